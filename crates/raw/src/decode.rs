@@ -1,0 +1,235 @@
+//! Decoding camera RAW files (ARW, NEF, CR2, CR3, RAF, DNG, ...) through rawler
+//! into a `RawFrame`.
+//!
+//! Only what pgrf's physics needs is kept: the visible Bayer mosaic as u16, its
+//! levels, white balance, colour matrix and exposure metadata. Files that are
+//! not Bayer mosaics (X-Trans, Foveon, linear/demosaiced DNGs, float DNGs) are
+//! refused with a reason rather than half-handled.
+
+use crate::cfa::Cfa;
+use crate::error::{RawError, Result};
+use crate::frame::{bits_for, ColorMatrix, LevelOverrides, RawFrame};
+use crate::panic_guard::quietly;
+use rawler::decoders::{RawDecodeParams, RawMetadata};
+use rawler::imgop::xyz::Illuminant;
+use rawler::rawimage::{RawImage, RawImageData, RawPhotometricInterpretation};
+use rawler::rawsource::RawSource;
+use std::path::Path;
+
+/// Decode a RAW file, then apply level overrides.
+pub fn decode_file(path: &Path, overrides: &LevelOverrides) -> Result<RawFrame> {
+    let meta = std::fs::metadata(path).map_err(|e| RawError::io(path, e))?;
+    if meta.is_dir() {
+        return Err(RawError::unsupported(path, "is a directory, expected a RAW file"));
+    }
+    if meta.len() == 0 {
+        return Err(RawError::decode(path, "file is empty"));
+    }
+    let (image, exif) = quietly(|| -> std::result::Result<_, String> {
+        let source = RawSource::new(path).map_err(|e| e.to_string())?;
+        let decoder = rawler::get_decoder(&source).map_err(|e| e.to_string())?;
+        let params = RawDecodeParams::default();
+        let image = decoder
+            .raw_image(&source, &params, false)
+            .map_err(|e| e.to_string())?;
+        // EXIF is a convenience; a file whose pixels decode but whose
+        // metadata does not is still usable.
+        let exif = decoder.raw_metadata(&source, &params).ok();
+        Ok((image, exif))
+    })
+    .and_then(|r| r)
+    .map_err(|reason| RawError::decode(path, tidy_reason(&reason)))?;
+    let mut frame = frame_from_rawler(path, image, exif)?;
+    frame.apply_overrides(overrides)?;
+    Ok(frame)
+}
+
+/// rawler's messages start with "Error: " or carry its issue-tracker hint;
+/// keep the informative part.
+fn tidy_reason(reason: &str) -> String {
+    let r = reason.trim_start_matches("Error: ");
+    if r.starts_with("No decoder found") {
+        return "not a camera RAW format rawler recognises (for a headerless sensor dump give its geometry: --width, --height, --bits, --cfa, --black)".to_string();
+    }
+    r.split(" Please open an issue").next().unwrap_or(r).to_string()
+}
+
+fn frame_from_rawler(path: &Path, image: RawImage, exif: Option<RawMetadata>) -> Result<RawFrame> {
+    let config = match &image.photometric {
+        RawPhotometricInterpretation::Cfa(config) => config.clone(),
+        RawPhotometricInterpretation::LinearRaw => {
+            return Err(RawError::unsupported(
+                path,
+                format!(
+                    "linear (already demosaiced) raw data with {} channels; pgrf needs a Bayer CFA mosaic",
+                    image.cpp
+                ),
+            ))
+        }
+        RawPhotometricInterpretation::BlackIsZero => {
+            return Err(RawError::unsupported(
+                path,
+                "monochrome raw data; pgrf needs a Bayer CFA mosaic",
+            ))
+        }
+    };
+    if image.cpp != 1 {
+        return Err(RawError::unsupported(
+            path,
+            format!("{} samples per pixel; pgrf needs a one-sample Bayer mosaic", image.cpp),
+        ));
+    }
+    let data = match &image.data {
+        RawImageData::Integer(d) => d,
+        RawImageData::Float(_) => {
+            return Err(RawError::unsupported(
+                path,
+                "floating-point raw data; pgrf reads integer sensor data",
+            ))
+        }
+    };
+    if data.len() != image.width * image.height {
+        return Err(RawError::decode(
+            path,
+            format!(
+                "decoder returned {} samples for a {}x{} image",
+                data.len(),
+                image.width,
+                image.height
+            ),
+        ));
+    }
+
+    // Visible area: the active area when the file declares one.
+    let (x0, y0, w, h) = match image.active_area {
+        Some(r) => (r.p.x, r.p.y, r.d.w, r.d.h),
+        None => (0, 0, image.width, image.height),
+    };
+    if w < 2 || h < 2 || x0 + w > image.width || y0 + h > image.height {
+        return Err(RawError::decode(
+            path,
+            format!(
+                "active area {w}x{h} at ({y0},{x0}) does not fit the {}x{} readout",
+                image.width, image.height
+            ),
+        ));
+    }
+
+    let cfa_name = config.cfa.to_string();
+    if config.cfa.width != 2 || config.cfa.height != 2 {
+        return Err(RawError::unsupported(
+            path,
+            format!(
+                "{}x{} colour filter array '{}' (X-Trans or other non-Bayer sensor); pgrf needs a 2x2 Bayer CFA",
+                config.cfa.height, config.cfa.width, cfa_name
+            ),
+        ));
+    }
+    let full_cfa: Cfa = cfa_name.parse().map_err(|e: String| RawError::unsupported(path, e))?;
+    let cfa = full_cfa.shifted(y0, x0);
+
+    let black = black_per_plane(path, &image, cfa, y0, x0)?;
+    let white = *image.whitelevel.0.first().ok_or_else(|| RawError::decode(path, "no white level"))?;
+
+    let mut mosaic = Vec::with_capacity(w * h);
+    for row in y0..y0 + h {
+        mosaic.extend_from_slice(&data[row * image.width + x0..row * image.width + x0 + w]);
+    }
+
+    let wb = {
+        let c = image.wb_coeffs;
+        let ok = c[..3].iter().all(|v| v.is_finite() && *v > 0.0);
+        ok.then(|| [c[0] / c[1], 1.0, c[2] / c[1]])
+    };
+
+    let (iso, exposure_s) = exif.as_ref().map(exposure_of).unwrap_or((None, None));
+
+    // Decoders disagree on bps (container vs sensor depth); the white level is
+    // what the data actually spans.
+    let bits = bits_for(white);
+
+    let frame = RawFrame {
+        width: w,
+        height: h,
+        mosaic,
+        cfa,
+        black,
+        white,
+        bits,
+        wb,
+        color_matrix: pick_color_matrix(&image),
+        iso,
+        exposure_s,
+        make: image.clean_make.clone(),
+        model: image.clean_model.clone(),
+        sensor_origin: (y0, x0),
+        sensor_size: (image.height, image.width),
+        exif,
+    };
+    frame
+        .check_levels()
+        .map_err(|e| RawError::decode(path, format!("file metadata gives unusable levels ({e})")))?;
+    Ok(frame)
+}
+
+/// Per-plane black level. rawler stores the DNG-style repeat pattern anchored
+/// at the readout origin; shift it to the visible area and read each plane.
+fn black_per_plane(path: &Path, image: &RawImage, cfa: Cfa, y0: usize, x0: usize) -> Result<[f32; 4]> {
+    let bl = &image.blacklevel;
+    if bl.levels.is_empty() || bl.width == 0 || bl.height == 0 {
+        return Ok([0.0; 4]);
+    }
+    if bl.width > 2 || bl.height > 2 || bl.levels.len() < bl.width * bl.height {
+        return Err(RawError::unsupported(
+            path,
+            format!(
+                "black level repeat pattern {}x{} with {} values",
+                bl.height,
+                bl.width,
+                bl.levels.len()
+            ),
+        ));
+    }
+    let mut out = [0.0f32; 4];
+    for (plane, (dr, dc)) in cfa.offsets().into_iter().enumerate() {
+        let r = (y0 + dr) % bl.height;
+        let c = (x0 + dc) % bl.width;
+        let v = bl.levels[r * bl.width + c];
+        if v.d == 0 {
+            return Err(RawError::decode(path, "black level with zero denominator"));
+        }
+        out[plane] = v.n as f32 / v.d as f32;
+    }
+    Ok(out)
+}
+
+fn pick_color_matrix(image: &RawImage) -> Option<ColorMatrix> {
+    let prefer = [Illuminant::D65, Illuminant::D50, Illuminant::D55, Illuminant::Daylight];
+    let chosen = prefer
+        .iter()
+        .find_map(|i| image.color_matrix.get(i).map(|m| (*i, m)))
+        .or_else(|| image.color_matrix.iter().next().map(|(i, m)| (*i, m)))?;
+    let (illum, m) = chosen;
+    if m.len() < 9 || m[..9].iter().any(|v| !v.is_finite()) || m[..9].iter().all(|v| *v == 0.0) {
+        return None;
+    }
+    Some(ColorMatrix {
+        xyz_to_cam: [[m[0], m[1], m[2]], [m[3], m[4], m[5]], [m[6], m[7], m[8]]],
+        illuminant: format!("{illum:?}"),
+    })
+}
+
+fn exposure_of(m: &RawMetadata) -> (Option<u32>, Option<f64>) {
+    let e = &m.exif;
+    let iso = e
+        .iso_speed_ratings
+        .map(u32::from)
+        .or(e.iso_speed)
+        .or(e.recommended_exposure_index)
+        .filter(|v| *v > 0);
+    let exposure = e
+        .exposure_time
+        .filter(|r| r.d != 0 && r.n != 0)
+        .map(|r| r.n as f64 / r.d as f64);
+    (iso, exposure)
+}

@@ -1,0 +1,73 @@
+//! One error type for everything the RAW layer can refuse.
+//!
+//! Every variant renders as a single line that names the file (where there is
+//! one) and says what was wrong, because the CLI prints it verbatim and scripts
+//! grep it.
+
+use std::path::{Path, PathBuf};
+
+/// Why a RAW file could not be read, packed or written.
+#[derive(Debug, thiserror::Error)]
+pub enum RawError {
+    #[error("{path}: {source}")]
+    Io {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error("{path}: cannot decode: {reason}")]
+    Decode { path: PathBuf, reason: String },
+    #[error("{path}: unsupported: {reason}")]
+    Unsupported { path: PathBuf, reason: String },
+    #[error("invalid input: {0}")]
+    Invalid(String),
+    #[error("{path}: cannot write: {reason}")]
+    Write { path: PathBuf, reason: String },
+}
+
+impl RawError {
+    pub(crate) fn io(path: &Path, source: std::io::Error) -> Self {
+        RawError::Io {
+            path: path.to_path_buf(),
+            source,
+        }
+    }
+
+    pub(crate) fn decode(path: &Path, reason: impl Into<String>) -> Self {
+        RawError::Decode {
+            path: path.to_path_buf(),
+            reason: one_line(reason.into()),
+        }
+    }
+
+    pub(crate) fn unsupported(path: &Path, reason: impl Into<String>) -> Self {
+        RawError::Unsupported {
+            path: path.to_path_buf(),
+            reason: one_line(reason.into()),
+        }
+    }
+
+    pub(crate) fn write(path: &Path, reason: impl Into<String>) -> Self {
+        RawError::Write {
+            path: path.to_path_buf(),
+            reason: one_line(reason.into()),
+        }
+    }
+}
+
+/// Decoder messages sometimes carry newlines or long backtraces; keep the
+/// first line so the CLI's "one line per error" promise holds.
+pub(crate) fn one_line(s: String) -> String {
+    let first = s.lines().map(str::trim).find(|l| !l.is_empty()).unwrap_or("unknown error");
+    if first.len() > 300 {
+        let mut cut = 300;
+        while !first.is_char_boundary(cut) {
+            cut -= 1;
+        }
+        format!("{}…", &first[..cut])
+    } else {
+        first.to_string()
+    }
+}
+
+pub type Result<T> = std::result::Result<T, RawError>;

@@ -1,0 +1,248 @@
+//! `RawFrame`: one Bayer mosaic with everything needed to interpret its numbers.
+//!
+//! The mosaic is the sensor's visible (active) area only, so that pixel (0, 0)
+//! is the first pixel that saw light and the CFA phase refers to it. Levels are
+//! kept per packed plane (R, G1, B, G2) because several cameras have a different
+//! black level on each channel, and the whole pipeline normalises per channel.
+
+use crate::cfa::Cfa;
+use crate::error::{RawError, Result};
+use serde::Serialize;
+
+/// XYZ -> camera RGB matrix (DNG `ColorMatrix`) and the illuminant it was measured under.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct ColorMatrix {
+    /// Row-major 3x3, rows are camera R, G, B.
+    pub xyz_to_cam: [[f32; 3]; 3],
+    /// Illuminant name as DNG calls it (e.g. "D65", "A").
+    pub illuminant: String,
+}
+
+/// A decoded Bayer raw frame, visible area only.
+#[derive(Clone, Debug)]
+pub struct RawFrame {
+    pub width: usize,
+    pub height: usize,
+    /// Row-major u16 samples, `width * height` of them.
+    pub mosaic: Vec<u16>,
+    pub cfa: Cfa,
+    /// Black level in DN of the planes R, G1, B, G2.
+    pub black: [f32; 4],
+    /// Saturation level in DN.
+    pub white: u32,
+    /// Bits per sample the file declares (14 for most modern sensors).
+    pub bits: u32,
+    /// As-shot white-balance multipliers for R, G, B, normalised to G = 1.
+    pub wb: Option<[f32; 3]>,
+    pub color_matrix: Option<ColorMatrix>,
+    pub iso: Option<u32>,
+    /// Exposure time in seconds.
+    pub exposure_s: Option<f64>,
+    pub make: String,
+    pub model: String,
+    /// Where the visible area starts on the full sensor readout (row, col),
+    /// and the readout's size (height, width): for `pgrf info` and for
+    /// checking a decode against another decoder.
+    pub sensor_origin: (usize, usize),
+    pub sensor_size: (usize, usize),
+    /// The decoder's EXIF record, carried into DNGs written from this frame so
+    /// lens, date and exposure tags survive a round trip.
+    pub(crate) exif: Option<rawler::decoders::RawMetadata>,
+}
+
+/// User overrides for the levels read from a file's metadata. Files lie
+/// (Sony's compressed ARW reports 15360 white, its sensor clips at 16383),
+/// so every level must be overridable.
+#[derive(Clone, Debug, Default)]
+pub struct LevelOverrides {
+    /// One black level for all planes, or four for R, G1, B, G2.
+    pub black: Option<Vec<f32>>,
+    pub white: Option<u32>,
+}
+
+impl LevelOverrides {
+    pub fn is_empty(&self) -> bool {
+        self.black.is_none() && self.white.is_none()
+    }
+}
+
+impl RawFrame {
+    /// A frame built from raw samples; levels and CFA as given, no metadata.
+    pub fn from_mosaic(
+        width: usize,
+        height: usize,
+        mosaic: Vec<u16>,
+        cfa: Cfa,
+        black: [f32; 4],
+        white: u32,
+    ) -> Result<Self> {
+        if width == 0 || height == 0 {
+            return Err(RawError::Invalid(format!("empty frame {width}x{height}")));
+        }
+        if mosaic.len() != width * height {
+            return Err(RawError::Invalid(format!(
+                "mosaic has {} samples, {}x{} needs {}",
+                mosaic.len(),
+                width,
+                height,
+                width * height
+            )));
+        }
+        let frame = RawFrame {
+            width,
+            height,
+            mosaic,
+            cfa,
+            black,
+            white,
+            bits: bits_for(white),
+            wb: None,
+            color_matrix: None,
+            iso: None,
+            exposure_s: None,
+            make: String::new(),
+            model: String::new(),
+            sensor_origin: (0, 0),
+            sensor_size: (height, width),
+            exif: None,
+        };
+        frame.check_levels()?;
+        Ok(frame)
+    }
+
+    /// Apply user overrides, then re-check that the levels make sense.
+    pub fn apply_overrides(&mut self, o: &LevelOverrides) -> Result<()> {
+        if let Some(b) = &o.black {
+            self.black = match b.as_slice() {
+                [v] => [*v; 4],
+                [r, g1, b, g2] => [*r, *g1, *b, *g2],
+                other => {
+                    return Err(RawError::Invalid(format!(
+                        "black level override needs 1 or 4 values (R,G1,B,G2), got {}",
+                        other.len()
+                    )))
+                }
+            };
+        }
+        if let Some(w) = o.white {
+            self.white = w;
+        }
+        self.check_levels()
+    }
+
+    /// Levels that would make normalisation divide by zero, go negative or
+    /// produce NaN are rejected here rather than discovered as garbage later.
+    pub fn check_levels(&self) -> Result<()> {
+        for (c, &b) in self.black.iter().enumerate() {
+            if !b.is_finite() || b < 0.0 {
+                return Err(RawError::Invalid(format!(
+                    "black level of plane {} is {b}; it must be a finite value >= 0",
+                    crate::cfa::PLANE_NAMES[c]
+                )));
+            }
+            if b >= self.white as f32 {
+                return Err(RawError::Invalid(format!(
+                    "black level {b} of plane {} is not below the white level {}",
+                    crate::cfa::PLANE_NAMES[c],
+                    self.white
+                )));
+            }
+        }
+        if self.white > u16::MAX as u32 {
+            return Err(RawError::Invalid(format!(
+                "white level {} exceeds the 16-bit range",
+                self.white
+            )));
+        }
+        Ok(())
+    }
+
+    /// Sample at (row, col).
+    #[inline]
+    pub fn at(&self, row: usize, col: usize) -> u16 {
+        self.mosaic[row * self.width + col]
+    }
+
+    /// Width and height of the packed planes (odd trailing rows/columns are
+    /// not part of any complete 2x2 cell and are left out of packing).
+    pub fn packed_dims(&self) -> (usize, usize) {
+        (self.height / 2, self.width / 2)
+    }
+
+    /// Black level of the pixel at (row, col).
+    #[inline]
+    pub fn black_at(&self, row: usize, col: usize) -> f32 {
+        self.black[self.cfa.plane_at(row, col)]
+    }
+
+    /// The same frame with new pixel data (levels and metadata kept): what a
+    /// denoiser or a noise synthesiser produces.
+    pub fn with_mosaic(&self, mosaic: Vec<u16>) -> Result<Self> {
+        if mosaic.len() != self.mosaic.len() {
+            return Err(RawError::Invalid(format!(
+                "new mosaic has {} samples, frame has {}",
+                mosaic.len(),
+                self.mosaic.len()
+            )));
+        }
+        let mut f = self.clone();
+        f.mosaic = mosaic;
+        Ok(f)
+    }
+}
+
+/// Smallest bit depth that holds `white`.
+pub(crate) fn bits_for(white: u32) -> u32 {
+    (32 - white.leading_zeros()).max(1)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn frame() -> RawFrame {
+        RawFrame::from_mosaic(4, 2, vec![0; 8], Cfa::Rggb, [512.0; 4], 16383).unwrap()
+    }
+
+    #[test]
+    fn overrides_apply_and_validate() {
+        let mut f = frame();
+        f.apply_overrides(&LevelOverrides {
+            black: Some(vec![1.0, 2.0, 3.0, 4.0]),
+            white: Some(4095),
+        })
+        .unwrap();
+        assert_eq!(f.black, [1.0, 2.0, 3.0, 4.0]);
+        assert_eq!(f.white, 4095);
+        let bad = LevelOverrides {
+            black: Some(vec![5000.0]),
+            white: None,
+        };
+        let err = f.apply_overrides(&bad).unwrap_err().to_string();
+        assert!(err.contains("not below the white level"), "{err}");
+        let nan = LevelOverrides {
+            black: Some(vec![f32::NAN]),
+            white: None,
+        };
+        assert!(frame().apply_overrides(&nan).is_err());
+        let three = LevelOverrides {
+            black: Some(vec![1.0, 2.0, 3.0]),
+            white: None,
+        };
+        assert!(frame().apply_overrides(&three).is_err());
+    }
+
+    #[test]
+    fn bits_for_levels() {
+        assert_eq!(bits_for(16383), 14);
+        assert_eq!(bits_for(15000), 14);
+        assert_eq!(bits_for(4095), 12);
+        assert_eq!(bits_for(65535), 16);
+    }
+
+    #[test]
+    fn size_mismatch_is_an_error() {
+        assert!(RawFrame::from_mosaic(4, 4, vec![0; 8], Cfa::Rggb, [0.0; 4], 255).is_err());
+        assert!(RawFrame::from_mosaic(0, 4, vec![], Cfa::Rggb, [0.0; 4], 255).is_err());
+    }
+}

@@ -1,0 +1,24 @@
+//! pgrf's RAW layer: decode camera files into Bayer mosaics with their levels,
+//! pack them into the 4-plane normalised arrays the rest of pgrf works on,
+//! and write results back as DNG and sRGB previews.
+//!
+//! This crate is physics-side: plain arrays (ndarray) and rayon, no
+//! deep-learning framework.
+
+pub mod atomic;
+pub mod cfa;
+pub mod decode;
+pub mod dng;
+pub mod error;
+pub mod frame;
+pub mod headerless;
+pub mod pack;
+mod panic_guard;
+
+pub use cfa::Cfa;
+pub use decode::decode_file;
+pub use dng::{encode_dng, write_dng, Compression, DngOptions};
+pub use error::{RawError, Result};
+pub use frame::{ColorMatrix, LevelOverrides, RawFrame};
+pub use headerless::{read_headerless, HeaderlessSpec};
+pub use pack::{pack_normalized, pack_u16, unpack_normalized, unpack_u16};
