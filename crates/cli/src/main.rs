@@ -1,1 +1,60 @@
-fn main(){}
+//! `pgrf`: low-light RAW photography toolkit. This binary only parses
+//! arguments, shows progress and reports errors; the science lives in the
+//! library crates.
+
+mod cmd;
+mod input;
+
+use clap::{Parser, Subcommand};
+use std::process::ExitCode;
+
+#[derive(Parser, Debug)]
+#[command(name = "pgrf", version, about = "Measure sensor noise, synthesise training pairs, denoise dark RAW photos", long_about = None)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand, Debug)]
+enum Command {
+    /// Print what pgrf reads from a RAW file: size, CFA, levels, white balance, colour matrix, exposure.
+    Info(cmd::info::InfoArgs),
+    /// Render a RAW file to an sRGB PNG (demosaic, white balance, colour matrix, gamma).
+    Preview(cmd::preview::PreviewArgs),
+    /// Convert a RAW file (or headerless dump) to a lossless DNG, keeping pixels and metadata.
+    Convert(cmd::convert::ConvertArgs),
+    /// Render pgrf's built-in colour test chart as a DNG.
+    Chart(cmd::chart::ChartArgs),
+    /// Time pgrf's hot paths (results go to BENCHMARKS.md).
+    Bench(cmd::bench::BenchArgs),
+}
+
+fn main() -> ExitCode {
+    // Our own panics are bugs, but the promise to users is still one line.
+    std::panic::set_hook(Box::new(|info| {
+        let msg = info
+            .payload()
+            .downcast_ref::<&str>()
+            .map(|s| s.to_string())
+            .or_else(|| info.payload().downcast_ref::<String>().cloned())
+            .unwrap_or_else(|| "unknown panic".into());
+        let at = info.location().map(|l| format!(" at {}:{}", l.file(), l.line())).unwrap_or_default();
+        eprintln!("pgrf: internal error (please report): {msg}{at}");
+    }));
+    let cli = Cli::parse();
+    let result = match &cli.command {
+        Command::Info(a) => cmd::info::run(a),
+        Command::Preview(a) => cmd::preview::run(a),
+        Command::Convert(a) => cmd::convert::run(a),
+        Command::Chart(a) => cmd::chart::run(a),
+        Command::Bench(a) => cmd::bench::run(a),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            let msg = format!("{e:#}").replace('\n', " ");
+            eprintln!("pgrf: error: {msg}");
+            ExitCode::FAILURE
+        }
+    }
+}

@@ -7,13 +7,20 @@
 
 pub mod atomic;
 pub mod cfa;
+pub mod chart;
+pub mod color;
 pub mod decode;
+pub mod demosaic;
 pub mod dng;
 pub mod error;
 pub mod frame;
 pub mod headerless;
 pub mod pack;
 mod panic_guard;
+pub mod preview;
+
+/// Re-exported so callers use the same ndarray version as the packed arrays.
+pub use ndarray;
 
 pub use cfa::Cfa;
 pub use decode::decode_file;
@@ -22,3 +29,5 @@ pub use error::{RawError, Result};
 pub use frame::{ColorMatrix, LevelOverrides, RawFrame};
 pub use headerless::{read_headerless, HeaderlessSpec};
 pub use pack::{pack_normalized, pack_u16, unpack_normalized, unpack_u16};
+pub use demosaic::Demosaic;
+pub use preview::{render_preview, Preview, PreviewOptions};

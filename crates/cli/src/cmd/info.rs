@@ -1,0 +1,143 @@
+//! `pgrf info`: what pgrf reads from a RAW file.
+
+use crate::input::InputArgs;
+use anyhow::Result;
+use clap::Args;
+use pgrf_raw::cfa::PLANE_NAMES;
+use pgrf_raw::ndarray::Axis;
+use pgrf_raw::{pack_u16, RawFrame};
+use serde::Serialize;
+use std::path::PathBuf;
+
+#[derive(Args, Debug)]
+pub struct InfoArgs {
+    /// RAW file (ARW, NEF, CR2, CR3, RAF, DNG, ...) or headerless dump.
+    pub file: PathBuf,
+    /// Print one JSON object instead of text.
+    #[arg(long)]
+    pub json: bool,
+    #[command(flatten)]
+    pub input: InputArgs,
+}
+
+#[derive(Serialize)]
+struct PlaneStats {
+    plane: &'static str,
+    min: u16,
+    max: u16,
+    mean: f64,
+    /// Share of samples at or above the white level.
+    saturated: f64,
+}
+
+#[derive(Serialize)]
+struct Info<'a> {
+    file: String,
+    make: &'a str,
+    model: &'a str,
+    width: usize,
+    height: usize,
+    cfa: String,
+    black: [f32; 4],
+    white: u32,
+    bits: u32,
+    wb: Option<[f32; 3]>,
+    color_matrix: Option<&'a pgrf_raw::ColorMatrix>,
+    iso: Option<u32>,
+    exposure_s: Option<f64>,
+    visible_origin: [usize; 2],
+    sensor_size: [usize; 2],
+    planes: Vec<PlaneStats>,
+}
+
+fn plane_stats(f: &RawFrame) -> Result<Vec<PlaneStats>> {
+    let p = pack_u16(f)?;
+    Ok((0..4)
+        .map(|c| {
+            let plane = p.index_axis(Axis(0), c);
+            let n = plane.len() as f64;
+            let (mut min, mut max, mut sum, mut sat) = (u16::MAX, 0u16, 0u64, 0usize);
+            for &v in plane.iter() {
+                min = min.min(v);
+                max = max.max(v);
+                sum += v as u64;
+                sat += (v as u32 >= f.white) as usize;
+            }
+            PlaneStats {
+                plane: PLANE_NAMES[c],
+                min,
+                max,
+                mean: sum as f64 / n,
+                saturated: sat as f64 / n,
+            }
+        })
+        .collect())
+}
+
+pub fn run(a: &InfoArgs) -> Result<()> {
+    let f = a.input.open(&a.file)?;
+    let info = Info {
+        file: a.file.display().to_string(),
+        make: &f.make,
+        model: &f.model,
+        width: f.width,
+        height: f.height,
+        cfa: f.cfa.to_string(),
+        black: f.black,
+        white: f.white,
+        bits: f.bits,
+        wb: f.wb,
+        color_matrix: f.color_matrix.as_ref(),
+        iso: f.iso,
+        exposure_s: f.exposure_s,
+        visible_origin: [f.sensor_origin.0, f.sensor_origin.1],
+        sensor_size: [f.sensor_size.0, f.sensor_size.1],
+        planes: plane_stats(&f)?,
+    };
+    if a.json {
+        println!("{}", serde_json::to_string(&info)?);
+        return Ok(());
+    }
+    let opt = |v: Option<String>| v.unwrap_or_else(|| "unknown".into());
+    println!("file        {}", info.file);
+    println!("camera      {} {}", or_dash(info.make), or_dash(info.model));
+    println!("visible     {} x {} (at row {}, col {} of a {} x {} readout)",
+        info.width, info.height, f.sensor_origin.0, f.sensor_origin.1, f.sensor_size.1, f.sensor_size.0);
+    println!("cfa         {}", info.cfa);
+    println!("black       R {} G1 {} B {} G2 {} DN", f.black[0], f.black[1], f.black[2], f.black[3]);
+    println!("white       {} DN ({} bits)", f.white, f.bits);
+    println!("iso         {}", opt(f.iso.map(|v| v.to_string())));
+    println!("exposure    {}", opt(f.exposure_s.map(format_exposure)));
+    println!(
+        "wb          {}",
+        opt(f.wb.map(|w| format!("R {:.4}  G 1  B {:.4} (multipliers)", w[0], w[2])))
+    );
+    match &f.color_matrix {
+        Some(cm) => println!(
+            "matrix      XYZ->camera ({}): {:?}",
+            cm.illuminant, cm.xyz_to_cam
+        ),
+        None => println!("matrix      none"),
+    }
+    println!("plane       min     max     mean      saturated");
+    for s in &info.planes {
+        println!("  {:<8}{:<8}{:<8}{:<10.2}{:.4}%", s.plane, s.min, s.max, s.mean, 100.0 * s.saturated);
+    }
+    Ok(())
+}
+
+fn or_dash(s: &str) -> &str {
+    if s.is_empty() {
+        "-"
+    } else {
+        s
+    }
+}
+
+fn format_exposure(t: f64) -> String {
+    if t < 1.0 {
+        format!("1/{:.0} s ({t:.6} s)", 1.0 / t)
+    } else {
+        format!("{t} s")
+    }
+}
