@@ -55,8 +55,15 @@ fn parent_dir(path: &Path) -> PathBuf {
 fn temp_sibling(path: &Path) -> PathBuf {
     use std::sync::atomic::{AtomicU64, Ordering};
     static N: AtomicU64 = AtomicU64::new(0);
-    let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
-    let tmp = format!(".{name}.{}.{}.part", std::process::id(), N.fetch_add(1, Ordering::Relaxed));
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let tmp = format!(
+        ".{name}.{}.{}.part",
+        std::process::id(),
+        N.fetch_add(1, Ordering::Relaxed)
+    );
     parent_dir(path).join(tmp)
 }
 
@@ -78,7 +85,11 @@ mod tests {
         write_atomic(&p, b"one").unwrap();
         write_atomic(&p, b"two!").unwrap();
         assert_eq!(std::fs::read(&p).unwrap(), b"two!");
-        assert_eq!(std::fs::read_dir(&d).unwrap().count(), 1, "no temp file left behind");
+        assert_eq!(
+            std::fs::read_dir(&d).unwrap().count(),
+            1,
+            "no temp file left behind"
+        );
     }
 
     #[test]
@@ -99,7 +110,9 @@ mod tests {
     #[test]
     fn missing_folder_is_a_clear_error() {
         let d = scratch("missing");
-        let err = write_atomic(&d.join("nope/x.dng"), b"x").unwrap_err().to_string();
+        let err = write_atomic(&d.join("nope/x.dng"), b"x")
+            .unwrap_err()
+            .to_string();
         assert!(err.contains("does not exist"), "{err}");
     }
 }

@@ -43,7 +43,9 @@ impl Cfa {
     pub fn plane_at(self, row: usize, col: usize) -> usize {
         let cell = (row & 1, col & 1);
         let off = self.offsets();
-        (0..4).find(|&p| off[p] == cell).expect("2x2 cell covers all positions")
+        (0..4)
+            .find(|&p| off[p] == cell)
+            .expect("2x2 cell covers all positions")
     }
 
     /// Colour (0 red, 1 green, 2 blue) of the pixel at (row, col).

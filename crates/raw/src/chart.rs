@@ -10,8 +10,8 @@
 
 use crate::cfa::Cfa;
 use crate::color::{invert, Mat3};
-use crate::frame::{ColorMatrix, RawFrame};
 use crate::error::Result;
+use crate::frame::{ColorMatrix, RawFrame};
 
 /// ColorChecker Classic patches as 8-bit sRGB (D65), row by row; the
 /// commonly published BabelColor averages.
@@ -44,7 +44,11 @@ pub const COLORCHECKER_SRGB: [[u8; 3]; 24] = [
 
 /// Sony A7S2 D65 ColorMatrix (XYZ -> camera), as published in camera
 /// databases (dnglab/rawler's definition of the ILCE-7SM2).
-pub const A7S2_D65_MATRIX: [[f32; 3]; 3] = [[0.5838, -0.143, -0.0246], [-0.3497, 1.1477, 0.2297], [-0.0748, 0.1885, 0.5778]];
+pub const A7S2_D65_MATRIX: [[f32; 3]; 3] = [
+    [0.5838, -0.143, -0.0246],
+    [-0.3497, 1.1477, 0.2297],
+    [-0.0748, 0.1885, 0.5778],
+];
 
 const SRGB_TO_XYZ: Mat3 = [
     [0.4124564, 0.3575761, 0.1804375],
@@ -107,7 +111,9 @@ pub fn patch_box(spec: &ChartSpec, i: usize) -> (usize, usize, usize) {
 /// balance that makes its D65 white neutral.
 pub fn render_chart(spec: &ChartSpec) -> Result<RawFrame> {
     let x2c: Mat3 = std::array::from_fn(|i| std::array::from_fn(|j| A7S2_D65_MATRIX[i][j] as f64));
-    let mul = |m: &Mat3, v: [f64; 3]| -> [f64; 3] { std::array::from_fn(|i| (0..3).map(|k| m[i][k] * v[k]).sum()) };
+    let mul = |m: &Mat3, v: [f64; 3]| -> [f64; 3] {
+        std::array::from_fn(|i| (0..3).map(|k| m[i][k] * v[k]).sum())
+    };
     // Camera response to linear sRGB: xyz_to_cam * srgb_to_xyz.
     let cam_of = |rgb: [f64; 3]| mul(&x2c, mul(&SRGB_TO_XYZ, rgb));
     let white_cam = cam_of([1.0, 1.0, 1.0]);
@@ -126,10 +132,10 @@ pub fn render_chart(spec: &ChartSpec) -> Result<RawFrame> {
     let scene = |r: usize, c: usize| -> [f64; 3] {
         if r < chart_h {
             // Inside a patch box: its colour; elsewhere the chart's dark frame.
-            for i in 0..24 {
+            for (i, patch) in COLORCHECKER_SRGB.iter().enumerate() {
                 let (cr, cc, half) = patch_box(spec, i);
                 if r.abs_diff(cr) <= half && c.abs_diff(cc) <= half {
-                    return COLORCHECKER_SRGB[i].map(srgb_decode_u8);
+                    return patch.map(srgb_decode_u8);
                 }
             }
             [0.03, 0.03, 0.03]
@@ -178,9 +184,15 @@ pub fn render_chart(spec: &ChartSpec) -> Result<RawFrame> {
 /// light (white reflector at 1.0 after white balance).
 pub fn chart_display_gain(spec: &ChartSpec) -> f32 {
     let x2c: Mat3 = std::array::from_fn(|i| std::array::from_fn(|j| A7S2_D65_MATRIX[i][j] as f64));
-    let g: f64 = (0..3).map(|k| x2c[1][k] * SRGB_TO_XYZ[k].iter().sum::<f64>()).sum();
+    let g: f64 = (0..3)
+        .map(|k| x2c[1][k] * SRGB_TO_XYZ[k].iter().sum::<f64>())
+        .sum();
     let peak = (0..3)
-        .map(|i| (0..3).map(|k| x2c[i][k] * SRGB_TO_XYZ[k].iter().sum::<f64>()).sum::<f64>())
+        .map(|i| {
+            (0..3)
+                .map(|k| x2c[i][k] * SRGB_TO_XYZ[k].iter().sum::<f64>())
+                .sum::<f64>()
+        })
         .fold(f64::MIN, f64::max);
     // After white balance every channel of white equals the green response.
     (peak / (spec.exposure as f64 * g)) as f32
@@ -202,7 +214,14 @@ mod tests {
             };
             let f = render_chart(&spec).unwrap();
             let gain = chart_display_gain(&spec);
-            let p = render_preview(&f, &PreviewOptions { gain, ..Default::default() }).unwrap();
+            let p = render_preview(
+                &f,
+                &PreviewOptions {
+                    gain,
+                    ..Default::default()
+                },
+            )
+            .unwrap();
             assert!(p.warnings.is_empty());
             for (i, want) in COLORCHECKER_SRGB.iter().enumerate() {
                 let (r, c, _) = patch_box(&spec, i);
@@ -222,11 +241,15 @@ mod tests {
 
     #[test]
     fn chart_is_deterministic_and_within_levels() {
-        let spec = ChartSpec { width: 120, height: 80, ..Default::default() };
+        let spec = ChartSpec {
+            width: 120,
+            height: 80,
+            ..Default::default()
+        };
         let a = render_chart(&spec).unwrap();
         let b = render_chart(&spec).unwrap();
         assert_eq!(a.mosaic, b.mosaic);
-        assert!(a.mosaic.iter().all(|&v| v >= 512 && v <= 16383));
+        assert!(a.mosaic.iter().all(|v| (512..=16383).contains(v)));
         // Headroom: the brightest sample stays below white (exposure 0.5 of range,
         // the ramp's end reaches exactly the chosen exposure).
         let max = *a.mosaic.iter().max().unwrap() as f32;

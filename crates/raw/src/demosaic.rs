@@ -50,23 +50,31 @@ fn reflect(i: isize, n: usize) -> usize {
 }
 
 /// Demosaic `mosaic` (row-major, `width * height`) into interleaved RGB.
-pub fn demosaic(mosaic: &[f32], width: usize, height: usize, cfa: Cfa, method: Demosaic) -> Vec<f32> {
+pub fn demosaic(
+    mosaic: &[f32],
+    width: usize,
+    height: usize,
+    cfa: Cfa,
+    method: Demosaic,
+) -> Vec<f32> {
     assert_eq!(mosaic.len(), width * height);
     let mut out = vec![0.0f32; width * height * 3];
-    out.par_chunks_mut(width * 3).enumerate().for_each(|(r, row)| {
-        let px = |dr: isize, dc: isize, c: usize| -> f32 {
-            let rr = reflect(r as isize + dr, height);
-            let cc = reflect(c as isize + dc, width);
-            mosaic[rr * width + cc]
-        };
-        for c in 0..width {
-            let rgb = match method {
-                Demosaic::Bilinear => bilinear_at(&px, cfa, r, c),
-                Demosaic::Malvar => malvar_at(&px, cfa, r, c),
+    out.par_chunks_mut(width * 3)
+        .enumerate()
+        .for_each(|(r, row)| {
+            let px = |dr: isize, dc: isize, c: usize| -> f32 {
+                let rr = reflect(r as isize + dr, height);
+                let cc = reflect(c as isize + dc, width);
+                mosaic[rr * width + cc]
             };
-            row[c * 3..c * 3 + 3].copy_from_slice(&rgb);
-        }
-    });
+            for c in 0..width {
+                let rgb = match method {
+                    Demosaic::Bilinear => bilinear_at(&px, cfa, r, c),
+                    Demosaic::Malvar => malvar_at(&px, cfa, r, c),
+                };
+                row[c * 3..c * 3 + 3].copy_from_slice(&rgb);
+            }
+        });
     out
 }
 
@@ -74,7 +82,8 @@ pub fn demosaic(mosaic: &[f32], width: usize, height: usize, cfa: Cfa, method: D
 /// and for a green pixel whether red lies along its row.
 fn site(cfa: Cfa, r: usize, c: usize) -> (usize, bool) {
     let own = cfa.color_at(r, c);
-    let red_in_row = own == 1 && (cfa.color_at(r, c + 1) == 0 || (c > 0 && cfa.color_at(r, c - 1) == 0));
+    let red_in_row =
+        own == 1 && (cfa.color_at(r, c + 1) == 0 || (c > 0 && cfa.color_at(r, c - 1) == 0));
     (own, red_in_row)
 }
 
@@ -124,7 +133,9 @@ mod tests {
     use super::*;
 
     fn mosaic_of(f: impl Fn(usize, usize) -> [f32; 3], w: usize, h: usize, cfa: Cfa) -> Vec<f32> {
-        (0..w * h).map(|i| f(i / w, i % w)[cfa.color_at(i / w, i % w)]).collect()
+        (0..w * h)
+            .map(|i| f(i / w, i % w)[cfa.color_at(i / w, i % w)])
+            .collect()
     }
 
     #[test]
@@ -144,7 +155,10 @@ mod tests {
                 let m = mosaic_of(|_, _| colour, 13, 9, cfa);
                 let rgb = demosaic(&m, 13, 9, cfa, method);
                 for (i, v) in rgb.iter().enumerate() {
-                    assert!((v - colour[i % 3]).abs() < 1e-6, "{cfa} {method:?} at {i}: {v}");
+                    assert!(
+                        (v - colour[i % 3]).abs() < 1e-6,
+                        "{cfa} {method:?} at {i}: {v}"
+                    );
                 }
             }
         }
@@ -156,7 +170,11 @@ mod tests {
         // symmetric and sum to one, so they reproduce it exactly away from borders.
         let f = |r: usize, c: usize| {
             let (r, c) = (r as f32, c as f32);
-            [0.1 + 0.01 * r + 0.02 * c, 0.2 - 0.005 * r + 0.01 * c, 0.3 + 0.003 * r - 0.004 * c]
+            [
+                0.1 + 0.01 * r + 0.02 * c,
+                0.2 - 0.005 * r + 0.01 * c,
+                0.3 + 0.003 * r - 0.004 * c,
+            ]
         };
         let (w, h) = (20, 16);
         for cfa in Cfa::ALL {
@@ -167,7 +185,11 @@ mod tests {
                         let want = f(r, c);
                         for k in 0..3 {
                             let got = rgb[(r * w + c) * 3 + k];
-                            assert!((got - want[k]).abs() < 1e-5, "{cfa} {method:?} ({r},{c},{k}) {got} vs {}", want[k]);
+                            assert!(
+                                (got - want[k]).abs() < 1e-5,
+                                "{cfa} {method:?} ({r},{c},{k}) {got} vs {}",
+                                want[k]
+                            );
                         }
                     }
                 }

@@ -9,6 +9,7 @@ use crate::atomic::write_atomic;
 use crate::error::{RawError, Result};
 use crate::frame::RawFrame;
 use crate::panic_guard::quietly;
+use rawler::cfa::{PlaneColor, CFA};
 use rawler::decoders::{Camera, RawMetadata};
 use rawler::dng::writer::DngWriter;
 use rawler::dng::{CropMode, DngCompression, DngPhotometricConversion, DNG_VERSION_V1_4};
@@ -17,7 +18,6 @@ use rawler::imgop::xyz::Illuminant;
 use rawler::pixarray::PixU16;
 use rawler::rawimage::{BlackLevel, CFAConfig, RawImage, RawPhotometricInterpretation, WhiteLevel};
 use rawler::tags::{DngTag, ExifTag, TiffCommonTag};
-use rawler::cfa::{PlaneColor, CFA};
 use std::io::Cursor;
 use std::path::Path;
 
@@ -50,7 +50,9 @@ impl Default for DngOptions {
 pub fn encode_dng(frame: &RawFrame, opts: &DngOptions) -> Result<Vec<u8>> {
     frame.check_levels()?;
     if frame.mosaic.len() != frame.width * frame.height {
-        return Err(RawError::Invalid("frame mosaic length does not match its size".into()));
+        return Err(RawError::Invalid(
+            "frame mosaic length does not match its size".into(),
+        ));
     }
     if frame.width > u16::MAX as usize || frame.height > u16::MAX as usize {
         return Err(RawError::Invalid(format!(
@@ -68,8 +70,14 @@ pub fn encode_dng(frame: &RawFrame, opts: &DngOptions) -> Result<Vec<u8>> {
             Compression::Lossless => DngCompression::Lossless,
             Compression::Uncompressed => DngCompression::Uncompressed,
         };
-        raw.raw_image(&image, CropMode::None, compression, DngPhotometricConversion::Original, 1)
-            .map_err(|e| e.to_string())?;
+        raw.raw_image(
+            &image,
+            CropMode::None,
+            compression,
+            DngPhotometricConversion::Original,
+            1,
+        )
+        .map_err(|e| e.to_string())?;
         raw.finalize().map_err(|e| e.to_string())?;
         dng.load_base_tags(&image).map_err(|e| e.to_string())?;
         dng.load_metadata(&exif).map_err(|e| e.to_string())?;
@@ -113,9 +121,21 @@ fn rawler_image(frame: &RawFrame) -> RawImage {
     let white = WhiteLevel::new(vec![frame.white]);
     let photometric = RawPhotometricInterpretation::Cfa(CFAConfig::new(&cam.cfa, &cam.plane_color));
     // The writer derives AsShotNeutral from these; it is rewritten exactly below.
-    let wb = frame.wb.map(|w| [w[0], w[1], w[2], f32::NAN]).unwrap_or([1.0, 1.0, 1.0, f32::NAN]);
+    let wb = frame
+        .wb
+        .map(|w| [w[0], w[1], w[2], f32::NAN])
+        .unwrap_or([1.0, 1.0, 1.0, f32::NAN]);
     let pixels = PixU16::new_with(frame.mosaic.clone(), frame.width, frame.height);
-    RawImage::new(cam, pixels, 1, wb, photometric, Some(black), Some(white), false)
+    RawImage::new(
+        cam,
+        pixels,
+        1,
+        wb,
+        photometric,
+        Some(black),
+        Some(white),
+        false,
+    )
 }
 
 /// Integer levels stay integers (most readers expect SHORT/LONG); fractional
@@ -177,7 +197,10 @@ fn exif_for(frame: &RawFrame) -> RawMetadata {
             m.exif.iso_speed = None;
         }
     }
-    m.exif.exposure_time = frame.exposure_s.filter(|t| *t > 0.0 && t.is_finite()).map(exposure_rational);
+    m.exif.exposure_time = frame
+        .exposure_s
+        .filter(|t| *t > 0.0 && t.is_finite())
+        .map(exposure_rational);
     m
 }
 

@@ -58,7 +58,11 @@ impl RawError {
 /// Decoder messages sometimes carry newlines or long backtraces; keep the
 /// first line so the CLI's "one line per error" promise holds.
 pub(crate) fn one_line(s: String) -> String {
-    let first = s.lines().map(str::trim).find(|l| !l.is_empty()).unwrap_or("unknown error");
+    let first = s
+        .lines()
+        .map(str::trim)
+        .find(|l| !l.is_empty())
+        .unwrap_or("unknown error");
     if first.len() > 300 {
         let mut cut = 300;
         while !first.is_char_boundary(cut) {

@@ -28,10 +28,16 @@ pub struct HeaderlessSpec {
 /// [`samples_above_range`] to report them.
 pub fn read_headerless(path: &Path, spec: &HeaderlessSpec) -> Result<RawFrame> {
     if path.is_dir() {
-        return Err(RawError::unsupported(path, "is a directory, expected a raw dump"));
+        return Err(RawError::unsupported(
+            path,
+            "is a directory, expected a raw dump",
+        ));
     }
     if !(1..=16).contains(&spec.bits) {
-        return Err(RawError::Invalid(format!("bit depth {} is outside 1..=16", spec.bits)));
+        return Err(RawError::Invalid(format!(
+            "bit depth {} is outside 1..=16",
+            spec.bits
+        )));
     }
     let bytes = std::fs::read(path).map_err(|e| RawError::io(path, e))?;
     let want = spec
@@ -47,7 +53,11 @@ pub fn read_headerless(path: &Path, spec: &HeaderlessSpec) -> Result<RawFrame> {
                 bytes.len(),
                 spec.width,
                 spec.height,
-                if bytes.len() < want { "truncated?" } else { "wrong size given?" }
+                if bytes.len() < want {
+                    "truncated?"
+                } else {
+                    "wrong size given?"
+                }
             ),
         ));
     }
@@ -94,6 +104,10 @@ pub fn read_headerless(path: &Path, spec: &HeaderlessSpec) -> Result<RawFrame> {
 
 /// How many samples exceed the frame's declared bit depth.
 pub fn samples_above_range(frame: &RawFrame) -> usize {
-    let max = if frame.bits >= 16 { u16::MAX } else { ((1u32 << frame.bits) - 1) as u16 };
+    let max = if frame.bits >= 16 {
+        u16::MAX
+    } else {
+        ((1u32 << frame.bits) - 1) as u16
+    };
     frame.mosaic.iter().filter(|&&v| v > max).count()
 }

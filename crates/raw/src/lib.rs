@@ -24,10 +24,10 @@ pub use ndarray;
 
 pub use cfa::Cfa;
 pub use decode::decode_file;
+pub use demosaic::Demosaic;
 pub use dng::{encode_dng, write_dng, Compression, DngOptions};
 pub use error::{RawError, Result};
 pub use frame::{ColorMatrix, LevelOverrides, RawFrame};
 pub use headerless::{read_headerless, HeaderlessSpec};
 pub use pack::{pack_normalized, pack_u16, unpack_normalized, unpack_u16};
-pub use demosaic::Demosaic;
 pub use preview::{render_preview, Preview, PreviewOptions};

@@ -50,7 +50,10 @@ pub struct Preview {
 /// Render `frame` to sRGB.
 pub fn render_preview(frame: &RawFrame, opts: &PreviewOptions) -> Result<Preview> {
     if !opts.gain.is_finite() || opts.gain <= 0.0 {
-        return Err(RawError::Invalid(format!("preview gain must be a positive number, got {}", opts.gain)));
+        return Err(RawError::Invalid(format!(
+            "preview gain must be a positive number, got {}",
+            opts.gain
+        )));
     }
     frame.check_levels()?;
     let mut warnings = Vec::new();
@@ -58,14 +61,22 @@ pub fn render_preview(frame: &RawFrame, opts: &PreviewOptions) -> Result<Preview
         (true, _) => [1.0; 3],
         (false, Some(wb)) => wb,
         (false, None) => {
-            warnings.push("no as-shot white balance in the file: using multipliers of 1".to_string());
+            warnings
+                .push("no as-shot white balance in the file: using multipliers of 1".to_string());
             [1.0; 3]
         }
     };
-    let matrix = match frame.color_matrix.as_ref().and_then(|cm| srgb_from_camera(&cm.xyz_to_cam)) {
+    let matrix = match frame
+        .color_matrix
+        .as_ref()
+        .and_then(|cm| srgb_from_camera(&cm.xyz_to_cam))
+    {
         Some(m) => m,
         None => {
-            warnings.push("no usable colour matrix in the file: camera RGB shown as sRGB (identity)".to_string());
+            warnings.push(
+                "no usable colour matrix in the file: camera RGB shown as sRGB (identity)"
+                    .to_string(),
+            );
             IDENTITY
         }
     };
@@ -99,7 +110,11 @@ pub fn render_preview(frame: &RawFrame, opts: &PreviewOptions) -> Result<Preview
         });
         (pw, ph, rgb)
     } else {
-        (w, frame.height, demosaic(&lin, w, frame.height, cfa, opts.demosaic))
+        (
+            w,
+            frame.height,
+            demosaic(&lin, w, frame.height, cfa, opts.demosaic),
+        )
     };
 
     let m: [[f32; 3]; 3] = to_f32(&matrix);
@@ -109,7 +124,12 @@ pub fn render_preview(frame: &RawFrame, opts: &PreviewOptions) -> Result<Preview
             p[k] = srgb_encode(m[k][0] * r + m[k][1] * g + m[k][2] * b);
         }
     });
-    Ok(Preview { width, height, rgb, warnings })
+    Ok(Preview {
+        width,
+        height,
+        rgb,
+        warnings,
+    })
 }
 
 fn to_f32(m: &Mat3) -> [[f32; 3]; 3] {
@@ -137,7 +157,11 @@ impl Preview {
                     .collect();
                 enc.write_image(&buf, w, h, image::ExtendedColorType::Rgb16)
             }
-            b => return Err(RawError::Invalid(format!("PNG bit depth must be 8 or 16, got {b}"))),
+            b => {
+                return Err(RawError::Invalid(format!(
+                    "PNG bit depth must be 8 or 16, got {b}"
+                )))
+            }
         };
         res.map_err(|e| RawError::Invalid(format!("PNG encoding failed: {e}")))?;
         Ok(out)
@@ -168,7 +192,11 @@ mod tests {
         let mut f = RawFrame::from_mosaic(w, h, mosaic, cfa, [512.0; 4], 16383).unwrap();
         f.wb = Some(wb);
         f.color_matrix = Some(ColorMatrix {
-            xyz_to_cam: [[0.6461, -0.1164, -0.0857], [-0.3825, 1.1597, 0.2534], [-0.0416, 0.154, 0.6039]],
+            xyz_to_cam: [
+                [0.6461, -0.1164, -0.0857],
+                [-0.3825, 1.1597, 0.2534],
+                [-0.0416, 0.154, 0.6039],
+            ],
             illuminant: "D65".into(),
         });
         f
@@ -179,7 +207,14 @@ mod tests {
         for cfa in Cfa::ALL {
             for half in [false, true] {
                 let f = grey_frame(cfa, 0.18);
-                let p = render_preview(&f, &PreviewOptions { half, ..Default::default() }).unwrap();
+                let p = render_preview(
+                    &f,
+                    &PreviewOptions {
+                        half,
+                        ..Default::default()
+                    },
+                )
+                .unwrap();
                 assert!(p.warnings.is_empty());
                 for px in p.rgb.chunks(3) {
                     for v in px {
@@ -194,11 +229,32 @@ mod tests {
     #[test]
     fn gain_and_highlight_clipping() {
         let f = grey_frame(Cfa::Rggb, 0.18);
-        let p = render_preview(&f, &PreviewOptions { gain: 10.0, ..Default::default() }).unwrap();
+        let p = render_preview(
+            &f,
+            &PreviewOptions {
+                gain: 10.0,
+                ..Default::default()
+            },
+        )
+        .unwrap();
         // 1.8 clips to white on every channel: still neutral, not pink.
         assert!(p.rgb.iter().all(|v| (v - 1.0).abs() < 1e-5));
-        assert!(render_preview(&f, &PreviewOptions { gain: 0.0, ..Default::default() }).is_err());
-        assert!(render_preview(&f, &PreviewOptions { gain: f32::NAN, ..Default::default() }).is_err());
+        assert!(render_preview(
+            &f,
+            &PreviewOptions {
+                gain: 0.0,
+                ..Default::default()
+            }
+        )
+        .is_err());
+        assert!(render_preview(
+            &f,
+            &PreviewOptions {
+                gain: f32::NAN,
+                ..Default::default()
+            }
+        )
+        .is_err());
     }
 
     #[test]
@@ -221,7 +277,10 @@ mod tests {
             let px = img.to_rgb16().get_pixel(3, 3).0;
             let want = (p.rgb[(3 * 16 + 3) * 3] * 65535.0) as f32;
             let tol = if bits == 8 { 257.0 } else { 1.0 };
-            assert!((px[0] as f32 - want).abs() <= tol, "{bits}: {px:?} vs {want}");
+            assert!(
+                (px[0] as f32 - want).abs() <= tol,
+                "{bits}: {px:?} vs {want}"
+            );
         }
         assert!(p.encode_png(12).is_err());
     }

@@ -11,14 +11,23 @@ fn assert_clean_error(path: &std::path::Path) -> String {
         .err()
         .unwrap_or_else(|| panic!("{} decoded but should not", path.display()))
         .to_string();
-    assert!(!err.contains('\n'), "multi-line error for {}: {err}", path.display());
-    assert!(err.contains(&*path.to_string_lossy()), "error does not name the file: {err}");
+    assert!(
+        !err.contains('\n'),
+        "multi-line error for {}: {err}",
+        path.display()
+    );
+    assert!(
+        err.contains(&*path.to_string_lossy()),
+        "error does not name the file: {err}"
+    );
     err
 }
 
 #[test]
 fn every_broken_sample_is_a_one_line_error() {
-    let Some(data) = common::data_dir() else { return };
+    let Some(data) = common::data_dir() else {
+        return;
+    };
     let mut n = 0;
     for entry in std::fs::read_dir(data.join("raw/broken")).unwrap() {
         assert_clean_error(&entry.unwrap().path());
@@ -57,7 +66,9 @@ fn empty_random_directory_and_missing_inputs() {
 
 #[test]
 fn linear_dng_is_refused_with_a_reason() {
-    let Some(data) = common::data_dir() else { return };
+    let Some(data) = common::data_dir() else {
+        return;
+    };
     let err = assert_clean_error(&data.join("raw/canon6d_linear_lossy.dng"));
     assert!(err.contains("linear"), "{err}");
 }
@@ -76,9 +87,14 @@ fn dslr_spec() -> HeaderlessSpec {
 
 #[test]
 fn headerless_dump_reads_and_validates() {
-    let Some(data) = common::data_dir() else { return };
+    let Some(data) = common::data_dir() else {
+        return;
+    };
     let f = read_headerless(&data.join("raw/dslr_crop_768x512_rggb14.raw"), &dslr_spec()).unwrap();
-    assert_eq!((f.width, f.height, f.white, f.black), (768, 512, 15520, [600.0; 4]));
+    assert_eq!(
+        (f.width, f.height, f.white, f.black),
+        (768, 512, 15520, [600.0; 4])
+    );
     // Known content: 14-bit samples, min 616, max 16383, mean 1693.17.
     assert_eq!(*f.mosaic.iter().min().unwrap(), 616);
     assert_eq!(*f.mosaic.iter().max().unwrap(), 16383);
@@ -87,23 +103,38 @@ fn headerless_dump_reads_and_validates() {
 
     // The bad-pixel twin differs in exactly the 400 injected pixels, some of
     // them stuck at 0xFFFF beyond the 14-bit range: kept, and counted.
-    let bad = read_headerless(&data.join("raw/dslr_crop_768x512_rggb14_badpixels.raw"), &dslr_spec()).unwrap();
-    let diff = f.mosaic.iter().zip(&bad.mosaic).filter(|(a, b)| a != b).count();
+    let bad = read_headerless(
+        &data.join("raw/dslr_crop_768x512_rggb14_badpixels.raw"),
+        &dslr_spec(),
+    )
+    .unwrap();
+    let diff = f
+        .mosaic
+        .iter()
+        .zip(&bad.mosaic)
+        .filter(|(a, b)| a != b)
+        .count();
     assert_eq!(diff, 400);
     assert!(pgrf_raw::headerless::samples_above_range(&bad) > 0);
 
     // Wrong geometry, truncation, wrong byte order: clear errors.
     let mut spec = dslr_spec();
     spec.width = 700;
-    let e = read_headerless(&data.join("raw/dslr_crop_768x512_rggb14.raw"), &spec).unwrap_err().to_string();
+    let e = read_headerless(&data.join("raw/dslr_crop_768x512_rggb14.raw"), &spec)
+        .unwrap_err()
+        .to_string();
     assert!(e.contains("bytes"), "{e}");
     let dir = common::scratch("headerless");
     let bytes = std::fs::read(data.join("raw/dslr_crop_768x512_rggb14.raw")).unwrap();
     std::fs::write(dir.join("cut.raw"), &bytes[..bytes.len() - 100]).unwrap();
-    let e = read_headerless(&dir.join("cut.raw"), &dslr_spec()).unwrap_err().to_string();
+    let e = read_headerless(&dir.join("cut.raw"), &dslr_spec())
+        .unwrap_err()
+        .to_string();
     assert!(e.contains("truncated"), "{e}");
     let mut be = dslr_spec();
     be.big_endian = true;
-    let e = read_headerless(&data.join("raw/dslr_crop_768x512_rggb14.raw"), &be).unwrap_err().to_string();
+    let e = read_headerless(&data.join("raw/dslr_crop_768x512_rggb14.raw"), &be)
+        .unwrap_err()
+        .to_string();
     assert!(e.contains("byte order"), "{e}");
 }

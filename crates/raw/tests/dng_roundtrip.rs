@@ -2,7 +2,10 @@
 
 mod common;
 
-use pgrf_raw::{decode_file, encode_dng, write_dng, Cfa, ColorMatrix, Compression, DngOptions, LevelOverrides, RawFrame};
+use pgrf_raw::{
+    decode_file, encode_dng, write_dng, Cfa, ColorMatrix, Compression, DngOptions, LevelOverrides,
+    RawFrame,
+};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
@@ -28,7 +31,12 @@ fn assert_same(a: &RawFrame, b: &RawFrame) {
     match (&a.color_matrix, &b.color_matrix) {
         (Some(x), Some(y)) => {
             assert_eq!(x.illuminant, y.illuminant);
-            for (r, s) in x.xyz_to_cam.iter().flatten().zip(y.xyz_to_cam.iter().flatten()) {
+            for (r, s) in x
+                .xyz_to_cam
+                .iter()
+                .flatten()
+                .zip(y.xyz_to_cam.iter().flatten())
+            {
                 assert!((r - s).abs() < 0.5e-4, "{x:?} vs {y:?}");
             }
         }
@@ -40,18 +48,35 @@ fn assert_same(a: &RawFrame, b: &RawFrame) {
 
 #[test]
 fn canon_550d_survives_dng_round_trip_both_compressions() {
-    let Some(data) = common::data_dir() else { return };
-    let src = decode_file(&data.join("raw/canon550d_colorchart.dng"), &LevelOverrides::default()).unwrap();
+    let Some(data) = common::data_dir() else {
+        return;
+    };
+    let src = decode_file(
+        &data.join("raw/canon550d_colorchart.dng"),
+        &LevelOverrides::default(),
+    )
+    .unwrap();
     let dir = common::scratch("dng550d");
     for compression in [Compression::Lossless, Compression::Uncompressed] {
         let out = dir.join(format!("{compression:?}.dng"));
-        write_dng(&src, &out, &DngOptions { compression, ..Default::default() }).unwrap();
+        write_dng(
+            &src,
+            &out,
+            &DngOptions {
+                compression,
+                ..Default::default()
+            },
+        )
+        .unwrap();
         let back = decode_file(&out, &LevelOverrides::default()).unwrap();
         assert_same(&src, &back);
         assert_eq!(back.sensor_origin, (0, 0));
         let size = std::fs::metadata(&out).unwrap().len() as usize;
         if compression == Compression::Lossless {
-            assert!(size < src.mosaic.len() * 2, "lossless DNG not smaller than raw samples: {size}");
+            assert!(
+                size < src.mosaic.len() * 2,
+                "lossless DNG not smaller than raw samples: {size}"
+            );
         }
     }
 }
@@ -59,12 +84,17 @@ fn canon_550d_survives_dng_round_trip_both_compressions() {
 fn synthetic(cfa: Cfa, w: usize, h: usize, seed: u64) -> RawFrame {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let mosaic = (0..w * h).map(|_| rng.random_range(0..16384u16)).collect();
-    let mut f = RawFrame::from_mosaic(w, h, mosaic, cfa, [512.0, 511.5, 513.0, 510.0], 16383).unwrap();
+    let mut f =
+        RawFrame::from_mosaic(w, h, mosaic, cfa, [512.0, 511.5, 513.0, 510.0], 16383).unwrap();
     f.iso = Some(3200);
     f.exposure_s = Some(1.0 / 30.0);
     f.wb = Some([2.1, 1.0, 1.55]);
     f.color_matrix = Some(ColorMatrix {
-        xyz_to_cam: [[0.5838, -0.143, -0.0246], [-0.3497, 1.1477, 0.2297], [-0.0748, 0.1885, 0.5778]],
+        xyz_to_cam: [
+            [0.5838, -0.143, -0.0246],
+            [-0.3497, 1.1477, 0.2297],
+            [-0.0748, 0.1885, 0.5778],
+        ],
         illuminant: "D65".into(),
     });
     f.make = "Sony".into();
@@ -80,7 +110,15 @@ fn every_cfa_phase_and_odd_sizes_round_trip() {
             let f = synthetic(cfa, w, h, 11 + k as u64);
             for compression in [Compression::Lossless, Compression::Uncompressed] {
                 let out = dir.join(format!("{cfa}-{w}-{compression:?}.dng"));
-                write_dng(&f, &out, &DngOptions { compression, ..Default::default() }).unwrap();
+                write_dng(
+                    &f,
+                    &out,
+                    &DngOptions {
+                        compression,
+                        ..Default::default()
+                    },
+                )
+                .unwrap();
                 let back = decode_file(&out, &LevelOverrides::default())
                     .unwrap_or_else(|e| panic!("{cfa} {w}x{h} {compression:?}: {e}"));
                 assert_same(&f, &back);

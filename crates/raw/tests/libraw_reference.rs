@@ -9,19 +9,39 @@ use sha2::{Digest, Sha256};
 
 #[test]
 fn canon_550d_matches_libraw() {
-    let Some(data) = common::data_dir() else { return };
-    let reference: Value =
-        serde_json::from_str(&std::fs::read_to_string(data.join("raw/LIBRAW_REFERENCE.json")).unwrap()).unwrap();
+    let Some(data) = common::data_dir() else {
+        return;
+    };
+    let reference: Value = serde_json::from_str(
+        &std::fs::read_to_string(data.join("raw/LIBRAW_REFERENCE.json")).unwrap(),
+    )
+    .unwrap();
     let r = &reference["canon550d_colorchart.dng"];
-    let f = decode_file(&data.join("raw/canon550d_colorchart.dng"), &LevelOverrides::default()).unwrap();
+    let f = decode_file(
+        &data.join("raw/canon550d_colorchart.dng"),
+        &LevelOverrides::default(),
+    )
+    .unwrap();
 
     let as_usize = |v: &Value| v.as_u64().unwrap() as usize;
-    assert_eq!((f.height, f.width), (as_usize(&r["visible_shape"][0]), as_usize(&r["visible_shape"][1])));
+    assert_eq!(
+        (f.height, f.width),
+        (
+            as_usize(&r["visible_shape"][0]),
+            as_usize(&r["visible_shape"][1])
+        )
+    );
     assert_eq!(
         f.sensor_origin,
-        (as_usize(&r["visible_offset_top_left"][0]), as_usize(&r["visible_offset_top_left"][1]))
+        (
+            as_usize(&r["visible_offset_top_left"][0]),
+            as_usize(&r["visible_offset_top_left"][1])
+        )
     );
-    assert_eq!(f.sensor_size, (as_usize(&r["raw_shape"][0]), as_usize(&r["raw_shape"][1])));
+    assert_eq!(
+        f.sensor_size,
+        (as_usize(&r["raw_shape"][0]), as_usize(&r["raw_shape"][1]))
+    );
     assert_eq!(f.white as u64, r["white_level"].as_u64().unwrap());
 
     // LibRaw's black_level_per_channel and raw_pattern index colours by
@@ -32,14 +52,27 @@ fn canon_550d_matches_libraw() {
         .iter()
         .map(|v| v.as_f64().unwrap() as f32)
         .collect();
-    assert_eq!(f.black, [libraw_black[0], libraw_black[1], libraw_black[2], libraw_black[3]]);
+    assert_eq!(
+        f.black,
+        [
+            libraw_black[0],
+            libraw_black[1],
+            libraw_black[2],
+            libraw_black[3]
+        ]
+    );
 
     let pattern = &r["raw_pattern"];
     let letter = |v: &Value| ["R", "G", "B", "G"][v.as_u64().unwrap() as usize];
-    let cfa_name: String = [&pattern[0][0], &pattern[0][1], &pattern[1][0], &pattern[1][1]]
-        .into_iter()
-        .map(letter)
-        .collect();
+    let cfa_name: String = [
+        &pattern[0][0],
+        &pattern[0][1],
+        &pattern[1][0],
+        &pattern[1][1],
+    ]
+    .into_iter()
+    .map(letter)
+    .collect();
     assert_eq!(f.cfa, cfa_name.parse::<Cfa>().unwrap());
     assert_eq!(f.cfa, Cfa::Rggb);
 
@@ -49,8 +82,14 @@ fn canon_550d_matches_libraw() {
     assert_eq!(digest, r["visible_sha256_u16le"].as_str().unwrap());
     let sum: u64 = f.mosaic.iter().map(|&v| v as u64).sum();
     assert_eq!(sum, r["visible_sum"].as_u64().unwrap());
-    assert_eq!(*f.mosaic.iter().min().unwrap() as u64, r["visible_min"].as_u64().unwrap());
-    assert_eq!(*f.mosaic.iter().max().unwrap() as u64, r["visible_max"].as_u64().unwrap());
+    assert_eq!(
+        *f.mosaic.iter().min().unwrap() as u64,
+        r["visible_min"].as_u64().unwrap()
+    );
+    assert_eq!(
+        *f.mosaic.iter().max().unwrap() as u64,
+        r["visible_max"].as_u64().unwrap()
+    );
     for px in r["visible_pixels_row_col_value"].as_array().unwrap() {
         let (row, col, v) = (as_usize(&px[0]), as_usize(&px[1]), px[2].as_u64().unwrap());
         assert_eq!(f.at(row, col) as u64, v, "pixel ({row},{col})");
@@ -58,9 +97,20 @@ fn canon_550d_matches_libraw() {
 
     // White balance: LibRaw's cam_mul is unnormalised; compare ratios to green.
     let wb = f.wb.expect("as-shot white balance");
-    let cam: Vec<f64> = r["camera_whitebalance"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect();
-    assert!((wb[0] as f64 - cam[0] / cam[1]).abs() < 1e-4, "{wb:?} vs {cam:?}");
-    assert!((wb[2] as f64 - cam[2] / cam[1]).abs() < 1e-4, "{wb:?} vs {cam:?}");
+    let cam: Vec<f64> = r["camera_whitebalance"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_f64().unwrap())
+        .collect();
+    assert!(
+        (wb[0] as f64 - cam[0] / cam[1]).abs() < 1e-4,
+        "{wb:?} vs {cam:?}"
+    );
+    assert!(
+        (wb[2] as f64 - cam[2] / cam[1]).abs() < 1e-4,
+        "{wb:?} vs {cam:?}"
+    );
 
     // Packing puts the top-left red pixel at plane R (0,0) and the bottom-right
     // sample of the first cell in plane B.
@@ -73,7 +123,9 @@ fn canon_550d_matches_libraw() {
 
 #[test]
 fn level_overrides_replace_metadata() {
-    let Some(data) = common::data_dir() else { return };
+    let Some(data) = common::data_dir() else {
+        return;
+    };
     let o = LevelOverrides {
         black: Some(vec![2000.0, 2001.0, 2002.0, 2003.0]),
         white: Some(16383),
@@ -85,7 +137,9 @@ fn level_overrides_replace_metadata() {
 
 #[test]
 fn kodak_kdc_decodes_as_grbg() {
-    let Some(data) = common::data_dir() else { return };
+    let Some(data) = common::data_dir() else {
+        return;
+    };
     let f = decode_file(&data.join("raw/kodak_dc50.kdc"), &LevelOverrides::default()).unwrap();
     assert_eq!(f.cfa, Cfa::Grbg);
     assert_eq!((f.width, f.height), (768, 512));

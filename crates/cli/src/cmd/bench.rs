@@ -60,7 +60,10 @@ pub fn run(a: &BenchArgs) -> Result<()> {
                 bail!("--iters must be at least 1");
             }
             if !json {
-                println!("{:<40} {:>6} {:>10} {:>10} {:>10} {:>10}", "file", "MP", "decode", "pack", "total", "min");
+                println!(
+                    "{:<40} {:>6} {:>10} {:>10} {:>10} {:>10}",
+                    "file", "MP", "decode", "pack", "total", "min"
+                );
             }
             for f in files {
                 let o = LevelOverrides::default();
@@ -93,10 +96,18 @@ pub fn run(a: &BenchArgs) -> Result<()> {
                 if *json {
                     println!("{}", serde_json::to_string(&r)?);
                 } else {
-                    let name = f.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+                    let name = f
+                        .file_name()
+                        .map(|n| n.to_string_lossy().into_owned())
+                        .unwrap_or_default();
                     println!(
                         "{:<40} {:>6.2} {:>8.2}ms {:>8.2}ms {:>8.2}ms {:>8.2}ms",
-                        name, r.megapixels, r.decode_ms_median, r.pack_ms_median, r.total_ms_median, r.total_ms_min
+                        name,
+                        r.megapixels,
+                        r.decode_ms_median,
+                        r.pack_ms_median,
+                        r.total_ms_median,
+                        r.total_ms_min
                     );
                 }
             }
@@ -106,5 +117,7 @@ pub fn run(a: &BenchArgs) -> Result<()> {
 }
 
 fn pgrf_raw_threads() -> usize {
-    std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1)
+    std::thread::available_parallelism()
+        .map(|n| n.get())
+        .unwrap_or(1)
 }

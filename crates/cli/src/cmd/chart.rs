@@ -31,7 +31,11 @@ pub struct ChartArgs {
 
 pub fn run(a: &ChartArgs) -> Result<()> {
     if a.width < 60 || a.height < 40 || a.width > 20000 || a.height > 20000 {
-        bail!("chart size {}x{} is outside 60x40 ..= 20000x20000", a.width, a.height);
+        bail!(
+            "chart size {}x{} is outside 60x40 ..= 20000x20000",
+            a.width,
+            a.height
+        );
     }
     if !(a.exposure > 0.0 && a.exposure <= 1.0) {
         bail!("--exposure must be in (0, 1], got {}", a.exposure);

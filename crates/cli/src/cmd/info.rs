@@ -101,16 +101,28 @@ pub fn run(a: &InfoArgs) -> Result<()> {
     let opt = |v: Option<String>| v.unwrap_or_else(|| "unknown".into());
     println!("file        {}", info.file);
     println!("camera      {} {}", or_dash(info.make), or_dash(info.model));
-    println!("visible     {} x {} (at row {}, col {} of a {} x {} readout)",
-        info.width, info.height, f.sensor_origin.0, f.sensor_origin.1, f.sensor_size.1, f.sensor_size.0);
+    println!(
+        "visible     {} x {} (at row {}, col {} of a {} x {} readout)",
+        info.width,
+        info.height,
+        f.sensor_origin.0,
+        f.sensor_origin.1,
+        f.sensor_size.1,
+        f.sensor_size.0
+    );
     println!("cfa         {}", info.cfa);
-    println!("black       R {} G1 {} B {} G2 {} DN", f.black[0], f.black[1], f.black[2], f.black[3]);
+    println!(
+        "black       R {} G1 {} B {} G2 {} DN",
+        f.black[0], f.black[1], f.black[2], f.black[3]
+    );
     println!("white       {} DN ({} bits)", f.white, f.bits);
     println!("iso         {}", opt(f.iso.map(|v| v.to_string())));
     println!("exposure    {}", opt(f.exposure_s.map(format_exposure)));
     println!(
         "wb          {}",
-        opt(f.wb.map(|w| format!("R {:.4}  G 1  B {:.4} (multipliers)", w[0], w[2])))
+        opt(f
+            .wb
+            .map(|w| format!("R {:.4}  G 1  B {:.4} (multipliers)", w[0], w[2])))
     );
     match &f.color_matrix {
         Some(cm) => println!(
@@ -121,7 +133,14 @@ pub fn run(a: &InfoArgs) -> Result<()> {
     }
     println!("plane       min     max     mean      saturated");
     for s in &info.planes {
-        println!("  {:<8}{:<8}{:<8}{:<10.2}{:.4}%", s.plane, s.min, s.max, s.mean, 100.0 * s.saturated);
+        println!(
+            "  {:<8}{:<8}{:<8}{:<10.2}{:.4}%",
+            s.plane,
+            s.min,
+            s.max,
+            s.mean,
+            100.0 * s.saturated
+        );
     }
     Ok(())
 }

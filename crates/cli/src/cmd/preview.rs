@@ -50,6 +50,12 @@ pub fn run(a: &PreviewArgs) -> Result<()> {
         eprintln!("pgrf: warning: {}: {w}", a.file.display());
     }
     p.write_png(&a.output, a.png_bits)?;
-    eprintln!("wrote {} ({} x {}, {}-bit sRGB)", a.output.display(), p.width, p.height, a.png_bits);
+    eprintln!(
+        "wrote {} ({} x {}, {}-bit sRGB)",
+        a.output.display(),
+        p.width,
+        p.height,
+        a.png_bits
+    );
     Ok(())
 }

@@ -1,0 +1,238 @@
+//! The `pgrf` binary as users and scripts see it: exit codes, one-line
+//! errors, outputs that decode.
+
+use rand::{RngCore, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use serde_json::Value;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn pgrf(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_pgrf"))
+        .args(args)
+        .output()
+        .expect("run pgrf")
+}
+
+fn data_dir() -> Option<PathBuf> {
+    let d = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data");
+    if d.is_dir() {
+        Some(d)
+    } else {
+        eprintln!("skipping: {} not found", d.display());
+        None
+    }
+}
+
+fn scratch(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("pgrf-cli-test-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+/// Exit code 1, nothing on stdout, exactly one line on stderr that names the file.
+fn assert_one_line_failure(out: &Output, file: &str) -> String {
+    let err = String::from_utf8_lossy(&out.stderr).to_string();
+    assert_eq!(out.status.code(), Some(1), "stderr: {err}");
+    assert!(
+        out.stdout.is_empty(),
+        "stdout: {}",
+        String::from_utf8_lossy(&out.stdout)
+    );
+    assert_eq!(err.trim_end().lines().count(), 1, "not one line: {err:?}");
+    assert!(err.starts_with("pgrf: error: "), "{err}");
+    assert!(err.contains(file), "error does not name {file}: {err}");
+    assert!(!err.contains("panicked at"), "{err}");
+    err
+}
+
+#[test]
+fn info_json_reports_the_550d_metadata() {
+    let Some(d) = data_dir() else { return };
+    let f = d.join("raw/canon550d_colorchart.dng");
+    let out = pgrf(&["info", s(&f), "--json"]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["width"], 1734);
+    assert_eq!(v["height"], 1156);
+    assert_eq!(v["cfa"], "RGGB");
+    assert_eq!(v["white"], 15000);
+    assert_eq!(
+        v["black"],
+        serde_json::json!([2056.0, 2056.0, 2056.0, 2056.0])
+    );
+    assert_eq!(v["visible_origin"], serde_json::json!([26, 152]));
+    assert_eq!(v["planes"].as_array().unwrap().len(), 4);
+    assert_eq!(v["planes"][0]["min"], 1968);
+    // Text mode works too.
+    let out = pgrf(&["info", s(&f)]);
+    assert!(String::from_utf8_lossy(&out.stdout).contains("1734 x 1156"));
+}
+
+#[test]
+fn broken_inputs_fail_with_one_line() {
+    let Some(d) = data_dir() else { return };
+    for entry in std::fs::read_dir(d.join("raw/broken")).unwrap() {
+        let p = entry.unwrap().path();
+        for cmd in ["info", "convert", "preview"] {
+            let out_file = scratch("broken-out").join("x.out");
+            let args: Vec<&str> = match cmd {
+                "info" => vec!["info", s(&p)],
+                _ => vec![cmd, s(&p), "-o", s(&out_file)],
+            };
+            assert_one_line_failure(&pgrf(&args), s(&p));
+            assert!(
+                !out_file.exists(),
+                "{cmd} left an output behind for {}",
+                p.display()
+            );
+        }
+    }
+    let dir = scratch("broken-misc");
+    let empty = dir.join("empty.nef");
+    std::fs::write(&empty, b"").unwrap();
+    assert_one_line_failure(&pgrf(&["info", s(&empty)]), s(&empty));
+    let mut bytes = vec![0u8; 50_000];
+    ChaCha8Rng::seed_from_u64(9).fill_bytes(&mut bytes);
+    let random = dir.join("random.arw");
+    std::fs::write(&random, &bytes).unwrap();
+    assert_one_line_failure(&pgrf(&["info", s(&random)]), s(&random));
+    assert_one_line_failure(&pgrf(&["info", s(&dir)]), s(&dir));
+    let linear = d.join("raw/canon6d_linear_lossy.dng");
+    let e = assert_one_line_failure(&pgrf(&["info", s(&linear)]), s(&linear));
+    assert!(e.contains("linear"), "{e}");
+}
+
+#[test]
+fn convert_then_decode_gives_the_same_frame() {
+    let Some(d) = data_dir() else { return };
+    let src = d.join("raw/canon550d_colorchart.dng");
+    let dir = scratch("convert");
+    let out = dir.join("out.dng");
+    let r = pgrf(&["convert", s(&src), "-o", s(&out)]);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    let a = pgrf_raw::decode_file(&src, &Default::default()).unwrap();
+    let b = pgrf_raw::decode_file(&out, &Default::default()).unwrap();
+    assert!(a.mosaic == b.mosaic);
+    assert_eq!((a.black, a.white, a.cfa), (b.black, b.white, b.cfa));
+    // Missing output folder: clear error, nothing written.
+    let bad = dir.join("missing/out.dng");
+    let r = pgrf(&["convert", s(&src), "-o", s(&bad)]);
+    let e = assert_one_line_failure(&r, "missing");
+    assert!(e.contains("does not exist"), "{e}");
+}
+
+#[test]
+fn headerless_convert_keeps_the_dump_exactly() {
+    let Some(d) = data_dir() else { return };
+    let src = d.join("raw/dslr_crop_768x512_rggb14.raw");
+    let dir = scratch("headerless");
+    let out = dir.join("dump.dng");
+    let geo = [
+        "--width", "768", "--height", "512", "--cfa", "RGGB", "--black", "600", "--white", "15520",
+    ];
+    let mut args = vec!["convert", s(&src), "-o", s(&out)];
+    args.extend(geo);
+    let r = pgrf(&args);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    let b = pgrf_raw::decode_file(&out, &Default::default()).unwrap();
+    let raw: Vec<u16> = std::fs::read(&src)
+        .unwrap()
+        .chunks(2)
+        .map(|c| u16::from_le_bytes([c[0], c[1]]))
+        .collect();
+    assert!(b.mosaic == raw);
+    assert_eq!((b.black, b.white), ([600.0; 4], 15520));
+    // A dump without a black level is refused, not guessed.
+    let r = pgrf(&[
+        "info",
+        s(&src),
+        "--width",
+        "768",
+        "--height",
+        "512",
+        "--cfa",
+        "RGGB",
+    ]);
+    assert_eq!(r.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&r.stderr).contains("--black"));
+}
+
+#[test]
+fn preview_writes_pngs_of_the_right_size() {
+    let dir = scratch("preview");
+    let chart = dir.join("chart.dng");
+    let r = pgrf(&[
+        "chart",
+        "-o",
+        s(&chart),
+        "--width",
+        "300",
+        "--height",
+        "200",
+        "--cfa",
+        "GBRG",
+    ]);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    for (extra, w, h, depth16) in [
+        (vec![], 300, 200, false),
+        (vec!["--half"], 150, 100, false),
+        (
+            vec!["--png-bits", "16", "--demosaic", "bilinear"],
+            300,
+            200,
+            true,
+        ),
+    ] {
+        let png = dir.join("p.png");
+        let mut args = vec!["preview", s(&chart), "-o", s(&png), "--gain", "2"];
+        args.extend(extra.iter().copied());
+        let r = pgrf(&args);
+        assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+        let img = image::open(&png).unwrap();
+        assert_eq!((img.width(), img.height()), (w, h));
+        assert_eq!(matches!(img, image::DynamicImage::ImageRgb16(_)), depth16);
+    }
+    for bad in [
+        vec!["--gain=-1"],
+        vec!["--png-bits", "12"],
+        vec!["--gain", "NaN"],
+    ] {
+        let png = dir.join("bad.png");
+        let mut args = vec!["preview", s(&chart), "-o", s(&png)];
+        args.extend(bad.iter().copied());
+        let r = pgrf(&args);
+        assert_eq!(r.status.code(), Some(1), "{bad:?}");
+        assert!(!png.exists());
+    }
+}
+
+#[test]
+fn every_command_has_help() {
+    for cmd in [
+        vec!["--help"],
+        vec!["info", "--help"],
+        vec!["preview", "--help"],
+        vec!["convert", "--help"],
+        vec!["chart", "--help"],
+        vec!["bench", "decode", "--help"],
+    ] {
+        let out = pgrf(&cmd);
+        assert!(out.status.success(), "{cmd:?}");
+        assert!(
+            String::from_utf8_lossy(&out.stdout).contains("Usage"),
+            "{cmd:?}"
+        );
+    }
+    // Unknown flags are usage errors (exit 2), not crashes.
+    assert_eq!(pgrf(&["info", "--frobnicate"]).status.code(), Some(2));
+}
