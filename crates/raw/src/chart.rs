@@ -169,10 +169,10 @@ pub fn render_chart(spec: &ChartSpec) -> Result<RawFrame> {
     }
     let mut f = RawFrame::from_mosaic(w, h, mosaic, spec.cfa, [spec.black; 4], spec.white)?;
     f.wb = Some(wb);
-    f.color_matrix = Some(ColorMatrix {
+    f.color_matrices = vec![ColorMatrix {
         xyz_to_cam: A7S2_D65_MATRIX,
         illuminant: "D65".into(),
-    });
+    }];
     f.iso = spec.iso;
     f.exposure_s = spec.exposure_s;
     f.make = "pgrf".into();

@@ -190,7 +190,7 @@ fn frame_from_rawler(
         white,
         bits,
         wb,
-        color_matrix: pick_color_matrix(&image),
+        color_matrices: color_matrices(&image),
         iso,
         exposure_s,
         make: image.clean_make.clone(),
@@ -242,25 +242,32 @@ fn black_per_plane(
     Ok(out)
 }
 
-fn pick_color_matrix(image: &RawImage) -> Option<ColorMatrix> {
-    let prefer = [
-        Illuminant::D65,
-        Illuminant::D50,
-        Illuminant::D55,
-        Illuminant::Daylight,
-    ];
-    let chosen = prefer
+/// All usable 3x3 matrices, ordered by illuminant code with daylight-class
+/// illuminants (D65, D50, D55, daylight) last, as DNG puts the warmer
+/// illuminant in slot 1.
+fn color_matrices(image: &RawImage) -> Vec<ColorMatrix> {
+    let daylight = |i: &Illuminant| {
+        matches!(
+            i,
+            Illuminant::D65 | Illuminant::D50 | Illuminant::D55 | Illuminant::Daylight
+        )
+    };
+    let mut v: Vec<(bool, u16, ColorMatrix)> = image
+        .color_matrix
         .iter()
-        .find_map(|i| image.color_matrix.get(i).map(|m| (*i, m)))
-        .or_else(|| image.color_matrix.iter().next().map(|(i, m)| (*i, m)))?;
-    let (illum, m) = chosen;
-    if m.len() < 9 || m[..9].iter().any(|v| !v.is_finite()) || m[..9].iter().all(|v| *v == 0.0) {
-        return None;
-    }
-    Some(ColorMatrix {
-        xyz_to_cam: [[m[0], m[1], m[2]], [m[3], m[4], m[5]], [m[6], m[7], m[8]]],
-        illuminant: format!("{illum:?}"),
-    })
+        .filter(|(_, m)| {
+            m.len() >= 9 && m[..9].iter().all(|v| v.is_finite()) && m[..9].iter().any(|v| *v != 0.0)
+        })
+        .map(|(illum, m)| {
+            let cm = ColorMatrix {
+                xyz_to_cam: [[m[0], m[1], m[2]], [m[3], m[4], m[5]], [m[6], m[7], m[8]]],
+                illuminant: format!("{illum:?}"),
+            };
+            (daylight(illum), u16::from(*illum), cm)
+        })
+        .collect();
+    v.sort_by_key(|(d, code, _)| (*d, *code));
+    v.into_iter().map(|(_, _, m)| m).collect()
 }
 
 fn exposure_of(m: &RawMetadata) -> (Option<u32>, Option<f64>) {

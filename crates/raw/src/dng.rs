@@ -7,7 +7,7 @@
 
 use crate::atomic::write_atomic;
 use crate::error::{RawError, Result};
-use crate::frame::RawFrame;
+use crate::frame::{ColorMatrix, RawFrame};
 use crate::panic_guard::quietly;
 use rawler::cfa::{PlaneColor, CFA};
 use rawler::decoders::{Camera, RawMetadata};
@@ -158,15 +158,24 @@ fn write_color_tags<B: std::io::Write + std::io::Seek>(dng: &mut DngWriter<B>, f
         }
         None => root.remove_tag(DngTag::AsShotNeutral),
     }
-    if let Some(cm) = &frame.color_matrix {
-        let illum = illuminant_from_name(&cm.illuminant).unwrap_or(Illuminant::D65);
+    // DNG has two matrix slots; with more than two, keep the warmest
+    // illuminant and the daylight one (the pair converters interpolate).
+    let slots: Vec<&ColorMatrix> = match frame.color_matrices.as_slice() {
+        [] => vec![],
+        [one] => vec![one],
+        [first, .., last] => vec![first, last],
+    };
+    for (slot, cm) in slots.into_iter().enumerate() {
+        let illum = illuminant_from_name(&cm.illuminant).unwrap_or(Illuminant::Unknown);
+        // rawler's own conversion truncates to 1/10000; round instead so
+        // matrices read from a DNG are written back bit for bit.
         let m: Vec<SRational> = cm
             .xyz_to_cam
             .iter()
             .flatten()
             .map(|v| SRational::new((*v as f64 * 10000.0).round() as i32, 10000))
             .collect();
-        dng.color_matrix(1, illum, m.as_slice());
+        dng.color_matrix(slot + 1, illum, m.as_slice());
     }
 }
 

@@ -34,7 +34,10 @@ pub struct RawFrame {
     pub bits: u32,
     /// As-shot white-balance multipliers for R, G, B, normalised to G = 1.
     pub wb: Option<[f32; 3]>,
-    pub color_matrix: Option<ColorMatrix>,
+    /// Every XYZ->camera matrix the file carries (DNG ColorMatrix1/2), the
+    /// D65-like one last. Raw converters interpolate between them by white
+    /// balance, so a DNG written from this frame keeps all of them.
+    pub color_matrices: Vec<ColorMatrix>,
     pub iso: Option<u32>,
     /// Exposure time in seconds.
     pub exposure_s: Option<f64>,
@@ -97,7 +100,7 @@ impl RawFrame {
             white,
             bits: bits_for(white),
             wb: None,
-            color_matrix: None,
+            color_matrices: Vec::new(),
             iso: None,
             exposure_s: None,
             make: String::new(),
@@ -155,6 +158,15 @@ impl RawFrame {
             )));
         }
         Ok(())
+    }
+
+    /// The matrix for rendering under daylight: D65, else D50/D55/daylight,
+    /// else whatever the file has.
+    pub fn color_matrix(&self) -> Option<&ColorMatrix> {
+        ["D65", "D50", "D55", "Daylight"]
+            .iter()
+            .find_map(|name| self.color_matrices.iter().find(|m| m.illuminant == *name))
+            .or_else(|| self.color_matrices.first())
     }
 
     /// Sample at (row, col).

@@ -67,8 +67,7 @@ pub fn render_preview(frame: &RawFrame, opts: &PreviewOptions) -> Result<Preview
         }
     };
     let matrix = match frame
-        .color_matrix
-        .as_ref()
+        .color_matrix()
         .and_then(|cm| srgb_from_camera(&cm.xyz_to_cam))
     {
         Some(m) => m,
@@ -191,14 +190,14 @@ mod tests {
             .collect();
         let mut f = RawFrame::from_mosaic(w, h, mosaic, cfa, [512.0; 4], 16383).unwrap();
         f.wb = Some(wb);
-        f.color_matrix = Some(ColorMatrix {
+        f.color_matrices = vec![ColorMatrix {
             xyz_to_cam: [
                 [0.6461, -0.1164, -0.0857],
                 [-0.3825, 1.1597, 0.2534],
                 [-0.0416, 0.154, 0.6039],
             ],
             illuminant: "D65".into(),
-        });
+        }];
         f
     }
 
@@ -260,7 +259,7 @@ mod tests {
     #[test]
     fn missing_matrix_warns_and_uses_identity() {
         let mut f = grey_frame(Cfa::Bggr, 0.18);
-        f.color_matrix = None;
+        f.color_matrices.clear();
         let p = render_preview(&f, &PreviewOptions::default()).unwrap();
         assert_eq!(p.warnings.len(), 1);
         assert!((p.rgb[0] - 0.4614).abs() < 2e-3);

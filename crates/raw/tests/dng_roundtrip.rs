@@ -28,19 +28,19 @@ fn assert_same(a: &RawFrame, b: &RawFrame) {
         }
         (x, y) => assert_eq!(x, y),
     }
-    match (&a.color_matrix, &b.color_matrix) {
-        (Some(x), Some(y)) => {
-            assert_eq!(x.illuminant, y.illuminant);
-            for (r, s) in x
-                .xyz_to_cam
-                .iter()
-                .flatten()
-                .zip(y.xyz_to_cam.iter().flatten())
-            {
-                assert!((r - s).abs() < 0.5e-4, "{x:?} vs {y:?}");
-            }
+    // Matrices are stored in 1/10000 steps: equal to that precision, and the
+    // same illuminants in the same order.
+    assert_eq!(a.color_matrices.len(), b.color_matrices.len());
+    for (x, y) in a.color_matrices.iter().zip(&b.color_matrices) {
+        assert_eq!(x.illuminant, y.illuminant);
+        for (r, s) in x
+            .xyz_to_cam
+            .iter()
+            .flatten()
+            .zip(y.xyz_to_cam.iter().flatten())
+        {
+            assert!((r - s).abs() < 0.5e-4, "{x:?} vs {y:?}");
         }
-        (x, y) => assert_eq!(x, y),
     }
     assert_eq!(a.make, b.make);
     assert_eq!(a.model, b.model);
@@ -89,14 +89,25 @@ fn synthetic(cfa: Cfa, w: usize, h: usize, seed: u64) -> RawFrame {
     f.iso = Some(3200);
     f.exposure_s = Some(1.0 / 30.0);
     f.wb = Some([2.1, 1.0, 1.55]);
-    f.color_matrix = Some(ColorMatrix {
-        xyz_to_cam: [
-            [0.5838, -0.143, -0.0246],
-            [-0.3497, 1.1477, 0.2297],
-            [-0.0748, 0.1885, 0.5778],
-        ],
-        illuminant: "D65".into(),
-    });
+    // The A7S2's two published matrices: tungsten (A) in slot 1, D65 in slot 2.
+    f.color_matrices = vec![
+        ColorMatrix {
+            xyz_to_cam: [
+                [0.6263, -0.1964, 0.0102],
+                [-0.4375, 1.2428, 0.2171],
+                [-0.066, 0.1559, 0.7146],
+            ],
+            illuminant: "A".into(),
+        },
+        ColorMatrix {
+            xyz_to_cam: [
+                [0.5838, -0.143, -0.0246],
+                [-0.3497, 1.1477, 0.2297],
+                [-0.0748, 0.1885, 0.5778],
+            ],
+            illuminant: "D65".into(),
+        },
+    ];
     f.make = "Sony".into();
     f.model = "ILCE-7SM2".into();
     f

@@ -42,7 +42,7 @@ struct Info<'a> {
     white: u32,
     bits: u32,
     wb: Option<[f32; 3]>,
-    color_matrix: Option<&'a pgrf_raw::ColorMatrix>,
+    color_matrices: &'a [pgrf_raw::ColorMatrix],
     iso: Option<u32>,
     exposure_s: Option<f64>,
     visible_origin: [usize; 2],
@@ -87,7 +87,7 @@ pub fn run(a: &InfoArgs) -> Result<()> {
         white: f.white,
         bits: f.bits,
         wb: f.wb,
-        color_matrix: f.color_matrix.as_ref(),
+        color_matrices: &f.color_matrices,
         iso: f.iso,
         exposure_s: f.exposure_s,
         visible_origin: [f.sensor_origin.0, f.sensor_origin.1],
@@ -124,12 +124,14 @@ pub fn run(a: &InfoArgs) -> Result<()> {
             .wb
             .map(|w| format!("R {:.4}  G 1  B {:.4} (multipliers)", w[0], w[2])))
     );
-    match &f.color_matrix {
-        Some(cm) => println!(
+    if f.color_matrices.is_empty() {
+        println!("matrix      none");
+    }
+    for cm in &f.color_matrices {
+        println!(
             "matrix      XYZ->camera ({}): {:?}",
             cm.illuminant, cm.xyz_to_cam
-        ),
-        None => println!("matrix      none"),
+        );
     }
     println!("plane       min     max     mean      saturated");
     for s in &info.planes {
