@@ -176,6 +176,11 @@ fn frame_from_rawler(
     };
 
     let (iso, exposure_s) = exif.as_ref().map(exposure_of).unwrap_or((None, None));
+    let orientation = exif
+        .as_ref()
+        .and_then(|m| m.exif.orientation)
+        .filter(|o| (1..=8).contains(o))
+        .unwrap_or(1);
 
     // Decoders disagree on bps (container vs sensor depth); the white level is
     // what the data actually spans.
@@ -195,6 +200,7 @@ fn frame_from_rawler(
         exposure_s,
         make: image.clean_make.clone(),
         model: image.clean_model.clone(),
+        orientation,
         sensor_origin: (y0, x0),
         sensor_size: (image.height, image.width),
         exif,

@@ -83,7 +83,7 @@ pub fn encode_dng(frame: &RawFrame, opts: &DngOptions) -> Result<Vec<u8>> {
         dng.load_metadata(&exif).map_err(|e| e.to_string())?;
         write_color_tags(&mut dng, frame);
         let root = dng.root_ifd_mut();
-        root.add_tag(ExifTag::Orientation, 1_u16);
+        root.add_tag(ExifTag::Orientation, frame.orientation);
         root.add_tag(TiffCommonTag::Software, opts.software.as_str());
         dng.close().map_err(|e| e.to_string())?;
         Ok(buf.into_inner())
@@ -194,6 +194,7 @@ fn illuminant_from_name(name: &str) -> Option<Illuminant> {
 /// exposure taken from the frame (they may have been edited, e.g. by synthesis).
 fn exif_for(frame: &RawFrame) -> RawMetadata {
     let mut m = frame.exif.clone().unwrap_or_default();
+    m.exif.orientation = Some(frame.orientation);
     m.make = frame.make.clone();
     m.model = frame.model.clone();
     match frame.iso {

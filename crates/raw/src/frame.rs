@@ -43,6 +43,9 @@ pub struct RawFrame {
     pub exposure_s: Option<f64>,
     pub make: String,
     pub model: String,
+    /// EXIF orientation (1 = as stored, 6 = rotate 90 degrees clockwise to
+    /// display, ...). Pixels are never rotated; previews apply it, DNGs keep it.
+    pub orientation: u16,
     /// Where the visible area starts on the full sensor readout (row, col),
     /// and the readout's size (height, width): for `pgrf info` and for
     /// checking a decode against another decoder.
@@ -105,6 +108,7 @@ impl RawFrame {
             exposure_s: None,
             make: String::new(),
             model: String::new(),
+            orientation: 1,
             sensor_origin: (0, 0),
             sensor_size: (height, width),
             exif: None,

@@ -15,6 +15,7 @@ pub mod dng;
 pub mod error;
 pub mod frame;
 pub mod headerless;
+pub mod orientation;
 pub mod pack;
 mod panic_guard;
 pub mod preview;

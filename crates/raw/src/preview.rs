@@ -10,6 +10,7 @@ use crate::color::{srgb_encode, srgb_from_camera, Mat3, IDENTITY};
 use crate::demosaic::{demosaic, Demosaic};
 use crate::error::{RawError, Result};
 use crate::frame::RawFrame;
+use crate::orientation::apply_orientation;
 use rayon::prelude::*;
 use std::path::Path;
 
@@ -24,6 +25,9 @@ pub struct PreviewOptions {
     pub half: bool,
     /// Ignore the file's white balance (multipliers of 1).
     pub no_wb: bool,
+    /// Show pixels in sensor order instead of turning the picture upright
+    /// by the file's EXIF orientation.
+    pub keep_orientation: bool,
 }
 
 impl Default for PreviewOptions {
@@ -33,6 +37,7 @@ impl Default for PreviewOptions {
             demosaic: Demosaic::Malvar,
             half: false,
             no_wb: false,
+            keep_orientation: false,
         }
     }
 }
@@ -123,6 +128,11 @@ pub fn render_preview(frame: &RawFrame, opts: &PreviewOptions) -> Result<Preview
             p[k] = srgb_encode(m[k][0] * r + m[k][1] * g + m[k][2] * b);
         }
     });
+    let (rgb, width, height) = if opts.keep_orientation {
+        (rgb, width, height)
+    } else {
+        apply_orientation(&rgb, width, height, 3, frame.orientation)
+    };
     Ok(Preview {
         width,
         height,
@@ -254,6 +264,20 @@ mod tests {
             }
         )
         .is_err());
+    }
+
+    #[test]
+    fn exif_orientation_turns_the_preview_upright() {
+        let mut f = grey_frame(Cfa::Rggb, 0.18);
+        f.orientation = 6;
+        let p = render_preview(&f, &PreviewOptions::default()).unwrap();
+        assert_eq!((p.width, p.height), (12, 16));
+        let keep = PreviewOptions {
+            keep_orientation: true,
+            ..Default::default()
+        };
+        let p = render_preview(&f, &keep).unwrap();
+        assert_eq!((p.width, p.height), (16, 12));
     }
 
     #[test]

@@ -43,6 +43,7 @@ fn assert_same(a: &RawFrame, b: &RawFrame) {
         }
     }
     assert_eq!(a.make, b.make);
+    assert_eq!(a.orientation, b.orientation);
     assert_eq!(a.model, b.model);
 }
 
@@ -110,6 +111,7 @@ fn synthetic(cfa: Cfa, w: usize, h: usize, seed: u64) -> RawFrame {
     ];
     f.make = "Sony".into();
     f.model = "ILCE-7SM2".into();
+    f.orientation = 6;
     f
 }
 

@@ -45,6 +45,7 @@ struct Info<'a> {
     color_matrices: &'a [pgrf_raw::ColorMatrix],
     iso: Option<u32>,
     exposure_s: Option<f64>,
+    orientation: u16,
     visible_origin: [usize; 2],
     sensor_size: [usize; 2],
     planes: Vec<PlaneStats>,
@@ -90,6 +91,7 @@ pub fn run(a: &InfoArgs) -> Result<()> {
         color_matrices: &f.color_matrices,
         iso: f.iso,
         exposure_s: f.exposure_s,
+        orientation: f.orientation,
         visible_origin: [f.sensor_origin.0, f.sensor_origin.1],
         sensor_size: [f.sensor_size.0, f.sensor_size.1],
         planes: plane_stats(&f)?,
@@ -111,6 +113,7 @@ pub fn run(a: &InfoArgs) -> Result<()> {
         f.sensor_size.0
     );
     println!("cfa         {}", info.cfa);
+    println!("orientation {} (EXIF)", f.orientation);
     println!(
         "black       R {} G1 {} B {} G2 {} DN",
         f.black[0], f.black[1], f.black[2], f.black[3]

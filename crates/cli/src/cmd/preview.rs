@@ -28,6 +28,9 @@ pub struct PreviewArgs {
     /// Ignore the file's as-shot white balance.
     #[arg(long)]
     pub no_wb: bool,
+    /// Keep sensor orientation (do not apply the file's EXIF rotation).
+    #[arg(long)]
+    pub keep_orientation: bool,
     #[command(flatten)]
     pub input: InputArgs,
 }
@@ -44,6 +47,7 @@ pub fn run(a: &PreviewArgs) -> Result<()> {
             demosaic: a.demosaic,
             half: a.half,
             no_wb: a.no_wb,
+            keep_orientation: a.keep_orientation,
         },
     )?;
     for w in &p.warnings {
