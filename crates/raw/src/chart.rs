@@ -9,7 +9,7 @@
 //! noise-free on purpose: noise belongs to the noise models.
 
 use crate::cfa::Cfa;
-use crate::color::{invert, Mat3};
+use crate::color::{Mat3, SRGB_TO_XYZ};
 use crate::error::Result;
 use crate::frame::{ColorMatrix, RawFrame};
 
@@ -48,12 +48,6 @@ pub const A7S2_D65_MATRIX: [[f32; 3]; 3] = [
     [0.5838, -0.143, -0.0246],
     [-0.3497, 1.1477, 0.2297],
     [-0.0748, 0.1885, 0.5778],
-];
-
-const SRGB_TO_XYZ: Mat3 = [
-    [0.4124564, 0.3575761, 0.1804375],
-    [0.2126729, 0.7151522, 0.0721750],
-    [0.0193339, 0.1191920, 0.9503041],
 ];
 
 /// How to render the chart.
@@ -107,24 +101,31 @@ pub fn patch_box(spec: &ChartSpec, i: usize) -> (usize, usize, usize) {
     (pr * cell_h + cell_h / 2, pc * cell_w + cell_w / 2, half)
 }
 
-/// Render the chart as a RawFrame with the A7S2 colour matrix and the white
-/// balance that makes its D65 white neutral.
-pub fn render_chart(spec: &ChartSpec) -> Result<RawFrame> {
-    let x2c: Mat3 = std::array::from_fn(|i| std::array::from_fn(|j| A7S2_D65_MATRIX[i][j] as f64));
+/// Camera response (A7S2 matrix) to linear sRGB: xyz_to_cam * srgb_to_xyz * rgb.
+fn camera_rgb(rgb: [f64; 3]) -> [f64; 3] {
     let mul = |m: &Mat3, v: [f64; 3]| -> [f64; 3] {
         std::array::from_fn(|i| (0..3).map(|k| m[i][k] * v[k]).sum())
     };
-    // Camera response to linear sRGB: xyz_to_cam * srgb_to_xyz.
-    let cam_of = |rgb: [f64; 3]| mul(&x2c, mul(&SRGB_TO_XYZ, rgb));
-    let white_cam = cam_of([1.0, 1.0, 1.0]);
-    let peak = white_cam.iter().cloned().fold(f64::MIN, f64::max);
+    let x2c: Mat3 = std::array::from_fn(|i| std::array::from_fn(|j| A7S2_D65_MATRIX[i][j] as f64));
+    mul(&x2c, mul(&SRGB_TO_XYZ, rgb))
+}
+
+/// Camera response to a perfect white reflector and its strongest channel.
+fn white_response() -> ([f64; 3], f64) {
+    let white = camera_rgb([1.0; 3]);
+    (white, white.iter().cloned().fold(f64::MIN, f64::max))
+}
+
+/// Render the chart as a RawFrame with the A7S2 colour matrix and the white
+/// balance that makes its D65 white neutral.
+pub fn render_chart(spec: &ChartSpec) -> Result<RawFrame> {
+    let (white_cam, peak) = white_response();
     let k = spec.exposure as f64 / peak;
     let wb = [
         (white_cam[1] / white_cam[0]) as f32,
         1.0,
         (white_cam[1] / white_cam[2]) as f32,
     ];
-    debug_assert!(invert(&x2c).is_some());
 
     let (w, h) = (spec.width, spec.height);
     let chart_h = h * 7 / 10;
@@ -161,7 +162,7 @@ pub fn render_chart(spec: &ChartSpec) -> Result<RawFrame> {
     let mut mosaic = Vec::with_capacity(w * h);
     for r in 0..h {
         for c in 0..w {
-            let cam = cam_of(scene(r, c));
+            let cam = camera_rgb(scene(r, c));
             let v = cam[spec.cfa.color_at(r, c)] * k;
             let dn = spec.black as f64 + v.clamp(0.0, 1.0) * range;
             mosaic.push(dn.round() as u16);
@@ -183,19 +184,9 @@ pub fn render_chart(spec: &ChartSpec) -> Result<RawFrame> {
 /// The linear gain that maps the chart's exposure back to scene-referred
 /// light (white reflector at 1.0 after white balance).
 pub fn chart_display_gain(spec: &ChartSpec) -> f32 {
-    let x2c: Mat3 = std::array::from_fn(|i| std::array::from_fn(|j| A7S2_D65_MATRIX[i][j] as f64));
-    let g: f64 = (0..3)
-        .map(|k| x2c[1][k] * SRGB_TO_XYZ[k].iter().sum::<f64>())
-        .sum();
-    let peak = (0..3)
-        .map(|i| {
-            (0..3)
-                .map(|k| x2c[i][k] * SRGB_TO_XYZ[k].iter().sum::<f64>())
-                .sum::<f64>()
-        })
-        .fold(f64::MIN, f64::max);
     // After white balance every channel of white equals the green response.
-    (peak / (spec.exposure as f64 * g)) as f32
+    let (white_cam, peak) = white_response();
+    (peak / (spec.exposure as f64 * white_cam[1])) as f32
 }
 
 #[cfg(test)]

@@ -6,7 +6,7 @@
 //! equal in camera space), and invert it.
 
 /// Linear sRGB (D65) -> XYZ, IEC 61966-2-1.
-const SRGB_TO_XYZ: [[f64; 3]; 3] = [
+pub const SRGB_TO_XYZ: [[f64; 3]; 3] = [
     [0.4124564, 0.3575761, 0.1804375],
     [0.2126729, 0.7151522, 0.0721750],
     [0.0193339, 0.1191920, 0.9503041],

@@ -120,16 +120,7 @@ impl RawFrame {
     /// Apply user overrides, then re-check that the levels make sense.
     pub fn apply_overrides(&mut self, o: &LevelOverrides) -> Result<()> {
         if let Some(b) = &o.black {
-            self.black = match b.as_slice() {
-                [v] => [*v; 4],
-                [r, g1, b, g2] => [*r, *g1, *b, *g2],
-                other => {
-                    return Err(RawError::Invalid(format!(
-                        "black level override needs 1 or 4 values (R,G1,B,G2), got {}",
-                        other.len()
-                    )))
-                }
-            };
+            self.black = black_per_plane(b)?;
         }
         if let Some(w) = o.white {
             self.white = w;
@@ -204,6 +195,19 @@ impl RawFrame {
         let mut f = self.clone();
         f.mosaic = mosaic;
         Ok(f)
+    }
+}
+
+/// Black levels as users give them: one value for all planes, or four for
+/// R, G1, B, G2.
+pub fn black_per_plane(values: &[f32]) -> Result<[f32; 4]> {
+    match values {
+        [v] => Ok([*v; 4]),
+        [r, g1, b, g2] => Ok([*r, *g1, *b, *g2]),
+        other => Err(RawError::Invalid(format!(
+            "black level needs 1 or 4 values (R,G1,B,G2), got {}",
+            other.len()
+        ))),
     }
 }
 

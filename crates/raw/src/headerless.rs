@@ -4,7 +4,7 @@
 
 use crate::cfa::Cfa;
 use crate::error::{RawError, Result};
-use crate::frame::RawFrame;
+use crate::frame::{black_per_plane, RawFrame};
 use std::path::Path;
 
 /// How to interpret a headerless dump.
@@ -86,16 +86,7 @@ pub fn read_headerless(path: &Path, spec: &HeaderlessSpec) -> Result<RawFrame> {
             ),
         ));
     }
-    let black = match spec.black.as_slice() {
-        [v] => [*v; 4],
-        [r, g1, b, g2] => [*r, *g1, *b, *g2],
-        other => {
-            return Err(RawError::Invalid(format!(
-                "black level needs 1 or 4 values (R,G1,B,G2), got {}",
-                other.len()
-            )))
-        }
-    };
+    let black = black_per_plane(&spec.black)?;
     let white = spec.white.unwrap_or(max as u32);
     let mut frame = RawFrame::from_mosaic(spec.width, spec.height, mosaic, spec.cfa, black, white)?;
     frame.bits = spec.bits;
