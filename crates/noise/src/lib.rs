@@ -1,6 +1,26 @@
-//! Noise models (Poisson-Gaussian, ELD, the PGRF per-pixel composite), camera
-//! profiles, the virtual sensor and training-pair synthesis.
+//! Physics noise models for low-light RAW: Poisson-Gaussian (Foi), ELD's
+//! Tukey-lambda + row + quantisation model, and the PGRF composite with
+//! per-pixel maps and a dark-current x fixed-pattern term; camera profiles
+//! built from published calibrations; exact, thread-count-independent sampling.
 //!
-//! Empty until the noise-model stage lands; the crate exists so the workspace
-//! has its final shape and the data flow raw -> noise/calib -> nn -> eval is
-//! fixed from the start.
+//! Physics-side crate: ndarray and rayon only, no deep-learning framework.
+//! Images are packed `(4, H/2, W/2)` normalised arrays as produced by
+//! `pgrf_raw::pack_normalized`.
+
+pub mod components;
+pub mod error;
+pub mod maps;
+pub mod model;
+pub mod pair;
+pub mod params;
+pub mod poisson;
+pub mod profile;
+pub mod rng;
+pub mod tukey;
+
+pub use components::Components;
+pub use error::{NoiseError, Result};
+pub use maps::{Map, PixelMaps};
+pub use model::{Capture, ModelKind, NoiseModel, ReadDist};
+pub use params::CaptureParams;
+pub use profile::{CameraProfile, DarkLaw};

@@ -1,0 +1,11 @@
+//! Errors of the noise crate, one line each.
+
+#[derive(Debug, thiserror::Error)]
+pub enum NoiseError {
+    #[error("profile {name}: {reason}")]
+    Profile { name: String, reason: String },
+    #[error("invalid noise setting: {0}")]
+    Invalid(String),
+}
+
+pub type Result<T> = std::result::Result<T, NoiseError>;

@@ -1,0 +1,143 @@
+//! Per-pixel noise maps, the paper's key idea: every pixel has its own offset,
+//! read-noise level and dark current, measured by calibration. The same type
+//! carries global values (the "noD" ablation, or a profile without a
+//! calibration) without allocating full-size arrays.
+
+use crate::error::{NoiseError, Result};
+use crate::profile::DarkLaw;
+use ndarray::Array3;
+use std::sync::Arc;
+
+/// One map: a single value, one value per packed plane, or one per pixel in
+/// packed layout `(4, H/2, W/2)`.
+#[derive(Clone, Debug)]
+pub enum Map {
+    Scalar(f32),
+    Plane([f32; 4]),
+    Pixel(Arc<Array3<f32>>),
+}
+
+impl Map {
+    #[inline(always)]
+    pub fn at(&self, plane: usize, flat_in_plane: usize) -> f32 {
+        match self {
+            Map::Scalar(v) => *v,
+            Map::Plane(v) => v[plane],
+            Map::Pixel(a) => {
+                let s = a.as_slice().expect("maps are standard layout");
+                s[plane * (s.len() / 4) + flat_in_plane]
+            }
+        }
+    }
+
+    /// Row of a per-pixel map, or None for scalar/plane maps.
+    #[inline]
+    pub fn row(&self, plane: usize, i: usize, pw: usize) -> Option<&[f32]> {
+        match self {
+            Map::Pixel(a) => {
+                let s = a.as_slice().expect("maps are standard layout");
+                let ph = s.len() / 4 / pw;
+                let start = (plane * ph + i) * pw;
+                Some(&s[start..start + pw])
+            }
+            _ => None,
+        }
+    }
+
+    /// The global value that replaces this map in the "noD" ablation: its mean
+    /// per plane.
+    pub fn global(&self) -> Map {
+        match self {
+            Map::Pixel(a) => {
+                let m: [f32; 4] = std::array::from_fn(|p| {
+                    let plane = a.index_axis(ndarray::Axis(0), p);
+                    (plane.iter().map(|&v| v as f64).sum::<f64>() / plane.len() as f64) as f32
+                });
+                Map::Plane(m)
+            }
+            other => other.clone(),
+        }
+    }
+
+    fn check(&self, name: &str, shape: (usize, usize), nonneg: bool) -> Result<()> {
+        let bad = |v: f32| !v.is_finite() || (nonneg && v < 0.0);
+        let what = if nonneg { "finite and >= 0" } else { "finite" };
+        match self {
+            Map::Scalar(v) if bad(*v) => Err(NoiseError::Invalid(format!(
+                "{name} must be {what}, got {v}"
+            ))),
+            Map::Plane(v) if v.iter().any(|x| bad(*x)) => Err(NoiseError::Invalid(format!(
+                "{name} must be {what}, got {v:?}"
+            ))),
+            Map::Pixel(a) => {
+                if a.shape() != [4, shape.0, shape.1] {
+                    return Err(NoiseError::Invalid(format!(
+                        "{name} map has shape {:?}, the image packs to [4, {}, {}]",
+                        a.shape(),
+                        shape.0,
+                        shape.1
+                    )));
+                }
+                if !a.is_standard_layout() {
+                    return Err(NoiseError::Invalid(format!(
+                        "{name} map is not in standard layout"
+                    )));
+                }
+                if let Some(pos) = a.iter().position(|v| bad(*v)) {
+                    return Err(NoiseError::Invalid(format!(
+                        "{name} map has a value that is not {what} at flat index {pos}"
+                    )));
+                }
+                Ok(())
+            }
+            _ => Ok(()),
+        }
+    }
+}
+
+/// The per-pixel description of a sensor the PGRF model needs.
+#[derive(Clone, Debug)]
+pub struct PixelMaps {
+    /// Fixed-pattern offset of the dark level, DN (bias frames' mean - black).
+    pub bias: Map,
+    /// Source-follower read-noise standard deviation, DN.
+    pub sigma_read: Map,
+    /// Dark-current rate, electrons per sqrt(s) or per s (see `dark_law`).
+    pub dark_rate: Map,
+    /// Fixed-pattern deviation N_FP multiplying the dark signal: D = N_RS (1 + N_FP).
+    pub n_fp: Map,
+    pub dark_law: DarkLaw,
+}
+
+impl PixelMaps {
+    /// Validate against the packed image shape `(H/2, W/2)`.
+    pub fn check(&self, shape: (usize, usize)) -> Result<()> {
+        self.bias.check("bias", shape, false)?;
+        self.sigma_read.check("sigma_read", shape, true)?;
+        self.dark_rate.check("dark_rate", shape, true)?;
+        self.n_fp.check("n_fp", shape, false)?;
+        // 1 + N_FP must stay >= 0 or the dark signal would turn negative.
+        let min_fp = match &self.n_fp {
+            Map::Scalar(v) => *v,
+            Map::Plane(v) => v.iter().cloned().fold(f32::MAX, f32::min),
+            Map::Pixel(a) => a.iter().cloned().fold(f32::MAX, f32::min),
+        };
+        if min_fp < -1.0 {
+            return Err(NoiseError::Invalid(format!(
+                "n_fp must be >= -1 (1 + N_FP >= 0), min is {min_fp}"
+            )));
+        }
+        Ok(())
+    }
+
+    /// Global ("noD") version: each map replaced by its per-plane mean.
+    pub fn global(&self) -> PixelMaps {
+        PixelMaps {
+            bias: self.bias.global(),
+            sigma_read: self.sigma_read.global(),
+            dark_rate: self.dark_rate.global(),
+            n_fp: self.n_fp.global(),
+            dark_law: self.dark_law,
+        }
+    }
+}

@@ -1,0 +1,318 @@
+//! The noise models and the one sampling engine they share.
+//!
+//! All three models are special cases of the PGRF composite, in DN above
+//! black on the profile's scale:
+//!
+//!   D = K Poisson(S/K)                       P  photon shot (S = clean signal)
+//!     + K Poisson(d(t)) (1 + N_FP)           A  dark-current shot, F its fixed pattern
+//!     + b(x, y)                              F  fixed-pattern offset / colour bias
+//!     + sigma_r(x, y) N(0,1) or Tukey        G  source-follower read noise
+//!     + N(0, sigma_H) per sensor row         H  row noise
+//!     + U(-q/2, q/2)                         Q  quantisation
+//!
+//! - P-G (Foi): P + Gaussian G.
+//! - ELD: P + Tukey-lambda (or Gaussian) G + H + Q + per-channel colour bias.
+//! - PGRF: everything, with per-pixel maps; "noD" replaces them by their means.
+//!
+//! A component that is switched off contributes nothing; with P off the
+//! signal passes through noiselessly. The ADC's range is respected: results
+//! are clipped at white, and at 0 DN when the profile knows its black level.
+
+use crate::components::Components;
+use crate::error::{NoiseError, Result};
+use crate::maps::{Map, PixelMaps};
+use crate::params::CaptureParams;
+use crate::poisson::poisson;
+use crate::profile::{CameraProfile, DarkLaw};
+use crate::rng::{open01, stream, Domain};
+use crate::tukey;
+use ndarray::{Array3, ArrayView3};
+use rand::Rng;
+use rand_distr::StandardNormal;
+use rayon::prelude::*;
+
+/// Read-noise distribution.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum ReadDist {
+    Gaussian,
+    /// Tukey-lambda with this shape; `sigma_read` is its scale.
+    Tukey {
+        lambda: f32,
+    },
+}
+
+/// Which model a user asked for.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ModelKind {
+    PoissonGaussian,
+    Eld,
+    Pgrf,
+}
+
+impl std::str::FromStr for ModelKind {
+    type Err = String;
+    fn from_str(s: &str) -> std::result::Result<Self, String> {
+        match s.to_ascii_lowercase().as_str() {
+            "pg" => Ok(ModelKind::PoissonGaussian),
+            "eld" => Ok(ModelKind::Eld),
+            "pgrf" => Ok(ModelKind::Pgrf),
+            o => Err(format!("unknown noise model '{o}' (pg, eld or pgrf)")),
+        }
+    }
+}
+
+/// A noise model resolved for one capture.
+#[derive(Clone, Debug)]
+pub struct NoiseModel {
+    /// System gain, DN per electron.
+    pub k: f32,
+    pub read: ReadDist,
+    pub maps: PixelMaps,
+    pub row_sigma: f32,
+    /// Quantisation step, DN.
+    pub quant_step: f32,
+    pub components: Components,
+    /// white - black in DN: maps normalised images to the model's DN.
+    pub dn_range: f32,
+    /// Black level in DN, when known: values are clipped at 0 DN.
+    pub black: Option<f32>,
+}
+
+/// One capture's conditions.
+#[derive(Clone, Copy, Debug)]
+pub struct Capture {
+    /// Exposure ratio: the clean image is divided by it, the noisy result multiplied back.
+    pub ratio: f32,
+    /// Exposure time of the noisy capture, seconds (drives the dark current).
+    pub exposure_s: f32,
+    /// Sensor-row parity of each packed plane (R, G1, B, G2): row noise is
+    /// shared by the planes read out on the same sensor row. From the CFA.
+    pub plane_rows: [usize; 4],
+    pub seed: u64,
+}
+
+impl NoiseModel {
+    /// Foi's Poisson-Gaussian model: shot noise and a Gaussian read noise.
+    pub fn poisson_gaussian(profile: &CameraProfile, p: &CaptureParams) -> NoiseModel {
+        NoiseModel {
+            k: p.k as f32,
+            read: ReadDist::Gaussian,
+            maps: PixelMaps {
+                bias: Map::Scalar(0.0),
+                sigma_read: Map::Scalar(p.sigma_gauss as f32),
+                dark_rate: Map::Scalar(0.0),
+                n_fp: Map::Scalar(0.0),
+                dark_law: DarkLaw::Sqrt,
+            },
+            row_sigma: 0.0,
+            quant_step: 1.0,
+            components: Components::parse("PG").expect("valid"),
+            dn_range: profile.dn_range as f32,
+            black: profile.black.map(|b| b as f32),
+        }
+    }
+
+    /// ELD's model: shot, Tukey-lambda (or Gaussian) read, row, quantisation,
+    /// per-channel colour bias.
+    pub fn eld(profile: &CameraProfile, p: &CaptureParams, tukey: bool) -> NoiseModel {
+        let (read, sigma) = if tukey {
+            (
+                ReadDist::Tukey {
+                    lambda: p.tukey_lambda as f32,
+                },
+                p.sigma_tukey,
+            )
+        } else {
+            (ReadDist::Gaussian, p.sigma_gauss)
+        };
+        NoiseModel {
+            k: p.k as f32,
+            read,
+            maps: PixelMaps {
+                bias: Map::Plane(p.bias.map(|b| b as f32)),
+                sigma_read: Map::Scalar(sigma as f32),
+                dark_rate: Map::Scalar(0.0),
+                n_fp: Map::Scalar(0.0),
+                dark_law: DarkLaw::Sqrt,
+            },
+            row_sigma: p.sigma_row as f32,
+            quant_step: 1.0,
+            components: Components::parse("PGHQF").expect("valid"),
+            dn_range: profile.dn_range as f32,
+            black: profile.black.map(|b| b as f32),
+        }
+    }
+
+    /// The paper's composite. `maps` come from a calibration; without one the
+    /// profile's global values are used (Gaussian read at the ISO's sigma,
+    /// per-channel dark-level offset, the profile's dark current if measured).
+    /// `global` is the "noD" ablation: per-pixel maps replaced by their means.
+    pub fn pgrf(
+        profile: &CameraProfile,
+        p: &CaptureParams,
+        maps: Option<PixelMaps>,
+        components: Components,
+        global: bool,
+    ) -> NoiseModel {
+        let maps = maps.unwrap_or_else(|| {
+            let (law, rate) = profile
+                .dark_current
+                .as_ref()
+                .map(|d| (d.law, d.rate as f32))
+                .unwrap_or((DarkLaw::Sqrt, 0.0));
+            PixelMaps {
+                bias: Map::Plane(p.bias.map(|b| b as f32)),
+                sigma_read: Map::Scalar(p.sigma_gauss as f32),
+                dark_rate: Map::Scalar(rate),
+                n_fp: Map::Scalar(0.0),
+                dark_law: law,
+            }
+        });
+        NoiseModel {
+            k: p.k as f32,
+            read: ReadDist::Gaussian,
+            maps: if global { maps.global() } else { maps },
+            row_sigma: p.sigma_row as f32,
+            quant_step: 1.0,
+            components,
+            dn_range: profile.dn_range as f32,
+            black: profile.black.map(|b| b as f32),
+        }
+    }
+
+    fn validate(&self, clean: &ArrayView3<f32>, c: &Capture) -> Result<()> {
+        let s = clean.shape();
+        if s.len() != 3 || s[0] != 4 || s[1] == 0 || s[2] == 0 {
+            return Err(NoiseError::Invalid(format!(
+                "clean image must be packed (4, H, W), got {s:?}"
+            )));
+        }
+        if !(c.ratio.is_finite() && c.ratio > 0.0) {
+            return Err(NoiseError::Invalid(format!(
+                "exposure ratio must be > 0, got {}",
+                c.ratio
+            )));
+        }
+        if !(c.exposure_s.is_finite() && c.exposure_s >= 0.0) {
+            return Err(NoiseError::Invalid(format!(
+                "exposure time must be >= 0 s, got {}",
+                c.exposure_s
+            )));
+        }
+        if !(self.k.is_finite() && self.k > 0.0) {
+            return Err(NoiseError::Invalid(format!(
+                "system gain K must be > 0, got {}",
+                self.k
+            )));
+        }
+        for (what, v) in [
+            ("row sigma", self.row_sigma),
+            ("quantisation step", self.quant_step),
+        ] {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(NoiseError::Invalid(format!("{what} must be >= 0, got {v}")));
+            }
+        }
+        if c.plane_rows.iter().any(|&r| r > 1) {
+            return Err(NoiseError::Invalid(
+                "plane_rows holds row parities (0 or 1)".into(),
+            ));
+        }
+        self.maps.check((s[1], s[2]))?;
+        if let Some(pos) = clean.iter().position(|v| !v.is_finite()) {
+            return Err(NoiseError::Invalid(format!(
+                "clean image has a non-finite value at flat index {pos}"
+            )));
+        }
+        Ok(())
+    }
+
+    /// Synthesise the noisy capture of `clean` (normalised, packed) taken
+    /// `ratio` times darker, and return it multiplied back by the ratio, in
+    /// the same normalised units (what a low-light pipeline feeds a denoiser).
+    /// Deterministic in `capture.seed`, whatever the number of threads.
+    pub fn sample(&self, clean: ArrayView3<f32>, capture: &Capture) -> Result<Array3<f32>> {
+        self.validate(&clean, capture)?;
+        let clean = clean.as_standard_layout();
+        let src = clean.as_slice().expect("standard layout");
+        let (ph, pw) = (clean.shape()[1], clean.shape()[2]);
+        let c = self.components;
+
+        // Row noise: one value per sensor row, shared by the planes on it.
+        let rows: Vec<f32> = if c.row && self.row_sigma > 0.0 {
+            (0..2 * ph)
+                .map(|r| {
+                    let z: f32 =
+                        stream(capture.seed, Domain::Row, r as u64, 0).sample(StandardNormal);
+                    z * self.row_sigma
+                })
+                .collect()
+        } else {
+            vec![0.0; 2 * ph]
+        };
+
+        let to_dn = self.dn_range / capture.ratio;
+        let from_dn = capture.ratio / self.dn_range;
+        let k = self.k;
+        let inv_k = 1.0 / k as f64;
+        let dark_time = self.maps.dark_law.electrons(1.0, capture.exposure_s as f64) as f32;
+        let lo = self.black.map(|b| -b).unwrap_or(f32::NEG_INFINITY);
+        let hi = self.dn_range;
+        let m = &self.maps;
+        let q = self.quant_step;
+
+        let mut out = vec![0.0f32; src.len()];
+        out.par_chunks_mut(pw).enumerate().for_each(|(block, dst)| {
+            let plane = block / ph;
+            let i = block % ph;
+            let mut rng = stream(capture.seed, Domain::Pixel, plane as u64, i as u64);
+            let row_off = rows[2 * i + capture.plane_rows[plane]];
+            let base = i * pw;
+            let srow = &src[block * pw..(block + 1) * pw];
+            let sig_row = m.sigma_read.row(plane, i, pw);
+            let bias_row = m.bias.row(plane, i, pw);
+            let dark_row = m.dark_rate.row(plane, i, pw);
+            let fp_row = m.n_fp.row(plane, i, pw);
+            for j in 0..pw {
+                let s = srow[j] * to_dn;
+                let mut v = if c.photon {
+                    k * poisson(&mut rng, s as f64 * inv_k) as f32
+                } else {
+                    s
+                };
+                if c.dark {
+                    let rate = dark_row.map_or_else(|| m.dark_rate.at(plane, base + j), |r| r[j]);
+                    let e = rate * dark_time;
+                    if e > 0.0 {
+                        let mut d = k * poisson(&mut rng, e as f64) as f32;
+                        if c.fixed_pattern {
+                            d *= 1.0 + fp_row.map_or_else(|| m.n_fp.at(plane, base + j), |r| r[j]);
+                        }
+                        v += d;
+                    }
+                }
+                if c.fixed_pattern {
+                    v += bias_row.map_or_else(|| m.bias.at(plane, base + j), |r| r[j]);
+                }
+                if c.read {
+                    let sigma = sig_row.map_or_else(|| m.sigma_read.at(plane, base + j), |r| r[j]);
+                    let z = match self.read {
+                        ReadDist::Gaussian => rng.sample::<f32, _>(StandardNormal),
+                        ReadDist::Tukey { lambda } => {
+                            tukey::quantile(open01(&mut rng), lambda as f64) as f32
+                        }
+                    };
+                    v += sigma * z;
+                }
+                if c.row {
+                    v += row_off;
+                }
+                if c.quant {
+                    v += q * (open01(&mut rng) as f32 - 0.5);
+                }
+                dst[j] = v.clamp(lo, hi) * from_dn;
+            }
+        });
+        Ok(Array3::from_shape_vec((4, ph, pw), out).expect("shape"))
+    }
+}

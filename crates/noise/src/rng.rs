@@ -1,0 +1,74 @@
+//! Random streams that do not depend on the number of threads.
+//!
+//! Every block of work (one packed row of one plane, one sensor row of row
+//! noise, ...) gets its own generator, seeded by hashing (user seed, domain,
+//! block indices). Which thread runs a block then cannot change what it draws,
+//! so the same seed gives byte-identical output with 1 or 16 threads.
+//! xoshiro256++ is fast (about a nanosecond per u64) and passes BigCrush;
+//! seeding through SplitMix64 decorrelates neighbouring block indices.
+
+use rand::{Rng, SeedableRng};
+use rand_xoshiro::Xoshiro256PlusPlus;
+
+pub type BlockRng = Xoshiro256PlusPlus;
+
+/// Domains keep streams for different purposes apart.
+#[derive(Clone, Copy, Debug)]
+#[repr(u64)]
+pub enum Domain {
+    Pixel = 1,
+    Row = 2,
+    Params = 3,
+    Maps = 4,
+}
+
+/// SplitMix64 finaliser: a bijective mix of 64 bits.
+#[inline]
+pub fn mix64(mut z: u64) -> u64 {
+    z = z.wrapping_add(0x9E37_79B9_7F4A_7C15);
+    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    z ^ (z >> 31)
+}
+
+/// Generator for block (a, b) of `domain` under `seed`.
+pub fn stream(seed: u64, domain: Domain, a: u64, b: u64) -> BlockRng {
+    let h = mix64(mix64(mix64(seed ^ (domain as u64).rotate_left(56)) ^ a) ^ b.rotate_left(32));
+    BlockRng::seed_from_u64(h)
+}
+
+/// Uniform on the open interval (0, 1), 53 bits: never 0, so log() is safe.
+#[inline]
+pub fn open01<R: Rng + ?Sized>(rng: &mut R) -> f64 {
+    ((rng.next_u64() >> 11) as f64 + 0.5) * (1.0 / (1u64 << 53) as f64)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::RngCore;
+
+    #[test]
+    fn streams_are_reproducible_and_distinct() {
+        let a = stream(7, Domain::Pixel, 0, 1).next_u64();
+        assert_eq!(a, stream(7, Domain::Pixel, 0, 1).next_u64());
+        assert_ne!(a, stream(7, Domain::Pixel, 1, 0).next_u64());
+        assert_ne!(a, stream(7, Domain::Row, 0, 1).next_u64());
+        assert_ne!(a, stream(8, Domain::Pixel, 0, 1).next_u64());
+    }
+
+    #[test]
+    fn open01_stays_inside() {
+        let mut r = stream(1, Domain::Pixel, 0, 0);
+        let n = 100_000;
+        let mut sum = 0.0;
+        for _ in 0..n {
+            let u = open01(&mut r);
+            assert!(u > 0.0 && u < 1.0);
+            sum += u;
+        }
+        // Mean of U(0,1): 0.5 with SE 1/sqrt(12 n); 5 SE.
+        let se = (1.0 / 12.0 / n as f64).sqrt();
+        assert!((sum / n as f64 - 0.5).abs() < 5.0 * se);
+    }
+}
