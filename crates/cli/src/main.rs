@@ -23,6 +23,8 @@ enum Command {
     Preview(cmd::preview::PreviewArgs),
     /// Convert a RAW file (or headerless dump) to a lossless DNG, keeping pixels and metadata.
     Convert(cmd::convert::ConvertArgs),
+    /// Simulate a low-light capture of a clean RAW with a physics noise model (P-G, ELD or PGRF).
+    Synth(cmd::synth::SynthArgs),
     /// Render pgrf's built-in colour test chart as a DNG.
     Chart(cmd::chart::ChartArgs),
     /// Time pgrf's hot paths (results go to BENCHMARKS.md).
@@ -50,6 +52,7 @@ fn main() -> ExitCode {
         Command::Preview(a) => cmd::preview::run(a),
         Command::Convert(a) => cmd::convert::run(a),
         Command::Chart(a) => cmd::chart::run(a),
+        Command::Synth(a) => cmd::synth::run(a),
         Command::Bench(a) => cmd::bench::run(a),
     };
     match result {

@@ -236,3 +236,128 @@ fn every_command_has_help() {
     // Unknown flags are usage errors (exit 2), not crashes.
     assert_eq!(pgrf(&["info", "--frobnicate"]).status.code(), Some(2));
 }
+
+#[test]
+fn synth_is_byte_reproducible_and_keeps_the_frame_geometry() {
+    let dir = scratch("synth");
+    let chart = dir.join("chart.dng");
+    assert!(pgrf(&[
+        "chart",
+        "-o",
+        s(&chart),
+        "--width",
+        "240",
+        "--height",
+        "160",
+        "--cfa",
+        "BGGR"
+    ])
+    .status
+    .success());
+    let run = |seed: &str, out: &Path| {
+        let r = pgrf(&[
+            "synth",
+            s(&chart),
+            "--profile",
+            "sony-a7s2",
+            "--ratio",
+            "100",
+            "--iso",
+            "1600",
+            "--seed",
+            seed,
+            "-o",
+            s(out),
+        ]);
+        assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+        std::fs::read(out).unwrap()
+    };
+    let a = run("7", &dir.join("a.dng"));
+    let b = run("7", &dir.join("b.dng"));
+    let c = run("8", &dir.join("c.dng"));
+    assert_eq!(a, b, "same seed must give identical bytes");
+    assert_ne!(a, c);
+    let src = pgrf_raw::decode_file(&chart, &Default::default()).unwrap();
+    let out = pgrf_raw::decode_file(&dir.join("a.dng"), &Default::default()).unwrap();
+    assert_eq!(
+        (out.width, out.height, out.cfa, out.black, out.white),
+        (src.width, src.height, src.cfa, src.black, src.white)
+    );
+    assert_eq!(out.iso, Some(1600));
+    // Inside the black..white range, and visibly noisier than the clean chart.
+    assert!(out
+        .mosaic
+        .iter()
+        .all(|&v| v as f32 >= src.black[0] && v as u32 <= src.white));
+    let diff: f64 = out
+        .mosaic
+        .iter()
+        .zip(&src.mosaic)
+        .map(|(&x, &y)| (x as f64 - y as f64).abs())
+        .sum::<f64>()
+        / out.mosaic.len() as f64;
+    assert!(
+        diff > 50.0,
+        "mean absolute change {diff} DN is too small for x100 at ISO 1600"
+    );
+
+    // Every model and the ablations run.
+    for extra in [
+        vec!["--model", "pg"],
+        vec!["--model", "eld"],
+        vec!["--model", "eld", "--gaussian-read"],
+        vec!["--components", "P,G"],
+        vec!["--global"],
+        vec!["--dark-rate", "5", "--dark-law", "linear"],
+    ] {
+        let m = dir.join("m.dng");
+        let mut args = vec![
+            "synth",
+            s(&chart),
+            "--profile",
+            "sony-a7s2",
+            "--ratio",
+            "200",
+            "-o",
+            s(&m),
+        ];
+        args.extend(extra.iter().copied());
+        let r = pgrf(&args);
+        assert!(
+            r.status.success(),
+            "{extra:?}: {}",
+            String::from_utf8_lossy(&r.stderr)
+        );
+    }
+}
+
+#[test]
+fn synth_refuses_bad_arguments_cleanly() {
+    let dir = scratch("synth-bad");
+    let chart = dir.join("chart.dng");
+    assert!(
+        pgrf(&["chart", "-o", s(&chart), "--width", "120", "--height", "80"])
+            .status
+            .success()
+    );
+    let out = dir.join("n.dng");
+    for (extra, needle) in [
+        (vec!["--profile", "sony-a7s2", "--ratio=-3"], "ratio"),
+        (vec!["--profile", "no-such-camera"], "built-in"),
+        (
+            vec!["--profile", "sony-a7s2", "--components", "P,X"],
+            "component",
+        ),
+        (vec!["--profile", "sony-a7s2", "--iso", "40"], "ISO 40"),
+        (vec!["--profile", "nikon-d850", "--iso", "800"], "per-ISO"),
+    ] {
+        let mut args = vec!["synth", s(&chart), "-o", s(&out)];
+        args.extend(extra.iter().copied());
+        let r = pgrf(&args);
+        let err = String::from_utf8_lossy(&r.stderr).to_string();
+        assert_eq!(r.status.code(), Some(1), "{extra:?}: {err}");
+        assert_eq!(err.trim_end().lines().count(), 1, "{err}");
+        assert!(err.contains(needle), "{extra:?}: {err}");
+        assert!(!out.exists());
+    }
+}

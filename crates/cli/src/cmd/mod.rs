@@ -5,3 +5,4 @@ pub mod chart;
 pub mod convert;
 pub mod info;
 pub mod preview;
+pub mod synth;
