@@ -83,16 +83,20 @@ impl Map {
                         "{name} map is not in standard layout"
                     )));
                 }
-                if let Some(pos) = a.iter().position(|v| bad(*v)) {
-                    return Err(NoiseError::Invalid(format!(
-                        "{name} map has a value that is not {what} at flat index {pos}"
-                    )));
-                }
                 Ok(())
             }
             _ => Ok(()),
         }
     }
+}
+
+fn check_fp(min_fp: f32) -> Result<()> {
+    if min_fp < -1.0 {
+        return Err(NoiseError::Invalid(format!(
+            "n_fp must be >= -1 (1 + N_FP >= 0), min is {min_fp}"
+        )));
+    }
+    Ok(())
 }
 
 /// The per-pixel description of a sensor the PGRF model needs.
@@ -110,22 +114,45 @@ pub struct PixelMaps {
 }
 
 impl PixelMaps {
-    /// Validate against the packed image shape `(H/2, W/2)`.
+    /// Shapes against the packed image `(H/2, W/2)`, and scalar/per-plane
+    /// values. Constant time, because the sampler calls it on every frame;
+    /// per-pixel values are scanned once where maps are loaded
+    /// ([`Self::check_values`]) and non-finite results are caught by the sampler.
     pub fn check(&self, shape: (usize, usize)) -> Result<()> {
         self.bias.check("bias", shape, false)?;
         self.sigma_read.check("sigma_read", shape, true)?;
         self.dark_rate.check("dark_rate", shape, true)?;
         self.n_fp.check("n_fp", shape, false)?;
-        // 1 + N_FP must stay >= 0 or the dark signal would turn negative.
         let min_fp = match &self.n_fp {
             Map::Scalar(v) => *v,
             Map::Plane(v) => v.iter().cloned().fold(f32::MAX, f32::min),
-            Map::Pixel(a) => a.iter().cloned().fold(f32::MAX, f32::min),
+            Map::Pixel(_) => 0.0,
         };
-        if min_fp < -1.0 {
-            return Err(NoiseError::Invalid(format!(
-                "n_fp must be >= -1 (1 + N_FP >= 0), min is {min_fp}"
-            )));
+        check_fp(min_fp)
+    }
+
+    /// Every per-pixel value: finite, non-negative where it must be, and
+    /// 1 + N_FP >= 0 (or the dark signal would turn negative).
+    pub fn check_values(&self) -> Result<()> {
+        for (name, m, nonneg) in [
+            ("bias", &self.bias, false),
+            ("sigma_read", &self.sigma_read, true),
+            ("dark_rate", &self.dark_rate, true),
+            ("n_fp", &self.n_fp, false),
+        ] {
+            if let Map::Pixel(a) = m {
+                if let Some(pos) = a
+                    .iter()
+                    .position(|v| !v.is_finite() || (nonneg && *v < 0.0))
+                {
+                    return Err(NoiseError::Invalid(format!(
+                        "{name} map has an invalid value at flat index {pos}"
+                    )));
+                }
+            }
+        }
+        if let Map::Pixel(a) = &self.n_fp {
+            check_fp(a.iter().cloned().fold(f32::MAX, f32::min))?;
         }
         Ok(())
     }

@@ -44,29 +44,45 @@ fn inversion<R: Rng + ?Sized>(rng: &mut R, mean: f64) -> f64 {
 
 /// PTRS (W. Hörmann, "The transformed rejection method for generating Poisson
 /// random variables", Insurance: Mathematics and Economics 12, 1993).
+///
+/// Logarithms are only needed on the slow path (about 40% of draws at mean
+/// 40), so they are taken there, and merged into one per iteration: profiling
+/// showed `ln` at 28% of the full model's time when set up eagerly.
 fn ptrs<R: Rng + ?Sized>(rng: &mut R, mean: f64) -> f64 {
     let slam = mean.sqrt();
-    let loglam = mean.ln();
     let b = 0.931 + 2.53 * slam;
     let a = -0.059 + 0.02483 * b;
-    let inv_alpha = 1.1239 + 1.1328 / (b - 3.4);
     let vr = 0.9277 - 3.6224 / (b - 2.0);
+    // (ln mean, 1/alpha): slow path only.
+    let mut slow: Option<(f64, f64)> = None;
     loop {
         let u = open01(rng) - 0.5;
         let v = open01(rng);
         let us = 0.5 - u.abs();
-        let k = ((2.0 * a / us + b) * u + mean + 0.43).floor();
+        let k = floor((2.0 * a / us + b) * u + mean + 0.43);
         if us >= 0.07 && v <= vr {
             return k;
         }
         if k < 0.0 || (us < 0.013 && v > us) {
             continue;
         }
-        if v.ln() + inv_alpha.ln() - (a / (us * us) + b).ln()
-            <= -mean + k * loglam - ln_factorial(k)
-        {
+        let (ll, inv_alpha) = *slow.get_or_insert_with(|| (mean.ln(), 1.1239 + 1.1328 / (b - 3.4)));
+        // ln v + ln(1/alpha) - ln(a/us^2 + b) as one logarithm.
+        let lhs = (v * inv_alpha / (a / (us * us) + b)).ln();
+        if lhs <= -mean + k * ll - ln_factorial(k) {
             return k;
         }
+    }
+}
+
+/// floor() without a libm call (baseline x86-64 has no SSE4.1 round).
+#[inline(always)]
+fn floor(x: f64) -> f64 {
+    let t = x as i64 as f64;
+    if t > x {
+        t - 1.0
+    } else {
+        t
     }
 }
 
@@ -101,7 +117,7 @@ mod tests {
     #[test]
     fn ln_factorial_matches_direct_sums() {
         let mut direct = 0.0;
-        for k in 1..400u32 {
+        for k in 1..3000u32 {
             direct += (k as f64).ln();
             let got = ln_factorial(k as f64);
             assert!(

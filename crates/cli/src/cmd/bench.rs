@@ -17,6 +17,16 @@ pub struct BenchArgs {
 
 #[derive(Subcommand, Debug)]
 pub enum BenchWhat {
+    /// Full PGRF noise model (all components, per-pixel maps) on an A7S2-sized
+    /// frame (4 x 1424 x 2128 packed), plus this machine's memory bandwidth.
+    Synth {
+        /// Timed frames (after one warm-up).
+        #[arg(long, default_value_t = 10)]
+        frames: usize,
+        /// Print one JSON line instead of text.
+        #[arg(long)]
+        json: bool,
+    },
     /// Decode + pack + normalise RAW files.
     Decode {
         /// RAW files to time.
@@ -43,7 +53,7 @@ struct DecodeResult {
     threads: usize,
 }
 
-fn median(v: &mut [f64]) -> f64 {
+pub(crate) fn median(v: &mut [f64]) -> f64 {
     v.sort_by(|a, b| a.partial_cmp(b).unwrap());
     let n = v.len();
     if n % 2 == 1 {
@@ -55,6 +65,7 @@ fn median(v: &mut [f64]) -> f64 {
 
 pub fn run(a: &BenchArgs) -> Result<()> {
     match &a.what {
+        BenchWhat::Synth { frames, json } => crate::cmd::bench_synth::run(*frames, *json),
         BenchWhat::Decode { files, iters, json } => {
             if *iters == 0 {
                 bail!("--iters must be at least 1");

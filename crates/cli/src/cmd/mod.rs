@@ -1,6 +1,7 @@
 //! One module per subcommand: argument struct plus `run`.
 
 pub mod bench;
+pub mod bench_synth;
 pub mod chart;
 pub mod convert;
 pub mod info;
