@@ -171,3 +171,76 @@ impl PairSpec {
         })
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use ndarray::Array3;
+
+    fn clean() -> Array3<f32> {
+        // Includes values outside [0, 1] that synthesis must clip.
+        Array3::from_shape_fn((4, 64, 64), |(p, i, j)| {
+            (p as f32 * 0.1 + i as f32 / 64.0 + j as f32 / 640.0) - 0.05
+        })
+    }
+
+    #[test]
+    fn pairs_are_reproducible_and_draw_their_conditions_in_range() {
+        let mut spec = PairSpec::new(
+            CameraProfile::built_in("sony-a7s2").unwrap(),
+            ModelKind::Pgrf,
+        );
+        spec.iso = Some(3200);
+        let c = clean();
+        let a = spec.synthesize(c.view(), [0, 0, 1, 1], 11).unwrap();
+        let b = spec.synthesize(c.view(), [0, 0, 1, 1], 11).unwrap();
+        assert_eq!(a.noisy, b.noisy);
+        assert_eq!((a.ratio, a.exposure_s), (b.ratio, b.exposure_s));
+        assert!(a.clean.iter().all(|v| (0.0..=1.0).contains(v)));
+        let mut ratios = Vec::new();
+        for s in 0..200 {
+            let (r, t) = spec.conditions(s).unwrap();
+            assert!((100.0..=300.0).contains(&r));
+            assert!((1.0 / 30.0..=1.0).contains(&t));
+            ratios.push(r as f64);
+        }
+        // U(100, 300): mean 200, sd 57.7; 5 SE over 200 draws.
+        let m = ratios.iter().sum::<f64>() / 200.0;
+        assert!((m - 200.0).abs() < 5.0 * 57.7 / 200f64.sqrt(), "{m}");
+    }
+
+    #[test]
+    fn shot_noise_alone_is_unbiased_after_amplification() {
+        let mut spec = PairSpec::new(
+            CameraProfile::built_in("sony-a7s2").unwrap(),
+            ModelKind::Pgrf,
+        );
+        spec.iso = Some(1600);
+        spec.components = Components::parse("P").unwrap();
+        spec.ratio = RatioSpec::Fixed(100.0);
+        let flat = Array3::from_elem((4, 128, 128), 0.5f32);
+        let p = spec.synthesize(flat.view(), [0, 0, 1, 1], 3).unwrap();
+        let n = p.noisy.len() as f64;
+        let mean = p.noisy.iter().map(|&v| v as f64).sum::<f64>() / n;
+        // In DN of the short exposure: S = 0.5 * 15871 / 100, Var = K S; amplified back by 100/15871.
+        let s = 0.5 * 15871.0 / 100.0;
+        let se = (1.53008 * s / n).sqrt() * 100.0 / 15871.0;
+        assert!((mean - 0.5).abs() < 5.0 * se, "{mean}");
+    }
+
+    #[test]
+    fn bad_ranges_are_errors() {
+        let mut spec = PairSpec::new(
+            CameraProfile::built_in("sony-a7s2").unwrap(),
+            ModelKind::Eld,
+        );
+        spec.ratio = RatioSpec::Uniform {
+            lo: 300.0,
+            hi: 100.0,
+        };
+        assert!(spec.conditions(0).is_err());
+        spec.ratio = RatioSpec::Fixed(100.0);
+        spec.exposure = ExposureSpec::LogUniform { lo: 0.0, hi: 1.0 };
+        assert!(spec.conditions(0).is_err());
+    }
+}
