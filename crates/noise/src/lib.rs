@@ -9,6 +9,7 @@
 
 pub mod components;
 pub mod error;
+pub mod mapfile;
 pub mod maps;
 pub mod model;
 pub mod pair;
@@ -16,6 +17,7 @@ pub mod params;
 pub mod poisson;
 pub mod profile;
 pub mod rng;
+pub mod sensor;
 pub mod tukey;
 
 pub use components::Components;
