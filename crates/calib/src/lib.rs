@@ -1,4 +1,17 @@
 //! Per-pixel sensor calibration from bias, dark and flat-field stacks:
-//! streaming statistics, fits, calibration files and report plots.
+//! streaming statistics, estimators, calibration files and report plots.
 //!
-//! Empty until the calibration stage lands.
+//! Physics-side crate: ndarray and rayon, no deep-learning framework.
+
+pub mod calibrate;
+pub mod calibration;
+pub mod error;
+pub mod estimate;
+pub mod ppcc;
+pub mod report;
+pub mod stack;
+pub mod stats;
+
+pub use calibrate::{calibrate, CalibrateInput, CalibrationRun};
+pub use calibration::{CalibMeta, Calibration};
+pub use error::{CalibError, Result};

@@ -85,7 +85,7 @@ impl SensorSpec {
             prnu: 0.01,
             dsnu: 1.5,
             read_sigma: p.sigma_gauss as f32,
-            read_spread: 0.15,
+            read_spread: 0.25,
             row_sigma: p.sigma_row as f32,
             dark_rate: 1.0,
             dark_spread: 0.3,

@@ -1,0 +1,359 @@
+//! The estimators: what each stack says about each pixel.
+//!
+//! All maps are packed `(4, H/2, W/2)`, in DN unless stated. Equations refer
+//! to the paper and EMVA 1288.
+
+use crate::error::{invalid, Result};
+use crate::ppcc::ppcc;
+use crate::stack::Stack;
+use ndarray::{Array3, Zip};
+use pgrf_noise::DarkLaw;
+
+/// From bias frames (shortest exposure, no light).
+#[derive(Clone, Debug)]
+pub struct BiasEstimate {
+    /// Per-pixel mean minus the black level: the fixed-pattern offset.
+    pub fixed_pattern: Array3<f32>,
+    /// Per-pixel temporal mean (DN, black included).
+    pub mean: Array3<f64>,
+    /// Per-pixel temporal variance (row noise included).
+    pub var: Array3<f64>,
+    /// Source-follower sigma: sqrt(var - row variance).
+    pub sigma_read: Array3<f32>,
+    pub row_sigma: f64,
+    /// DSNU: spatial sd of the fixed pattern, temporal noise of the mean removed.
+    pub dsnu: f64,
+    pub frames: usize,
+    /// PPCC of sampled pixels' temporal samples vs a Gaussian (paper Fig. 2),
+    /// and of all those samples pooled without per-pixel centring/scaling.
+    pub ppcc_pixels: Vec<f64>,
+    pub ppcc_pooled: f64,
+}
+
+fn median(v: &mut [f64]) -> f64 {
+    let v: &mut [f64] = v;
+    v.sort_by(|a, b| a.partial_cmp(b).unwrap_or(std::cmp::Ordering::Equal));
+    if v.is_empty() {
+        f64::NAN
+    } else {
+        v[v.len() / 2]
+    }
+}
+
+pub fn median_of(a: &Array3<f32>) -> f64 {
+    let mut v: Vec<f64> = a
+        .iter()
+        .filter(|x| x.is_finite())
+        .map(|&x| x as f64)
+        .collect();
+    median(&mut v)
+}
+
+pub fn estimate_bias(stack: &Stack, black: [f32; 4]) -> Result<BiasEstimate> {
+    let g = stack
+        .groups
+        .first()
+        .ok_or_else(|| invalid("bias stack is empty"))?;
+    let (mean, var) = (g.stats.mean(), g.stats.var());
+    let row_var = g.stats.row_variance();
+    let mut fixed_pattern = Array3::<f32>::zeros(mean.raw_dim());
+    for (p, mut plane) in fixed_pattern.outer_iter_mut().enumerate() {
+        let m = mean.index_axis(ndarray::Axis(0), p);
+        Zip::from(&mut plane)
+            .and(&m)
+            .for_each(|f, &x| *f = (x - black[p] as f64) as f32);
+    }
+    let sigma_read = var.mapv(|v| (v - row_var).max(0.0).sqrt() as f32);
+    let n = g.files.len() as f64;
+    let fp_mean = fixed_pattern.iter().map(|&v| v as f64).sum::<f64>() / fixed_pattern.len() as f64;
+    let fp_var = fixed_pattern
+        .iter()
+        .map(|&v| (v as f64 - fp_mean).powi(2))
+        .sum::<f64>()
+        / fixed_pattern.len() as f64;
+    let mean_var = var.iter().sum::<f64>() / var.len() as f64;
+    let dsnu = (fp_var - mean_var / n).max(0.0).sqrt();
+    let ppcc_pixels: Vec<f64> = stack
+        .tap
+        .iter()
+        .map(|s| ppcc(&s.iter().map(|&v| v as f64).collect::<Vec<_>>()))
+        .filter(|v| v.is_finite())
+        .collect();
+    let pooled: Vec<f64> = stack.tap.iter().flatten().map(|&v| v as f64).collect();
+    Ok(BiasEstimate {
+        fixed_pattern,
+        mean,
+        var,
+        sigma_read,
+        row_sigma: row_var.sqrt(),
+        dsnu,
+        frames: g.files.len(),
+        ppcc_pixels,
+        ppcc_pooled: ppcc(&pooled),
+    })
+}
+
+/// One flat level of the photon-transfer curve.
+#[derive(Clone, Copy, Debug, serde::Serialize)]
+pub struct PtcLevel {
+    pub exposure_s: f64,
+    /// Spatial mean of (flat mean - bias mean), DN.
+    pub mean_dn: f64,
+    /// Spatial mean of (flat variance - bias variance), DN^2: the shot-noise variance.
+    pub var_dn2: f64,
+    pub frames: usize,
+}
+
+#[derive(Clone, Debug)]
+pub struct GainEstimate {
+    /// Global system gain, DN per electron.
+    pub k: f64,
+    /// "ptc" (regression over levels) or "var/mean" (eq. 3.15, one level).
+    pub method: &'static str,
+    /// Eq. 3.15 per pixel at the brightest level: (var_flat - var_bias) / (mean_flat - mean_bias).
+    pub k_map: Array3<f32>,
+    /// Eq. 3.15 globally at the brightest level.
+    pub k_var_mean: f64,
+    /// Per-pixel signal at the brightest level (flat mean - bias mean), DN.
+    pub response: Array3<f32>,
+    pub levels: Vec<PtcLevel>,
+    /// var = slope mean + intercept over the levels, when there are two or more.
+    pub ptc_fit: Option<(f64, f64)>,
+    /// PRNU: spatial sd of the per-pixel response at the brightest level,
+    /// relative to its mean, temporal noise removed.
+    pub prnu: f64,
+}
+
+pub fn estimate_gain(flat: &Stack, bias: &BiasEstimate) -> Result<GainEstimate> {
+    let mut levels = Vec::new();
+    for g in &flat.groups {
+        let (m, v) = (g.stats.mean(), g.stats.var());
+        let n = m.len() as f64;
+        let mean_dn = Zip::from(&m)
+            .and(&bias.mean)
+            .fold(0.0, |acc, a, b| acc + (a - b))
+            / n;
+        let var_dn2 = Zip::from(&v)
+            .and(&bias.var)
+            .fold(0.0, |acc, a, b| acc + (a - b))
+            / n;
+        if mean_dn <= 0.0 {
+            return Err(invalid(format!(
+                "flat frames at {} s are not brighter than the bias frames (mean {mean_dn:.2} DN above bias)",
+                g.exposure_s
+            )));
+        }
+        levels.push(PtcLevel {
+            exposure_s: g.exposure_s,
+            mean_dn,
+            var_dn2,
+            frames: g.files.len(),
+        });
+    }
+    let bright = flat
+        .groups
+        .iter()
+        .zip(&levels)
+        .max_by(|a, b| a.1.mean_dn.partial_cmp(&b.1.mean_dn).unwrap())
+        .ok_or_else(|| invalid("flat stack is empty"))?;
+    let (bm, bv) = (bright.0.stats.mean(), bright.0.stats.var());
+    let mut k_map = Array3::<f32>::zeros(bm.raw_dim());
+    Zip::from(&mut k_map)
+        .and(&bm)
+        .and(&bv)
+        .and(&bias.mean)
+        .and(&bias.var)
+        .for_each(|k, &fm, &fv, &m0, &v0| {
+            let s = fm - m0;
+            *k = if s > 0.0 {
+                ((fv - v0) / s) as f32
+            } else {
+                f32::NAN
+            };
+        });
+    let k_var_mean = bright.1.var_dn2 / bright.1.mean_dn;
+    // PRNU from the spread of the per-pixel signal at the brightest level.
+    let response = Zip::from(&bm)
+        .and(&bias.mean)
+        .map_collect(|a, b| (a - b) as f32);
+    let sig: Vec<f64> = response.iter().map(|&v| v as f64).collect();
+    let sm = sig.iter().sum::<f64>() / sig.len() as f64;
+    let sv = sig.iter().map(|s| (s - sm).powi(2)).sum::<f64>() / sig.len() as f64;
+    let temporal = (bright.1.var_dn2 + bias.var.mean().unwrap_or(0.0)) / bright.1.frames as f64;
+    let prnu = (sv - temporal - bias.dsnu.powi(2)).max(0.0).sqrt() / sm;
+
+    let ptc_fit = if levels.len() >= 2 {
+        let n = levels.len() as f64;
+        let mx = levels.iter().map(|l| l.mean_dn).sum::<f64>() / n;
+        let my = levels.iter().map(|l| l.var_dn2).sum::<f64>() / n;
+        let sxx: f64 = levels.iter().map(|l| (l.mean_dn - mx).powi(2)).sum();
+        let sxy: f64 = levels
+            .iter()
+            .map(|l| (l.mean_dn - mx) * (l.var_dn2 - my))
+            .sum();
+        if sxx > 0.0 {
+            let slope = sxy / sxx;
+            Some((slope, my - slope * mx))
+        } else {
+            None
+        }
+    } else {
+        None
+    };
+    let (k, method) = match ptc_fit {
+        Some((slope, _)) if slope > 0.0 => (slope, "ptc"),
+        _ => (k_var_mean, "var/mean"),
+    };
+    if !(k.is_finite() && k > 0.0) {
+        return Err(invalid(format!(
+            "system gain estimate {k} is not positive: are the flat frames lit and unsaturated?"
+        )));
+    }
+    Ok(GainEstimate {
+        k,
+        method,
+        k_map,
+        k_var_mean,
+        response,
+        levels,
+        ptc_fit,
+        prnu,
+    })
+}
+
+#[derive(Clone, Debug)]
+pub struct DarkEstimate {
+    pub exposures: Vec<f64>,
+    /// The law with the better fit of the pixel-averaged dark signal.
+    pub law: DarkLaw,
+    /// R^2 of the pixel-averaged dark signal under each law.
+    pub r2_sqrt_global: f64,
+    pub r2_linear_global: f64,
+    /// Per-pixel R^2 of each law (NaN where the pixel has no dark signal variation).
+    pub r2_sqrt: Array3<f32>,
+    pub r2_linear: Array3<f32>,
+    /// Per-pixel dark rate in electrons per sqrt(s) or per s (chosen law),
+    /// N_FP absorbed (mean dark DN = K rate g(t)).
+    pub rate: Array3<f32>,
+    /// Mean dark rate, electrons per unit of g(t).
+    pub rate_mean: f64,
+}
+
+/// Least-squares fit through the origin, y = a g, and its R^2 against the mean of y.
+fn fit_origin(g: &[f64], y: &[f64]) -> (f64, f64) {
+    let sgg: f64 = g.iter().map(|v| v * v).sum();
+    let a = g.iter().zip(y).map(|(g, y)| g * y).sum::<f64>() / sgg;
+    let my = y.iter().sum::<f64>() / y.len() as f64;
+    let ss_tot: f64 = y.iter().map(|v| (v - my).powi(2)).sum();
+    let ss_res: f64 = g.iter().zip(y).map(|(g, y)| (y - a * g).powi(2)).sum();
+    (
+        a,
+        if ss_tot > 0.0 {
+            1.0 - ss_res / ss_tot
+        } else {
+            f64::NAN
+        },
+    )
+}
+
+pub fn estimate_dark(dark: &Stack, bias: &BiasEstimate, k: f64) -> Result<DarkEstimate> {
+    let exposures: Vec<f64> = dark.groups.iter().map(|g| g.exposure_s).collect();
+    if exposures.len() < 2 {
+        return Err(invalid(format!(
+            "dark stack has one exposure time ({} s); fitting a*sqrt(t) vs a*t needs at least 2",
+            exposures.first().copied().unwrap_or(0.0)
+        )));
+    }
+    let means: Vec<Array3<f64>> = dark.groups.iter().map(|g| g.stats.mean()).collect();
+    let sig: Vec<Vec<f64>> = means
+        .iter()
+        .map(|m| {
+            Zip::from(m)
+                .and(&bias.mean)
+                .map_collect(|a, b| a - b)
+                .into_iter()
+                .collect()
+        })
+        .collect();
+    let gs = exposures.iter().map(|t| t.sqrt()).collect::<Vec<_>>();
+    let gl = exposures.clone();
+    let avg: Vec<f64> = sig
+        .iter()
+        .map(|s| s.iter().sum::<f64>() / s.len() as f64)
+        .collect();
+    let (_, r2s) = fit_origin(&gs, &avg);
+    let (_, r2l) = fit_origin(&gl, &avg);
+    let law = if r2l > r2s {
+        DarkLaw::Linear
+    } else {
+        DarkLaw::Sqrt
+    };
+    let shape = means[0].raw_dim();
+    let npx = sig[0].len();
+    let mut r2_sqrt = vec![0f32; npx];
+    let mut r2_linear = vec![0f32; npx];
+    let mut rate = vec![0f32; npx];
+    let mut y = vec![0.0; exposures.len()];
+    for x in 0..npx {
+        for (t, s) in y.iter_mut().zip(&sig) {
+            *t = s[x];
+        }
+        let (as_, r2a) = fit_origin(&gs, &y);
+        let (al, r2b) = fit_origin(&gl, &y);
+        r2_sqrt[x] = r2a as f32;
+        r2_linear[x] = r2b as f32;
+        let a = if law == DarkLaw::Sqrt { as_ } else { al };
+        rate[x] = (a / k).max(0.0) as f32;
+    }
+    let rate = Array3::from_shape_vec(shape, rate).expect("shape");
+    Ok(DarkEstimate {
+        exposures,
+        law,
+        r2_sqrt_global: r2s,
+        r2_linear_global: r2l,
+        r2_sqrt: Array3::from_shape_vec(shape, r2_sqrt).expect("shape"),
+        r2_linear: Array3::from_shape_vec(shape, r2_linear).expect("shape"),
+        rate_mean: rate.mean().unwrap_or(0.0) as f64,
+        rate,
+    })
+}
+
+/// Defect map: 1 hot (dark rate or bias offset far above the rest), 2 dead
+/// (response to light far below the rest), 0 good. Thresholds are robust:
+/// median + 10 MAD (scaled to sigma) for hot, below half the median response for dead.
+pub fn defects(
+    bias: &BiasEstimate,
+    gain: Option<&GainEstimate>,
+    dark: Option<&DarkEstimate>,
+) -> Array3<f32> {
+    let robust_hi = |a: &Array3<f32>| {
+        let mut v: Vec<f64> = a
+            .iter()
+            .filter(|x| x.is_finite())
+            .map(|&x| x as f64)
+            .collect();
+        let m = median(&mut v);
+        let mut dev: Vec<f64> = v.iter().map(|x| (x - m).abs()).collect();
+        let mad = median(&mut dev) * 1.4826;
+        m + 10.0 * mad.max(1e-6)
+    };
+    let mut out = Array3::<f32>::zeros(bias.fixed_pattern.raw_dim());
+    let hot_src = dark.map(|d| &d.rate).unwrap_or(&bias.fixed_pattern);
+    let thr = robust_hi(hot_src);
+    Zip::from(&mut out).and(hot_src).for_each(|o, &v| {
+        if v as f64 > thr {
+            *o = 1.0;
+        }
+    });
+    // Dead: the mean response, not the per-pixel gain, which is too noisy
+    // (its variance term has a relative error of sqrt(2/(F-1))).
+    if let Some(g) = gain {
+        let mr = median_of(&g.response);
+        Zip::from(&mut out).and(&g.response).for_each(|o, &v| {
+            if (v as f64) < 0.5 * mr || !v.is_finite() {
+                *o = 2.0;
+            }
+        });
+    }
+    out
+}

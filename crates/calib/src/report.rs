@@ -1,0 +1,1336 @@
+//! Human-readable calibration report: a handful of PNG plots and a Markdown
+//! summary written next to the calibration file.
+//!
+//! The numbers in a calibration file are only as good as the frames behind
+//! them, and the usual failures (a light leak in the bias frames, a flat level
+//! that clipped, a sensor whose dark current follows neither law) are obvious
+//! in a plot and invisible in a table. The report exists so a person can check
+//! a calibration in a few seconds before trusting it.
+//!
+//! Everything here must work headless and without system fonts (calibration
+//! runs on build machines and in containers), which is why the font is the
+//! embedded DejaVu Sans and the bitmaps are encoded by the `image` crate rather
+//! than by plotters.
+
+use ndarray::{s, ArrayView3};
+use plotters::coord::ranged1d::{Ranged, ValueFormatter};
+use plotters::coord::types::RangedCoordf64;
+use plotters::prelude::*;
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use std::sync::OnceLock;
+
+/// One flat-field level of the photon-transfer curve: bias-corrected mean signal
+/// and temporal variance (from frame pairs), both in DN / DN^2.
+#[derive(Clone, Copy, Debug)]
+pub struct PtcPoint {
+    pub mean_dn: f64,
+    pub var_dn2: f64,
+}
+
+/// Everything the report shows, borrowed from the calibration run so that
+/// writing a report never copies the full-resolution maps.
+pub struct ReportData<'a> {
+    /// e.g. "Sony ILCE-7SM2"
+    pub camera: String,
+    pub iso: Option<u32>,
+    /// Photon-transfer points, one per flat level (may be empty).
+    pub ptc_points: Vec<PtcPoint>,
+    /// Fitted line var = slope * mean + intercept (slope is the system gain K in DN/e-), if any.
+    pub ptc_fit: Option<(f64, f64)>,
+    /// Per-pixel temporal read-noise sigma in DN, packed planes (4, H, W) in order R, G1, B, G2.
+    pub sigma_read: ArrayView3<'a, f32>,
+    /// Per-pixel fixed-pattern offset (bias mean minus black level) in DN, shape (4, H, W).
+    pub fixed_pattern: ArrayView3<'a, f32>,
+    /// Per-pixel R^2 of the dark-current fits y = a*sqrt(t) and y = a*t (None when no dark frames).
+    pub r2_sqrt: Option<ArrayView3<'a, f32>>,
+    pub r2_linear: Option<ArrayView3<'a, f32>>,
+    /// Rows of the summary table: (quantity, value, unit), EMVA 1288 vocabulary
+    /// (system gain, temporal dark noise, DSNU, PRNU, dark current ...), already formatted.
+    pub summary: Vec<(String, String, String)>,
+}
+
+/// Why a report could not be written. Every message is a single line because
+/// the CLI prints errors verbatim, one per line.
+#[derive(Debug, thiserror::Error)]
+pub enum ReportError {
+    /// Creating the folder is the caller's decision (it usually also holds
+    /// the calibration file), so a missing one is refused, not created.
+    #[error("report folder '{0}' does not exist")]
+    MissingDir(PathBuf),
+    #[error("report path '{0}' is not a folder")]
+    NotADir(PathBuf),
+    #[error("invalid report input: {0}")]
+    Invalid(String),
+    #[error("cannot load the embedded plot font: {0}")]
+    Font(String),
+    #[error("{file}: cannot draw: {reason}")]
+    Plot { file: String, reason: String },
+    #[error("{file}: cannot encode PNG: {reason}")]
+    Encode { file: String, reason: String },
+    #[error(transparent)]
+    Raw(#[from] pgrf_raw::RawError),
+}
+
+/// File names are fixed so scripts and the Markdown links can rely on them.
+const PTC_PNG: &str = "ptc.png";
+const SIGMA_HIST_PNG: &str = "sigma_hist.png";
+const DARK_R2_HIST_PNG: &str = "dark_r2_hist.png";
+const FIXED_PATTERN_PNG: &str = "fixed_pattern.png";
+const SIGMA_MAP_PNG: &str = "sigma_map.png";
+const SUMMARY_MD: &str = "summary.md";
+
+/// Plot size: tick labels stay legible when a Markdown preview scales the
+/// plot down to page width, and the PNGs stay well under a megabyte.
+const PLOT_W: u32 = 1100;
+const PLOT_H: u32 = 700;
+
+/// Maps larger than this on a side are strided down: the point of the map is
+/// to spot structure (banding, amp glow, clusters), which survives striding,
+/// and a full-resolution mosaic of a 24 MP sensor is tens of MB of noisy PNG.
+const MAP_MAX_SIDE: usize = 1600;
+
+/// plotters' default family; registering the embedded font under it means
+/// every text element (captions, tick labels, legends) finds a font without
+/// each call site naming one.
+const FONT_FAMILY: &str = "sans-serif";
+
+/// Write the report into `dir`: ptc.png, sigma_hist.png, dark_r2_hist.png
+/// (only with dark-current fits), fixed_pattern.png, sigma_map.png and
+/// summary.md, which links them. Returns the paths written.
+///
+/// `dir` must already exist: it is chosen by the caller (usually next to the
+/// calibration file), and silently creating a mistyped folder would hide the
+/// report. Each file is written atomically and summary.md last, so an
+/// interrupted run never leaves a summary pointing at half-written plots.
+/// Missing or empty inputs skip their plot instead of failing, because a
+/// partial calibration (bias frames only, no flats or darks) is a normal run;
+/// summary.md says what was skipped and why.
+pub fn write_report(dir: &Path, data: &ReportData) -> Result<Vec<PathBuf>, ReportError> {
+    if !dir.exists() {
+        return Err(ReportError::MissingDir(dir.to_path_buf()));
+    }
+    if !dir.is_dir() {
+        return Err(ReportError::NotADir(dir.to_path_buf()));
+    }
+    check_planes("sigma_read", &data.sigma_read)?;
+    check_planes("fixed_pattern", &data.fixed_pattern)?;
+    if let Some(r2) = &data.r2_sqrt {
+        check_planes("r2_sqrt", r2)?;
+    }
+    if let Some(r2) = &data.r2_linear {
+        check_planes("r2_linear", r2)?;
+    }
+    ensure_font()?;
+
+    let title = report_title(data);
+    let sections = [
+        ptc_section(dir, data, &title)?,
+        sigma_hist_section(dir, data, &title)?,
+        dark_r2_section(dir, data, &title)?,
+        map_section(
+            dir,
+            FIXED_PATTERN_PNG,
+            "Fixed-pattern offset map",
+            "bias mean minus black level",
+            "DN",
+            &data.fixed_pattern,
+        )?,
+        map_section(
+            dir,
+            SIGMA_MAP_PNG,
+            "Read-noise map",
+            "per-pixel temporal read noise",
+            "DN",
+            &data.sigma_read,
+        )?,
+    ];
+    let mut written: Vec<PathBuf> = sections.iter().filter_map(|s| s.path.clone()).collect();
+
+    let md = summary_markdown(&title, data, &sections);
+    let md_path = dir.join(SUMMARY_MD);
+    pgrf_raw::atomic::write_atomic(&md_path, md.as_bytes())?;
+    written.push(md_path);
+    Ok(written)
+}
+
+/// One entry of the "Plots" part of summary.md: either the file that was
+/// written with a caption saying how to read it, or the reason it was not.
+struct Section {
+    heading: &'static str,
+    file: &'static str,
+    path: Option<PathBuf>,
+    /// Caption when written, reason when skipped.
+    text: String,
+}
+
+impl Section {
+    fn written(heading: &'static str, file: &'static str, path: PathBuf, text: String) -> Self {
+        Section {
+            heading,
+            file,
+            path: Some(path),
+            text,
+        }
+    }
+
+    fn skipped(heading: &'static str, file: &'static str, reason: String) -> Self {
+        Section {
+            heading,
+            file,
+            path: None,
+            text: reason,
+        }
+    }
+}
+
+/// The plane layout is the contract with the rest of the crate; a wrong
+/// plane count means the caller packed the maps differently and every
+/// label in the report would lie.
+fn check_planes(name: &str, a: &ArrayView3<f32>) -> Result<(), ReportError> {
+    if a.shape()[0] != 4 {
+        return Err(ReportError::Invalid(format!(
+            "{name} has {} planes, expected 4 (R, G1, B, G2)",
+            a.shape()[0]
+        )));
+    }
+    Ok(())
+}
+
+/// Register the embedded font once per process: the `ab_glyph` backend has
+/// no system-font fallback, and without a registered family every text draw
+/// fails.
+fn ensure_font() -> Result<(), ReportError> {
+    static FONT: OnceLock<Result<(), String>> = OnceLock::new();
+    FONT.get_or_init(|| {
+        plotters::style::register_font(FONT_FAMILY, FontStyle::Normal, dejavu::sans::regular())
+            .map_err(|_| "DejaVu Sans regular is not a valid font".to_string())?;
+        plotters::style::register_font(FONT_FAMILY, FontStyle::Bold, dejavu::sans::bold())
+            .map_err(|_| "DejaVu Sans bold is not a valid font".to_string())
+    })
+    .clone()
+    .map_err(ReportError::Font)
+}
+
+fn report_title(data: &ReportData) -> String {
+    let camera = data.camera.trim();
+    let camera = if camera.is_empty() {
+        "unknown camera"
+    } else {
+        camera
+    };
+    match data.iso {
+        Some(iso) => format!("{camera}, ISO {iso}"),
+        None => format!("{camera}, ISO unknown"),
+    }
+}
+
+// ---------------------------------------------------------------- rendering
+
+type PlotResult = Result<(), Box<dyn std::error::Error>>;
+
+/// Render with plotters into an in-memory RGB buffer, encode and write
+/// atomically: the crate has no `bitmap_encoder` feature (it would pull in a
+/// second image stack), and writing through a temp file keeps a crashed run
+/// from leaving half a PNG behind.
+fn render_png(
+    path: &Path,
+    (w, h): (u32, u32),
+    draw: impl FnOnce(&DrawingArea<BitMapBackend, plotters::coord::Shift>) -> PlotResult,
+) -> Result<(), ReportError> {
+    let file = file_label(path);
+    let mut rgb = vec![0u8; w as usize * h as usize * 3];
+    {
+        let root = BitMapBackend::with_buffer(&mut rgb, (w, h)).into_drawing_area();
+        let result = root
+            .fill(&WHITE)
+            .map_err(|e| Box::new(e) as Box<dyn std::error::Error>)
+            .and_then(|_| draw(&root))
+            .and_then(|_| root.present().map_err(|e| e.into()));
+        result.map_err(|e| ReportError::Plot {
+            file: file.clone(),
+            reason: one_line(&e.to_string()),
+        })?;
+    }
+    let png = encode_png(&rgb, w, h, image::ExtendedColorType::Rgb8).map_err(|reason| {
+        ReportError::Encode {
+            file: file.clone(),
+            reason,
+        }
+    })?;
+    pgrf_raw::atomic::write_atomic(path, &png)?;
+    Ok(())
+}
+
+fn encode_png(
+    pixels: &[u8],
+    w: u32,
+    h: u32,
+    color: image::ExtendedColorType,
+) -> Result<Vec<u8>, String> {
+    use image::ImageEncoder as _;
+    let mut out = Vec::new();
+    image::codecs::png::PngEncoder::new(&mut out)
+        .write_image(pixels, w, h, color)
+        .map_err(|e| one_line(&e.to_string()))?;
+    Ok(out)
+}
+
+fn file_label(path: &Path) -> String {
+    path.display().to_string()
+}
+
+/// Backend and font errors can carry newlines; the error type promises one.
+fn one_line(s: &str) -> String {
+    let line = s
+        .lines()
+        .map(str::trim)
+        .filter(|l| !l.is_empty())
+        .collect::<Vec<_>>()
+        .join("; ");
+    if line.is_empty() {
+        "unknown error".to_string()
+    } else {
+        line
+    }
+}
+
+/// Numbers in plot labels: a fixed number of significant digits reads better
+/// than Rust's shortest round-trip form ("0.30000000000000004").
+fn fmt_sig(v: f64, digits: usize) -> String {
+    if !v.is_finite() {
+        return format!("{v}");
+    }
+    if v == 0.0 {
+        return "0".to_string();
+    }
+    let mag = v.abs().log10().floor() as i32;
+    if !(-3..5).contains(&mag) {
+        let s = format!("{:.*e}", digits.saturating_sub(1), v);
+        return match s.split_once('e') {
+            Some((m, e)) => format!("{}e{e}", trim_zeros(m)),
+            None => s,
+        };
+    }
+    let decimals = (digits as i32 - 1 - mag).max(0) as usize;
+    trim_zeros(&format!("{v:.decimals$}")).to_string()
+}
+
+fn trim_zeros(s: &str) -> &str {
+    if s.contains('.') {
+        s.trim_end_matches('0').trim_end_matches('.')
+    } else {
+        s
+    }
+}
+
+/// Pixel counts of a multi-megapixel sensor: "2.5M" reads at a glance where
+/// "2.50e6" or "2500000" needs counting digits.
+fn fmt_count(v: &f64) -> String {
+    let a = v.abs();
+    let (scaled, suffix) = if a >= 1e9 {
+        (v / 1e9, "G")
+    } else if a >= 1e6 {
+        (v / 1e6, "M")
+    } else if a >= 1e4 {
+        (v / 1e3, "k")
+    } else {
+        (*v, "")
+    };
+    format!("{}{suffix}", fmt_sig(scaled, 3))
+}
+
+fn fmt_tick(v: &f64) -> String {
+    fmt_sig(*v, 3)
+}
+
+/// Percentiles by nearest rank over finite values only: non-finite pixels
+/// (dead pixels, divisions by zero in the estimators) must not decide the
+/// display range or the median. `values` is reordered.
+fn percentiles(values: &mut [f32], qs: &[f64]) -> Vec<f64> {
+    if values.is_empty() {
+        return vec![f64::NAN; qs.len()];
+    }
+    let n = values.len();
+    qs.iter()
+        .map(|&q| {
+            let idx = ((q.clamp(0.0, 1.0) * (n - 1) as f64).round() as usize).min(n - 1);
+            let (_, v, _) = values.select_nth_unstable_by(idx, f32::total_cmp);
+            *v as f64
+        })
+        .collect()
+}
+
+fn finite_values(a: &ArrayView3<f32>) -> Vec<f32> {
+    a.iter().copied().filter(|v| v.is_finite()).collect()
+}
+
+/// A display range that is never empty, so plotters never divides by zero
+/// when every value is the same.
+fn widen(lo: f64, hi: f64) -> (f64, f64) {
+    if hi > lo {
+        (lo, hi)
+    } else {
+        let pad = if lo == 0.0 { 0.5 } else { lo.abs() * 0.05 };
+        (lo - pad, hi + pad)
+    }
+}
+
+// ---------------------------------------------------------------------- PTC
+
+/// Log-log axes, because flat levels are normally spaced geometrically
+/// (exposure doubled per level): on linear axes the low-signal points, where
+/// read noise and the fit intercept matter, collapse into one corner. The
+/// straight shot-noise line still reads as slope one and K is annotated.
+fn ptc_section(dir: &Path, data: &ReportData, title: &str) -> Result<Section, ReportError> {
+    const HEADING: &str = "Photon transfer curve";
+    let all = &data.ptc_points;
+    if all.is_empty() {
+        return Ok(Section::skipped(
+            HEADING,
+            PTC_PNG,
+            "Skipped: no photon-transfer points (no flat-field frames were given).".to_string(),
+        ));
+    }
+    let pts: Vec<(f64, f64)> = all
+        .iter()
+        .filter(|p| p.mean_dn.is_finite() && p.var_dn2.is_finite())
+        .filter(|p| p.mean_dn > 0.0 && p.var_dn2 > 0.0)
+        .map(|p| (p.mean_dn, p.var_dn2))
+        .collect();
+    let dropped = all.len() - pts.len();
+    if pts.is_empty() {
+        return Ok(Section::skipped(
+            HEADING,
+            PTC_PNG,
+            format!(
+                "Skipped: none of the {} photon-transfer points has a positive, finite mean and variance.",
+                all.len()
+            ),
+        ));
+    }
+    let fit = data.ptc_fit.filter(|(k, b)| k.is_finite() && b.is_finite());
+
+    let (mut x_lo, mut x_hi) = min_max(pts.iter().map(|p| p.0));
+    let (mut y_lo, mut y_hi) = min_max(pts.iter().map(|p| p.1));
+    if let Some((k, b)) = fit {
+        for x in [x_lo, x_hi] {
+            let y = k * x + b;
+            if y > 0.0 {
+                y_lo = y_lo.min(y);
+                y_hi = y_hi.max(y);
+            }
+        }
+    }
+    // Half a decade of margin on each side keeps end points off the frame.
+    x_lo /= 1.6;
+    x_hi *= 1.6;
+    y_lo /= 1.6;
+    y_hi *= 1.6;
+
+    let path = dir.join(PTC_PNG);
+    let caption = format!("Photon transfer: {title}");
+    render_png(&path, (PLOT_W, PLOT_H), |root| {
+        let mut chart = ChartBuilder::on(root)
+            .caption(&caption, (FONT_FAMILY, 28))
+            .margin(20)
+            .x_label_area_size(60)
+            .y_label_area_size(90)
+            .build_cartesian_2d((x_lo..x_hi).log_scale(), (y_lo..y_hi).log_scale())?;
+        chart
+            .configure_mesh()
+            .x_desc("mean signal [DN]")
+            .y_desc("temporal variance [DN^2]")
+            .x_label_formatter(&fmt_tick)
+            .y_label_formatter(&fmt_tick)
+            .axis_desc_style((FONT_FAMILY, 20))
+            .label_style((FONT_FAMILY, 16))
+            .light_line_style(RGBColor(235, 235, 235))
+            .draw()?;
+
+        if let Some((k, b)) = fit {
+            // Sampled densely because a line with an intercept is curved on
+            // log axes; samples where the model variance is not positive have
+            // no place on a log axis and are left out.
+            let n = 200;
+            let line: Vec<(f64, f64)> = (0..=n)
+                .map(|i| {
+                    let t = i as f64 / n as f64;
+                    x_lo * (x_hi / x_lo).powf(t)
+                })
+                .map(|x| (x, k * x + b))
+                .filter(|&(_, y)| y >= y_lo && y <= y_hi)
+                .collect();
+            let label = format!(
+                "fit var = K·mean + b:  K = {} DN/e⁻ ({} e⁻/DN),  b = {} DN²",
+                fmt_sig(k, 4),
+                if k != 0.0 {
+                    fmt_sig(1.0 / k, 4)
+                } else {
+                    "inf".to_string()
+                },
+                fmt_sig(b, 4)
+            );
+            chart
+                .draw_series(LineSeries::new(line, RED.stroke_width(2)))?
+                .label(label)
+                .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], RED.stroke_width(2)));
+        }
+        chart
+            .draw_series(
+                pts.iter()
+                    .map(|&(x, y)| Circle::new((x, y), 5, BLUE.filled())),
+            )?
+            .label(format!("flat levels ({})", pts.len()))
+            .legend(|(x, y)| Circle::new((x + 12, y), 5, BLUE.filled()));
+        chart
+            .configure_series_labels()
+            .position(SeriesLabelPosition::UpperLeft)
+            .label_font((FONT_FAMILY, 18))
+            .background_style(WHITE.mix(0.9))
+            .border_style(BLACK)
+            .draw()?;
+        if fit.is_none() {
+            root.draw(&Text::new(
+                "no fit given",
+                (PLOT_W as i32 - 220, PLOT_H as i32 - 120),
+                (FONT_FAMILY, 18).into_font().color(&RED),
+            ))?;
+        }
+        Ok(())
+    })?;
+
+    let mut text = String::from(
+        "Temporal variance against mean signal per flat level, log-log. In the \
+         shot-noise regime the points follow var = K·mean + b; the slope K is the \
+         system gain.",
+    );
+    match fit {
+        Some((k, b)) => {
+            let _ = write!(
+                text,
+                " Fit: K = {} DN/e⁻ ({} e⁻/DN), intercept b = {} DN².",
+                fmt_sig(k, 4),
+                if k != 0.0 {
+                    fmt_sig(1.0 / k, 4)
+                } else {
+                    "inf".to_string()
+                },
+                fmt_sig(b, 4)
+            );
+        }
+        None => text.push_str(" No fit was given."),
+    }
+    if dropped > 0 {
+        let _ = write!(
+            text,
+            " {dropped} point(s) with non-positive or non-finite values are not shown."
+        );
+    }
+    Ok(Section::written(HEADING, PTC_PNG, path, text))
+}
+
+fn min_max(it: impl Iterator<Item = f64>) -> (f64, f64) {
+    it.fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| {
+        (lo.min(v), hi.max(v))
+    })
+}
+
+// --------------------------------------------------------------- histograms
+
+/// One histogram drawn on shared bins.
+struct HistSeries {
+    label: String,
+    color: RGBColor,
+    counts: Vec<u64>,
+    median: f64,
+}
+
+/// Equal-width bins over [lo, hi]; values outside are counted separately so
+/// the caption can say how many were left out instead of silently piling
+/// them into the edge bins.
+fn bin(values: &[f32], lo: f64, hi: f64, n_bins: usize) -> (Vec<u64>, usize, usize) {
+    let mut counts = vec![0u64; n_bins];
+    let (mut below, mut above) = (0, 0);
+    let width = (hi - lo) / n_bins as f64;
+    for &v in values {
+        let v = v as f64;
+        if v < lo {
+            below += 1;
+        } else if v > hi {
+            above += 1;
+        } else {
+            let i = (((v - lo) / width) as usize).min(n_bins - 1);
+            counts[i] += 1;
+        }
+    }
+    (counts, below, above)
+}
+
+/// Enough bins to show shape, few enough that small test maps do not turn
+/// into a comb.
+fn bin_count(n: usize) -> usize {
+    ((n as f64).sqrt() as usize).clamp(10, 120)
+}
+
+struct HistSpec<'s> {
+    caption: String,
+    x_desc: &'s str,
+    lo: f64,
+    hi: f64,
+    series: &'s [HistSeries],
+    unit: &'s str,
+    /// Log counts show the rare tail (RTS and hot pixels) next to the bulk.
+    log_y: bool,
+    note: Option<String>,
+}
+
+fn draw_histogram(
+    root: &DrawingArea<BitMapBackend, plotters::coord::Shift>,
+    spec: &HistSpec,
+) -> PlotResult {
+    let max_count = spec
+        .series
+        .iter()
+        .flat_map(|s| s.counts.iter().copied())
+        .max()
+        .unwrap_or(1)
+        .max(1) as f64;
+    let mut builder = ChartBuilder::on(root);
+    builder
+        .caption(&spec.caption, (FONT_FAMILY, 28))
+        .margin(20)
+        // Room under the x-axis title for the note about values not shown.
+        .margin_bottom(if spec.note.is_some() { 40 } else { 20 })
+        .x_label_area_size(60)
+        .y_label_area_size(90);
+    if spec.log_y {
+        // Bars start just below one so a single-pixel bin is still visible.
+        let mut chart =
+            builder.build_cartesian_2d(spec.lo..spec.hi, (0.7..max_count * 2.0).log_scale())?;
+        histogram_body(&mut chart, spec, 0.7)?;
+    } else {
+        let mut chart = builder.build_cartesian_2d(spec.lo..spec.hi, 0.0..max_count * 1.08)?;
+        histogram_body(&mut chart, spec, 0.0)?;
+    }
+    if let Some(note) = &spec.note {
+        root.draw(&Text::new(
+            note.clone(),
+            (110, PLOT_H as i32 - 30),
+            (FONT_FAMILY, 15).into_font().color(&RGBColor(90, 90, 90)),
+        ))?;
+    }
+    Ok(())
+}
+
+fn histogram_body<'a, Y>(
+    chart: &mut ChartContext<'a, BitMapBackend<'a>, Cartesian2d<RangedCoordf64, Y>>,
+    spec: &HistSpec,
+    base: f64,
+) -> PlotResult
+where
+    Y: Ranged<ValueType = f64> + ValueFormatter<f64>,
+{
+    let y_top = chart.y_range().end;
+    chart
+        .configure_mesh()
+        .x_desc(spec.x_desc)
+        .y_desc("pixels")
+        .x_label_formatter(&fmt_tick)
+        .y_label_formatter(&fmt_count)
+        .axis_desc_style((FONT_FAMILY, 20))
+        .label_style((FONT_FAMILY, 16))
+        .light_line_style(RGBColor(235, 235, 235))
+        .draw()?;
+    let overlay = spec.series.len() > 1;
+    for s in spec.series {
+        let n_bins = s.counts.len();
+        let width = (spec.hi - spec.lo) / n_bins as f64;
+        // Overlaid histograms are translucent so neither hides the other.
+        let fill = if overlay {
+            s.color.mix(0.45).filled()
+        } else {
+            s.color.mix(0.8).filled()
+        };
+        let color = s.color;
+        chart
+            .draw_series(
+                s.counts
+                    .iter()
+                    .enumerate()
+                    .filter(|(_, &c)| c > 0)
+                    .map(|(i, &c)| {
+                        let x0 = spec.lo + i as f64 * width;
+                        Rectangle::new([(x0, base), (x0 + width, c as f64)], fill)
+                    }),
+            )?
+            .label(s.label.clone())
+            .legend(move |(x, y)| Rectangle::new([(x, y - 6), (x + 20, y + 6)], color.filled()));
+    }
+    for s in spec.series {
+        if !s.median.is_finite() {
+            continue;
+        }
+        let style = if overlay {
+            s.color.stroke_width(3)
+        } else {
+            RED.stroke_width(3)
+        };
+        chart
+            .draw_series(DashedLineSeries::new(
+                vec![(s.median, base), (s.median, y_top)],
+                10,
+                6,
+                style,
+            ))?
+            .label(format!(
+                "median {}{} {}",
+                if overlay {
+                    format!("({}) ", short_label(&s.label))
+                } else {
+                    String::new()
+                },
+                fmt_sig(s.median, 4),
+                spec.unit
+            ))
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], style));
+    }
+    chart
+        .configure_series_labels()
+        .position(legend_corner(spec.series))
+        .label_font((FONT_FAMILY, 18))
+        .background_style(WHITE.mix(0.9))
+        .border_style(BLACK)
+        .draw()?;
+    Ok(())
+}
+
+/// Put the legend over the half of the plot where the tallest bar is not,
+/// so it never hides the mode (R² piles up near 1 on the right, read noise
+/// near zero on the left).
+fn legend_corner(series: &[HistSeries]) -> SeriesLabelPosition {
+    let peak = series
+        .iter()
+        .filter_map(|s| {
+            let (i, &c) = s.counts.iter().enumerate().max_by_key(|(_, &c)| c)?;
+            Some((c, i as f64 / s.counts.len().max(1) as f64))
+        })
+        .max_by(|a, b| a.0.cmp(&b.0))
+        .map(|(_, pos)| pos)
+        .unwrap_or(0.0);
+    if peak > 0.5 {
+        SeriesLabelPosition::UpperLeft
+    } else {
+        SeriesLabelPosition::UpperRight
+    }
+}
+
+/// Legend text for a median line: the series label up to its first space
+/// or colon, so two medians are told apart without repeating the formula.
+fn short_label(label: &str) -> &str {
+    label.split([' ', ':']).next().unwrap_or(label)
+}
+
+fn sigma_hist_section(dir: &Path, data: &ReportData, title: &str) -> Result<Section, ReportError> {
+    const HEADING: &str = "Read-noise histogram";
+    let mut values = finite_values(&data.sigma_read);
+    let total = data.sigma_read.len();
+    if values.is_empty() {
+        return Ok(Section::skipped(
+            HEADING,
+            SIGMA_HIST_PNG,
+            if total == 0 {
+                "Skipped: the read-noise map is empty.".to_string()
+            } else {
+                format!("Skipped: none of the {total} read-noise values is finite.")
+            },
+        ));
+    }
+    let non_finite = total - values.len();
+    // The top 0.05 % (hot and RTS pixels) can be orders of magnitude above the
+    // bulk; letting them set the axis would squash the bulk into one bar.
+    let p = percentiles(&mut values, &[0.0, 0.5, 0.9995]);
+    let (lo, hi) = widen(p[0], p[2]);
+    let n_bins = bin_count(values.len());
+    let (counts, _, above) = bin(&values, lo, hi, n_bins);
+    let series = [HistSeries {
+        label: "R, G1, B, G2 pixels".to_string(),
+        color: RGBColor(40, 90, 170),
+        counts,
+        median: p[1],
+    }];
+    let mut note = Vec::new();
+    if above > 0 {
+        note.push(format!(
+            "{above} pixel(s) above the 99.95th percentile ({} DN) not shown",
+            fmt_sig(hi, 4)
+        ));
+    }
+    if non_finite > 0 {
+        note.push(format!("{non_finite} non-finite value(s) ignored"));
+    }
+    let note = (!note.is_empty()).then(|| note.join("; "));
+    let spec = HistSpec {
+        caption: format!("Read noise: {title}"),
+        x_desc: "temporal read noise sigma [DN]",
+        lo,
+        hi,
+        series: &series,
+        unit: "DN",
+        log_y: true,
+        note: note.clone(),
+    };
+    let path = dir.join(SIGMA_HIST_PNG);
+    render_png(&path, (PLOT_W, PLOT_H), |root| draw_histogram(root, &spec))?;
+    let mut text = format!(
+        "Per-pixel temporal read noise over all four CFA planes, log count axis so the \
+         hot/RTS tail is visible next to the bulk. Median {} DN.",
+        fmt_sig(p[1], 4)
+    );
+    if let Some(note) = note {
+        let _ = write!(text, " Note: {note}.");
+    }
+    Ok(Section::written(HEADING, SIGMA_HIST_PNG, path, text))
+}
+
+/// Both laws on one set of bins: the question the plot answers is which
+/// law explains the dark signal of more pixels, which needs a shared axis.
+fn dark_r2_section(dir: &Path, data: &ReportData, title: &str) -> Result<Section, ReportError> {
+    const HEADING: &str = "Dark-current fit quality";
+    let laws: Vec<(&str, RGBColor, &ArrayView3<f32>)> = [
+        ("sqrt-law: y = a·√t", RGBColor(30, 110, 200), &data.r2_sqrt),
+        ("linear: y = a·t", RGBColor(230, 120, 20), &data.r2_linear),
+    ]
+    .into_iter()
+    .filter_map(|(l, c, a)| a.as_ref().map(|a| (l, c, a)))
+    .collect();
+    if laws.is_empty() {
+        return Ok(Section::skipped(
+            HEADING,
+            DARK_R2_HIST_PNG,
+            "Skipped: no dark-current fits (no dark frames were given).".to_string(),
+        ));
+    }
+    let mut vals: Vec<Vec<f32>> = laws.iter().map(|(_, _, a)| finite_values(a)).collect();
+    let mut combined: Vec<f32> = vals.iter().flatten().copied().collect();
+    if combined.is_empty() {
+        return Ok(Section::skipped(
+            HEADING,
+            DARK_R2_HIST_PNG,
+            "Skipped: the dark-current R² maps hold no finite values.".to_string(),
+        ));
+    }
+    // R² of a fit through the origin is unbounded below; the worst 0.5 % of
+    // pixels would otherwise stretch the axis far past where the laws differ.
+    let p = percentiles(&mut combined, &[0.005, 1.0]);
+    let lo = if p[1] > -1.0 { p[0].max(-1.0) } else { p[0] };
+    let (lo, hi) = widen(lo, p[1]);
+    let n_bins = bin_count(combined.len() / laws.len()).min(80);
+    let mut series = Vec::new();
+    let mut below_total = 0;
+    for ((label, color, _), v) in laws.iter().zip(vals.iter_mut()) {
+        let (counts, below, _) = bin(v, lo, hi, n_bins);
+        below_total += below;
+        let median = percentiles(v, &[0.5])[0];
+        series.push(HistSeries {
+            label: label.to_string(),
+            color: *color,
+            counts,
+            median,
+        });
+    }
+    let note = (below_total > 0).then(|| {
+        format!(
+            "{below_total} value(s) below R² = {} not shown",
+            fmt_sig(lo, 3)
+        )
+    });
+    let spec = HistSpec {
+        caption: format!("Dark-current fit R²: {title}"),
+        x_desc: "R² of the per-pixel dark-current fit",
+        lo,
+        hi,
+        series: &series,
+        unit: "",
+        log_y: false,
+        note: note.clone(),
+    };
+    let path = dir.join(DARK_R2_HIST_PNG);
+    render_png(&path, (PLOT_W, PLOT_H), |root| draw_histogram(root, &spec))?;
+    let mut text = String::from(
+        "Per-pixel R² of the dark-signal fits against exposure time; the law whose \
+         histogram sits closer to 1 describes this sensor better.",
+    );
+    for s in &series {
+        let _ = write!(text, " Median R² {} ({}).", fmt_sig(s.median, 4), s.label);
+    }
+    if let Some(note) = note {
+        let _ = write!(text, " Note: {note}.");
+    }
+    Ok(Section::written(HEADING, DARK_R2_HIST_PNG, path, text))
+}
+
+// --------------------------------------------------------------------- maps
+
+/// Plane indices (into R, G1, B, G2) for the 2x2 tiles in reading order:
+/// the Bayer RGGB layout, so the tile position matches the CFA position.
+const TILE_PLANES: [usize; 4] = [0, 1, 3, 2];
+
+/// A grayscale mosaic, scaled between the 0.5th and 99.5th percentile so a
+/// few hot pixels do not turn the rest of the map black. Percentiles use the
+/// full-resolution data, striding only decides which pixels are drawn.
+fn map_section(
+    dir: &Path,
+    file: &'static str,
+    heading: &'static str,
+    what: &str,
+    unit: &str,
+    map: &ArrayView3<f32>,
+) -> Result<Section, ReportError> {
+    let (h, w) = (map.shape()[1], map.shape()[2]);
+    if h == 0 || w == 0 {
+        return Ok(Section::skipped(
+            heading,
+            file,
+            format!("Skipped: the {what} map is empty ({h}x{w} per plane)."),
+        ));
+    }
+    let mut values = finite_values(map);
+    if values.is_empty() {
+        return Ok(Section::skipped(
+            heading,
+            file,
+            format!("Skipped: the {what} map holds no finite values."),
+        ));
+    }
+    let non_finite = map.len() - values.len();
+    let p = percentiles(&mut values, &[0.005, 0.995]);
+    drop(values);
+    let (lo, hi) = (p[0], p[1]);
+
+    let stride = (2 * h.max(w)).div_ceil(MAP_MAX_SIDE).max(1);
+    let (th, tw) = (h.div_ceil(stride), w.div_ceil(stride));
+    let (out_w, out_h) = (2 * tw, 2 * th);
+    let mut gray = vec![0u8; out_w * out_h];
+    for (t, &plane) in TILE_PLANES.iter().enumerate() {
+        let (oy, ox) = ((t / 2) * th, (t % 2) * tw);
+        let view = map.slice(s![plane, ..;stride, ..;stride]);
+        for ((y, x), &v) in view.indexed_iter() {
+            gray[(oy + y) * out_w + ox + x] = to_gray(v, lo, hi);
+        }
+    }
+    let path = dir.join(file);
+    let png = encode_png(
+        &gray,
+        out_w as u32,
+        out_h as u32,
+        image::ExtendedColorType::L8,
+    )
+    .map_err(|reason| ReportError::Encode {
+        file: file_label(&path),
+        reason,
+    })?;
+    pgrf_raw::atomic::write_atomic(&path, &png)?;
+
+    let mut text = format!(
+        "{} ({unit}) as grayscale, the four CFA planes tiled 2x2: R top-left, G1 top-right, \
+         G2 bottom-left, B bottom-right.",
+        capitalize(what),
+    );
+    if hi > lo {
+        let _ = write!(
+            text,
+            " Black = {} {unit} (0.5th percentile), white = {} {unit} (99.5th percentile).",
+            fmt_sig(lo, 4),
+            fmt_sig(hi, 4)
+        );
+    } else {
+        let _ = write!(
+            text,
+            " The map is uniform at {} {unit} and shown mid-gray.",
+            fmt_sig(lo, 4)
+        );
+    }
+    if stride > 1 {
+        let _ = write!(
+            text,
+            " Downsampled by striding, one pixel in {stride} along each axis \
+             ({h}x{w} per plane shown as {th}x{tw})."
+        );
+    }
+    if non_finite > 0 {
+        let _ = write!(text, " {non_finite} non-finite pixel(s) are shown black.");
+    }
+    Ok(Section::written(heading, file, path, text))
+}
+
+fn to_gray(v: f32, lo: f64, hi: f64) -> u8 {
+    if !v.is_finite() {
+        return 0;
+    }
+    if hi <= lo {
+        // A flat map: mid-gray says "uniform" where black would say "low".
+        return 128;
+    }
+    let t = ((v as f64 - lo) / (hi - lo)).clamp(0.0, 1.0);
+    (t * 255.0).round() as u8
+}
+
+fn capitalize(s: &str) -> String {
+    let mut c = s.chars();
+    match c.next() {
+        Some(f) => f.to_uppercase().chain(c).collect(),
+        None => String::new(),
+    }
+}
+
+// ------------------------------------------------------------------ summary
+
+/// Cells come from free-form strings; a stray pipe or newline would break
+/// the table for every row after it.
+fn md_cell(s: &str) -> String {
+    s.replace('|', "\\|")
+        .split(['\n', '\r'])
+        .map(str::trim)
+        .filter(|l| !l.is_empty())
+        .collect::<Vec<_>>()
+        .join(" ")
+}
+
+fn summary_markdown(title: &str, data: &ReportData, sections: &[Section]) -> String {
+    let mut md = String::new();
+    let _ = writeln!(md, "# Calibration report: {title}\n");
+    if data.summary.is_empty() {
+        md.push_str("_No summary quantities were given._\n\n");
+    } else {
+        md.push_str("| quantity | value | unit |\n|---|---|---|\n");
+        for (q, v, u) in &data.summary {
+            let _ = writeln!(md, "| {} | {} | {} |", md_cell(q), md_cell(v), md_cell(u));
+        }
+        md.push('\n');
+    }
+    md.push_str("## Plots\n\n");
+    for s in sections {
+        match &s.path {
+            Some(_) => {
+                let _ = writeln!(md, "- [{}]({})", s.heading, s.file);
+            }
+            None => {
+                let _ = writeln!(md, "- {} (`{}`): not written", s.heading, s.file);
+            }
+        }
+    }
+    md.push('\n');
+    for s in sections {
+        let _ = writeln!(md, "### {}\n", s.heading);
+        match &s.path {
+            Some(_) => {
+                let _ = writeln!(md, "{}\n", s.text);
+                let _ = writeln!(md, "![{}]({})\n", s.heading, s.file);
+            }
+            None => {
+                let _ = writeln!(md, "_{}_\n", s.text);
+            }
+        }
+    }
+    md
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use ndarray::Array3;
+
+    fn scratch(name: &str) -> PathBuf {
+        let d = std::env::temp_dir().join(format!("pgrf-report-{}-{name}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&d);
+        std::fs::create_dir_all(&d).unwrap();
+        d
+    }
+
+    /// Deterministic pseudo-random numbers without a dev-dependency.
+    fn lcg(seed: &mut u64) -> f32 {
+        *seed = seed
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        ((*seed >> 40) as f32) / (1u64 << 24) as f32
+    }
+
+    fn maps(h: usize, w: usize) -> (Array3<f32>, Array3<f32>, Array3<f32>, Array3<f32>) {
+        let mut seed = 7;
+        let sigma = Array3::from_shape_fn((4, h, w), |(p, y, x)| {
+            let base = 2.0 + 0.2 * p as f32 + 0.002 * (x + y) as f32;
+            let v = base + 0.5 * lcg(&mut seed);
+            if (x * 31 + y * 17) % 97 == 0 {
+                v * 8.0 // hot/RTS tail
+            } else {
+                v
+            }
+        });
+        let mut fixed = Array3::from_shape_fn((4, h, w), |(p, y, x)| {
+            // column banding plus a gradient, so the map has visible structure
+            (if x % 8 < 2 { 1.5 } else { 0.0 }) + 0.01 * y as f32 - 0.3 * p as f32
+                + 0.3 * lcg(&mut seed)
+        });
+        fixed[[1, 3, 3]] = f32::NAN;
+        fixed[[2, 4, 4]] = f32::INFINITY;
+        let r2s = Array3::from_shape_fn((4, h, w), |_| 0.98 - 0.2 * lcg(&mut seed).powi(3));
+        let mut r2l = Array3::from_shape_fn((4, h, w), |_| 0.9 - 0.6 * lcg(&mut seed).powi(2));
+        r2l[[0, 0, 0]] = f32::NAN;
+        r2l[[0, 0, 1]] = -40.0;
+        (sigma, fixed, r2s, r2l)
+    }
+
+    fn summary_rows() -> Vec<(String, String, String)> {
+        vec![
+            ("system gain K".into(), "0.452".into(), "DN/e-".into()),
+            ("temporal dark noise".into(), "2.31".into(), "DN".into()),
+            ("DSNU".into(), "0.84".into(), "DN".into()),
+            ("PRNU".into(), "0.61".into(), "%".into()),
+            ("dark current".into(), "0.013".into(), "e-/s".into()),
+        ]
+    }
+
+    fn ptc() -> Vec<PtcPoint> {
+        let (k, b) = (0.452, 5.3);
+        (0..10)
+            .map(|i| {
+                let m = 20.0 * 2f64.powi(i);
+                PtcPoint {
+                    mean_dn: m,
+                    var_dn2: (k * m + b) * (1.0 + 0.04 * ((i * 7 % 5) as f64 - 2.0)),
+                }
+            })
+            .collect()
+    }
+
+    fn assert_png(path: &Path, w: u32, h: u32) {
+        let img = image::open(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+        assert_eq!((img.width(), img.height()), (w, h), "{}", path.display());
+        let px = img.to_luma8();
+        let n = px.len() as f64;
+        let mean = px.iter().map(|&v| v as f64).sum::<f64>() / n;
+        let var = px.iter().map(|&v| (v as f64 - mean).powi(2)).sum::<f64>() / n;
+        assert!(var > 1.0, "{} looks flat (variance {var})", path.display());
+    }
+
+    #[test]
+    fn writes_full_report() {
+        let dir = scratch("full");
+        let (h, w) = (48, 64);
+        let (sigma, fixed, r2s, r2l) = maps(h, w);
+        let data = ReportData {
+            camera: "Sony ILCE-7SM2".into(),
+            iso: Some(3200),
+            ptc_points: ptc(),
+            ptc_fit: Some((0.452, 5.3)),
+            sigma_read: sigma.view(),
+            fixed_pattern: fixed.view(),
+            r2_sqrt: Some(r2s.view()),
+            r2_linear: Some(r2l.view()),
+            summary: summary_rows(),
+        };
+        let written = write_report(&dir, &data).unwrap();
+        let names = [
+            PTC_PNG,
+            SIGMA_HIST_PNG,
+            DARK_R2_HIST_PNG,
+            FIXED_PATTERN_PNG,
+            SIGMA_MAP_PNG,
+            SUMMARY_MD,
+        ];
+        assert_eq!(written.len(), names.len());
+        for n in names {
+            let p = dir.join(n);
+            assert!(p.is_file(), "{n} missing");
+            assert!(written.contains(&p), "{n} not reported");
+        }
+        for n in [PTC_PNG, SIGMA_HIST_PNG, DARK_R2_HIST_PNG] {
+            assert_png(&dir.join(n), PLOT_W, PLOT_H);
+        }
+        for n in [FIXED_PATTERN_PNG, SIGMA_MAP_PNG] {
+            assert_png(&dir.join(n), 2 * w as u32, 2 * h as u32);
+        }
+        let md = std::fs::read_to_string(dir.join(SUMMARY_MD)).unwrap();
+        assert!(md.contains("Sony ILCE-7SM2"), "{md}");
+        assert!(md.contains("ISO 3200"), "{md}");
+        assert!(md.contains("| quantity | value | unit |"), "{md}");
+        for (q, v, u) in summary_rows() {
+            let row = format!("| {q} | {v} | {u} |");
+            assert!(md.contains(&row), "missing row {row}\n{md}");
+        }
+        for n in names.iter().filter(|n| n.ends_with(".png")) {
+            assert!(md.contains(&format!("]({n})")), "no link to {n}\n{md}");
+        }
+        let leftovers: Vec<_> = std::fs::read_dir(&dir)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .filter(|n| n.ends_with(".part"))
+            .collect();
+        assert!(leftovers.is_empty(), "temp files left: {leftovers:?}");
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn map_tiles_follow_cfa_layout_and_stride() {
+        let dir = scratch("tiles");
+        // Each plane constant at its index, so tile brightness reveals the plane.
+        let (h, w) = (900, 1000);
+        let map = Array3::from_shape_fn((4, h, w), |(p, _, _)| p as f32);
+        let sec = map_section(&dir, SIGMA_MAP_PNG, "t", "test", "DN", &map.view()).unwrap();
+        let img = image::open(sec.path.unwrap()).unwrap().to_luma8();
+        // 2 * 1000 = 2000 px > 1600, so stride 2: tiles 450x500.
+        assert_eq!((img.width(), img.height()), (1000, 900));
+        let at = |x, y| img.get_pixel(x, y).0[0];
+        assert_eq!(at(10, 10), 0, "R top-left");
+        assert_eq!(at(510, 10), 85, "G1 top-right");
+        assert_eq!(at(10, 460), 255, "G2 bottom-left");
+        assert_eq!(at(510, 460), 170, "B bottom-right");
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn empty_inputs_are_skipped_and_explained() {
+        let dir = scratch("empty");
+        let empty = Array3::<f32>::zeros((4, 0, 0));
+        let nan = Array3::<f32>::from_elem((4, 2, 2), f32::NAN);
+        let data = ReportData {
+            camera: String::new(),
+            iso: None,
+            ptc_points: vec![],
+            ptc_fit: None,
+            sigma_read: nan.view(),
+            fixed_pattern: empty.view(),
+            r2_sqrt: None,
+            r2_linear: None,
+            summary: vec![],
+        };
+        let written = write_report(&dir, &data).unwrap();
+        assert_eq!(written, vec![dir.join(SUMMARY_MD)]);
+        let md = std::fs::read_to_string(dir.join(SUMMARY_MD)).unwrap();
+        assert!(md.contains("ISO unknown"), "{md}");
+        assert!(md.contains("no photon-transfer points"), "{md}");
+        assert!(md.contains("no dark frames"), "{md}");
+        assert!(md.matches("Skipped").count() >= 5, "{md}");
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn ptc_without_fit_and_with_bad_points_still_plots() {
+        let dir = scratch("nofit");
+        let z = Array3::<f32>::zeros((4, 2, 2));
+        let mut pts = ptc();
+        pts.push(PtcPoint {
+            mean_dn: -3.0,
+            var_dn2: 4.0,
+        });
+        pts.push(PtcPoint {
+            mean_dn: f64::NAN,
+            var_dn2: 4.0,
+        });
+        let data = ReportData {
+            camera: "x".into(),
+            iso: Some(100),
+            ptc_points: pts,
+            ptc_fit: None,
+            sigma_read: z.view(),
+            fixed_pattern: z.view(),
+            r2_sqrt: None,
+            r2_linear: None,
+            summary: vec![],
+        };
+        let written = write_report(&dir, &data).unwrap();
+        assert!(written.contains(&dir.join(PTC_PNG)));
+        assert_png(&dir.join(PTC_PNG), PLOT_W, PLOT_H);
+        let md = std::fs::read_to_string(dir.join(SUMMARY_MD)).unwrap();
+        assert!(md.contains("2 point(s)"), "{md}");
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn degenerate_inputs_do_not_panic() {
+        let dir = scratch("degenerate");
+        let one = Array3::<f32>::from_elem((4, 1, 1), 3.0);
+        let bad_r2 = Array3::<f32>::from_elem((4, 1, 1), -5.0);
+        let data = ReportData {
+            camera: "x".into(),
+            iso: Some(1),
+            // One point and a fit that is negative everywhere on the plot.
+            ptc_points: vec![PtcPoint {
+                mean_dn: 10.0,
+                var_dn2: 1.0,
+            }],
+            ptc_fit: Some((-1.0, -1.0)),
+            sigma_read: one.view(),
+            fixed_pattern: one.view(),
+            r2_sqrt: Some(bad_r2.view()),
+            r2_linear: None,
+            summary: vec![],
+        };
+        let written = write_report(&dir, &data).unwrap();
+        assert_eq!(written.len(), 6, "{written:?}");
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn missing_dir_is_an_error() {
+        let dir = scratch("missing").join("does-not-exist");
+        let z = Array3::<f32>::zeros((4, 2, 2));
+        let data = ReportData {
+            camera: "x".into(),
+            iso: None,
+            ptc_points: vec![],
+            ptc_fit: None,
+            sigma_read: z.view(),
+            fixed_pattern: z.view(),
+            r2_sqrt: None,
+            r2_linear: None,
+            summary: vec![],
+        };
+        let err = write_report(&dir, &data).unwrap_err();
+        assert!(matches!(err, ReportError::MissingDir(_)), "{err}");
+        let msg = err.to_string();
+        assert!(
+            msg.contains("does not exist") && !msg.contains('\n'),
+            "{msg}"
+        );
+        assert!(!dir.exists());
+    }
+
+    #[test]
+    fn wrong_plane_count_is_an_error() {
+        let dir = scratch("planes");
+        let z3 = Array3::<f32>::zeros((3, 2, 2));
+        let z = Array3::<f32>::zeros((4, 2, 2));
+        let data = ReportData {
+            camera: "x".into(),
+            iso: None,
+            ptc_points: vec![],
+            ptc_fit: None,
+            sigma_read: z3.view(),
+            fixed_pattern: z.view(),
+            r2_sqrt: None,
+            r2_linear: None,
+            summary: vec![],
+        };
+        let err = write_report(&dir, &data).unwrap_err().to_string();
+        assert!(err.contains("sigma_read has 3 planes"), "{err}");
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn percentiles_ignore_order_and_number_format_is_short() {
+        let mut v = vec![5.0, 1.0, 3.0, 2.0, 4.0];
+        assert_eq!(percentiles(&mut v, &[0.0, 0.5, 1.0]), vec![1.0, 3.0, 5.0]);
+        assert!(percentiles(&mut [], &[0.5])[0].is_nan());
+        assert_eq!(fmt_sig(0.30000000000000004, 4), "0.3");
+        assert_eq!(fmt_sig(1234.567, 4), "1235");
+        assert_eq!(fmt_sig(0.4521, 3), "0.452");
+        assert_eq!(fmt_sig(2.0e6, 3), "2e6");
+        assert_eq!(fmt_sig(-2.5e-5, 3), "-2.5e-5");
+        assert_eq!(fmt_count(&2.5e6), "2.5M");
+        assert_eq!(fmt_count(&20000.0), "20k");
+        assert_eq!(fmt_count(&100.0), "100");
+        assert_eq!(md_cell("a|b\nc"), "a\\|b c");
+    }
+}

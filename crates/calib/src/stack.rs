@@ -1,0 +1,268 @@
+//! Reading a folder of frames into per-exposure streaming statistics.
+//!
+//! Frames are decoded on worker threads while the main thread accumulates,
+//! through a channel of capacity two, so memory holds a few frames however
+//! long the stack. Every frame must agree with the first in size, CFA, ISO
+//! and (within an exposure group) exposure; the first that does not is named
+//! in the error, and nothing is written.
+
+use crate::error::{invalid, Result};
+use crate::stats::PixelStats;
+use pgrf_raw::{decode_file, pack_u16, Cfa, LevelOverrides, RawFrame};
+use rayon::prelude::*;
+use std::path::{Path, PathBuf};
+
+/// What every frame of a calibration must share.
+#[derive(Clone, Debug, PartialEq)]
+pub struct FrameKey {
+    pub width: usize,
+    pub height: usize,
+    pub cfa: Cfa,
+    pub iso: Option<u32>,
+    pub black: [f32; 4],
+    pub white: u32,
+    pub make: String,
+    pub model: String,
+}
+
+impl FrameKey {
+    pub fn of(f: &RawFrame) -> FrameKey {
+        FrameKey {
+            width: f.width,
+            height: f.height,
+            cfa: f.cfa,
+            iso: f.iso,
+            black: f.black,
+            white: f.white,
+            make: f.make.clone(),
+            model: f.model.clone(),
+        }
+    }
+
+    /// Why `other` (from `file`) cannot join a stack described by `self`.
+    fn mismatch(&self, other: &FrameKey) -> Option<String> {
+        if (self.width, self.height) != (other.width, other.height) {
+            return Some(format!(
+                "size {}x{} differs from the other frames' {}x{}",
+                other.width, other.height, self.width, self.height
+            ));
+        }
+        if self.cfa != other.cfa {
+            return Some(format!(
+                "CFA {} differs from the other frames' {}",
+                other.cfa, self.cfa
+            ));
+        }
+        if self.iso != other.iso {
+            let s = |i: Option<u32>| {
+                i.map(|v| format!("ISO {v}"))
+                    .unwrap_or_else(|| "no ISO".into())
+            };
+            return Some(format!(
+                "{} differs from the other frames' {}",
+                s(other.iso),
+                s(self.iso)
+            ));
+        }
+        if (self.make.as_str(), self.model.as_str()) != (other.make.as_str(), other.model.as_str())
+        {
+            return Some(format!(
+                "camera '{} {}' differs from the other frames' '{} {}'",
+                other.make, other.model, self.make, self.model
+            ));
+        }
+        None
+    }
+}
+
+/// Frames of one exposure time.
+#[derive(Clone, Debug)]
+pub struct Group {
+    pub exposure_s: f64,
+    pub stats: PixelStats,
+    pub files: Vec<PathBuf>,
+}
+
+/// A decoded stack: groups by exposure, sorted by exposure time.
+#[derive(Clone, Debug)]
+pub struct Stack {
+    pub key: FrameKey,
+    pub groups: Vec<Group>,
+    /// Temporal samples of a sparse grid of pixels (packed flat indices),
+    /// kept for the per-pixel normality check.
+    pub tap_index: Vec<usize>,
+    pub tap: Vec<Vec<f32>>,
+}
+
+/// RAW files in `dir`, sorted by name (hidden files skipped).
+pub fn list_files(dir: &Path) -> Result<Vec<PathBuf>> {
+    if !dir.is_dir() {
+        return Err(invalid(format!("{}: not a folder", dir.display())));
+    }
+    let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
+        .map_err(|e| invalid(format!("{}: {e}", dir.display())))?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| {
+            p.is_file()
+                && !p
+                    .file_name()
+                    .map(|n| n.to_string_lossy().starts_with('.'))
+                    .unwrap_or(true)
+        })
+        .collect();
+    files.sort();
+    if files.is_empty() {
+        return Err(invalid(format!("{}: folder has no files", dir.display())));
+    }
+    Ok(files)
+}
+
+/// Options for reading one stack.
+pub struct ReadOptions<'a> {
+    /// "bias", "dark" or "flat", for messages.
+    pub kind: &'a str,
+    /// Frames must match this (e.g. the bias stack's key) when given.
+    pub expect: Option<&'a FrameKey>,
+    /// All frames must share one exposure time (bias).
+    pub single_exposure: bool,
+    /// Exposure time must be in the metadata (dark, flat).
+    pub need_exposure: bool,
+    /// How many pixels to keep temporal samples of (0 for none).
+    pub tap_pixels: usize,
+    /// Called once per frame accumulated.
+    pub progress: &'a (dyn Fn() + Sync),
+}
+
+/// Decode and accumulate `files`.
+pub fn read_stack(files: &[PathBuf], opt: &ReadOptions) -> Result<Stack> {
+    if files.len() < 2 {
+        return Err(invalid(format!(
+            "{} stack has {} frame{}; per-pixel variance needs at least 2",
+            opt.kind,
+            files.len(),
+            if files.len() == 1 { "" } else { "s" }
+        )));
+    }
+    let (tx, rx) = std::sync::mpsc::sync_channel::<Result<(usize, RawFrame)>>(2);
+    std::thread::scope(|scope| -> Result<Stack> {
+        // Decoders run on their own pool: they block on the channel when the
+        // accumulator is behind, and blocking the global pool's workers would
+        // deadlock the accumulator's own parallel loops.
+        let threads = std::thread::available_parallelism()
+            .map(|n| n.get())
+            .unwrap_or(2);
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .thread_name(|i| format!("pgrf-decode-{i}"))
+            .build()
+            .map_err(|e| invalid(format!("cannot start decoder threads: {e}")))?;
+        scope.spawn(move || {
+            pool.install(|| {
+                files
+                    .par_iter()
+                    .enumerate()
+                    .try_for_each_with(tx, |tx, (i, f)| {
+                        let r = decode_file(f, &LevelOverrides::default())
+                            .map(|fr| (i, fr))
+                            .map_err(Into::into);
+                        let failed = r.is_err();
+                        // A closed channel means the reader stopped on an error: stop too.
+                        if tx.send(r).is_err() || failed {
+                            Err(())
+                        } else {
+                            Ok(())
+                        }
+                    })
+            })
+        });
+        let mut key: Option<FrameKey> = opt.expect.cloned();
+        let mut groups: Vec<Group> = Vec::new();
+        let mut tap_index: Vec<usize> = Vec::new();
+        let mut tap: Vec<Vec<f32>> = Vec::new();
+        for msg in rx {
+            let (i, frame) = msg?;
+            let file = &files[i];
+            let k = FrameKey::of(&frame);
+            match &key {
+                Some(want) => {
+                    if let Some(why) = want.mismatch(&k) {
+                        return Err(invalid(format!(
+                            "{}: {} ({} stack)",
+                            file.display(),
+                            why,
+                            opt.kind
+                        )));
+                    }
+                }
+                None => key = Some(k),
+            }
+            let t = frame.exposure_s;
+            if opt.need_exposure && t.is_none() {
+                return Err(invalid(format!(
+                    "{}: no exposure time in the file's metadata ({} frames are grouped by exposure)",
+                    file.display(),
+                    opt.kind
+                )));
+            }
+            let t = t.unwrap_or(0.0);
+            let packed = pack_u16(&frame)?;
+            let (ph, pw) = (packed.shape()[1], packed.shape()[2]);
+            let slot = groups
+                .iter()
+                .position(|g| (g.exposure_s - t).abs() <= 1e-6 * t.max(1e-9));
+            let slot = match slot {
+                Some(s) => s,
+                None => {
+                    if opt.single_exposure && !groups.is_empty() {
+                        return Err(invalid(format!(
+                            "{}: exposure {t} s differs from the other {} frames' {} s",
+                            file.display(),
+                            opt.kind,
+                            groups[0].exposure_s
+                        )));
+                    }
+                    groups.push(Group {
+                        exposure_s: t,
+                        stats: PixelStats::new(ph, pw, frame.cfa.offsets().map(|(r, _)| r)),
+                        files: Vec::new(),
+                    });
+                    groups.len() - 1
+                }
+            };
+            let data = packed.as_slice().expect("standard layout");
+            if opt.tap_pixels > 0 && tap_index.is_empty() {
+                let stride = (data.len() / opt.tap_pixels).max(1);
+                tap_index = (0..data.len())
+                    .step_by(stride)
+                    .take(opt.tap_pixels)
+                    .collect();
+                tap = vec![Vec::new(); tap_index.len()];
+            }
+            if slot == 0 {
+                for (t, &ix) in tap.iter_mut().zip(&tap_index) {
+                    t.push(data[ix] as f32);
+                }
+            }
+            groups[slot].stats.push(data);
+            groups[slot].files.push(file.clone());
+            (opt.progress)();
+        }
+        for g in &groups {
+            if g.files.len() < 2 {
+                return Err(invalid(format!(
+                    "{} stack: only one frame at exposure {} s ({}); each exposure needs at least 2",
+                    opt.kind,
+                    g.exposure_s,
+                    g.files[0].display()
+                )));
+            }
+        }
+        groups.sort_by(|a, b| a.exposure_s.partial_cmp(&b.exposure_s).unwrap());
+        Ok(Stack {
+            key: key.expect("at least two frames were read"),
+            groups,
+            tap_index,
+            tap,
+        })
+    })
+}

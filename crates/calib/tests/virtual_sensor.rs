@@ -1,0 +1,308 @@
+//! Virtual sensor -> DNG stacks -> calibrate: the estimators must recover the
+//! truth that generated the frames.
+
+use ndarray::{Array3, Zip};
+use pgrf_calib::{calibrate, CalibrateInput, Calibration};
+use pgrf_noise::sensor::{SensorSpec, VirtualSensor};
+use pgrf_noise::{Capture, Components, DarkLaw, NoiseModel, ReadDist};
+use pgrf_raw::{write_dng, DngOptions};
+use std::path::{Path, PathBuf};
+
+fn scratch(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("pgrf-calib-test-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+struct Stacks {
+    bias: Vec<PathBuf>,
+    dark: Vec<PathBuf>,
+    flat: Vec<PathBuf>,
+}
+
+/// Write bias (64 frames), dark (3 exposures x 16) and flat (2 levels x 16) stacks.
+fn write_stacks(v: &VirtualSensor, dir: &Path, bias_frames: usize) -> Stacks {
+    let mut seed = 1000u64;
+    let mut write = |sub: &str, n: usize, electrons: f32, t: f32| -> Vec<PathBuf> {
+        let d = dir.join(sub);
+        std::fs::create_dir_all(&d).unwrap();
+        (0..n)
+            .map(|i| {
+                seed += 1;
+                let p = d.join(format!("{sub}_{t}_{i:03}.dng"));
+                write_dng(
+                    &v.frame(electrons, t, seed).unwrap(),
+                    &p,
+                    &DngOptions::default(),
+                )
+                .unwrap();
+                p
+            })
+            .collect()
+    };
+    let bias = write("bias", bias_frames, 0.0, 1.0 / 8000.0);
+    let mut dark = Vec::new();
+    for t in [1.0, 4.0, 16.0] {
+        dark.extend(write("dark", 16, 0.0, t));
+    }
+    let mut flat = write("flat", 16, 2000.0, 0.01);
+    flat.extend(write("flat", 16, 8000.0, 0.04));
+    Stacks { bias, dark, flat }
+}
+
+fn sensor(law: DarkLaw) -> VirtualSensor {
+    let mut s = SensorSpec::preset("a7s2-iso1600").unwrap();
+    s.width = 128;
+    s.height = 96;
+    s.dark_law = law;
+    s.dark_rate = 3.0;
+    VirtualSensor::new(s).unwrap()
+}
+
+fn corr(a: &Array3<f32>, b: &Array3<f32>) -> f64 {
+    let n = a.len() as f64;
+    let (ma, mb) = (
+        a.iter().map(|&v| v as f64).sum::<f64>() / n,
+        b.iter().map(|&v| v as f64).sum::<f64>() / n,
+    );
+    let (mut sab, mut saa, mut sbb) = (0.0, 0.0, 0.0);
+    Zip::from(a).and(b).for_each(|&x, &y| {
+        let (x, y) = (x as f64 - ma, y as f64 - mb);
+        sab += x * y;
+        saa += x * x;
+        sbb += y * y;
+    });
+    sab / (saa * sbb).sqrt()
+}
+
+#[test]
+fn calibration_recovers_the_virtual_sensor() {
+    let v = sensor(DarkLaw::Sqrt);
+    let dir = scratch("recover");
+    let s = write_stacks(&v, &dir, 64);
+    let run = calibrate(
+        &CalibrateInput {
+            bias: s.bias.clone(),
+            dark: s.dark.clone(),
+            flat: s.flat.clone(),
+            iso: Some(1600),
+            tap_pixels: 256,
+        },
+        &|| {},
+    )
+    .unwrap();
+    let m = &run.calibration.meta;
+    // K within 2%.
+    let k_true = v.spec.k as f64;
+    assert!((m.k / k_true - 1.0).abs() < 0.02, "K {} vs {}", m.k, k_true);
+    assert_eq!(m.k_method, "ptc");
+    // Fixed pattern: RMSE against truth below the standard error of a mean of
+    // 64 frames (temporal variance: read + row + quantisation), 5% slack for
+    // the RMS itself being estimated from 12288 pixels.
+    let fp = &run.calibration.maps["fixed_pattern"];
+    let n = fp.len() as f64;
+    let rmse = (Zip::from(fp)
+        .and(&v.bias)
+        .fold(0.0, |a, &e, &t| a + ((e - t) as f64).powi(2))
+        / n)
+        .sqrt();
+    let mean_var = v
+        .sigma_read
+        .iter()
+        .map(|&s| (s as f64).powi(2))
+        .sum::<f64>()
+        / n
+        + (v.spec.row_sigma as f64).powi(2)
+        + 1.0 / 12.0;
+    let se = (mean_var / 64.0).sqrt();
+    assert!(rmse < 1.05 * se, "fixed-pattern RMSE {rmse} vs SE {se}");
+    // Read-noise maps correlate with truth.
+    let c = corr(&run.calibration.maps["sigma_read"], &v.sigma_read);
+    assert!(c > 0.9, "sigma correlation {c}");
+    // Row noise and the dark law.
+    assert!(
+        (m.row_sigma / v.spec.row_sigma as f64 - 1.0).abs() < 0.15,
+        "row sigma {}",
+        m.row_sigma
+    );
+    assert_eq!(m.dark_law, "sqrt");
+    // Hot pixels found (the sensor has ~1e-4 of them; at least those in the truth map).
+    let hot_true: Vec<usize> = v
+        .hot
+        .iter()
+        .enumerate()
+        .filter(|(_, &h)| h > 0.0)
+        .map(|(i, _)| i)
+        .collect();
+    let found = &run.calibration.maps["defects"];
+    for i in &hot_true {
+        assert_eq!(found.as_slice().unwrap()[*i], 1.0, "hot pixel {i} missed");
+    }
+    // Per-pixel read noise is Gaussian (PPCC near 1 for 64 samples).
+    assert!(
+        m.ppcc_pixel_median.unwrap() > 0.97,
+        "{:?}",
+        m.ppcc_pixel_median
+    );
+
+    // The file round-trips and converts to noise-model maps.
+    let path = dir.join("calib.safetensors");
+    run.calibration.save(&path).unwrap();
+    let back = Calibration::load(&path).unwrap();
+    assert_eq!(back.meta, run.calibration.meta);
+    assert_eq!(back.maps["sigma_read"], run.calibration.maps["sigma_read"]);
+    assert!(back
+        .check_matches(&m.make, &m.model, Some(1600), false)
+        .is_ok());
+    assert!(back
+        .check_matches(&m.make, &m.model, Some(3200), false)
+        .is_err());
+    assert!(back
+        .check_matches("Sony", "ILCE-7SM2", Some(1600), false)
+        .is_err());
+    assert!(back
+        .check_matches("Sony", "ILCE-7SM2", Some(3200), true)
+        .is_ok());
+
+    // Per-pixel calibration reproduces the sensor's per-pixel variance better
+    // than the global ("noD") one: synthesise 64 dark frames with each.
+    let maps = back.to_pixel_maps().unwrap();
+    let model = |global: bool| NoiseModel {
+        k: m.k as f32,
+        read: ReadDist::Gaussian,
+        maps: if global { maps.global() } else { maps.clone() },
+        row_sigma: m.row_sigma as f32,
+        quant_step: 1.0,
+        components: Components::parse("G,H,Q,F").unwrap(),
+        dn_range: 16383.0 - 512.0,
+        black: Some(512.0),
+    };
+    let truth_var = v.sigma_read.mapv(|s| s * s + v.spec.row_sigma.powi(2));
+    let zeros = Array3::<f32>::zeros(v.bias.raw_dim());
+    let mut err = [0.0f64; 2];
+    for (slot, global) in [false, true].into_iter().enumerate() {
+        let md = model(global);
+        let mut acc = Vec::new();
+        for seed in 0..64u64 {
+            let out = md
+                .sample(
+                    zeros.view(),
+                    &Capture {
+                        ratio: 1.0,
+                        exposure_s: 0.0,
+                        plane_rows: [0, 0, 1, 1],
+                        seed,
+                    },
+                )
+                .unwrap();
+            acc.push(out.mapv(|x| x * (16383.0 - 512.0)));
+        }
+        let mean = acc
+            .iter()
+            .fold(Array3::<f32>::zeros(zeros.raw_dim()), |a, b| a + b)
+            / 64.0;
+        let var = acc
+            .iter()
+            .fold(Array3::<f32>::zeros(zeros.raw_dim()), |a, b| {
+                a + &(b - &mean).mapv(|d| d * d)
+            })
+            / 63.0;
+        err[slot] = Zip::from(&var)
+            .and(&truth_var)
+            .fold(0.0, |a, &x, &t| a + ((x - t) as f64).powi(2))
+            / n;
+    }
+    assert!(
+        err[0] < 0.6 * err[1],
+        "per-pixel MSE {} vs global {}",
+        err[0],
+        err[1]
+    );
+}
+
+#[test]
+fn linear_dark_current_is_recognised() {
+    let v = sensor(DarkLaw::Linear);
+    let dir = scratch("linear");
+    let s = write_stacks(&v, &dir, 16);
+    let run = calibrate(
+        &CalibrateInput {
+            bias: s.bias,
+            dark: s.dark,
+            flat: s.flat,
+            iso: None,
+            tap_pixels: 0,
+        },
+        &|| {},
+    )
+    .unwrap();
+    assert_eq!(run.calibration.meta.dark_law, "linear");
+    let d = run.dark.unwrap();
+    assert!(d.r2_linear_global > d.r2_sqrt_global);
+    // Mean rate in electrons per second, hot pixels included.
+    let want = v.dark_rate.mean().unwrap() as f64;
+    assert!(
+        (d.rate_mean / want - 1.0).abs() < 0.1,
+        "rate {} vs {}",
+        d.rate_mean,
+        want
+    );
+}
+
+#[test]
+fn bad_stacks_are_refused_with_the_file_named() {
+    let v = sensor(DarkLaw::Sqrt);
+    let dir = scratch("bad");
+    let s = write_stacks(&v, &dir, 4);
+    let run = |bias: Vec<PathBuf>, iso: Option<u32>| {
+        calibrate(
+            &CalibrateInput {
+                bias,
+                dark: s.dark.clone(),
+                flat: s.flat.clone(),
+                iso,
+                tap_pixels: 0,
+            },
+            &|| {},
+        )
+        .err()
+        .map(|e| e.to_string())
+    };
+    // Mixed sizes.
+    let mut other = v.spec.clone();
+    other.width = 64;
+    let small = VirtualSensor::new(other).unwrap();
+    let odd = dir.join("bias_odd.dng");
+    write_dng(
+        &small.frame(0.0, 1.0 / 8000.0, 9).unwrap(),
+        &odd,
+        &DngOptions::default(),
+    )
+    .unwrap();
+    let mut b = s.bias.clone();
+    b.push(odd.clone());
+    let e = run(b, None).expect("mixed sizes must fail");
+    assert!(e.contains("bias_odd.dng") && e.contains("size"), "{e}");
+    // Mixed ISO.
+    let mut f = v.frame(0.0, 1.0 / 8000.0, 10).unwrap();
+    f.iso = Some(3200);
+    let iso_file = dir.join("bias_iso.dng");
+    write_dng(&f, &iso_file, &DngOptions::default()).unwrap();
+    let mut b = s.bias.clone();
+    b.push(iso_file);
+    let e = run(b, None).expect("mixed ISO must fail");
+    assert!(e.contains("bias_iso.dng") && e.contains("ISO 3200"), "{e}");
+    // --iso that the frames do not have.
+    assert!(run(s.bias.clone(), Some(800)).unwrap().contains("ISO 1600"));
+    // One frame only.
+    let e = run(vec![s.bias[0].clone()], None).unwrap();
+    assert!(e.contains("at least 2"), "{e}");
+    // An unreadable file among many.
+    let junk = dir.join("bias_junk.dng");
+    std::fs::write(&junk, b"II*\0garbage").unwrap();
+    let mut b = s.bias.clone();
+    b.insert(2, junk);
+    let e = run(b, None).expect("junk must fail");
+    assert!(e.contains("bias_junk.dng"), "{e}");
+}
