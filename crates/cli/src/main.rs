@@ -25,6 +25,10 @@ enum Command {
     Convert(cmd::convert::ConvertArgs),
     /// Simulate a low-light capture of a clean RAW with a physics noise model (P-G, ELD or PGRF).
     Synth(cmd::synth::SynthArgs),
+    /// Write bias, dark and flat stacks of a virtual sensor with known per-pixel truth.
+    SimulateSensor(cmd::simulate::SimulateArgs),
+    /// Per-pixel calibration from bias, dark and flat-field stacks, with a report.
+    Calibrate(cmd::calibrate::CalibrateArgs),
     /// Render pgrf's built-in colour test chart as a DNG.
     Chart(cmd::chart::ChartArgs),
     /// Time pgrf's hot paths (results go to BENCHMARKS.md).
@@ -57,6 +61,8 @@ fn main() -> ExitCode {
         Command::Convert(a) => cmd::convert::run(a),
         Command::Chart(a) => cmd::chart::run(a),
         Command::Synth(a) => cmd::synth::run(a),
+        Command::SimulateSensor(a) => cmd::simulate::run(a),
+        Command::Calibrate(a) => cmd::calibrate::run(a),
         Command::Bench(a) => cmd::bench::run(a),
     };
     match result {

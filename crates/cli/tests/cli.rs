@@ -361,3 +361,129 @@ fn synth_refuses_bad_arguments_cleanly() {
         assert!(!out.exists());
     }
 }
+
+#[test]
+fn simulate_calibrate_and_synthesise_with_the_calibration() {
+    let dir = scratch("calib");
+    let vs = dir.join("vs");
+    let r = pgrf(&[
+        "simulate-sensor",
+        "--preset",
+        "a7s2-iso1600",
+        "--frames",
+        "8",
+        "--width",
+        "128",
+        "--height",
+        "96",
+        "-o",
+        s(&vs),
+    ]);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    for sub in ["bias", "dark", "flat"] {
+        assert!(std::fs::read_dir(vs.join(sub)).unwrap().count() >= 8);
+    }
+    let (_, truth) = pgrf_noise::mapfile::read_maps(&vs.join("truth.safetensors")).unwrap();
+    assert!(truth.contains_key("sigma_read") && truth.contains_key("dark_rate"));
+    let dark =
+        pgrf_raw::decode_file(&vs.join("dark/dark_16s_0000.dng"), &Default::default()).unwrap();
+    assert_eq!((dark.exposure_s, dark.iso), (Some(16.0), Some(1600)));
+
+    let cal = dir.join("calib.safetensors");
+    let report = dir.join("report");
+    let r = pgrf(&[
+        "calibrate",
+        "--bias",
+        s(&vs.join("bias")),
+        "--dark",
+        s(&vs.join("dark")),
+        "--flat",
+        s(&vs.join("flat")),
+        "-o",
+        s(&cal),
+        "--report",
+        s(&report),
+        "--json",
+    ]);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    let out = String::from_utf8_lossy(&r.stdout);
+    let v: Value = serde_json::from_str(out.trim_end().lines().last().unwrap()).unwrap();
+    let k = v["K"].as_f64().unwrap();
+    assert!((k / (9.563e-4 * 1600.0) - 1.0).abs() < 0.05, "K {k}");
+    assert!(v["row_sigma"].as_f64().unwrap() > 0.0);
+    assert!(v["read_sigma_median"].as_f64().unwrap() > 4.0);
+    assert_eq!(v["dark_law"], "sqrt");
+    for f in [
+        "ptc.png",
+        "sigma_hist.png",
+        "dark_r2_hist.png",
+        "fixed_pattern.png",
+        "sigma_map.png",
+        "summary.md",
+    ] {
+        assert!(report.join(f).exists(), "{f} missing");
+    }
+
+    // The calibration drives the PGRF model; a frame of another camera is refused.
+    let clean = vs.join("flat/flat_8000e_0000.dng");
+    let noisy = dir.join("noisy.dng");
+    let r = pgrf(&[
+        "synth",
+        s(&clean),
+        "--profile",
+        "sony-a7s2",
+        "--ratio",
+        "50",
+        "--calib",
+        s(&cal),
+        "-o",
+        s(&noisy),
+    ]);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    let chart = dir.join("chart.dng");
+    assert!(
+        pgrf(&["chart", "-o", s(&chart), "--width", "128", "--height", "96"])
+            .status
+            .success()
+    );
+    let r = pgrf(&[
+        "synth",
+        s(&chart),
+        "--profile",
+        "sony-a7s2",
+        "--ratio",
+        "50",
+        "--calib",
+        s(&cal),
+        "-o",
+        s(&dir.join("x.dng")),
+    ]);
+    assert_eq!(r.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&r.stderr).contains("--force"));
+
+    // Bad input: an empty folder, a missing output folder.
+    let empty = dir.join("empty");
+    std::fs::create_dir_all(&empty).unwrap();
+    let r = pgrf(&[
+        "calibrate",
+        "--bias",
+        s(&empty),
+        "--flat",
+        s(&vs.join("flat")),
+        "-o",
+        s(&dir.join("c2.safetensors")),
+    ]);
+    assert_eq!(r.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&r.stderr).contains("no files"));
+    let r = pgrf(&[
+        "calibrate",
+        "--bias",
+        s(&vs.join("bias")),
+        "--flat",
+        s(&vs.join("flat")),
+        "-o",
+        s(&dir.join("nope/c.safetensors")),
+    ]);
+    assert_eq!(r.status.code(), Some(1));
+    assert!(!dir.join("c2.safetensors").exists());
+}

@@ -62,10 +62,24 @@ pub struct PairSpec {
     /// ELD read noise: Tukey-lambda (true) or Gaussian.
     pub tukey: bool,
     pub maps: Option<PixelMaps>,
+    /// Global numbers measured with `maps` (gain, row noise, DN scale): they
+    /// replace the profile's, because per-pixel maps are only meaningful on
+    /// the scale and at the gain they were measured with.
+    pub measured: Option<Measured>,
     /// Fixed ISO, or None to draw parameters from the profile's ELD distribution.
     pub iso: Option<u32>,
     pub ratio: RatioSpec,
     pub exposure: ExposureSpec,
+}
+
+/// Global results of a calibration that accompany its per-pixel maps.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Measured {
+    pub k: f64,
+    pub row_sigma: f64,
+    /// white - black of the calibrated camera, DN.
+    pub dn_range: f64,
+    pub black: f64,
 }
 
 /// One synthesised pair.
@@ -89,6 +103,7 @@ impl PairSpec {
             global: false,
             tukey: true,
             maps: None,
+            measured: None,
             iso: None,
             ratio: RatioSpec::default(),
             exposure: ExposureSpec::default(),
@@ -97,15 +112,24 @@ impl PairSpec {
 
     /// Resolve the model for one capture.
     pub fn model(&self, seed: u64) -> Result<(NoiseModel, CaptureParams)> {
-        let params = match self.iso {
+        let mut params = match self.iso {
             Some(iso) => self.profile.params_at_iso(iso)?,
             None => self.profile.sample_params(seed),
         };
+        let mut profile = std::borrow::Cow::Borrowed(&self.profile);
+        if let Some(m) = self.measured {
+            params.k = m.k;
+            params.sigma_row = m.row_sigma;
+            let p = profile.to_mut();
+            p.dn_range = m.dn_range;
+            p.black = Some(m.black);
+        }
+        let profile = profile.as_ref();
         let model = match self.kind {
-            ModelKind::PoissonGaussian => NoiseModel::poisson_gaussian(&self.profile, &params),
-            ModelKind::Eld => NoiseModel::eld(&self.profile, &params, self.tukey),
+            ModelKind::PoissonGaussian => NoiseModel::poisson_gaussian(profile, &params),
+            ModelKind::Eld => NoiseModel::eld(profile, &params, self.tukey),
             ModelKind::Pgrf => NoiseModel::pgrf(
-                &self.profile,
+                profile,
                 &params,
                 self.maps.clone(),
                 self.components,

@@ -2,8 +2,10 @@
 
 pub mod bench;
 pub mod bench_synth;
+pub mod calibrate;
 pub mod chart;
 pub mod convert;
 pub mod info;
 pub mod preview;
+pub mod simulate;
 pub mod synth;

@@ -4,7 +4,8 @@
 use crate::input::InputArgs;
 use anyhow::{bail, Context, Result};
 use clap::Args;
-use pgrf_noise::pair::{ExposureSpec, PairSpec, RatioSpec};
+use pgrf_calib::Calibration;
+use pgrf_noise::pair::{ExposureSpec, Measured, PairSpec, RatioSpec};
 use pgrf_noise::profile::DarkCurrent;
 use pgrf_noise::{CameraProfile, Components, DarkLaw, ModelKind};
 use pgrf_raw::{
@@ -50,6 +51,13 @@ pub struct SynthArgs {
     /// Time law of the dark signal: sqrt (the paper's fit) or linear.
     #[arg(long, default_value = "sqrt")]
     pub dark_law: DarkLaw,
+    /// Per-pixel calibration file (from `pgrf calibrate`) for the PGRF model:
+    /// its maps, gain and row noise replace the profile's.
+    #[arg(long)]
+    pub calib: Option<PathBuf>,
+    /// Apply a calibration of another camera or ISO anyway.
+    #[arg(long)]
+    pub force: bool,
     /// Random seed: same arguments and seed give byte-identical output.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
@@ -108,6 +116,39 @@ pub fn run(a: &SynthArgs) -> Result<()> {
         (None, Some(t)) => ExposureSpec::Fixed((t / ratio as f64) as f32),
         (None, None) => ExposureSpec::default(),
     };
+    if let Some(path) = &a.calib {
+        if a.model != ModelKind::Pgrf {
+            bail!(
+                "--calib applies to the pgrf model (per-pixel maps), not {:?}",
+                a.model
+            );
+        }
+        let cal = Calibration::load(path)?;
+        cal.check_matches(&frame.make, &frame.model, spec.iso, a.force)
+            .with_context(|| format!("{}", path.display()))?;
+        let (ph, pw) = frame.packed_dims();
+        if (cal.meta.height / 2, cal.meta.width / 2) != (ph, pw) {
+            bail!(
+                "{}: calibration is {}x{}, the clean frame {}x{}",
+                path.display(),
+                cal.meta.width,
+                cal.meta.height,
+                frame.width,
+                frame.height
+            );
+        }
+        let black = cal.meta.black.iter().map(|&b| b as f64).sum::<f64>() / 4.0;
+        spec.maps = Some(cal.to_pixel_maps()?);
+        spec.measured = Some(Measured {
+            k: cal.meta.k,
+            row_sigma: cal.meta.row_sigma,
+            dn_range: cal.meta.white as f64 - black,
+            black,
+        });
+        if spec.iso.is_none() {
+            spec.iso = cal.meta.iso;
+        }
+    }
     let plane_rows = frame.cfa.offsets().map(|(r, _)| r);
     let pair = spec
         .synthesize(clean.view(), plane_rows, a.seed)
