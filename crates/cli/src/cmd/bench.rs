@@ -27,6 +27,15 @@ pub enum BenchWhat {
         #[arg(long)]
         json: bool,
     },
+    /// Per-pixel statistics of a bias stack (decode + Welford accumulation),
+    /// with the decode-only time and this process's peak memory.
+    Stack {
+        /// Folder of bias frames.
+        dir: PathBuf,
+        /// Print one JSON line instead of text.
+        #[arg(long)]
+        json: bool,
+    },
     /// Decode + pack + normalise RAW files.
     Decode {
         /// RAW files to time.
@@ -66,6 +75,7 @@ pub(crate) fn median(v: &mut [f64]) -> f64 {
 pub fn run(a: &BenchArgs) -> Result<()> {
     match &a.what {
         BenchWhat::Synth { frames, json } => crate::cmd::bench_synth::run(*frames, *json),
+        BenchWhat::Stack { dir, json } => bench_stack(dir, *json),
         BenchWhat::Decode { files, iters, json } => {
             if *iters == 0 {
                 bail!("--iters must be at least 1");
@@ -131,4 +141,72 @@ fn pgrf_raw_threads() -> usize {
     std::thread::available_parallelism()
         .map(|n| n.get())
         .unwrap_or(1)
+}
+
+/// Peak resident memory of this process so far (VmHWM), MiB.
+fn peak_rss_mib() -> f64 {
+    std::fs::read_to_string("/proc/self/status")
+        .ok()
+        .and_then(|s| {
+            s.lines().find(|l| l.starts_with("VmHWM:")).and_then(|l| {
+                l.split_whitespace()
+                    .nth(1)
+                    .and_then(|v| v.parse::<f64>().ok())
+            })
+        })
+        .map(|kb| kb / 1024.0)
+        .unwrap_or(f64::NAN)
+}
+
+fn bench_stack(dir: &std::path::Path, json: bool) -> Result<()> {
+    use pgrf_calib::stack::{list_files, read_stack, ReadOptions};
+    use rayon::prelude::*;
+    let files = list_files(dir)?;
+    let t = Instant::now();
+    let stack = read_stack(
+        &files,
+        &ReadOptions {
+            kind: "bias",
+            expect: None,
+            single_exposure: true,
+            need_exposure: false,
+            tap_pixels: 0,
+            progress: &|| {},
+        },
+    )?;
+    let bias = pgrf_calib::estimate::estimate_bias(&stack, stack.key.black)?;
+    let total_s = t.elapsed().as_secs_f64();
+    let peak = peak_rss_mib();
+    std::hint::black_box(&bias);
+    // Decode alone, with the same parallelism, for the decode-bound fraction.
+    let t = Instant::now();
+    files.par_iter().try_for_each(|f| -> Result<()> {
+        std::hint::black_box(decode_file(f, &LevelOverrides::default())?);
+        Ok(())
+    })?;
+    let decode_s = t.elapsed().as_secs_f64();
+    let r = serde_json::json!({
+        "frames": files.len(),
+        "megapixels": (stack.key.width * stack.key.height) as f64 / 1e6,
+        "total_s": total_s,
+        "decode_only_s": decode_s,
+        "decode_fraction": decode_s / total_s,
+        "peak_rss_mib": peak,
+        "read_sigma_median": pgrf_calib::estimate::median_of(&bias.sigma_read),
+        "threads": rayon::current_num_threads(),
+    });
+    if json {
+        println!("{r}");
+    } else {
+        println!(
+            "{} frames of {:.1} MP: {:.2} s (decode alone {:.2} s, {:.0}%), peak memory {:.0} MiB",
+            files.len(),
+            r["megapixels"].as_f64().unwrap_or(0.0),
+            total_s,
+            decode_s,
+            100.0 * decode_s / total_s,
+            peak
+        );
+    }
+    Ok(())
 }

@@ -33,6 +33,9 @@ pub struct SimulateArgs {
     /// Time law of the simulated dark current.
     #[arg(long, default_value = "sqrt")]
     pub dark_law: DarkLaw,
+    /// Which stacks to write (comma separated): bias, dark, flat.
+    #[arg(long, value_delimiter = ',', default_value = "bias,dark,flat")]
+    pub stacks: Vec<String>,
     /// Seed of the frames (the sensor's own maps have a fixed seed per preset).
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
@@ -47,7 +50,13 @@ pub fn run(a: &SimulateArgs) -> Result<()> {
     spec.height = a.height;
     spec.dark_law = a.dark_law;
     let sensor = VirtualSensor::new(spec)?;
-    for sub in ["bias", "dark", "flat"] {
+    for s in &a.stacks {
+        if !["bias", "dark", "flat"].contains(&s.as_str()) {
+            bail!("unknown stack '{s}' in --stacks (bias, dark, flat)");
+        }
+    }
+    let want = |s: &str| a.stacks.iter().any(|x| x == s);
+    for sub in ["bias", "dark", "flat"].into_iter().filter(|s| want(s)) {
         std::fs::create_dir_all(a.output.join(sub)).map_err(|e| {
             anyhow::anyhow!(
                 "{}: cannot create folder: {e}",
@@ -55,7 +64,10 @@ pub fn run(a: &SimulateArgs) -> Result<()> {
             )
         })?;
     }
-    let total = a.frames * (1 + DARK_EXPOSURES.len() + FLAT_LEVELS.len());
+    let total = a.frames
+        * (want("bias") as usize
+            + want("dark") as usize * DARK_EXPOSURES.len()
+            + want("flat") as usize * FLAT_LEVELS.len());
     let bar = ProgressBar::new(total as u64).with_style(
         ProgressStyle::with_template(
             "{spinner} simulating {pos}/{len} frames [{bar:30}] {per_sec} eta {eta}",
@@ -77,12 +89,18 @@ pub fn run(a: &SimulateArgs) -> Result<()> {
         }
         Ok(())
     };
-    write("bias", "bias", 0.0, BIAS_EXPOSURE)?;
-    for t in DARK_EXPOSURES {
-        write("dark", &format!("dark_{t}s"), 0.0, t)?;
+    if want("bias") {
+        write("bias", "bias", 0.0, BIAS_EXPOSURE)?;
     }
-    for (e, t) in FLAT_LEVELS {
-        write("flat", &format!("flat_{e}e"), e, t)?;
+    if want("dark") {
+        for t in DARK_EXPOSURES {
+            write("dark", &format!("dark_{t}s"), 0.0, t)?;
+        }
+    }
+    if want("flat") {
+        for (e, t) in FLAT_LEVELS {
+            write("flat", &format!("flat_{e}e"), e, t)?;
+        }
     }
     bar.finish_and_clear();
     let maps: Vec<(&str, pgrf_raw::ndarray::ArrayView3<f32>)> = sensor
