@@ -31,7 +31,6 @@ pub struct BiasEstimate {
 }
 
 fn median(v: &mut [f64]) -> f64 {
-    let v: &mut [f64] = v;
     v.sort_by(|a, b| a.partial_cmp(b).unwrap_or(std::cmp::Ordering::Equal));
     if v.is_empty() {
         f64::NAN
