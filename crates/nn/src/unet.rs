@@ -1,0 +1,201 @@
+//! The SID U-Net (Chen et al., "Learning to See in the Dark", 2018) for
+//! raw -> raw denoising: 4 packed Bayer planes in, 4 out.
+//!
+//! Five levels of two 3x3 convolutions with LeakyReLU(0.2) at widths w, 2w,
+//! 4w, 8w, 16w; 2x2 max-pool down, 2x2 stride-2 transposed convolution up,
+//! skip connections by concatenation, a 1x1 head. Four pooling steps need
+//! sides that are multiples of 16: other sizes are padded by reflection
+//! (zeros when the image is too small to reflect) and the output is cropped
+//! back, so any packed image size works.
+
+use burn::config::Config;
+use burn::module::Module;
+use burn::nn::conv::{Conv2d, Conv2dConfig, ConvTranspose2d, ConvTranspose2dConfig};
+use burn::nn::pool::{MaxPool2d, MaxPool2dConfig};
+use burn::nn::{LeakyRelu, LeakyReluConfig, PaddingConfig2d};
+use burn::tensor::backend::Backend;
+use burn::tensor::ops::PadMode;
+use burn::tensor::Tensor;
+
+/// Multiple that input sides are padded to (2^4 for four poolings).
+pub const SIDE_MULTIPLE: usize = 16;
+
+#[derive(Config, Debug)]
+pub struct SidUnetConfig {
+    /// Width of the first level (32 in the paper).
+    #[config(default = 32)]
+    pub width: usize,
+    #[config(default = 4)]
+    pub in_channels: usize,
+    #[config(default = 4)]
+    pub out_channels: usize,
+}
+
+#[derive(Module, Debug)]
+struct DoubleConv<B: Backend> {
+    first: Conv2d<B>,
+    second: Conv2d<B>,
+    act: LeakyRelu,
+}
+
+impl<B: Backend> DoubleConv<B> {
+    fn new(cin: usize, cout: usize, device: &B::Device) -> Self {
+        let conv = |a, b| {
+            Conv2dConfig::new([a, b], [3, 3])
+                .with_padding(PaddingConfig2d::Same)
+                .init(device)
+        };
+        DoubleConv {
+            first: conv(cin, cout),
+            second: conv(cout, cout),
+            act: LeakyReluConfig::new().with_negative_slope(0.2).init(),
+        }
+    }
+
+    fn forward(&self, x: Tensor<B, 4>) -> Tensor<B, 4> {
+        let x = self.act.forward(self.first.forward(x));
+        self.act.forward(self.second.forward(x))
+    }
+}
+
+#[derive(Module, Debug)]
+pub struct SidUnet<B: Backend> {
+    down: Vec<DoubleConv<B>>,
+    pool: MaxPool2d,
+    up: Vec<ConvTranspose2d<B>>,
+    merge: Vec<DoubleConv<B>>,
+    head: Conv2d<B>,
+}
+
+impl SidUnetConfig {
+    pub fn init<B: Backend>(&self, device: &B::Device) -> SidUnet<B> {
+        let w = self.width;
+        let widths = [w, 2 * w, 4 * w, 8 * w, 16 * w];
+        let mut down = Vec::new();
+        let mut cin = self.in_channels;
+        for &c in &widths {
+            down.push(DoubleConv::new(cin, c, device));
+            cin = c;
+        }
+        let mut up = Vec::new();
+        let mut merge = Vec::new();
+        for level in (0..4).rev() {
+            let (hi, lo) = (widths[level + 1], widths[level]);
+            up.push(
+                ConvTranspose2dConfig::new([hi, lo], [2, 2])
+                    .with_stride([2, 2])
+                    .init(device),
+            );
+            merge.push(DoubleConv::new(2 * lo, lo, device));
+        }
+        SidUnet {
+            down,
+            pool: MaxPool2dConfig::new([2, 2]).with_strides([2, 2]).init(),
+            up,
+            merge,
+            head: Conv2dConfig::new([w, self.out_channels], [1, 1]).init(device),
+        }
+    }
+}
+
+impl<B: Backend> SidUnet<B> {
+    /// `x`: `(batch, 4, H, W)` packed, normalised and amplified raw. Returns
+    /// the same shape.
+    pub fn forward(&self, x: Tensor<B, 4>) -> Tensor<B, 4> {
+        let [n, _, h, w] = x.dims();
+        let (ph, pw) = (pad_to(h), pad_to(w));
+        let mode = if ph < h && pw < w {
+            PadMode::Reflect
+        } else {
+            PadMode::Constant(0.0)
+        };
+        let mut x = if ph + pw > 0 {
+            x.pad((0, pw, 0, ph), mode)
+        } else {
+            x
+        };
+        let mut skips = Vec::with_capacity(4);
+        for (level, block) in self.down.iter().enumerate() {
+            x = block.forward(x);
+            if level < 4 {
+                skips.push(x.clone());
+                x = self.pool.forward(x);
+            }
+        }
+        for (up, merge) in self.up.iter().zip(&self.merge) {
+            let skip = skips.pop().expect("one skip per level");
+            x = merge.forward(Tensor::cat(vec![up.forward(x), skip], 1));
+        }
+        let out = self.head.forward(x);
+        let c = out.dims()[1];
+        out.slice([0..n, 0..c, 0..h, 0..w])
+    }
+}
+
+/// Padding that brings `side` up to a multiple of 16.
+fn pad_to(side: usize) -> usize {
+    (SIDE_MULTIPLE - side % SIDE_MULTIPLE) % SIDE_MULTIPLE
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use burn::backend::Flex;
+
+    type B = Flex;
+
+    /// Parameters of the architecture, counted by hand: a k x k conv from a
+    /// to b channels has k*k*a*b weights and b biases.
+    fn expected_params(w: usize, cin: usize, cout: usize) -> usize {
+        let conv = |k: usize, a: usize, b: usize| k * k * a * b + b;
+        let widths = [w, 2 * w, 4 * w, 8 * w, 16 * w];
+        let mut total = 0;
+        let mut a = cin;
+        for &c in &widths {
+            total += conv(3, a, c) + conv(3, c, c);
+            a = c;
+        }
+        for level in 0..4 {
+            let (hi, lo) = (widths[level + 1], widths[level]);
+            total += conv(2, hi, lo) + conv(3, 2 * lo, lo) + conv(3, lo, lo);
+        }
+        total + conv(1, w, cout)
+    }
+
+    #[test]
+    fn parameter_count_matches_the_architecture() {
+        let device = Default::default();
+        let net = SidUnetConfig::new().init::<B>(&device);
+        // w = 32, 4 -> 4 channels: 7,760,484 by the hand count.
+        assert_eq!(expected_params(32, 4, 4), 7_760_484);
+        assert_eq!(net.num_params(), expected_params(32, 4, 4));
+        let small = SidUnetConfig::new().with_width(8).init::<B>(&device);
+        assert_eq!(small.num_params(), expected_params(8, 4, 4));
+    }
+
+    #[test]
+    fn any_size_in_same_size_out_and_deterministic() {
+        let device = Default::default();
+        let net = SidUnetConfig::new().with_width(4).init::<B>(&device);
+        for (h, w) in [(32, 48), (36, 52), (10, 7)] {
+            let x = Tensor::<B, 4>::random(
+                [2, 4, h, w],
+                burn::tensor::Distribution::Uniform(0.0, 1.0),
+                &device,
+            );
+            let y = net.forward(x.clone());
+            assert_eq!(y.dims(), [2, 4, h, w]);
+            let y2 = net.forward(x);
+            let d: f32 = (y - y2).abs().max().into_scalar();
+            assert_eq!(d, 0.0);
+        }
+    }
+
+    #[test]
+    fn padding_reaches_the_next_multiple_of_16() {
+        assert_eq!(pad_to(16), 0);
+        assert_eq!(pad_to(17), 15);
+        assert_eq!(pad_to(1424), 0);
+        assert_eq!(pad_to(2128), 0);
+    }
+}
