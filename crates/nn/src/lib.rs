@@ -4,6 +4,7 @@
 //! deep-learning framework; everything upstream passes plain arrays.
 
 pub mod sr3;
+pub mod step;
 pub mod unet;
 
 pub use sr3::{Sr3Config, Sr3Unet};
