@@ -92,7 +92,7 @@ pub fn calibrate(input: &CalibrateInput, progress: &(dyn Fn() + Sync)) -> Result
         }
     }
     let mut pp = bias.ppcc_pixels.clone();
-    pp.sort_by(|a, b| a.partial_cmp(b).unwrap());
+    pp.sort_by(|a, b| a.total_cmp(b));
     let meta = CalibMeta {
         kind: "pgrf-calibration".into(),
         schema: 1,

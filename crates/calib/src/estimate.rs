@@ -153,7 +153,7 @@ pub fn estimate_gain(flat: &Stack, bias: &BiasEstimate) -> Result<GainEstimate> 
         .groups
         .iter()
         .zip(&levels)
-        .max_by(|a, b| a.1.mean_dn.partial_cmp(&b.1.mean_dn).unwrap())
+        .max_by(|a, b| a.1.mean_dn.total_cmp(&b.1.mean_dn))
         .ok_or_else(|| invalid("flat stack is empty"))?;
     let (bm, bv) = (bright.0.stats.mean(), bright.0.stats.var());
     let mut k_map = Array3::<f32>::zeros(bm.raw_dim());

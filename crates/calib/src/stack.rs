@@ -257,7 +257,7 @@ pub fn read_stack(files: &[PathBuf], opt: &ReadOptions) -> Result<Stack> {
                 )));
             }
         }
-        groups.sort_by(|a, b| a.exposure_s.partial_cmp(&b.exposure_s).unwrap());
+        groups.sort_by(|a, b| a.exposure_s.total_cmp(&b.exposure_s));
         Ok(Stack {
             key: key.expect("at least two frames were read"),
             groups,
