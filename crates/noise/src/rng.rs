@@ -43,6 +43,29 @@ pub fn open01<R: Rng + ?Sized>(rng: &mut R) -> f64 {
     ((rng.next_u64() >> 11) as f64 + 0.5) * (1.0 / (1u64 << 53) as f64)
 }
 
+/// A packed `(4, ph, pw)` map whose every value is `f` of a generator
+/// seeded per row from (seed, tag): for per-pixel truth and benchmark maps
+/// that must not depend on the thread count.
+pub fn seeded_map(
+    seed: u64,
+    tag: u64,
+    ph: usize,
+    pw: usize,
+    f: impl Fn(&mut BlockRng) -> f32 + Sync,
+) -> ndarray::Array3<f32> {
+    use rayon::prelude::*;
+    let mut a = ndarray::Array3::<f32>::zeros((4, ph, pw));
+    a.as_slice_mut()
+        .expect("standard layout")
+        .par_chunks_mut(pw.max(1))
+        .enumerate()
+        .for_each(|(r, row)| {
+            let mut rng = stream(mix64(seed ^ tag), Domain::Maps, r as u64, tag);
+            row.iter_mut().for_each(|v| *v = f(&mut rng));
+        });
+    a
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -15,7 +15,7 @@
 use crate::error::{NoiseError, Result};
 use crate::poisson::poisson;
 use crate::profile::{CameraProfile, DarkLaw};
-use crate::rng::{mix64, open01, stream, Domain};
+use crate::rng::{open01, seeded_map, stream, Domain};
 use ndarray::{Array3, Axis};
 use pgrf_raw::{Cfa, RawFrame};
 use rand::Rng;
@@ -113,25 +113,6 @@ pub struct VirtualSensor {
     pub hot: Array3<f32>,
 }
 
-fn map(
-    seed: u64,
-    tag: u64,
-    ph: usize,
-    pw: usize,
-    f: impl Fn(&mut crate::rng::BlockRng) -> f32 + Sync,
-) -> Array3<f32> {
-    let mut a = Array3::<f32>::zeros((4, ph, pw));
-    a.as_slice_mut()
-        .expect("standard layout")
-        .par_chunks_mut(pw)
-        .enumerate()
-        .for_each(|(r, row)| {
-            let mut rng = stream(mix64(seed ^ tag), Domain::Maps, r as u64, tag);
-            row.iter_mut().for_each(|v| *v = f(&mut rng));
-        });
-    a
-}
-
 impl VirtualSensor {
     pub fn new(spec: SensorSpec) -> Result<VirtualSensor> {
         if spec.width < 4 || spec.height < 4 || spec.width % 2 == 1 || spec.height % 2 == 1 {
@@ -147,10 +128,10 @@ impl VirtualSensor {
         let (rs, rsp) = (spec.read_sigma, spec.read_spread);
         let (dr, dsp) = (spec.dark_rate, spec.dark_spread);
         let nfp = spec.n_fp;
-        let hot = map(s, 6, ph, pw, |r| {
+        let hot = seeded_map(s, 6, ph, pw, |r| {
             (open01(r) < spec.hot_fraction as f64) as u8 as f32
         });
-        let mut dark_rate = map(s, 4, ph, pw, move |r| {
+        let mut dark_rate = seeded_map(s, 4, ph, pw, move |r| {
             dr * (dsp * gn(r) - 0.5 * dsp * dsp).exp()
         });
         ndarray::Zip::from(&mut dark_rate)
@@ -161,11 +142,11 @@ impl VirtualSensor {
                 }
             });
         Ok(VirtualSensor {
-            gain: map(s, 1, ph, pw, move |r| k * (1.0 + prnu * gn(r))),
-            bias: map(s, 2, ph, pw, move |r| dsnu * gn(r)),
-            sigma_read: map(s, 3, ph, pw, move |r| rs * (rsp * gn(r)).exp()),
+            gain: seeded_map(s, 1, ph, pw, move |r| k * (1.0 + prnu * gn(r))),
+            bias: seeded_map(s, 2, ph, pw, move |r| dsnu * gn(r)),
+            sigma_read: seeded_map(s, 3, ph, pw, move |r| rs * (rsp * gn(r)).exp()),
             dark_rate,
-            n_fp: map(s, 5, ph, pw, move |r| (nfp * gn(r)).max(-0.9)),
+            n_fp: seeded_map(s, 5, ph, pw, move |r| (nfp * gn(r)).max(-0.9)),
             hot,
             spec,
         })

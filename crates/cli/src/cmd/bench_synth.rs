@@ -9,7 +9,7 @@
 
 use crate::cmd::bench::median;
 use anyhow::Result;
-use pgrf_noise::rng::{open01, stream, Domain};
+use pgrf_noise::rng::{open01, seeded_map};
 use pgrf_noise::{CameraProfile, Capture, Components, Map, NoiseModel, PixelMaps};
 use pgrf_raw::ndarray::Array3;
 use rand::Rng;
@@ -36,19 +36,6 @@ struct SynthResult {
     threads: usize,
 }
 
-fn map(seed: u64, f: impl Fn(&mut pgrf_noise::rng::BlockRng) -> f32 + Sync) -> Arc<Array3<f32>> {
-    let mut a = Array3::<f32>::zeros((4, PH, PW));
-    a.as_slice_mut()
-        .unwrap()
-        .par_chunks_mut(PW)
-        .enumerate()
-        .for_each(|(r, row)| {
-            let mut rng = stream(seed, Domain::Maps, r as u64, 0);
-            row.iter_mut().for_each(|v| *v = f(&mut rng));
-        });
-    Arc::new(a)
-}
-
 /// The benchmark's model and clean frame.
 pub fn setup() -> Result<(NoiseModel, Array3<f32>)> {
     // The same smooth content as bench/pgrf_noise_numpy.py: the whole
@@ -62,12 +49,18 @@ pub fn setup() -> Result<(NoiseModel, Array3<f32>)> {
     let params = profile.params_at_iso(1600)?;
     let sigma = params.sigma_gauss as f32;
     let maps = PixelMaps {
-        bias: Map::Pixel(map(1, |r| r.sample::<f32, _>(StandardNormal))),
-        sigma_read: Map::Pixel(map(2, move |r| {
+        bias: Map::Pixel(Arc::new(seeded_map(1, 0, PH, PW, |r| {
+            r.sample::<f32, _>(StandardNormal)
+        }))),
+        sigma_read: Map::Pixel(Arc::new(seeded_map(2, 0, PH, PW, move |r| {
             sigma * (0.15 * r.sample::<f32, _>(StandardNormal)).exp()
-        })),
-        dark_rate: Map::Pixel(map(3, |r| 2.0 * open01(r) as f32)),
-        n_fp: Map::Pixel(map(4, |r| 0.05 * r.sample::<f32, _>(StandardNormal))),
+        }))),
+        dark_rate: Map::Pixel(Arc::new(seeded_map(3, 0, PH, PW, |r| {
+            2.0 * open01(r) as f32
+        }))),
+        n_fp: Map::Pixel(Arc::new(seeded_map(4, 0, PH, PW, |r| {
+            0.05 * r.sample::<f32, _>(StandardNormal)
+        }))),
         dark_law: pgrf_noise::DarkLaw::Sqrt,
     };
     let model = NoiseModel::pgrf(&profile, &params, Some(maps), Components::ALL, false);
