@@ -124,7 +124,10 @@ pub struct GainEstimate {
 }
 
 pub fn estimate_gain(flat: &Stack, bias: &BiasEstimate) -> Result<GainEstimate> {
-    let mut levels = Vec::new();
+    let mut levels: Vec<PtcLevel> = Vec::new();
+    // Mean and variance of the brightest level so far: each is a full-frame
+    // f64 copy, so they are kept from the loop rather than recomputed.
+    let mut bright: Option<(Array3<f64>, Array3<f64>, usize)> = None;
     for g in &flat.groups {
         let (m, v) = (g.stats.mean(), g.stats.var());
         let n = m.len() as f64;
@@ -142,6 +145,12 @@ pub fn estimate_gain(flat: &Stack, bias: &BiasEstimate) -> Result<GainEstimate> 
                 g.exposure_s
             )));
         }
+        if bright
+            .as_ref()
+            .is_none_or(|(_, _, i)| mean_dn > levels[*i].mean_dn)
+        {
+            bright = Some((m, v, levels.len()));
+        }
         levels.push(PtcLevel {
             exposure_s: g.exposure_s,
             mean_dn,
@@ -149,13 +158,8 @@ pub fn estimate_gain(flat: &Stack, bias: &BiasEstimate) -> Result<GainEstimate> 
             frames: g.files.len(),
         });
     }
-    let bright = flat
-        .groups
-        .iter()
-        .zip(&levels)
-        .max_by(|a, b| a.1.mean_dn.total_cmp(&b.1.mean_dn))
-        .ok_or_else(|| invalid("flat stack is empty"))?;
-    let (bm, bv) = (bright.0.stats.mean(), bright.0.stats.var());
+    let (bm, bv, bi) = bright.ok_or_else(|| invalid("flat stack is empty"))?;
+    let bright_level = levels[bi];
     let mut k_map = Array3::<f32>::zeros(bm.raw_dim());
     Zip::from(&mut k_map)
         .and(&bm)
@@ -170,7 +174,7 @@ pub fn estimate_gain(flat: &Stack, bias: &BiasEstimate) -> Result<GainEstimate> 
                 f32::NAN
             };
         });
-    let k_var_mean = bright.1.var_dn2 / bright.1.mean_dn;
+    let k_var_mean = bright_level.var_dn2 / bright_level.mean_dn;
     // PRNU from the spread of the per-pixel signal at the brightest level.
     let response = Zip::from(&bm)
         .and(&bias.mean)
@@ -178,7 +182,8 @@ pub fn estimate_gain(flat: &Stack, bias: &BiasEstimate) -> Result<GainEstimate> 
     let sig: Vec<f64> = response.iter().map(|&v| v as f64).collect();
     let sm = sig.iter().sum::<f64>() / sig.len() as f64;
     let sv = sig.iter().map(|s| (s - sm).powi(2)).sum::<f64>() / sig.len() as f64;
-    let temporal = (bright.1.var_dn2 + bias.var.mean().unwrap_or(0.0)) / bright.1.frames as f64;
+    let temporal =
+        (bright_level.var_dn2 + bias.var.mean().unwrap_or(0.0)) / bright_level.frames as f64;
     let prnu = (sv - temporal - bias.dsnu.powi(2)).max(0.0).sqrt() / sm;
 
     let ptc_fit = if levels.len() >= 2 {
@@ -263,11 +268,13 @@ pub fn estimate_dark(dark: &Stack, bias: &BiasEstimate, k: f64) -> Result<DarkEs
             exposures.first().copied().unwrap_or(0.0)
         )));
     }
-    let means: Vec<Array3<f64>> = dark.groups.iter().map(|g| g.stats.mean()).collect();
-    let sig: Vec<Vec<f64>> = means
+    // Per group, the dark signal of every pixel: mean minus the bias mean.
+    let sig: Vec<Vec<f64>> = dark
+        .groups
         .iter()
-        .map(|m| {
-            Zip::from(m)
+        .map(|g| {
+            let m = g.stats.mean();
+            Zip::from(&m)
                 .and(&bias.mean)
                 .map_collect(|a, b| a - b)
                 .into_iter()
@@ -287,7 +294,7 @@ pub fn estimate_dark(dark: &Stack, bias: &BiasEstimate, k: f64) -> Result<DarkEs
     } else {
         DarkLaw::Sqrt
     };
-    let shape = means[0].raw_dim();
+    let shape = bias.mean.raw_dim();
     let npx = sig[0].len();
     let mut r2_sqrt = vec![0f32; npx];
     let mut r2_linear = vec![0f32; npx];
