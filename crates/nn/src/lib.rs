@@ -3,6 +3,7 @@
 //! sampling to follow. The only crate that depends on the
 //! deep-learning framework; everything upstream passes plain arrays.
 
+pub mod backend;
 pub mod sr3;
 pub mod step;
 pub mod unet;
