@@ -19,6 +19,7 @@ pub mod orientation;
 pub mod pack;
 mod panic_guard;
 pub mod preview;
+pub mod scene;
 
 /// Re-exported so callers use the same ndarray version as the packed arrays.
 pub use ndarray;
@@ -32,3 +33,7 @@ pub use frame::{ColorMatrix, LevelOverrides, RawFrame};
 pub use headerless::{read_headerless, HeaderlessSpec};
 pub use pack::{pack_normalized, pack_u16, unpack_normalized, unpack_u16};
 pub use preview::{render_preview, Preview, PreviewOptions};
+pub use scene::{
+    render_frame, render_packed, render_packed_cfa, render_rgb, Scene, SceneKind, SceneLevels,
+    SceneSpec,
+};
