@@ -155,4 +155,45 @@ impl Calibration {
             dark_law: law,
         })
     }
+
+    /// Make `spec` synthesise this sensor: its per-pixel maps, and the gain,
+    /// row noise and DN scale they were measured with (maps are meaningless
+    /// on another scale). The ISO is taken from the calibration when unset.
+    pub fn apply_to(&self, spec: &mut pgrf_noise::pair::PairSpec) -> Result<()> {
+        if spec.kind != pgrf_noise::ModelKind::Pgrf {
+            return Err(invalid(format!(
+                "a calibration applies to the pgrf noise model (per-pixel maps), not {:?}",
+                spec.kind
+            )));
+        }
+        let m = &self.meta;
+        let black = m.black.iter().map(|&b| b as f64).sum::<f64>() / 4.0;
+        spec.maps = Some(self.to_pixel_maps()?);
+        spec.measured = Some(pgrf_noise::pair::Measured {
+            k: m.k,
+            row_sigma: m.row_sigma,
+            dn_range: m.white as f64 - black,
+            black,
+        });
+        if spec.iso.is_none() {
+            spec.iso = m.iso;
+        }
+        Ok(())
+    }
+
+    /// A short identity for records: camera, ISO and file name.
+    pub fn identity(&self, path: &Path) -> String {
+        format!(
+            "{} {} ISO {} ({})",
+            self.meta.make,
+            self.meta.model,
+            self.meta
+                .iso
+                .map(|i| i.to_string())
+                .unwrap_or_else(|| "?".into()),
+            path.file_name()
+                .map(|n| n.to_string_lossy().into_owned())
+                .unwrap_or_default()
+        )
+    }
 }

@@ -31,6 +31,8 @@ enum Command {
     Calibrate(cmd::calibrate::CalibrateArgs),
     /// Render pgrf's built-in colour test chart as a DNG.
     Chart(cmd::chart::ChartArgs),
+    /// Train the SPC denoiser or the PGRF flow model on synthetic pairs (procedural scenes or clean RAWs).
+    Train(Box<cmd::train::TrainArgs>),
     /// Time pgrf's hot paths (results go to BENCHMARKS.md).
     Bench(cmd::bench::BenchArgs),
 }
@@ -63,6 +65,7 @@ fn main() -> ExitCode {
         Command::Synth(a) => cmd::synth::run(a),
         Command::SimulateSensor(a) => cmd::simulate::run(a),
         Command::Calibrate(a) => cmd::calibrate::run(a),
+        Command::Train(a) => cmd::train::run(a),
         Command::Bench(a) => cmd::bench::run(a),
     };
     match result {

@@ -56,3 +56,53 @@ impl DeviceKind {
         Ok(())
     }
 }
+
+/// One line about the compute device, for headers and summaries.
+pub fn describe(kind: DeviceKind) -> String {
+    match kind {
+        DeviceKind::Cpu => format!("Flex, {} threads", rayon_threads()),
+        DeviceKind::Cuda => "CUDA device 0".into(),
+    }
+}
+
+fn rayon_threads() -> usize {
+    std::thread::available_parallelism()
+        .map(|n| n.get())
+        .unwrap_or(1)
+}
+
+/// Run the training loop on the chosen device.
+pub fn train(
+    kind: DeviceKind,
+    settings: &crate::train::TrainSettings,
+    source: std::sync::Arc<crate::data::Source>,
+    spec: std::sync::Arc<pgrf_noise::pair::PairSpec>,
+    val: Option<&crate::data::validation::ValSet>,
+    progress: &mut dyn crate::train::Progress,
+    stop: &std::sync::atomic::AtomicBool,
+) -> crate::Result<crate::train::Outcome> {
+    kind.check_available().map_err(crate::NnError::Invalid)?;
+    match kind {
+        DeviceKind::Cpu => crate::train::train::<CpuTrain>(
+            settings,
+            source,
+            spec,
+            val,
+            &Default::default(),
+            progress,
+            stop,
+        ),
+        #[cfg(feature = "cuda")]
+        DeviceKind::Cuda => crate::train::train::<GpuTrain>(
+            settings,
+            source,
+            spec,
+            val,
+            &Default::default(),
+            progress,
+            stop,
+        ),
+        #[cfg(not(feature = "cuda"))]
+        DeviceKind::Cuda => unreachable!("checked above"),
+    }
+}

@@ -1,12 +1,23 @@
 //! Networks for low-light RAW denoising on burn: the SID U-Net used by the
-//! paper's SPC baseline and the SR3 velocity field of PGRF; training and
-//! sampling to follow. The only crate that depends on the
-//! deep-learning framework; everything upstream passes plain arrays.
+//! paper's SPC baseline and the SR3 velocity field of PGRF, their training
+//! with online physics-based pair synthesis, weight files and samplers. The
+//! only crate that depends on the deep-learning framework; everything
+//! upstream passes plain arrays.
 
 pub mod backend;
+pub mod checkpoint;
+pub mod data;
+pub mod error;
+pub mod named;
+pub mod net;
+pub mod sample;
+pub mod schedule;
 pub mod sr3;
 pub mod step;
+pub mod train;
 pub mod unet;
+pub mod weights;
 
+pub use error::{NnError, Result};
 pub use sr3::{Sr3Config, Sr3Unet};
 pub use unet::{SidUnet, SidUnetConfig};

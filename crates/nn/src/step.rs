@@ -16,6 +16,27 @@ pub fn l1<B: burn::tensor::backend::Backend>(a: Tensor<B, 4>, b: Tensor<B, 4>) -
     (a - b).abs().mean()
 }
 
+/// The denoiser's loss: L1(net(noisy x ratio), clean).
+pub fn denoiser_loss<B: burn::tensor::backend::Backend>(
+    net: &SidUnet<B>,
+    noisy: Tensor<B, 4>,
+    clean: Tensor<B, 4>,
+) -> Tensor<B, 1> {
+    l1(net.forward(noisy), clean)
+}
+
+/// The rectified-flow loss |X1 - X0 - v(Xt, T, t)|_1 at Xt = t X1 + (1 - t) X0.
+pub fn flow_loss<B: burn::tensor::backend::Backend>(
+    net: &Sr3Unet<B>,
+    cond: Tensor<B, 4>,
+    x1: Tensor<B, 4>,
+    x0: Tensor<B, 4>,
+    t: Tensor<B, 1>,
+) -> Tensor<B, 1> {
+    let xt = interpolate_path(x1.clone(), x0.clone(), t.clone());
+    l1(x1 - x0, net.forward(xt, cond, t))
+}
+
 /// One Adam (or other optimiser) step of the denoiser; returns the updated
 /// network and the loss before the update.
 pub fn denoiser_step<B: AutodiffBackend, O: Optimizer<SidUnet<B>, B>>(
@@ -25,7 +46,7 @@ pub fn denoiser_step<B: AutodiffBackend, O: Optimizer<SidUnet<B>, B>>(
     clean: Tensor<B, 4>,
     lr: f64,
 ) -> (SidUnet<B>, f32) {
-    let loss = l1(net.forward(noisy), clean);
+    let loss = denoiser_loss(&net, noisy, clean);
     let value: f32 = loss.clone().into_scalar().elem();
     let grads = GradientsParams::from_grads(loss.backward(), &net);
     (optim.step(lr, net, grads), value)
@@ -53,9 +74,7 @@ pub fn flow_step<B: AutodiffBackend, O: Optimizer<Sr3Unet<B>, B>>(
     t: Tensor<B, 1>,
     lr: f64,
 ) -> (Sr3Unet<B>, f32) {
-    let xt = interpolate_path(x1.clone(), x0.clone(), t.clone());
-    let v = net.forward(xt, cond, t);
-    let loss = l1(x1 - x0, v);
+    let loss = flow_loss(&net, cond, x1, x0, t);
     let value: f32 = loss.clone().into_scalar().elem();
     let grads = GradientsParams::from_grads(loss.backward(), &net);
     (optim.step(lr, net, grads), value)

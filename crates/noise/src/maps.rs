@@ -59,6 +59,33 @@ impl Map {
         }
     }
 
+    /// The window `(y, x, h, w)` of a per-pixel map (packed coordinates);
+    /// scalar and per-plane maps are unchanged. Training crops need the maps
+    /// of the sensor region the crop stands for.
+    pub fn crop(&self, y: usize, x: usize, h: usize, w: usize) -> Result<Map> {
+        match self {
+            Map::Pixel(a) => {
+                let (ph, pw) = (a.shape()[1], a.shape()[2]);
+                if y + h > ph || x + w > pw {
+                    return Err(NoiseError::Invalid(format!(
+                        "crop {h}x{w} at ({y}, {x}) leaves the {ph}x{pw} map"
+                    )));
+                }
+                let v = a.slice(ndarray::s![.., y..y + h, x..x + w]);
+                Ok(Map::Pixel(Arc::new(v.as_standard_layout().into_owned())))
+            }
+            other => Ok(other.clone()),
+        }
+    }
+
+    /// Packed size `(H/2, W/2)` of a per-pixel map.
+    pub fn pixel_shape(&self) -> Option<(usize, usize)> {
+        match self {
+            Map::Pixel(a) => Some((a.shape()[1], a.shape()[2])),
+            _ => None,
+        }
+    }
+
     fn check(&self, name: &str, shape: (usize, usize), nonneg: bool) -> Result<()> {
         let bad = |v: f32| !v.is_finite() || (nonneg && v < 0.0);
         let what = if nonneg { "finite and >= 0" } else { "finite" };
@@ -157,6 +184,24 @@ impl PixelMaps {
         Ok(())
     }
 
+    /// The maps of the packed window `(y, x, h, w)`.
+    pub fn crop(&self, y: usize, x: usize, h: usize, w: usize) -> Result<PixelMaps> {
+        Ok(PixelMaps {
+            bias: self.bias.crop(y, x, h, w)?,
+            sigma_read: self.sigma_read.crop(y, x, h, w)?,
+            dark_rate: self.dark_rate.crop(y, x, h, w)?,
+            n_fp: self.n_fp.crop(y, x, h, w)?,
+            dark_law: self.dark_law,
+        })
+    }
+
+    /// Packed size of the per-pixel maps, if any map is per pixel.
+    pub fn pixel_shape(&self) -> Option<(usize, usize)> {
+        [&self.bias, &self.sigma_read, &self.dark_rate, &self.n_fp]
+            .iter()
+            .find_map(|m| m.pixel_shape())
+    }
+
     /// Global ("noD") version: each map replaced by its per-plane mean.
     pub fn global(&self) -> PixelMaps {
         PixelMaps {
@@ -166,5 +211,30 @@ impl PixelMaps {
             n_fp: self.n_fp.global(),
             dark_law: self.dark_law,
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn crops_take_the_window_and_refuse_to_leave_the_map() {
+        let a = Array3::from_shape_fn((4, 6, 8), |(p, i, j)| (p * 100 + i * 10 + j) as f32);
+        let m = PixelMaps {
+            bias: Map::Pixel(Arc::new(a)),
+            sigma_read: Map::Scalar(2.0),
+            dark_rate: Map::Plane([1.0, 2.0, 3.0, 4.0]),
+            n_fp: Map::Scalar(0.0),
+            dark_law: DarkLaw::Sqrt,
+        };
+        assert_eq!(m.pixel_shape(), Some((6, 8)));
+        let c = m.crop(2, 3, 3, 4).unwrap();
+        assert_eq!(c.pixel_shape(), Some((3, 4)));
+        assert_eq!(c.bias.at(0, 0), 23.0);
+        assert_eq!(c.bias.at(3, 3 * 4 - 1), 346.0);
+        assert_eq!(c.sigma_read.at(1, 5), 2.0);
+        c.check((3, 4)).unwrap();
+        assert!(m.crop(4, 0, 3, 4).is_err());
     }
 }

@@ -48,6 +48,9 @@ pub enum BenchWhat {
         #[arg(long)]
         json: bool,
     },
+    /// Forward and training-step time of the SID U-Net and the SR3 velocity
+    /// field on the CPU (bench/train.sh runs PyTorch beside it).
+    Train(crate::cmd::bench_train::TrainArgs),
 }
 
 #[derive(Serialize)]
@@ -76,6 +79,7 @@ pub fn run(a: &BenchArgs) -> Result<()> {
     match &a.what {
         BenchWhat::Synth { frames, json } => crate::cmd::bench_synth::run(*frames, *json),
         BenchWhat::Stack { dir, json } => bench_stack(dir, *json),
+        BenchWhat::Train(t) => crate::cmd::bench_train::run(t),
         BenchWhat::Decode { files, iters, json } => {
             if *iters == 0 {
                 bail!("--iters must be at least 1");

@@ -2,6 +2,7 @@
 
 pub mod bench;
 pub mod bench_synth;
+pub mod bench_train;
 pub mod calibrate;
 pub mod chart;
 pub mod convert;
@@ -9,3 +10,4 @@ pub mod info;
 pub mod preview;
 pub mod simulate;
 pub mod synth;
+pub mod train;

@@ -5,7 +5,7 @@ use crate::input::InputArgs;
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use pgrf_calib::Calibration;
-use pgrf_noise::pair::{ExposureSpec, Measured, PairSpec, RatioSpec};
+use pgrf_noise::pair::{ExposureSpec, PairSpec, RatioSpec};
 use pgrf_noise::profile::DarkCurrent;
 use pgrf_noise::{CameraProfile, Components, DarkLaw, ModelKind};
 use pgrf_raw::{
@@ -117,12 +117,6 @@ pub fn run(a: &SynthArgs) -> Result<()> {
         (None, None) => ExposureSpec::default(),
     };
     if let Some(path) = &a.calib {
-        if a.model != ModelKind::Pgrf {
-            bail!(
-                "--calib applies to the pgrf model (per-pixel maps), not {:?}",
-                a.model
-            );
-        }
         let cal = Calibration::load(path)?;
         cal.check_matches(&frame.make, &frame.model, spec.iso, a.force)
             .with_context(|| format!("{}", path.display()))?;
@@ -137,17 +131,8 @@ pub fn run(a: &SynthArgs) -> Result<()> {
                 frame.height
             );
         }
-        let black = cal.meta.black.iter().map(|&b| b as f64).sum::<f64>() / 4.0;
-        spec.maps = Some(cal.to_pixel_maps()?);
-        spec.measured = Some(Measured {
-            k: cal.meta.k,
-            row_sigma: cal.meta.row_sigma,
-            dn_range: cal.meta.white as f64 - black,
-            black,
-        });
-        if spec.iso.is_none() {
-            spec.iso = cal.meta.iso;
-        }
+        cal.apply_to(&mut spec)
+            .with_context(|| format!("--calib {}", path.display()))?;
     }
     let plane_rows = frame.cfa.offsets().map(|(r, _)| r);
     let pair = spec

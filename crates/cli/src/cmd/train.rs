@@ -1,0 +1,557 @@
+//! `pgrf train denoiser|flow`: every setting can come from a TOML file
+//! (`--config`, flat keys named like the flags with underscores) and any flag
+//! overrides the file. Progress bar, Ctrl-C (checkpoint and exit), and a JSON
+//! summary line for scripts.
+
+use anyhow::{bail, Context, Result};
+use clap::{Args, ValueEnum};
+use indicatif::{ProgressBar, ProgressStyle};
+use pgrf_calib::Calibration;
+use pgrf_nn::backend::DeviceKind;
+use pgrf_nn::data::validation::ValSet;
+use pgrf_nn::data::{Folder, Source};
+use pgrf_nn::schedule::Schedule;
+use pgrf_nn::train::{Outcome, Progress, TrainSettings};
+use pgrf_nn::weights::{Architecture, NoiseSource};
+use pgrf_nn::{SidUnetConfig, Sr3Config};
+use pgrf_noise::pair::{PairSpec, RatioSpec};
+use pgrf_noise::{CameraProfile, ModelKind};
+use pgrf_raw::LevelOverrides;
+use serde::Deserialize;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+
+#[derive(Clone, Copy, Debug, ValueEnum, PartialEq, Eq)]
+pub enum Task {
+    /// SPC: the SID U-Net, L1(denoise(noisy x ratio), clean).
+    Denoiser,
+    /// PGRF: the SR3 velocity field of the rectified flow.
+    Flow,
+}
+
+/// Every setting; all optional so the file and the flags can be merged.
+#[derive(Args, Debug, Default, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Settings {
+    /// Clean training images: a folder of RAWs, or "procedural" (dead-leaves scenes).
+    #[arg(long)]
+    pub data: Option<String>,
+    /// Validation images: a folder of RAWs or "procedural" (default: 10% of --data's files held out, or procedural).
+    #[arg(long)]
+    pub val_data: Option<String>,
+    /// Camera noise profile (built-in name or JSON path) [default: sony-a7s2].
+    #[arg(long)]
+    pub profile: Option<String>,
+    /// Per-pixel calibration file (from `pgrf calibrate`) for the pgrf noise model.
+    #[arg(long)]
+    pub calib: Option<PathBuf>,
+    /// Noise model of the synthetic pairs: pg, eld or pgrf [default: pgrf].
+    #[arg(long)]
+    pub noise: Option<String>,
+    /// Fixed ISO (default: parameters drawn from the profile's ELD distribution).
+    #[arg(long)]
+    pub iso: Option<u32>,
+    /// Smallest exposure ratio [default: 100].
+    #[arg(long)]
+    pub ratio_min: Option<f32>,
+    /// Largest exposure ratio [default: 300].
+    #[arg(long)]
+    pub ratio_max: Option<f32>,
+    /// Side of the packed training crops [default: 512].
+    #[arg(long)]
+    pub patch: Option<usize>,
+    /// Crops per step [default: 1].
+    #[arg(long)]
+    pub batch: Option<usize>,
+    /// Data worker threads [default: 2].
+    #[arg(long)]
+    pub workers: Option<usize>,
+    /// Memory for decoded training RAWs, MiB [default: 4096].
+    #[arg(long)]
+    pub cache_mib: Option<usize>,
+    /// Optimisation steps [default: 30000].
+    #[arg(long)]
+    pub steps: Option<u64>,
+    /// Base learning rate [default: 1e-4].
+    #[arg(long)]
+    pub lr: Option<f64>,
+    /// Learning-rate schedule: eld (1/2 at 50%, 1/10 at 90%), constant or cosine [default: eld].
+    #[arg(long)]
+    pub schedule: Option<String>,
+    /// Clip each parameter's gradient to this norm.
+    #[arg(long)]
+    pub clip_grad: Option<f32>,
+    /// Seed of initialisation, crops, noise, X0 and t [default: 0].
+    #[arg(long)]
+    pub seed: Option<u64>,
+    /// Turn off flips and transposes.
+    #[arg(long, num_args = 0..=1, default_missing_value = "true")]
+    pub no_augment: Option<bool>,
+    /// SID U-Net width of the first level [default: 32].
+    #[arg(long)]
+    pub width: Option<usize>,
+    /// SR3 channels of the first level [default: 64].
+    #[arg(long)]
+    pub inner_channels: Option<usize>,
+    /// SR3 channel multipliers per level, comma-separated [default: 1,2,4,8,8].
+    #[arg(long, value_delimiter = ',')]
+    pub channel_mults: Option<Vec<usize>>,
+    /// SR3 residual blocks per level [default: 2].
+    #[arg(long)]
+    pub res_blocks: Option<usize>,
+    /// SR3 levels with self-attention (0 = full resolution), comma-separated [default: 3].
+    #[arg(long, value_delimiter = ',')]
+    pub attn_levels: Option<Vec<usize>>,
+    /// SR3 GroupNorm groups [default: 32, or fewer to divide the channels].
+    #[arg(long)]
+    pub norm_groups: Option<usize>,
+    /// SR3 dropout [default: 0].
+    #[arg(long)]
+    pub dropout: Option<f64>,
+    /// Validate every N steps (0: only at the end) [default: 1000].
+    #[arg(long)]
+    pub val_every: Option<u64>,
+    /// Validation pairs [default: 4].
+    #[arg(long)]
+    pub val_pairs: Option<usize>,
+    /// Side of the validation crops [default: min(patch, 256)].
+    #[arg(long)]
+    pub val_patch: Option<usize>,
+    /// t2 of the two-stage sampler when validating the flow model [default: 0.5].
+    #[arg(long)]
+    pub val_t2: Option<f32>,
+    /// Checkpoint every N steps [default: 1000].
+    #[arg(long)]
+    pub checkpoint_every: Option<u64>,
+    /// Checkpoint file [default: OUTPUT with extension .ckpt].
+    #[arg(long)]
+    pub checkpoint: Option<PathBuf>,
+    /// Log file, CSV (or JSON lines if it ends in .jsonl) [default: OUTPUT with extension .log.csv].
+    #[arg(long)]
+    pub log: Option<PathBuf>,
+    /// Log the mean loss every N steps [default: 10].
+    #[arg(long)]
+    pub log_every: Option<u64>,
+    /// Weight file to write.
+    #[arg(short = 'o', long = "output")]
+    pub output: Option<PathBuf>,
+    /// cpu or cuda [default: cpu].
+    #[arg(long)]
+    pub device: Option<String>,
+}
+
+#[derive(Args, Debug)]
+pub struct TrainArgs {
+    /// Which network to train.
+    pub task: Task,
+    /// TOML file of settings (keys as the flags, with underscores); flags override it.
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+    #[command(flatten)]
+    pub settings: Settings,
+    /// Continue from the checkpoint (same settings; --steps may grow).
+    #[arg(long)]
+    pub resume: bool,
+    /// Print one JSON summary line at the end.
+    #[arg(long)]
+    pub json: bool,
+    /// No progress bar.
+    #[arg(long)]
+    pub quiet: bool,
+}
+
+macro_rules! merge {
+    ($flags:expr, $file:expr, $($f:ident),*) => {
+        Settings { $($f: $flags.$f.clone().or($file.$f.clone()),)* }
+    };
+}
+
+fn merged(a: &TrainArgs) -> Result<Settings> {
+    let file = match &a.config {
+        None => Settings::default(),
+        Some(p) => {
+            let text = std::fs::read_to_string(p).with_context(|| format!("{}", p.display()))?;
+            toml::from_str::<Settings>(&text)
+                .map_err(|e| anyhow::anyhow!("{}: {}", p.display(), e.message()))?
+        }
+    };
+    let f = &a.settings;
+    Ok(merge!(
+        f,
+        file,
+        data,
+        val_data,
+        profile,
+        calib,
+        noise,
+        iso,
+        ratio_min,
+        ratio_max,
+        patch,
+        batch,
+        workers,
+        cache_mib,
+        steps,
+        lr,
+        schedule,
+        clip_grad,
+        seed,
+        no_augment,
+        width,
+        inner_channels,
+        channel_mults,
+        res_blocks,
+        attn_levels,
+        norm_groups,
+        dropout,
+        val_every,
+        val_pairs,
+        val_patch,
+        val_t2,
+        checkpoint_every,
+        checkpoint,
+        log,
+        log_every,
+        output,
+        device
+    ))
+}
+
+/// The largest group count <= 32 that divides every level's channel count, so
+/// reduced configurations work without the user doing the arithmetic.
+fn default_groups(inner: usize, mults: &[usize]) -> usize {
+    (1..=32usize)
+        .rev()
+        .find(|&g| inner.is_multiple_of(g) && mults.iter().all(|m| (m * inner).is_multiple_of(g)))
+        .unwrap_or(1)
+}
+
+fn architecture(task: Task, s: &Settings) -> Result<Architecture> {
+    Ok(match task {
+        Task::Denoiser => {
+            let w = s.width.unwrap_or(32);
+            if w == 0 {
+                bail!("--width must be at least 1");
+            }
+            Architecture::SidUnet(SidUnetConfig::new().with_width(w))
+        }
+        Task::Flow => {
+            let inner = s.inner_channels.unwrap_or(64);
+            let mults = s
+                .channel_mults
+                .clone()
+                .unwrap_or_else(|| vec![1, 2, 4, 8, 8]);
+            let attn = s.attn_levels.clone().unwrap_or_else(|| vec![3]);
+            if let Some(l) = attn.iter().find(|&&l| l >= mults.len()) {
+                bail!(
+                    "--attn-levels {l} does not exist: the network has {} levels (0..{})",
+                    mults.len(),
+                    mults.len().saturating_sub(1)
+                );
+            }
+            let cfg = Sr3Config::new()
+                .with_inner_channels(inner)
+                .with_channel_mults(mults.clone())
+                .with_res_blocks(s.res_blocks.unwrap_or(2))
+                .with_attn_levels(attn)
+                .with_norm_groups(
+                    s.norm_groups
+                        .unwrap_or_else(|| default_groups(inner, &mults)),
+                )
+                .with_dropout(s.dropout.unwrap_or(0.0));
+            cfg.validate()
+                .map_err(|e| anyhow::anyhow!("flow network: {e}"))?;
+            Architecture::Sr3(cfg)
+        }
+    })
+}
+
+/// Training and validation sources.
+fn sources(s: &Settings, patch: usize, val_patch: usize) -> Result<(Source, Source, String)> {
+    let data = s.data.clone().unwrap_or_else(|| "procedural".into());
+    let cache = s.cache_mib.unwrap_or(4096);
+    let folder = |dir: &Path| -> Result<Vec<PathBuf>> {
+        Folder::list(dir).with_context(|| "--data".to_string())
+    };
+    let (train, mut held) = if data == "procedural" {
+        (Source::Procedural, None)
+    } else {
+        let mut files = folder(Path::new(&data))?;
+        let held = if s.val_data.is_none() && files.len() >= 2 {
+            let k = (files.len() / 10).max(1);
+            Some(files.split_off(files.len() - k))
+        } else {
+            None
+        };
+        let f = Folder::new(files, LevelOverrides::default(), cache)?;
+        f.check(patch)?;
+        (Source::Folder(f), held)
+    };
+    let val = match s.val_data.as_deref() {
+        Some("procedural") => Source::Procedural,
+        Some(dir) => {
+            let f = Folder::new(folder(Path::new(dir))?, LevelOverrides::default(), 256)?;
+            f.check(val_patch)?;
+            Source::Folder(f)
+        }
+        None => match held.take() {
+            Some(files) => {
+                let f = Folder::new(files, LevelOverrides::default(), 256)?;
+                f.check(val_patch)?;
+                Source::Folder(f)
+            }
+            None => match &train {
+                Source::Procedural => Source::Procedural,
+                Source::Folder(f) => {
+                    let f = Folder::new(f.files().to_vec(), LevelOverrides::default(), 256)?;
+                    Source::Folder(f)
+                }
+            },
+        },
+    };
+    Ok((train, val, data))
+}
+
+struct Bar {
+    bar: ProgressBar,
+    quiet: bool,
+}
+
+impl Progress for Bar {
+    fn start(&mut self, from: u64, total: u64) {
+        self.bar.set_length(total);
+        self.bar.set_position(from);
+        self.bar.reset_eta();
+    }
+    fn step(&mut self, step: u64, loss: f32, lr: f64, ips: f64) {
+        self.bar.set_position(step);
+        self.bar
+            .set_message(format!("loss {loss:.4}  lr {lr:.1e}  {ips:.2} img/s"));
+    }
+    fn note(&mut self, msg: &str) {
+        if !self.quiet {
+            if self.bar.is_hidden() {
+                eprintln!("{msg}");
+            } else {
+                self.bar.println(msg);
+            }
+        }
+    }
+    fn finish(&mut self) {
+        self.bar.finish_and_clear();
+    }
+}
+
+pub fn run(a: &TrainArgs) -> Result<()> {
+    let s = merged(a)?;
+    let Some(out) = s.output.clone() else {
+        bail!("no output: give -o FILE.safetensors (or `output = ...` in the config)");
+    };
+    let device: DeviceKind = s
+        .device
+        .as_deref()
+        .unwrap_or("cpu")
+        .parse()
+        .map_err(anyhow::Error::msg)?;
+    device.check_available().map_err(anyhow::Error::msg)?;
+    let arch = architecture(a.task, &s)?;
+    let patch = s.patch.unwrap_or(512);
+    let batch = s.batch.unwrap_or(1);
+    if patch < 8 || batch == 0 {
+        bail!("--patch must be at least 8 and --batch at least 1 (got {patch}, {batch})");
+    }
+    let val_patch = s.val_patch.unwrap_or(patch.min(256));
+    let steps = s.steps.unwrap_or(30_000);
+    let schedule: Schedule = s
+        .schedule
+        .as_deref()
+        .unwrap_or("eld")
+        .parse()
+        .map_err(anyhow::Error::msg)?;
+    let model: ModelKind = s
+        .noise
+        .as_deref()
+        .unwrap_or("pgrf")
+        .parse()
+        .map_err(anyhow::Error::msg)?;
+    let profile_name = s.profile.clone().unwrap_or_else(|| "sony-a7s2".into());
+    let profile = CameraProfile::load(&profile_name)?;
+    let mut spec = PairSpec::new(profile, model);
+    spec.iso = s.iso;
+    let (lo, hi) = (s.ratio_min.unwrap_or(100.0), s.ratio_max.unwrap_or(300.0));
+    if !(lo > 0.0 && hi >= lo && hi.is_finite()) {
+        bail!("ratio range {lo}..{hi} must be positive and ordered");
+    }
+    spec.ratio = RatioSpec::Uniform { lo, hi };
+    let mut calibration = None;
+    if let Some(path) = &s.calib {
+        let cal = Calibration::load(path)?;
+        cal.apply_to(&mut spec)
+            .with_context(|| format!("--calib {}", path.display()))?;
+        calibration = Some(cal.identity(path));
+    }
+    let (train_src, val_src, data) = sources(&s, patch, val_patch)?;
+    let val_pairs = s.val_pairs.unwrap_or(4);
+    let seed = s.seed.unwrap_or(0);
+    let spec = Arc::new(spec);
+    let val = if val_pairs > 0 {
+        Some(ValSet::build(&val_src, &spec, val_patch, val_pairs, seed)?)
+    } else {
+        None
+    };
+    let settings = TrainSettings {
+        arch: arch.clone(),
+        steps,
+        batch,
+        patch,
+        seed,
+        lr: s.lr.unwrap_or(1e-4),
+        schedule,
+        clip_grad: s.clip_grad,
+        augment: !s.no_augment.unwrap_or(false),
+        workers: s.workers.unwrap_or(2),
+        val_every: s.val_every.unwrap_or(1000),
+        val_t2: s.val_t2.unwrap_or(0.5),
+        checkpoint_every: s.checkpoint_every.unwrap_or(1000),
+        out: out.clone(),
+        checkpoint: s
+            .checkpoint
+            .clone()
+            .unwrap_or_else(|| out.with_extension("ckpt")),
+        log: Some(
+            s.log
+                .clone()
+                .unwrap_or_else(|| out.with_extension("log.csv")),
+        ),
+        log_every: s.log_every.unwrap_or(10),
+        resume: a.resume,
+        noise: NoiseSource {
+            profile: Some(profile_name.clone()),
+            calibration,
+            model: format!("{model:?}").to_lowercase(),
+            iso: spec.iso,
+            ratio: [lo, hi],
+        },
+        data: data.clone(),
+        device: device.to_string(),
+    };
+    for p in [&out, &settings.checkpoint] {
+        if let Some(dir) = p.parent().filter(|d| !d.as_os_str().is_empty()) {
+            if !dir.is_dir() {
+                bail!("{}: folder {} does not exist", p.display(), dir.display());
+            }
+        }
+    }
+    if a.resume && !settings.checkpoint.exists() {
+        bail!(
+            "--resume: no checkpoint at {}",
+            settings.checkpoint.display()
+        );
+    }
+    if !a.quiet {
+        eprintln!(
+            "training {} on {} ({}x{} crops, batch {batch}), noise {} from {}{}, {} steps, lr {:e} ({:?}), {} on {}",
+            arch.describe(),
+            train_src.describe(),
+            patch,
+            patch,
+            settings.noise.model,
+            profile_name,
+            settings.noise.calibration.as_ref().map(|c| format!(" + calibration {c}")).unwrap_or_default(),
+            steps,
+            settings.lr,
+            schedule,
+            device,
+            pgrf_nn::backend::describe(device),
+        );
+    }
+
+    let stop = Arc::new(AtomicBool::new(false));
+    {
+        let stop = stop.clone();
+        // A second Ctrl-C kills at once (the first asks for a clean stop).
+        let _ = ctrlc::set_handler(move || {
+            if stop.swap(true, Ordering::SeqCst) {
+                std::process::exit(130);
+            }
+        });
+    }
+    let bar = if a.quiet {
+        ProgressBar::hidden()
+    } else {
+        ProgressBar::new(steps)
+    };
+    bar.set_style(
+        ProgressStyle::with_template(
+            "{elapsed_precise} [{bar:30}] {pos}/{len} steps  {msg}  ETA {eta}",
+        )
+        .expect("static template")
+        .progress_chars("=> "),
+    );
+    let mut progress = Bar {
+        bar,
+        quiet: a.quiet,
+    };
+    let outcome = pgrf_nn::backend::train(
+        device,
+        &settings,
+        Arc::new(train_src),
+        spec,
+        val.as_ref(),
+        &mut progress,
+        &stop,
+    )?;
+    report(a, &settings, &outcome)?;
+    if outcome.interrupted {
+        eprintln!(
+            "interrupted at step {}: checkpoint {} and weights {} written; continue with --resume",
+            outcome.end_step,
+            settings.checkpoint.display(),
+            out.display()
+        );
+        std::process::exit(130);
+    }
+    Ok(())
+}
+
+fn report(a: &TrainArgs, s: &TrainSettings, o: &Outcome) -> Result<()> {
+    let val = o
+        .val_psnr
+        .map(|p| format!(", validation PSNR {p:.2} dB"))
+        .unwrap_or_default();
+    let input = o
+        .val_input_psnr
+        .map(|p| format!(" (noisy input {p:.2} dB)"))
+        .unwrap_or_default();
+    if !a.quiet {
+        eprintln!(
+            "steps {}..{}: final loss {:.5}{val}{input}, {:.2} images/s, {:.1} s; wrote {}",
+            o.start_step,
+            o.end_step,
+            o.final_loss,
+            o.images_per_s,
+            o.seconds,
+            s.out.display()
+        );
+    }
+    if a.json {
+        println!(
+            "{}",
+            serde_json::json!({
+                "task": s.task(),
+                "steps": o.end_step,
+                "steps_this_run": o.end_step - o.start_step,
+                "final_loss": o.final_loss,
+                "val_psnr": o.val_psnr,
+                "val_input_psnr": o.val_input_psnr,
+                "images_per_s": o.images_per_s,
+                "seconds": o.seconds,
+                "interrupted": o.interrupted,
+                "output": s.out,
+                "checkpoint": s.checkpoint,
+            })
+        );
+    }
+    Ok(())
+}

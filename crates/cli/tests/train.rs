@@ -1,0 +1,387 @@
+//! `pgrf train` as scripts use it: flags and TOML config, the JSON summary,
+//! weight files with their record, resume, and one-line errors.
+
+use serde_json::Value;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn pgrf(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_pgrf"))
+        .args(args)
+        .output()
+        .expect("run pgrf")
+}
+
+fn scratch(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("pgrf-train-test-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+fn summary(out: &Output) -> Value {
+    assert!(
+        out.status.success(),
+        "pgrf failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let text = String::from_utf8_lossy(&out.stdout);
+    serde_json::from_str(text.lines().last().expect("a JSON line")).expect("JSON summary")
+}
+
+fn one_line_error(out: &Output) -> String {
+    let err = String::from_utf8_lossy(&out.stderr).to_string();
+    assert_eq!(out.status.code(), Some(1), "stderr: {err}");
+    let lines: Vec<&str> = err.lines().filter(|l| !l.trim().is_empty()).collect();
+    assert_eq!(lines.len(), 1, "expected one line, got: {err}");
+    err
+}
+
+/// Small settings shared by the tests: seconds on two cores.
+const SMALL: &[&str] = &[
+    "--data",
+    "procedural",
+    "--patch",
+    "32",
+    "--batch",
+    "2",
+    "--seed",
+    "1",
+    "--val-pairs",
+    "2",
+    "--val-every",
+    "4",
+    "--iso",
+    "1600",
+    "--quiet",
+    "--json",
+];
+
+#[test]
+fn denoiser_trains_resumes_and_writes_a_described_weight_file() {
+    let d = scratch("denoiser");
+    let out = d.join("m.safetensors");
+    let mut args = vec![
+        "train",
+        "denoiser",
+        "--steps",
+        "6",
+        "--width",
+        "4",
+        "-o",
+        s(&out),
+        "--schedule",
+        "constant",
+    ];
+    args.extend_from_slice(SMALL);
+    let full = summary(&pgrf(&args));
+    assert_eq!(full["steps"], 6);
+    assert!(full["final_loss"].as_f64().unwrap() > 0.0);
+    assert!(full["val_psnr"].as_f64().unwrap().is_finite());
+    assert!(full["images_per_s"].as_f64().unwrap() > 0.0);
+    let log = std::fs::read_to_string(out.with_extension("log.csv")).unwrap();
+    assert!(
+        log.starts_with("step,loss,lr,images_per_s,val_psnr,seconds\n"),
+        "{log}"
+    );
+    assert!(log.lines().last().unwrap().starts_with("6,"), "{log}");
+
+    // The record says what the file is.
+    let bytes = std::fs::read(&out).unwrap();
+    let n = u64::from_le_bytes(bytes[..8].try_into().unwrap()) as usize;
+    let header: Value = serde_json::from_slice(&bytes[8..8 + n]).unwrap();
+    let meta: Value =
+        serde_json::from_str(header["__metadata__"]["pgrf"].as_str().unwrap()).unwrap();
+    assert_eq!(meta["format"], "pgrf-weights");
+    assert_eq!(meta["arch"], "sid-unet");
+    assert_eq!(meta["config"]["width"], 4);
+    assert_eq!(meta["noise"]["profile"], "sony-a7s2");
+    assert_eq!(meta["training"]["steps"], 6);
+
+    // 3 steps, then resume to 6: the same weights bit for bit (the data
+    // stream is a function of the step, the optimiser state is checkpointed).
+    // The schedule is relative to --steps, so both runs use a constant rate.
+    let half = d.join("h.safetensors");
+    let mut a = vec![
+        "train",
+        "denoiser",
+        "--steps",
+        "3",
+        "--width",
+        "4",
+        "-o",
+        s(&half),
+        "--schedule",
+        "constant",
+    ];
+    a.extend_from_slice(SMALL);
+    assert_eq!(summary(&pgrf(&a))["steps"], 3);
+    let mut b = vec![
+        "train",
+        "denoiser",
+        "--steps",
+        "6",
+        "--width",
+        "4",
+        "-o",
+        s(&half),
+        "--resume",
+        "--schedule",
+        "constant",
+    ];
+    b.extend_from_slice(SMALL);
+    let resumed = summary(&pgrf(&b));
+    assert_eq!(resumed["steps_this_run"], 3);
+    assert_eq!(resumed["final_loss"], full["final_loss"]);
+    let tensors = |p: &Path| {
+        let b = std::fs::read(p).unwrap();
+        let n = u64::from_le_bytes(b[..8].try_into().unwrap()) as usize;
+        b[8 + n..].to_vec()
+    };
+    assert!(tensors(&half) == tensors(&out), "resumed weights differ");
+
+    // Resuming into another architecture is refused in one line.
+    let mut c = vec![
+        "train",
+        "denoiser",
+        "--steps",
+        "8",
+        "--width",
+        "8",
+        "-o",
+        s(&half),
+        "--resume",
+    ];
+    c.extend_from_slice(SMALL);
+    let e = one_line_error(&pgrf(&c));
+    assert!(e.contains("another network"), "{e}");
+}
+
+#[test]
+fn flow_trains_from_a_toml_config_that_flags_override() {
+    let d = scratch("flow");
+    let out = d.join("f.safetensors");
+    let cfg = d.join("flow.toml");
+    std::fs::write(
+        &cfg,
+        format!(
+            "data = \"procedural\"\nsteps = 50\ninner_channels = 8\nchannel_mults = [1, 2]\n\
+             attn_levels = [1]\nres_blocks = 1\npatch = 16\nlr = 1e-3\nschedule = \"constant\"\n\
+             log = \"{}\"\n",
+            s(&d.join("log.jsonl"))
+        ),
+    )
+    .unwrap();
+    let args = [
+        "train",
+        "flow",
+        "--config",
+        s(&cfg),
+        "--steps",
+        "3",
+        "--val-pairs",
+        "1",
+        "-o",
+        s(&out),
+        "--quiet",
+        "--json",
+    ];
+    let j = summary(&pgrf(&args));
+    assert_eq!(j["steps"], 3, "the flag overrides the file's 50");
+    assert_eq!(j["task"], "flow");
+    let log = std::fs::read_to_string(d.join("log.jsonl")).unwrap();
+    let last: Value = serde_json::from_str(log.lines().last().unwrap()).unwrap();
+    assert_eq!(last["step"], 3);
+    assert!(last["val_psnr"].as_f64().is_some());
+    let bytes = std::fs::read(&out).unwrap();
+    let n = u64::from_le_bytes(bytes[..8].try_into().unwrap()) as usize;
+    let header: Value = serde_json::from_slice(&bytes[8..8 + n]).unwrap();
+    let meta: Value =
+        serde_json::from_str(header["__metadata__"]["pgrf"].as_str().unwrap()).unwrap();
+    assert_eq!(meta["arch"], "sr3");
+    assert_eq!(meta["config"]["channel_mults"], serde_json::json!([1, 2]));
+    assert_eq!(
+        meta["config"]["norm_groups"], 8,
+        "largest group count dividing 8 and 16"
+    );
+    assert!(meta["t2"].is_null());
+}
+
+#[test]
+fn bad_settings_are_one_line_errors_and_write_nothing() {
+    let d = scratch("bad");
+    let out = d.join("x.safetensors");
+    let cfg = d.join("bad.toml");
+    std::fs::write(&cfg, "stepz = 3\n").unwrap();
+    let none = d.join("none");
+    let empty = d.join("empty");
+    std::fs::create_dir_all(&empty).unwrap();
+    let cases: Vec<(Vec<&str>, &str)> = vec![
+        (
+            vec!["train", "denoiser", "--config", s(&cfg), "-o", s(&out)],
+            "stepz",
+        ),
+        (
+            vec!["train", "denoiser", "--data", s(&none), "-o", s(&out)],
+            "none",
+        ),
+        (
+            vec!["train", "denoiser", "--data", s(&empty), "-o", s(&out)],
+            "no files",
+        ),
+        (
+            vec!["train", "denoiser", "--data", s(&d), "-o", s(&out)],
+            "bad.toml",
+        ),
+        (
+            vec!["train", "flow", "--attn-levels", "7", "-o", s(&out)],
+            "attn-levels",
+        ),
+        (
+            vec![
+                "train",
+                "flow",
+                "--inner-channels",
+                "6",
+                "--norm-groups",
+                "4",
+                "-o",
+                s(&out),
+            ],
+            "norm_groups",
+        ),
+        (
+            vec!["train", "denoiser", "--ratio-min", "0", "-o", s(&out)],
+            "ratio",
+        ),
+        (
+            vec![
+                "train",
+                "denoiser",
+                "--steps",
+                "1",
+                "-o",
+                "/no/such/dir/m.safetensors",
+            ],
+            "does not exist",
+        ),
+        (
+            vec!["train", "denoiser", "--resume", "-o", s(&out)],
+            "no checkpoint",
+        ),
+        (
+            vec!["train", "denoiser", "--device", "tpu", "-o", s(&out)],
+            "unknown device",
+        ),
+        (
+            vec![
+                "train",
+                "denoiser",
+                "--profile",
+                "no-such-camera",
+                "-o",
+                s(&out),
+            ],
+            "no-such-camera",
+        ),
+    ];
+    for (args, needle) in cases {
+        let e = one_line_error(&pgrf(&args));
+        assert!(e.contains(needle), "{args:?}: {e}");
+    }
+    if !cfg!(feature = "cuda") {
+        let e = one_line_error(&pgrf(&[
+            "train",
+            "denoiser",
+            "--device",
+            "cuda",
+            "-o",
+            s(&out),
+        ]));
+        assert!(e.contains("without CUDA"), "{e}");
+    }
+    // The config and the empty folder stay the only entries.
+    let names: Vec<_> = std::fs::read_dir(&d)
+        .unwrap()
+        .map(|e| e.unwrap().file_name())
+        .collect();
+    assert_eq!(names.len(), 2, "{names:?}");
+}
+
+#[test]
+fn ctrl_c_checkpoints_and_exits_130_and_the_run_resumes() {
+    let d = scratch("sigint");
+    let out = d.join("m.safetensors");
+    let log = out.with_extension("log.csv");
+    let child = Command::new(env!("CARGO_BIN_EXE_pgrf"))
+        .args([
+            "train",
+            "denoiser",
+            "--steps",
+            "100000",
+            "--width",
+            "4",
+            "--log-every",
+            "1",
+            "--val-pairs",
+            "0",
+            "-o",
+            s(&out),
+        ])
+        .args(&SMALL[..8])
+        .stderr(std::process::Stdio::piped())
+        .stdout(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    // Wait until a few steps are logged, then interrupt like Ctrl-C does.
+    let t0 = std::time::Instant::now();
+    while std::fs::read_to_string(&log)
+        .map(|l| l.lines().count())
+        .unwrap_or(0)
+        < 4
+    {
+        assert!(t0.elapsed().as_secs() < 120, "training did not start");
+        std::thread::sleep(std::time::Duration::from_millis(100));
+    }
+    let pid = child.id().to_string();
+    assert!(Command::new("kill")
+        .args(["-INT", &pid])
+        .status()
+        .unwrap()
+        .success());
+    let res = child.wait_with_output().unwrap();
+    let err = String::from_utf8_lossy(&res.stderr);
+    assert_eq!(res.status.code(), Some(130), "{err}");
+    assert!(err.contains("interrupted at step"), "{err}");
+    assert!(out.exists() && out.with_extension("ckpt").exists());
+    let step: u64 = err
+        .split("interrupted at step ")
+        .nth(1)
+        .and_then(|r| r.split(':').next())
+        .and_then(|n| n.trim().parse().ok())
+        .expect("step in message");
+    let mut args = vec![
+        "train",
+        "denoiser",
+        "--steps",
+        "0",
+        "--width",
+        "4",
+        "--val-pairs",
+        "0",
+        "-o",
+        s(&out),
+        "--resume",
+    ];
+    args.extend_from_slice(&SMALL[..8]);
+    args.extend_from_slice(&["--quiet", "--json"]);
+    let steps = (step + 2).to_string();
+    args[3] = &steps;
+    let j = summary(&pgrf(&args));
+    assert_eq!(j["steps"].as_u64(), Some(step + 2));
+    assert_eq!(j["steps_this_run"], 2);
+}

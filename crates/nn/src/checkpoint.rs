@@ -1,0 +1,146 @@
+//! Training checkpoints: everything needed to continue a run exactly where it
+//! stopped — network and Adam moments (burn records, full precision), the
+//! step, the configuration it was started with and the elapsed time. The data
+//! stream needs no state: batches are a function of (seed, index).
+//!
+//! Layout: magic "PGRFCKPT", u32 version, then three length-prefixed (u64 LE)
+//! blocks: JSON state, network record, optimiser record. Written atomically,
+//! so a run killed mid-write keeps its previous checkpoint.
+
+use crate::error::{NnError, Result};
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+
+const MAGIC: &[u8; 8] = b"PGRFCKPT";
+const VERSION: u32 = 1;
+
+/// The JSON part of a checkpoint.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+pub struct CheckpointState {
+    /// "denoiser" or "flow".
+    pub task: String,
+    /// The architecture record (same JSON as in weight files).
+    pub arch: serde_json::Value,
+    /// Steps completed.
+    pub step: u64,
+    /// Total steps the run was configured for.
+    pub steps: u64,
+    pub seed: u64,
+    pub batch: usize,
+    pub patch: usize,
+    /// Training seconds so far (excluding time between runs).
+    pub elapsed_s: f64,
+    pub last_loss: Option<f32>,
+    pub last_val_psnr: Option<f32>,
+}
+
+/// A checkpoint read back: state plus the two burn records as bytes.
+pub struct Checkpoint {
+    pub state: CheckpointState,
+    pub model: Vec<u8>,
+    pub optim: Vec<u8>,
+}
+
+fn err(path: &Path, reason: impl std::fmt::Display) -> NnError {
+    NnError::Invalid(format!("{}: {reason}", path.display()))
+}
+
+pub fn encode(state: &CheckpointState, model: &[u8], optim: &[u8]) -> Result<Vec<u8>> {
+    let json = serde_json::to_vec(state).map_err(|e| NnError::Invalid(e.to_string()))?;
+    let mut out = Vec::with_capacity(12 + 24 + json.len() + model.len() + optim.len());
+    out.extend_from_slice(MAGIC);
+    out.extend_from_slice(&VERSION.to_le_bytes());
+    for block in [&json[..], model, optim] {
+        out.extend_from_slice(&(block.len() as u64).to_le_bytes());
+        out.extend_from_slice(block);
+    }
+    Ok(out)
+}
+
+pub fn save(path: &Path, state: &CheckpointState, model: &[u8], optim: &[u8]) -> Result<()> {
+    let bytes = encode(state, model, optim)?;
+    pgrf_raw::atomic::write_atomic(path, &bytes).map_err(|e| err(path, e))
+}
+
+pub fn decode(path: &Path, bytes: &[u8]) -> Result<Checkpoint> {
+    if bytes.len() < 12 || &bytes[..8] != MAGIC {
+        return Err(err(path, "not a pgrf training checkpoint"));
+    }
+    let version = u32::from_le_bytes(bytes[8..12].try_into().expect("4 bytes"));
+    if version != VERSION {
+        return Err(err(
+            path,
+            format!("checkpoint version {version}, this pgrf reads {VERSION}"),
+        ));
+    }
+    let mut at = 12usize;
+    let mut blocks = Vec::with_capacity(3);
+    for name in ["state", "network", "optimiser"] {
+        let len = bytes
+            .get(at..at + 8)
+            .map(|b| u64::from_le_bytes(b.try_into().expect("8 bytes")) as usize)
+            .ok_or_else(|| err(path, format!("truncated before the {name} block")))?;
+        at += 8;
+        let end = at
+            .checked_add(len)
+            .filter(|&e| e <= bytes.len())
+            .ok_or_else(|| err(path, format!("truncated in the {name} block")))?;
+        blocks.push(bytes[at..end].to_vec());
+        at = end;
+    }
+    if at != bytes.len() {
+        return Err(err(path, "trailing bytes after the optimiser block"));
+    }
+    let optim = blocks.pop().expect("three blocks");
+    let model = blocks.pop().expect("three blocks");
+    let state: CheckpointState = serde_json::from_slice(&blocks[0])
+        .map_err(|e| err(path, format!("bad state record: {e}")))?;
+    Ok(Checkpoint {
+        state,
+        model,
+        optim,
+    })
+}
+
+pub fn load(path: &Path) -> Result<Checkpoint> {
+    let bytes = std::fs::read(path).map_err(|e| err(path, e))?;
+    decode(path, &bytes)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn state() -> CheckpointState {
+        CheckpointState {
+            task: "flow".into(),
+            arch: serde_json::json!({"arch": "sr3"}),
+            step: 40,
+            steps: 100,
+            seed: 7,
+            batch: 2,
+            patch: 64,
+            elapsed_s: 12.5,
+            last_loss: Some(0.1),
+            last_val_psnr: None,
+        }
+    }
+
+    #[test]
+    fn round_trip_and_every_truncation_is_refused() {
+        let p = Path::new("ck.bin");
+        let bytes = encode(&state(), &[1, 2, 3], &[4, 5]).unwrap();
+        let c = decode(p, &bytes).unwrap();
+        assert_eq!(c.state, state());
+        assert_eq!(
+            (c.model.as_slice(), c.optim.as_slice()),
+            (&[1u8, 2, 3][..], &[4u8, 5][..])
+        );
+        for cut in 0..bytes.len() {
+            assert!(decode(p, &bytes[..cut]).is_err(), "cut at {cut}");
+        }
+        let mut extra = bytes.clone();
+        extra.push(0);
+        assert!(decode(p, &extra).is_err());
+    }
+}

@@ -1,0 +1,243 @@
+//! Where clean training images come from: a folder of clean RAWs (any format
+//! pgrf-raw reads) or procedural dead-leaves scenes. Either way a source hands
+//! out packed, normalised `(4, P, P)` crops plus where on the sensor the crop
+//! lies (for per-pixel calibration maps and row-noise parity).
+//!
+//! Decoding a 12-megapixel RAW costs ~100 ms, far more than one training
+//! step's share of the data budget, so decoded files are kept (as packed u16,
+//! half the bytes of f32) up to a memory budget; beyond it they are decoded
+//! again when drawn.
+
+use crate::error::{NnError, Result};
+use pgrf_raw::ndarray::{s, Array3};
+use pgrf_raw::{decode_file, pack_u16, LevelOverrides, RawFrame, SceneKind, SceneSpec};
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+use std::sync::{Arc, Mutex};
+
+/// A clean crop and its place on the sensor.
+#[derive(Clone, Debug)]
+pub struct Crop {
+    /// Packed planes R, G1, B, G2, normalised (not clipped).
+    pub clean: Array3<f32>,
+    /// Sensor-row parity of each plane (from the CFA).
+    pub plane_rows: [usize; 4],
+    /// Top-left corner in packed coordinates of the source image.
+    pub origin: (usize, usize),
+    /// Packed size of the whole source image.
+    pub image: (usize, usize),
+}
+
+/// One decoded clean file, packed.
+struct Packed {
+    planes: Array3<u16>,
+    black: [f32; 4],
+    white: f32,
+    plane_rows: [usize; 4],
+}
+
+impl Packed {
+    fn from_frame(f: &RawFrame) -> Result<Packed> {
+        Ok(Packed {
+            planes: pack_u16(f)?,
+            black: f.black,
+            white: f.white as f32,
+            plane_rows: f.cfa.offsets().map(|(r, _)| r),
+        })
+    }
+
+    fn shape(&self) -> (usize, usize) {
+        (self.planes.shape()[1], self.planes.shape()[2])
+    }
+
+    fn crop(&self, y: usize, x: usize, h: usize, w: usize) -> Array3<f32> {
+        let mut out = Array3::<f32>::zeros((4, h, w));
+        for p in 0..4 {
+            let scale = 1.0 / (self.white - self.black[p]);
+            let src = self.planes.slice(s![p, y..y + h, x..x + w]);
+            let black = self.black[p];
+            out.slice_mut(s![p, .., ..])
+                .zip_mut_with(&src, |o, &v| *o = (v as f32 - black) * scale);
+        }
+        out
+    }
+}
+
+/// A folder of clean RAWs.
+pub struct Folder {
+    files: Vec<PathBuf>,
+    levels: LevelOverrides,
+    cache: Mutex<HashMap<usize, Arc<Packed>>>,
+    cached_bytes: Mutex<usize>,
+    budget_bytes: usize,
+}
+
+impl Folder {
+    /// `budget_mib`: memory for decoded files (0 decodes on every draw).
+    pub fn new(files: Vec<PathBuf>, levels: LevelOverrides, budget_mib: usize) -> Result<Folder> {
+        if files.is_empty() {
+            return Err(NnError::Invalid("no clean RAW files to train on".into()));
+        }
+        Ok(Folder {
+            files,
+            levels,
+            cache: Mutex::new(HashMap::new()),
+            cached_bytes: Mutex::new(0),
+            budget_bytes: budget_mib << 20,
+        })
+    }
+
+    /// The RAW files in `dir`, sorted by name.
+    pub fn list(dir: &Path) -> Result<Vec<PathBuf>> {
+        pgrf_calib::stack::list_files(dir).map_err(|e| NnError::Invalid(e.to_string()))
+    }
+
+    pub fn files(&self) -> &[PathBuf] {
+        &self.files
+    }
+
+    fn get(&self, i: usize) -> Result<Arc<Packed>> {
+        if let Some(p) = self.cache.lock().expect("cache lock").get(&i) {
+            return Ok(p.clone());
+        }
+        let path = &self.files[i];
+        let frame = decode_file(path, &self.levels)
+            .map_err(|e| NnError::Invalid(format!("{}: {e}", path.display())))?;
+        let packed = Arc::new(Packed::from_frame(&frame)?);
+        let bytes = packed.planes.len() * 2;
+        let mut used = self.cached_bytes.lock().expect("cache lock");
+        if *used + bytes <= self.budget_bytes {
+            *used += bytes;
+            self.cache
+                .lock()
+                .expect("cache lock")
+                .insert(i, packed.clone());
+        }
+        Ok(packed)
+    }
+
+    /// Packed size of file `i` (decodes it).
+    pub fn shape(&self, i: usize) -> Result<(usize, usize)> {
+        Ok(self.get(i)?.shape())
+    }
+
+    /// Check every file decodes and is large enough, naming the first that is
+    /// not, so a bad folder fails before training starts rather than hours in.
+    pub fn check(&self, patch: usize) -> Result<()> {
+        for (i, path) in self.files.iter().enumerate() {
+            let (h, w) = self.shape(i)?;
+            if h < patch || w < patch {
+                return Err(NnError::Invalid(format!(
+                    "{}: packs to {h}x{w}, smaller than the {patch}x{patch} training patch",
+                    path.display()
+                )));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Clean images to train or validate on.
+pub enum Source {
+    Procedural,
+    Folder(Folder),
+}
+
+impl Source {
+    pub fn describe(&self) -> String {
+        match self {
+            Source::Procedural => "procedural dead-leaves scenes".into(),
+            Source::Folder(f) => format!("{} clean RAW files", f.files.len()),
+        }
+    }
+
+    /// A `patch` x `patch` crop: procedural scenes are rendered at exactly the
+    /// patch size from `scene_seed`; files are cropped at `(fy, fx)` in [0, 1)
+    /// of the free range, from file `pick` modulo the file count.
+    pub fn crop(&self, patch: usize, scene_seed: u64, pick: u64, fy: f64, fx: f64) -> Result<Crop> {
+        match self {
+            Source::Procedural => {
+                let spec = SceneSpec::new(SceneKind::DeadLeaves, 2 * patch, 2 * patch, scene_seed);
+                Ok(Crop {
+                    clean: pgrf_raw::render_packed(&spec),
+                    plane_rows: pgrf_raw::Cfa::Rggb.offsets().map(|(r, _)| r),
+                    origin: (0, 0),
+                    image: (patch, patch),
+                })
+            }
+            Source::Folder(f) => {
+                let i = (pick % f.files.len() as u64) as usize;
+                let img = f.get(i)?;
+                let (h, w) = img.shape();
+                if h < patch || w < patch {
+                    return Err(NnError::Invalid(format!(
+                        "{}: packs to {h}x{w}, smaller than the {patch}x{patch} patch",
+                        f.files[i].display()
+                    )));
+                }
+                let y = ((h - patch + 1) as f64 * fy) as usize;
+                let x = ((w - patch + 1) as f64 * fx) as usize;
+                let (y, x) = (y.min(h - patch), x.min(w - patch));
+                Ok(Crop {
+                    clean: img.crop(y, x, patch, patch),
+                    plane_rows: img.plane_rows,
+                    origin: (y, x),
+                    image: (h, w),
+                })
+            }
+        }
+    }
+
+    /// Number of distinct images (procedural: unbounded).
+    pub fn len(&self) -> Option<usize> {
+        match self {
+            Source::Procedural => None,
+            Source::Folder(f) => Some(f.files.len()),
+        }
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len() == Some(0)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn procedural_crops_are_patch_sized_and_seeded() {
+        let a = Source::Procedural.crop(32, 5, 0, 0.0, 0.0).unwrap();
+        let b = Source::Procedural.crop(32, 5, 9, 0.7, 0.2).unwrap();
+        let c = Source::Procedural.crop(32, 6, 0, 0.0, 0.0).unwrap();
+        assert_eq!(a.clean.shape(), &[4, 32, 32]);
+        assert_eq!(a.clean, b.clean);
+        assert_ne!(a.clean, c.clean);
+    }
+
+    #[test]
+    fn folder_crops_normalise_with_each_files_levels() {
+        let data = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data/raw");
+        let file = data.join("canon550d_colorchart.dng");
+        if !file.exists() {
+            eprintln!("skipping: {} not found", file.display());
+            return;
+        }
+        let frame = decode_file(&file, &LevelOverrides::default()).unwrap();
+        let reference = pgrf_raw::pack_normalized(&frame, false).unwrap();
+        let src = Source::Folder(Folder::new(vec![file], LevelOverrides::default(), 64).unwrap());
+        let c = src.crop(64, 0, 0, 0.5, 1.0).unwrap();
+        let (y, x) = c.origin;
+        assert_eq!(x, reference.shape()[2] - 64);
+        let want = reference.slice(s![.., y..y + 64, x..x + 64]);
+        let err = c
+            .clean
+            .iter()
+            .zip(want.iter())
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0f32, f32::max);
+        assert!(err < 1e-6, "{err}");
+        let too_big = src.crop(100_000, 0, 0, 0.0, 0.0);
+        assert!(too_big.unwrap_err().to_string().contains("smaller than"));
+    }
+}

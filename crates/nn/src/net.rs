@@ -1,0 +1,48 @@
+//! One type for either network, so a single optimiser type, checkpoint
+//! format and loader serve both methods (SPC and PGRF).
+
+use crate::error::{NnError, Result};
+use crate::sr3::Sr3Unet;
+use crate::unet::SidUnet;
+use crate::weights::{self, Architecture, WeightMeta};
+use burn::module::Module;
+use burn::tensor::backend::Backend;
+use burn::tensor::Tensor;
+
+/// Either network, as one module so one optimiser type serves both.
+// Moved rarely (once per optimiser step, by value as burn requires); boxing
+// would buy nothing and complicate the derived module.
+#[allow(clippy::large_enum_variant)]
+#[derive(Module, Debug)]
+pub enum Net<B: Backend> {
+    Spc(SidUnet<B>),
+    Pgrf(Sr3Unet<B>),
+}
+
+impl Architecture {
+    /// A freshly initialised network of this architecture.
+    pub fn init<B: Backend>(&self, device: &B::Device) -> Result<Net<B>> {
+        Ok(match self {
+            Architecture::SidUnet(c) => Net::Spc(c.init(device)),
+            Architecture::Sr3(c) => Net::Pgrf(c.init(device).map_err(NnError::Invalid)?),
+        })
+    }
+}
+
+impl<B: Backend> Net<B> {
+    /// The denoised batch: one pass for SPC, the two-stage sampler at `t2`
+    /// for the flow model.
+    pub fn restore(&self, noisy: Tensor<B, 4>, x0: Tensor<B, 4>, t2: f32) -> Tensor<B, 4> {
+        match self {
+            Net::Spc(n) => n.forward(noisy),
+            Net::Pgrf(n) => crate::sample::two_stage(n, noisy, x0, t2),
+        }
+    }
+
+    pub fn save(&self, path: &std::path::Path, meta: &WeightMeta) -> Result<()> {
+        match self {
+            Net::Spc(n) => weights::save::<B, _>(path, n, meta),
+            Net::Pgrf(n) => weights::save::<B, _>(path, n, meta),
+        }
+    }
+}

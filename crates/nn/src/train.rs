@@ -1,0 +1,416 @@
+//! The training loop shared by both networks: batches from the worker-thread
+//! loader, Adam with a learning-rate schedule, validation PSNR, logs,
+//! checkpoints, and a clean stop on request. Backend-generic: the CLI picks
+//! Flex on the CPU or CUDA.
+
+use crate::checkpoint::{self, CheckpointState};
+use crate::data::validation::{psnr, ValSet};
+use crate::data::{Extras, Loader, SampleSpec, Source};
+use crate::error::{NnError, Result};
+use crate::net::Net;
+use crate::schedule::Schedule;
+use crate::step::{denoiser_loss, flow_loss};
+use crate::weights::{Architecture, NoiseSource, TrainingSummary, WeightMeta};
+use burn::module::{AutodiffModule, Module};
+use burn::optim::grad_clipping::GradientClippingConfig;
+use burn::optim::{AdamConfig, GradientsParams, Optimizer};
+use burn::record::{BinBytesRecorder, FullPrecisionSettings, Recorder};
+use burn::tensor::backend::{AutodiffBackend, Backend};
+use burn::tensor::{ElementConversion, Tensor, TensorData};
+use pgrf_noise::pair::PairSpec;
+use std::io::Write;
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::time::Instant;
+
+/// Everything the loop needs to know.
+#[derive(Clone, Debug)]
+pub struct TrainSettings {
+    pub arch: Architecture,
+    pub steps: u64,
+    pub batch: usize,
+    pub patch: usize,
+    pub seed: u64,
+    pub lr: f64,
+    pub schedule: Schedule,
+    /// Per-tensor gradient norm limit (burn's clipping), if any.
+    pub clip_grad: Option<f32>,
+    pub augment: bool,
+    pub workers: usize,
+    /// Validate every this many steps (0: only at the end).
+    pub val_every: u64,
+    /// t2 of the two-stage sampler used for validating the flow model.
+    pub val_t2: f32,
+    pub checkpoint_every: u64,
+    pub checkpoint: PathBuf,
+    pub out: PathBuf,
+    /// CSV log (or JSON lines when the name ends in .jsonl/.json).
+    pub log: Option<PathBuf>,
+    pub log_every: u64,
+    pub resume: bool,
+    pub noise: NoiseSource,
+    pub data: String,
+    pub device: String,
+}
+
+impl TrainSettings {
+    pub fn task(&self) -> &'static str {
+        match self.arch {
+            Architecture::SidUnet(_) => "denoiser",
+            Architecture::Sr3(_) => "flow",
+        }
+    }
+}
+
+/// What the loop reports as it goes (the CLI draws a progress bar).
+pub trait Progress {
+    fn start(&mut self, from: u64, total: u64);
+    fn step(&mut self, step: u64, loss: f32, lr: f64, images_per_s: f64);
+    fn note(&mut self, msg: &str);
+    fn finish(&mut self);
+}
+
+/// Silent progress, for tests and scripts.
+pub struct Quiet;
+impl Progress for Quiet {
+    fn start(&mut self, _: u64, _: u64) {}
+    fn step(&mut self, _: u64, _: f32, _: f64, _: f64) {}
+    fn note(&mut self, _: &str) {}
+    fn finish(&mut self) {}
+}
+
+/// How a run ended.
+#[derive(Clone, Debug)]
+pub struct Outcome {
+    pub start_step: u64,
+    pub end_step: u64,
+    /// Loss of every step run in this call, in order.
+    pub losses: Vec<f32>,
+    pub final_loss: f32,
+    pub val_psnr: Option<f32>,
+    /// PSNR of the (amplified, clamped) noisy input on the validation pairs.
+    pub val_input_psnr: Option<f32>,
+    pub seconds: f64,
+    pub images_per_s: f64,
+    pub interrupted: bool,
+}
+
+type Rec = BinBytesRecorder<FullPrecisionSettings>;
+
+fn to_tensor<B: Backend>(v: &[f32], shape: [usize; 4], device: &B::Device) -> Tensor<B, 4> {
+    Tensor::from_data(TensorData::new(v.to_vec(), shape), device)
+}
+
+/// Mean PSNR of the network on the validation pairs (one at a time, so memory
+/// stays that of a single patch).
+pub fn validate<B: Backend>(net: &Net<B>, val: &ValSet, t2: f32, device: &B::Device) -> f32 {
+    let p = val.patch;
+    let mut sum = 0.0;
+    for pair in &val.pairs {
+        let noisy = to_tensor::<B>(&pair.noisy, [1, 4, p, p], device);
+        let x0 = to_tensor::<B>(&pair.x0, [1, 4, p, p], device);
+        let out: Vec<f32> = net
+            .restore(noisy, x0, t2)
+            .into_data()
+            .convert::<f32>()
+            .to_vec()
+            .expect("f32 output");
+        sum += psnr(&out, &pair.clean);
+    }
+    sum / val.pairs.len().max(1) as f32
+}
+
+struct Log {
+    file: Option<std::fs::File>,
+    json: bool,
+}
+
+impl Log {
+    const HEADER: &'static str = "step,loss,lr,images_per_s,val_psnr,seconds";
+
+    /// Open the log; on resume keep only the rows up to the checkpoint's step
+    /// (a crash after the last checkpoint leaves rows that will be redone).
+    fn open(path: Option<&PathBuf>, resume_step: Option<u64>) -> Result<Log> {
+        let Some(path) = path else {
+            return Ok(Log {
+                file: None,
+                json: false,
+            });
+        };
+        let json = matches!(
+            path.extension().and_then(|e| e.to_str()),
+            Some("jsonl") | Some("json")
+        );
+        let mut kept = String::new();
+        if let (Some(upto), Ok(text)) = (resume_step, std::fs::read_to_string(path)) {
+            for line in text.lines() {
+                let step = if json {
+                    serde_json::from_str::<serde_json::Value>(line)
+                        .ok()
+                        .and_then(|v| v.get("step").and_then(|s| s.as_u64()))
+                } else {
+                    line.split(',').next().and_then(|s| s.parse::<u64>().ok())
+                };
+                if step.is_some_and(|s| s <= upto) {
+                    kept.push_str(line);
+                    kept.push('\n');
+                }
+            }
+        }
+        let mut file = std::fs::File::create(path)
+            .map_err(|e| NnError::Invalid(format!("{}: {e}", path.display())))?;
+        let header = if json {
+            String::new()
+        } else {
+            format!("{}\n", Self::HEADER)
+        };
+        file.write_all(header.as_bytes())
+            .and_then(|_| file.write_all(kept.as_bytes()))
+            .map_err(|e| NnError::Invalid(format!("{}: {e}", path.display())))?;
+        Ok(Log {
+            file: Some(file),
+            json,
+        })
+    }
+
+    fn row(&mut self, step: u64, loss: f32, lr: f64, ips: f64, val: Option<f32>, secs: f64) {
+        let Some(f) = self.file.as_mut() else { return };
+        let line = if self.json {
+            serde_json::json!({"step": step, "loss": loss, "lr": lr, "images_per_s": ips,
+                "val_psnr": val, "seconds": secs})
+            .to_string()
+        } else {
+            let v = val.map(|v| format!("{v:.4}")).unwrap_or_default();
+            format!("{step},{loss:.6},{lr:e},{ips:.3},{v},{secs:.2}")
+        };
+        // A full disk should not kill hours of training: warn once via the row loss.
+        let _ = writeln!(f, "{line}");
+    }
+}
+
+/// Train from scratch or resume, until `settings.steps` or until `stop` is set.
+pub fn train<B: AutodiffBackend>(
+    s: &TrainSettings,
+    source: Arc<Source>,
+    spec: Arc<PairSpec>,
+    val: Option<&ValSet>,
+    device: &B::Device,
+    progress: &mut dyn Progress,
+    stop: &AtomicBool,
+) -> Result<Outcome> {
+    if s.batch == 0 || s.patch == 0 {
+        return Err(NnError::Invalid(
+            "batch and patch must be at least 1".into(),
+        ));
+    }
+    if !(s.lr > 0.0 && s.lr.is_finite()) {
+        return Err(NnError::Invalid(format!(
+            "learning rate must be > 0, got {}",
+            s.lr
+        )));
+    }
+    let arch_json = serde_json::to_value(&s.arch).map_err(|e| NnError::Invalid(e.to_string()))?;
+    B::seed(device, s.seed);
+    let mut net: Net<B> = s.arch.init(device)?;
+    let mut adam = AdamConfig::new().with_epsilon(1e-8);
+    if let Some(c) = s.clip_grad {
+        adam = adam.with_grad_clipping(Some(GradientClippingConfig::Norm(c)));
+    }
+    let mut optim = adam.init::<B, Net<B>>();
+    let recorder = Rec::default();
+
+    let (mut start, mut elapsed0, mut last_val) = (0u64, 0.0f64, None);
+    if s.resume {
+        let ck = checkpoint::load(&s.checkpoint)?;
+        let st = &ck.state;
+        if st.task != s.task() || st.arch != arch_json {
+            return Err(NnError::Invalid(format!(
+                "{}: checkpoint is of another network ({} {}), not this configuration",
+                s.checkpoint.display(),
+                st.task,
+                st.arch
+            )));
+        }
+        if (st.seed, st.batch, st.patch) != (s.seed, s.batch, s.patch) {
+            return Err(NnError::Invalid(format!(
+                "{}: checkpoint was made with seed {}, batch {}, patch {}; resume with the same",
+                s.checkpoint.display(),
+                st.seed,
+                st.batch,
+                st.patch
+            )));
+        }
+        let bad = |e: burn::record::RecorderError| {
+            NnError::Invalid(format!("{}: {e}", s.checkpoint.display()))
+        };
+        net = net.load_record(recorder.load(ck.model, device).map_err(bad)?);
+        optim = optim.load_record(recorder.load(ck.optim, device).map_err(bad)?);
+        start = st.step;
+        elapsed0 = st.elapsed_s;
+        last_val = st.last_val_psnr;
+        progress.note(&format!(
+            "resumed from {} at step {start}",
+            s.checkpoint.display()
+        ));
+    }
+    let mut log = Log::open(s.log.as_ref(), s.resume.then_some(start))?;
+
+    let extras = match s.arch {
+        Architecture::SidUnet(_) => Extras::None,
+        Architecture::Sr3(_) => Extras::Flow,
+    };
+    let sample = SampleSpec {
+        patch: s.patch,
+        seed: s.seed,
+        augment: s.augment,
+        extras,
+    };
+    let mut loader = Loader::start(source, spec, sample, s.batch, start, s.workers, 2);
+    let shape = [s.batch, 4, s.patch, s.patch];
+    let clock = Instant::now();
+    let mut losses = Vec::new();
+    let mut window = (0.0f64, 0u64);
+    let mut interrupted = false;
+    let mut step = start;
+    let save_checkpoint =
+        |net: &Net<B>,
+         optim: &burn::optim::adaptor::OptimizerAdaptor<burn::optim::Adam, Net<B>, B>,
+         step: u64,
+         elapsed: f64,
+         last_loss: Option<f32>,
+         last_val: Option<f32>|
+         -> Result<()> {
+            let bad = |e: burn::record::RecorderError| NnError::Invalid(e.to_string());
+            let model = recorder
+                .record(net.clone().into_record(), ())
+                .map_err(bad)?;
+            let opt = recorder.record(optim.to_record(), ()).map_err(bad)?;
+            let state = CheckpointState {
+                task: s.task().into(),
+                arch: arch_json.clone(),
+                step,
+                steps: s.steps,
+                seed: s.seed,
+                batch: s.batch,
+                patch: s.patch,
+                elapsed_s: elapsed,
+                last_loss,
+                last_val_psnr: last_val,
+            };
+            checkpoint::save(&s.checkpoint, &state, &model, &opt)
+        };
+
+    progress.start(start, s.steps);
+    while step < s.steps {
+        if stop.load(Ordering::Relaxed) {
+            interrupted = true;
+            break;
+        }
+        let batch = loader.next_batch()?;
+        let lr = s.schedule.lr(s.lr, step, s.steps);
+        let noisy = to_tensor::<B>(&batch.noisy, shape, device);
+        let clean = to_tensor::<B>(&batch.clean, shape, device);
+        let loss = match &net {
+            Net::Spc(n) => denoiser_loss(n, noisy, clean),
+            Net::Pgrf(n) => {
+                let x0 = to_tensor::<B>(&batch.x0, shape, device);
+                let t =
+                    Tensor::<B, 1>::from_data(TensorData::new(batch.t.clone(), [s.batch]), device);
+                flow_loss(n, noisy, clean, x0, t)
+            }
+        };
+        let value: f32 = loss.clone().into_scalar().elem();
+        if !value.is_finite() {
+            return Err(NnError::Invalid(format!(
+                "loss became {value} at step {step}; lower the learning rate or set clip_grad"
+            )));
+        }
+        let grads = GradientsParams::from_grads(loss.backward(), &net);
+        net = optim.step(lr, net, grads);
+        step += 1;
+        losses.push(value);
+        window.0 += value as f64;
+        window.1 += 1;
+        let secs = clock.elapsed().as_secs_f64();
+        let ips = ((step - start) as usize * s.batch) as f64 / secs.max(1e-9);
+        progress.step(step, value, lr, ips);
+        let mut val_now = None;
+        if let Some(v) = val {
+            if s.val_every > 0 && step % s.val_every == 0 && step < s.steps {
+                let p = validate(&net.valid(), v, s.val_t2, device);
+                progress.note(&format!("step {step}: validation PSNR {p:.2} dB"));
+                last_val = Some(p);
+                val_now = Some(p);
+            }
+        }
+        // The last step's row is written after the final validation.
+        if (step % s.log_every.max(1) == 0 || val_now.is_some()) && step < s.steps {
+            let mean = (window.0 / window.1.max(1) as f64) as f32;
+            log.row(step, mean, lr, ips, val_now, elapsed0 + secs);
+            window = (0.0, 0);
+        }
+        if s.checkpoint_every > 0 && step % s.checkpoint_every == 0 && step < s.steps {
+            save_checkpoint(&net, &optim, step, elapsed0 + secs, Some(value), last_val)?;
+        }
+    }
+    drop(loader);
+    let seconds = clock.elapsed().as_secs_f64();
+    let images_per_s = ((step - start) as usize * s.batch) as f64 / seconds.max(1e-9);
+    let (mut val_psnr, mut val_input_psnr) = (last_val, None);
+    let mut final_val = None;
+    if let Some(v) = val {
+        if !interrupted {
+            let p = validate(&net.valid(), v, s.val_t2, device);
+            val_psnr = Some(p);
+            final_val = Some(p);
+        }
+        val_input_psnr = Some(
+            v.pairs
+                .iter()
+                .map(|p| psnr(&p.noisy, &p.clean))
+                .sum::<f32>()
+                / v.pairs.len().max(1) as f32,
+        );
+    }
+    if window.1 > 0 {
+        let mean = (window.0 / window.1 as f64) as f32;
+        let lr = s.schedule.lr(s.lr, step.saturating_sub(1), s.steps);
+        log.row(step, mean, lr, images_per_s, final_val, elapsed0 + seconds);
+    }
+    let final_loss = losses.last().copied().unwrap_or(f32::NAN);
+    save_checkpoint(
+        &net,
+        &optim,
+        step,
+        elapsed0 + seconds,
+        losses.last().copied(),
+        val_psnr,
+    )?;
+    let mut meta = WeightMeta::new(s.arch.clone(), s.noise.clone());
+    meta.training = Some(TrainingSummary {
+        steps: step,
+        batch: s.batch,
+        patch: s.patch,
+        seed: s.seed,
+        data: s.data.clone(),
+        final_loss,
+        val_psnr,
+        seconds: elapsed0 + seconds,
+        images_per_s,
+        device: s.device.clone(),
+    });
+    net.valid().save(&s.out, &meta)?;
+    progress.finish();
+    Ok(Outcome {
+        start_step: start,
+        end_step: step,
+        losses,
+        final_loss,
+        val_psnr,
+        val_input_psnr,
+        seconds,
+        images_per_s,
+        interrupted,
+    })
+}

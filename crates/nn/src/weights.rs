@@ -1,0 +1,377 @@
+//! Weight files: safetensors of named f32 tensors plus one JSON record under
+//! the metadata key "pgrf" that says which network it is (architecture and its
+//! configuration), what noise it was trained on, how training went, and for
+//! the flow model the searched t2. Everything a later command needs to use
+//! the file travels with it, so `pgrf enhance` needs no flags about the model.
+
+use crate::error::{NnError, Result};
+use crate::named::{self, NamedTensor};
+use crate::net::Net;
+use crate::sr3::{Sr3Config, Sr3Unet};
+use crate::unet::{SidUnet, SidUnetConfig};
+use burn::module::Module;
+use burn::tensor::backend::Backend;
+use safetensors::tensor::{Dtype, SafeTensors, TensorView};
+use serde::{Deserialize, Serialize};
+use std::collections::{BTreeMap, HashMap};
+use std::path::Path;
+
+/// Metadata key of pgrf's record (the same key calibration files use).
+pub const META_KEY: &str = "pgrf";
+/// Value of `format` in every weight file.
+pub const FORMAT: &str = "pgrf-weights";
+pub const VERSION: u32 = 1;
+
+/// The two networks and their configurations.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+#[serde(tag = "arch", content = "config", rename_all = "kebab-case")]
+pub enum Architecture {
+    /// SPC: the SID U-Net, one pass from amplified noisy to clean.
+    SidUnet(SidUnetConfig),
+    /// PGRF: the SR3 velocity field of the rectified flow.
+    Sr3(Sr3Config),
+}
+
+impl Architecture {
+    /// "spc" or "pgrf": the method the weights implement.
+    pub fn method(&self) -> &'static str {
+        match self {
+            Architecture::SidUnet(_) => "spc",
+            Architecture::Sr3(_) => "pgrf",
+        }
+    }
+
+    pub fn describe(&self) -> String {
+        match self {
+            Architecture::SidUnet(c) => format!("SPC denoiser (SID U-Net, width {})", c.width),
+            Architecture::Sr3(c) => format!(
+                "PGRF flow model (SR3, {} channels x {:?})",
+                c.inner_channels, c.channel_mults
+            ),
+        }
+    }
+}
+
+/// Which noise the network learned to remove.
+#[derive(Clone, Debug, Default, Serialize, Deserialize, PartialEq)]
+pub struct NoiseSource {
+    /// Camera profile name or path.
+    pub profile: Option<String>,
+    /// Identity of the calibration file (camera, ISO, file name), when one was used.
+    pub calibration: Option<String>,
+    /// Noise model: pg, eld or pgrf.
+    pub model: String,
+    /// Fixed ISO, or None for ELD-sampled parameters.
+    pub iso: Option<u32>,
+    /// Exposure-ratio range the pairs were drawn from.
+    pub ratio: [f32; 2],
+}
+
+/// How training went, for people choosing between files.
+#[derive(Clone, Debug, Default, Serialize, Deserialize, PartialEq)]
+pub struct TrainingSummary {
+    pub steps: u64,
+    pub batch: usize,
+    pub patch: usize,
+    pub seed: u64,
+    pub data: String,
+    pub final_loss: f32,
+    /// PSNR (dB) on the held-out validation pairs at the end of training.
+    pub val_psnr: Option<f32>,
+    pub seconds: f64,
+    pub images_per_s: f64,
+    pub device: String,
+}
+
+/// The record stored in every weight file.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct WeightMeta {
+    pub format: String,
+    pub version: u32,
+    #[serde(flatten)]
+    pub arch: Architecture,
+    pub noise: NoiseSource,
+    pub training: Option<TrainingSummary>,
+    /// Second time of the two-stage sampler (flow model), from the sampling
+    /// search; None until searched.
+    pub t2: Option<f32>,
+}
+
+impl WeightMeta {
+    pub fn new(arch: Architecture, noise: NoiseSource) -> WeightMeta {
+        WeightMeta {
+            format: FORMAT.into(),
+            version: VERSION,
+            arch,
+            noise,
+            training: None,
+            t2: None,
+        }
+    }
+}
+
+fn err(path: &Path, reason: impl std::fmt::Display) -> NnError {
+    NnError::Invalid(format!("{}: {reason}", path.display()))
+}
+
+/// Serialise named tensors and the record to safetensors bytes.
+pub fn encode(tensors: &BTreeMap<String, NamedTensor>, meta: &WeightMeta) -> Result<Vec<u8>> {
+    let bytes: Vec<(&String, Vec<u8>, &Vec<usize>)> = tensors
+        .iter()
+        .map(|(n, t)| {
+            let b: Vec<u8> = t.values.iter().flat_map(|v| v.to_le_bytes()).collect();
+            (n, b, &t.shape)
+        })
+        .collect();
+    let views = bytes
+        .iter()
+        .map(|(n, b, s)| {
+            TensorView::new(Dtype::F32, (*s).clone(), b)
+                .map(|v| ((*n).clone(), v))
+                .map_err(|e| NnError::Invalid(e.to_string()))
+        })
+        .collect::<Result<Vec<_>>>()?;
+    let mut info = HashMap::new();
+    info.insert(
+        META_KEY.to_string(),
+        serde_json::to_string(meta).map_err(|e| NnError::Invalid(e.to_string()))?,
+    );
+    safetensors::tensor::serialize(views, Some(info)).map_err(|e| NnError::Invalid(e.to_string()))
+}
+
+/// Write `module`'s parameters and `meta` atomically.
+pub fn save<B: Backend, M: Module<B>>(path: &Path, module: &M, meta: &WeightMeta) -> Result<()> {
+    let bytes = encode(&named::collect::<B, M>(module), meta)?;
+    pgrf_raw::atomic::write_atomic(path, &bytes).map_err(|e| err(path, e))
+}
+
+/// Parse weight-file bytes into the record and the tensors.
+pub fn decode(path: &Path, bytes: &[u8]) -> Result<(WeightMeta, BTreeMap<String, NamedTensor>)> {
+    let (_, header) = SafeTensors::read_metadata(bytes)
+        .map_err(|e| err(path, format!("not a safetensors file ({e})")))?;
+    let text = header
+        .metadata()
+        .as_ref()
+        .and_then(|m| m.get(META_KEY))
+        .ok_or_else(|| {
+            err(
+                path,
+                "no pgrf record in the metadata (not a pgrf weight file)",
+            )
+        })?;
+    let value: serde_json::Value =
+        serde_json::from_str(text).map_err(|e| err(path, format!("bad metadata: {e}")))?;
+    if value.get("format").and_then(|f| f.as_str()) != Some(FORMAT) {
+        return Err(err(
+            path,
+            "this is a pgrf file but not a weight file (a calibration or truth map?)",
+        ));
+    }
+    let meta: WeightMeta =
+        serde_json::from_value(value).map_err(|e| err(path, format!("bad metadata: {e}")))?;
+    if meta.version > VERSION {
+        return Err(err(
+            path,
+            format!(
+                "weight file version {} is newer than this pgrf reads ({VERSION})",
+                meta.version
+            ),
+        ));
+    }
+    let st = SafeTensors::deserialize(bytes).map_err(|e| err(path, e))?;
+    let mut out = BTreeMap::new();
+    for (name, view) in st.tensors() {
+        if view.dtype() != Dtype::F32 {
+            return Err(err(
+                path,
+                format!("tensor {name} is {:?}, expected F32", view.dtype()),
+            ));
+        }
+        let values: Vec<f32> = view
+            .data()
+            .chunks_exact(4)
+            .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+            .collect();
+        if let Some(bad) = values.iter().position(|v| !v.is_finite()) {
+            return Err(err(
+                path,
+                format!("tensor {name} holds a non-finite value at index {bad}"),
+            ));
+        }
+        out.insert(
+            name,
+            NamedTensor {
+                shape: view.shape().to_vec(),
+                values,
+            },
+        );
+    }
+    Ok((meta, out))
+}
+
+/// Read a weight file's record without building the network.
+pub fn read_meta(path: &Path) -> Result<WeightMeta> {
+    Ok(read(path)?.0)
+}
+
+pub fn read(path: &Path) -> Result<(WeightMeta, BTreeMap<String, NamedTensor>)> {
+    let bytes = std::fs::read(path).map_err(|e| err(path, e))?;
+    decode(path, &bytes)
+}
+
+/// Build the network the file describes and load its weights.
+pub fn load<B: Backend>(path: &Path, device: &B::Device) -> Result<(Net<B>, WeightMeta)> {
+    let (meta, tensors) = read(path)?;
+    let net = match &meta.arch {
+        Architecture::SidUnet(c) => Net::Spc(
+            named::assign(c.init::<B>(device), &tensors, device).map_err(|e| {
+                err(
+                    path,
+                    format!("weights do not fit {}: {e}", meta.arch.describe()),
+                )
+            })?,
+        ),
+        Architecture::Sr3(c) => {
+            let net = c.init::<B>(device).map_err(|e| err(path, e))?;
+            Net::Pgrf(named::assign(net, &tensors, device).map_err(|e| {
+                err(
+                    path,
+                    format!("weights do not fit {}: {e}", meta.arch.describe()),
+                )
+            })?)
+        }
+    };
+    Ok((net, meta))
+}
+
+/// Load a file that must hold the SPC denoiser.
+pub fn load_denoiser<B: Backend>(
+    path: &Path,
+    device: &B::Device,
+) -> Result<(SidUnet<B>, WeightMeta)> {
+    match load::<B>(path, device)? {
+        (Net::Spc(n), m) => Ok((n, m)),
+        (_, m) => Err(err(
+            path,
+            format!("holds a {}, not an SPC denoiser", m.arch.describe()),
+        )),
+    }
+}
+
+/// Load a file that must hold the PGRF flow model.
+pub fn load_flow<B: Backend>(path: &Path, device: &B::Device) -> Result<(Sr3Unet<B>, WeightMeta)> {
+    match load::<B>(path, device)? {
+        (Net::Pgrf(n), m) => Ok((n, m)),
+        (_, m) => Err(err(
+            path,
+            format!("holds an {}, not a PGRF flow model", m.arch.describe()),
+        )),
+    }
+}
+
+/// Rewrite only the record of an existing weight file (e.g. the searched t2),
+/// atomically, keeping the tensors bit for bit.
+pub fn update_meta(path: &Path, f: impl FnOnce(&mut WeightMeta)) -> Result<WeightMeta> {
+    let (mut meta, tensors) = read(path)?;
+    f(&mut meta);
+    let bytes = encode(&tensors, &meta)?;
+    pgrf_raw::atomic::write_atomic(path, &bytes).map_err(|e| err(path, e))?;
+    Ok(meta)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::backend::Cpu;
+    use burn::tensor::{Distribution, Tensor};
+
+    fn tmp(name: &str) -> std::path::PathBuf {
+        let d = std::env::temp_dir().join(format!("pgrf-nn-weights-{}", std::process::id()));
+        std::fs::create_dir_all(&d).unwrap();
+        d.join(name)
+    }
+
+    fn noise() -> NoiseSource {
+        NoiseSource {
+            profile: Some("sony-a7s2".into()),
+            calibration: None,
+            model: "pgrf".into(),
+            iso: None,
+            ratio: [100.0, 300.0],
+        }
+    }
+
+    #[test]
+    fn save_load_gives_identical_outputs_and_keeps_the_record() {
+        let device = Default::default();
+        let cfg = SidUnetConfig::new().with_width(4);
+        let net = cfg.init::<Cpu>(&device);
+        let p = tmp("spc.safetensors");
+        let mut meta = WeightMeta::new(Architecture::SidUnet(cfg), noise());
+        meta.training = Some(TrainingSummary {
+            steps: 12,
+            final_loss: 0.25,
+            ..Default::default()
+        });
+        save::<Cpu, _>(&p, &net, &meta).unwrap();
+        let (back, m) = load_denoiser::<Cpu>(&p, &device).unwrap();
+        assert_eq!(m.training.as_ref().unwrap().steps, 12);
+        assert_eq!(m.noise, noise());
+        let x = Tensor::<Cpu, 4>::random([1, 4, 20, 36], Distribution::Default, &device);
+        let a: Vec<f32> = net.forward(x.clone()).into_data().to_vec().unwrap();
+        let b: Vec<f32> = back.forward(x).into_data().to_vec().unwrap();
+        assert_eq!(a, b);
+    }
+
+    #[test]
+    fn the_wrong_kind_and_a_wrong_config_are_refused() {
+        let device = Default::default();
+        let cfg = Sr3Config::new()
+            .with_inner_channels(8)
+            .with_channel_mults(vec![1, 2])
+            .with_res_blocks(1)
+            .with_attn_levels(vec![1])
+            .with_norm_groups(4);
+        let net = cfg.init::<Cpu>(&device).unwrap();
+        let p = tmp("flow.safetensors");
+        save::<Cpu, _>(&p, &net, &WeightMeta::new(Architecture::Sr3(cfg), noise())).unwrap();
+        let e = load_denoiser::<Cpu>(&p, &device).unwrap_err().to_string();
+        assert!(e.contains("not an SPC denoiser"), "{e}");
+        assert!(load_flow::<Cpu>(&p, &device).is_ok());
+        // The record says one width, the tensors are of another network.
+        let bytes = std::fs::read(&p).unwrap();
+        let (_, tensors) = decode(&p, &bytes).unwrap();
+        let wrong = WeightMeta::new(
+            Architecture::Sr3(Sr3Config::new().with_inner_channels(16).with_norm_groups(4)),
+            noise(),
+        );
+        let q = tmp("wrong.safetensors");
+        std::fs::write(&q, encode(&tensors, &wrong).unwrap()).unwrap();
+        let e = load_flow::<Cpu>(&q, &device).unwrap_err().to_string();
+        assert!(e.contains("weights do not fit"), "{e}");
+    }
+
+    #[test]
+    fn t2_is_rewritten_in_place_and_other_files_are_refused() {
+        let device = Default::default();
+        let cfg = SidUnetConfig::new().with_width(2);
+        let p = tmp("t2.safetensors");
+        save::<Cpu, _>(
+            &p,
+            &cfg.init::<Cpu>(&device),
+            &WeightMeta::new(Architecture::SidUnet(cfg), noise()),
+        )
+        .unwrap();
+        let before = read(&p).unwrap().1;
+        update_meta(&p, |m| m.t2 = Some(0.3)).unwrap();
+        let (m, after) = read(&p).unwrap();
+        assert_eq!(m.t2, Some(0.3));
+        assert_eq!(before, after);
+        let junk = tmp("junk.safetensors");
+        std::fs::write(&junk, b"not a weight file at all").unwrap();
+        assert!(read(&junk)
+            .unwrap_err()
+            .to_string()
+            .contains("not a safetensors"));
+    }
+}

@@ -1,0 +1,157 @@
+//! Burn's backward passes for the two layers every pgrf network leans on —
+//! 3x3 convolution and GroupNorm — against central finite differences of the
+//! same layer on the plain backend. f32 arithmetic: steps of 1e-2 and a
+//! tolerance of 2 % of the gradient's scale (conv is linear in its weights,
+//! so there the difference quotient is exact up to rounding).
+
+use burn::module::{AutodiffModule, Module};
+use burn::nn::conv::Conv2dConfig;
+use burn::nn::{GroupNormConfig, PaddingConfig2d};
+use burn::tensor::backend::Backend;
+use burn::tensor::{Distribution, Tensor, TensorData};
+use pgrf_nn::backend::{Cpu, CpuTrain};
+use pgrf_nn::named::{assign, collect};
+
+const H: f32 = 1e-2;
+
+fn values<B: Backend, const D: usize>(t: Tensor<B, D>) -> Vec<f32> {
+    t.into_data().convert::<f32>().to_vec().unwrap()
+}
+
+/// Compare analytic and numeric derivatives at a few indices.
+fn check(what: &str, analytic: &[f32], numeric: impl Fn(usize) -> f32, picks: &[usize]) {
+    let scale = analytic
+        .iter()
+        .fold(0.0f32, |m, v| m.max(v.abs()))
+        .max(1e-3);
+    for &i in picks {
+        let n = numeric(i);
+        let a = analytic[i];
+        assert!(
+            (a - n).abs() <= 0.02 * scale,
+            "{what}[{i}]: autodiff {a}, finite difference {n} (scale {scale})"
+        );
+    }
+}
+
+/// Loss = sum(layer(x) * r), evaluated on the plain backend for finite differences.
+fn loss_plain<M: Module<Cpu>>(
+    m: &M,
+    fwd: impl Fn(&M, Tensor<Cpu, 4>) -> Tensor<Cpu, 4>,
+    x: &[f32],
+    shape: [usize; 4],
+    r: &Tensor<Cpu, 4>,
+) -> f32 {
+    let xt = Tensor::<Cpu, 4>::from_data(TensorData::new(x.to_vec(), shape), &Default::default());
+    values((fwd(m, xt) * r.clone()).sum())[0]
+}
+
+#[test]
+fn conv3x3_gradients_match_finite_differences() {
+    let device = Default::default();
+    <CpuTrain as Backend>::seed(&device, 3);
+    let shape = [2, 3, 7, 6];
+    let cfg = Conv2dConfig::new([3, 4], [3, 3]).with_padding(PaddingConfig2d::Same);
+    let conv = cfg.init::<CpuTrain>(&device);
+    let x = Tensor::<CpuTrain, 4>::random(shape, Distribution::Normal(0.0, 1.0), &device)
+        .require_grad();
+    let out = conv.forward(x.clone());
+    let r = Tensor::<CpuTrain, 4>::random(out.dims(), Distribution::Normal(0.0, 1.0), &device);
+    let grads = (out * r.clone()).sum().backward();
+    let gw = values(conv.weight.val().grad(&grads).unwrap());
+    let gb = values(conv.bias.as_ref().unwrap().val().grad(&grads).unwrap());
+    let gx = values(x.grad(&grads).unwrap());
+
+    let plain = conv.valid();
+    let r = r.inner();
+    let xv = values(x.inner());
+    let named = collect::<Cpu, _>(&plain);
+    let fwd = |m: &burn::nn::conv::Conv2d<Cpu>, x| m.forward(x);
+    let perturbed = |name: &str, i: usize, d: f32| {
+        let mut n = named.clone();
+        n.get_mut(name).unwrap().values[i] += d;
+        let m = assign(cfg.init::<Cpu>(&device), &n, &device).unwrap();
+        loss_plain(&m, fwd, &xv, shape, &r)
+    };
+    check(
+        "weight",
+        &gw,
+        |i| (perturbed("weight", i, H) - perturbed("weight", i, -H)) / (2.0 * H),
+        &[0, 17, 50, 107],
+    );
+    check(
+        "bias",
+        &gb,
+        |i| (perturbed("bias", i, H) - perturbed("bias", i, -H)) / (2.0 * H),
+        &[0, 3],
+    );
+    let in_x = |i: usize, d: f32| {
+        let mut xs = xv.clone();
+        xs[i] += d;
+        loss_plain(&plain, fwd, &xs, shape, &r)
+    };
+    // Corners and interior pixels: padding must be differentiated correctly too.
+    check(
+        "input",
+        &gx,
+        |i| (in_x(i, H) - in_x(i, -H)) / (2.0 * H),
+        &[0, 5, 41, 126, 251],
+    );
+}
+
+#[test]
+fn group_norm_gradients_match_finite_differences() {
+    let device = Default::default();
+    <CpuTrain as Backend>::seed(&device, 4);
+    let shape = [2, 8, 5, 4];
+    let cfg = GroupNormConfig::new(4, 8);
+    let gn = cfg.init::<CpuTrain>(&device);
+    // Non-trivial affine parameters, so their gradients are exercised away from 1 and 0.
+    let mut named = collect::<CpuTrain, _>(&gn);
+    for (k, t) in named.iter_mut() {
+        for (i, v) in t.values.iter_mut().enumerate() {
+            *v = if k.ends_with("gamma") {
+                0.5 + 0.1 * i as f32
+            } else {
+                -0.2 + 0.05 * i as f32
+            };
+        }
+    }
+    let gn = assign(gn, &named, &device).unwrap();
+    let x = Tensor::<CpuTrain, 4>::random(shape, Distribution::Normal(0.3, 2.0), &device)
+        .require_grad();
+    let out = gn.forward(x.clone());
+    let r = Tensor::<CpuTrain, 4>::random(out.dims(), Distribution::Normal(0.0, 1.0), &device);
+    let grads = (out * r.clone()).sum().backward();
+    let gg = values(gn.gamma.as_ref().unwrap().val().grad(&grads).unwrap());
+    let gx = values(x.grad(&grads).unwrap());
+
+    let plain = gn.valid();
+    let r = r.inner();
+    let xv = values(x.inner());
+    let fwd = |m: &burn::nn::GroupNorm<Cpu>, x| m.forward(x);
+    let pnamed = collect::<Cpu, _>(&plain);
+    let gamma = |i: usize, d: f32| {
+        let mut n = pnamed.clone();
+        n.get_mut("gamma").unwrap().values[i] += d;
+        let m = assign(cfg.init::<Cpu>(&device), &n, &device).unwrap();
+        loss_plain(&m, fwd, &xv, shape, &r)
+    };
+    check(
+        "gamma",
+        &gg,
+        |i| (gamma(i, H) - gamma(i, -H)) / (2.0 * H),
+        &[0, 3, 7],
+    );
+    let in_x = |i: usize, d: f32| {
+        let mut xs = xv.clone();
+        xs[i] += d;
+        loss_plain(&plain, fwd, &xs, shape, &r)
+    };
+    check(
+        "input",
+        &gx,
+        |i| (in_x(i, H) - in_x(i, -H)) / (2.0 * H),
+        &[0, 19, 77, 160, 319],
+    );
+}
