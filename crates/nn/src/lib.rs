@@ -10,6 +10,7 @@ pub mod data;
 pub mod error;
 pub mod named;
 pub mod net;
+pub mod norm;
 pub mod sample;
 pub mod schedule;
 pub mod sr3;

@@ -9,6 +9,7 @@
 //! pgrf runs on any crop size: with 128 x 128 training crops and five levels,
 //! level 3 is the paper's 16 x 16 level.
 
+use crate::norm::group_norm;
 use burn::config::Config;
 use burn::module::Module;
 use burn::nn::conv::{Conv2d, Conv2dConfig};
@@ -164,7 +165,7 @@ impl<B: Backend> SelfAttention<B> {
         let [n, c, h, w] = x.dims();
         let qkv = self
             .qkv
-            .forward(self.norm.forward(x.clone()))
+            .forward(group_norm(&self.norm, x.clone()))
             .reshape([n, 3 * c, h * w]);
         let q = qkv.clone().slice([0..n, 0..c, 0..h * w]);
         let k = qkv.clone().slice([0..n, c..2 * c, 0..h * w]);
@@ -217,12 +218,12 @@ impl<B: Backend> ResBlock<B> {
 
     fn forward(&self, x: Tensor<B, 4>, emb: &Tensor<B, 2>) -> Tensor<B, 4> {
         let [n, _, _, _] = x.dims();
-        let h = self.conv1.forward(silu(self.norm1.forward(x.clone())));
+        let h = self.conv1.forward(silu(group_norm(&self.norm1, x.clone())));
         let c = h.dims()[1];
         let h = h + self.emb.forward(emb.clone()).reshape([n, c, 1, 1]);
         let h = self
             .conv2
-            .forward(self.dropout.forward(silu(self.norm2.forward(h))));
+            .forward(self.dropout.forward(silu(group_norm(&self.norm2, h))));
         let res = match &self.skip {
             Some(s) => s.forward(x),
             None => x,
@@ -326,7 +327,9 @@ impl<B: Backend> Sr3Unet<B> {
                 x = upsamples.next().expect("upsample").forward(x);
             }
         }
-        let out = self.final_conv.forward(silu(self.final_norm.forward(x)));
+        let out = self
+            .final_conv
+            .forward(silu(group_norm(&self.final_norm, x)));
         let c = out.dims()[1];
         out.slice([0..n, 0..c, 0..h, 0..w])
     }

@@ -1,5 +1,5 @@
-//! Burn's backward passes for the two layers every pgrf network leans on —
-//! 3x3 convolution and GroupNorm — against central finite differences of the
+//! Backward passes of the two layers every pgrf network leans on — burn's 3x3
+//! convolution and pgrf's GroupNorm (pgrf_nn::norm, the folded form SR3 runs) — against central finite differences of the
 //! same layer on the plain backend. f32 arithmetic: steps of 1e-2 and a
 //! tolerance of 2 % of the gradient's scale (conv is linear in its weights,
 //! so there the difference quotient is exact up to rounding).
@@ -11,6 +11,7 @@ use burn::tensor::backend::Backend;
 use burn::tensor::{Distribution, Tensor, TensorData};
 use pgrf_nn::backend::{Cpu, CpuTrain};
 use pgrf_nn::named::{assign, collect};
+use pgrf_nn::norm::group_norm;
 
 const H: f32 = 1e-2;
 
@@ -120,7 +121,7 @@ fn group_norm_gradients_match_finite_differences() {
     let gn = assign(gn, &named, &device).unwrap();
     let x = Tensor::<CpuTrain, 4>::random(shape, Distribution::Normal(0.3, 2.0), &device)
         .require_grad();
-    let out = gn.forward(x.clone());
+    let out = group_norm(&gn, x.clone());
     let r = Tensor::<CpuTrain, 4>::random(out.dims(), Distribution::Normal(0.0, 1.0), &device);
     let grads = (out * r.clone()).sum().backward();
     let gg = values(gn.gamma.as_ref().unwrap().val().grad(&grads).unwrap());
@@ -129,7 +130,7 @@ fn group_norm_gradients_match_finite_differences() {
     let plain = gn.valid();
     let r = r.inner();
     let xv = values(x.inner());
-    let fwd = |m: &burn::nn::GroupNorm<Cpu>, x| m.forward(x);
+    let fwd = |m: &burn::nn::GroupNorm<Cpu>, x| group_norm(m, x);
     let pnamed = collect::<Cpu, _>(&plain);
     let gamma = |i: usize, d: f32| {
         let mut n = pnamed.clone();

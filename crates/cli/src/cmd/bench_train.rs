@@ -648,32 +648,9 @@ fn attention_fused<B: Backend>(qkv: Tensor<B, 3>, c: usize) -> Tensor<B, 3> {
     out.reshape([n, hw, c]).swap_dims(1, 2)
 }
 
-/// GroupNorm as in burn (two-pass statistics per (n, group), eps 1e-5) but
-/// with gamma and beta folded into one scale and shift per (n, c), so that
-/// every full-size op is a same-shape op or a per-row scalar broadcast on
-/// `(n * c, h * w)`: the layouts Flex has SIMD fast paths for. burn's
-/// `GroupNorm` multiplies by `gamma.reshape([1, c, 1, 1])`, which Flex
-/// walks element by element.
+/// SR3's GroupNorm as the network runs it (folded affine, pgrf_nn::norm).
 fn group_norm_folded<B: Backend>(x: Tensor<B, 4>, norm: &GroupNorm<B>) -> Tensor<B, 4> {
-    let [n, c, h, w] = x.dims();
-    let g = norm.num_groups;
-    let cg = c / g;
-    let xg = x.reshape([n, g, cg * h * w]);
-    let mean = xg.clone().mean_dim(2);
-    let xc = xg - mean;
-    let var = xc.clone().square().mean_dim(2);
-    let rstd = var.add_scalar(norm.epsilon).sqrt().recip(); // (n, g, 1)
-    let xc = xc.reshape([n * c, h * w]);
-    let (Some(gamma), Some(beta)) = (&norm.gamma, &norm.beta) else {
-        return (xc.reshape([n, g, cg * h * w]) * rstd).reshape([n, c, h, w]);
-    };
-    let scale = (rstd * gamma.val().reshape([1, g, cg])).reshape([n * c, 1]);
-    let shift = beta
-        .val()
-        .reshape([1, c])
-        .expand([n, c])
-        .reshape([n * c, 1]);
-    (xc * scale + shift).reshape([n, c, h, w])
+    pgrf_nn::norm::group_norm(norm, x)
 }
 
 /// (inference forward, autodiff forward + backward) of `group_norm_folded`, ms.
