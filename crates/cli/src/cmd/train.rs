@@ -88,10 +88,10 @@ pub struct Settings {
     /// Turn off flips and transposes.
     #[arg(long, num_args = 0..=1, default_missing_value = "true")]
     pub no_augment: Option<bool>,
-    /// SID U-Net width of the first level [default: 32].
+    /// Width of the first level: SID U-Net channels [default: 32]; for the flow model the SR3 inner channels unless --inner-channels is given.
     #[arg(long)]
     pub width: Option<usize>,
-    /// SR3 channels of the first level [default: 64].
+    /// SR3 channels of the first level [default: 64, or --width].
     #[arg(long)]
     pub inner_channels: Option<usize>,
     /// SR3 channel multipliers per level, comma-separated [default: 1,2,4,8,8].
@@ -237,7 +237,7 @@ fn architecture(task: Task, s: &Settings) -> Result<Architecture> {
             Architecture::SidUnet(SidUnetConfig::new().with_width(w))
         }
         Task::Flow => {
-            let inner = s.inner_channels.unwrap_or(64);
+            let inner = s.inner_channels.or(s.width).unwrap_or(64);
             let mults = s
                 .channel_mults
                 .clone()
