@@ -222,24 +222,15 @@ pub fn read(path: &Path) -> Result<(WeightMeta, BTreeMap<String, NamedTensor>)> 
 /// Build the network the file describes and load its weights.
 pub fn load<B: Backend>(path: &Path, device: &B::Device) -> Result<(Net<B>, WeightMeta)> {
     let (meta, tensors) = read(path)?;
-    let net = match &meta.arch {
-        Architecture::SidUnet(c) => Net::Spc(
-            named::assign(c.init::<B>(device), &tensors, device).map_err(|e| {
-                err(
-                    path,
-                    format!("weights do not fit {}: {e}", meta.arch.describe()),
-                )
-            })?,
-        ),
-        Architecture::Sr3(c) => {
-            let net = c.init::<B>(device).map_err(|e| err(path, e))?;
-            Net::Pgrf(named::assign(net, &tensors, device).map_err(|e| {
-                err(
-                    path,
-                    format!("weights do not fit {}: {e}", meta.arch.describe()),
-                )
-            })?)
-        }
+    let fit = |e: String| {
+        err(
+            path,
+            format!("weights do not fit {}: {e}", meta.arch.describe()),
+        )
+    };
+    let net = match meta.arch.init::<B>(device).map_err(|e| err(path, e))? {
+        Net::Spc(n) => Net::Spc(named::assign(n, &tensors, device).map_err(fit)?),
+        Net::Pgrf(n) => Net::Pgrf(named::assign(n, &tensors, device).map_err(fit)?),
     };
     Ok((net, meta))
 }

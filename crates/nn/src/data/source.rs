@@ -67,8 +67,8 @@ impl Packed {
 pub struct Folder {
     files: Vec<PathBuf>,
     levels: LevelOverrides,
-    cache: Mutex<HashMap<usize, Arc<Packed>>>,
-    cached_bytes: Mutex<usize>,
+    /// Decoded files and the bytes they hold, under one lock.
+    cache: Mutex<(HashMap<usize, Arc<Packed>>, usize)>,
     budget_bytes: usize,
 }
 
@@ -81,8 +81,7 @@ impl Folder {
         Ok(Folder {
             files,
             levels,
-            cache: Mutex::new(HashMap::new()),
-            cached_bytes: Mutex::new(0),
+            cache: Mutex::new((HashMap::new(), 0)),
             budget_bytes: budget_mib << 20,
         })
     }
@@ -97,7 +96,7 @@ impl Folder {
     }
 
     fn get(&self, i: usize) -> Result<Arc<Packed>> {
-        if let Some(p) = self.cache.lock().expect("cache lock").get(&i) {
+        if let Some(p) = self.cache.lock().expect("cache lock").0.get(&i) {
             return Ok(p.clone());
         }
         let path = &self.files[i];
@@ -105,13 +104,10 @@ impl Folder {
             .map_err(|e| NnError::Invalid(format!("{}: {e}", path.display())))?;
         let packed = Arc::new(Packed::from_frame(&frame)?);
         let bytes = packed.planes.len() * 2;
-        let mut used = self.cached_bytes.lock().expect("cache lock");
-        if *used + bytes <= self.budget_bytes {
-            *used += bytes;
-            self.cache
-                .lock()
-                .expect("cache lock")
-                .insert(i, packed.clone());
+        let mut cache = self.cache.lock().expect("cache lock");
+        if cache.1 + bytes <= self.budget_bytes && !cache.0.contains_key(&i) {
+            cache.1 += bytes;
+            cache.0.insert(i, packed.clone());
         }
         Ok(packed)
     }
