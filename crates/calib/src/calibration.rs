@@ -181,6 +181,34 @@ impl Calibration {
         Ok(())
     }
 
+    /// Expected dark level above black in DN per packed pixel for an exposure
+    /// of `exposure_s`: the fixed pattern plus the mean dark current
+    /// (rate x law(t) electrons x K DN per electron). This is what dark-frame
+    /// subtraction removes before a photo is amplified; the random part of
+    /// the dark signal stays for the denoiser.
+    pub fn dark_shading_dn(&self, exposure_s: f64) -> Result<Array3<f32>> {
+        if !(exposure_s.is_finite() && exposure_s >= 0.0) {
+            return Err(invalid(format!(
+                "exposure time must be a non-negative number of seconds, got {exposure_s}"
+            )));
+        }
+        let get = |n: &str| {
+            self.maps
+                .get(n)
+                .ok_or_else(|| invalid(format!("calibration has no '{n}' map")))
+        };
+        let law = match self.meta.dark_law.as_str() {
+            "linear" => DarkLaw::Linear,
+            _ => DarkLaw::Sqrt,
+        };
+        let dn_per_rate = law.electrons(1.0, exposure_s) * self.meta.k;
+        let mut out = get("fixed_pattern")?.clone();
+        ndarray::Zip::from(&mut out)
+            .and(get("dark_rate")?)
+            .for_each(|o, &r| *o += (r as f64 * dn_per_rate) as f32);
+        Ok(out)
+    }
+
     /// A short identity for records: camera, ISO and file name.
     pub fn identity(&self, path: &Path) -> String {
         format!(

@@ -165,6 +165,22 @@ fn calibration_recovers_the_virtual_sensor() {
         .check_matches("Sony", "ILCE-7SM2", Some(3200), true)
         .is_ok());
 
+    // Dark shading for a 4 s exposure: fixed pattern + K x rate x sqrt(4),
+    // computed here from the maps; at t = 0 it is the fixed pattern alone.
+    let shading = back.dark_shading_dn(4.0).unwrap();
+    let expect = Zip::from(&back.maps["fixed_pattern"])
+        .and(&back.maps["dark_rate"])
+        .map_collect(|&f, &r| f + (r as f64 * 2.0 * m.k) as f32);
+    let worst = Zip::from(&shading)
+        .and(&expect)
+        .fold(0.0f32, |w, &a, &b| w.max((a - b).abs()));
+    assert!(worst < 1e-4, "dark shading differs by {worst} DN");
+    assert_eq!(
+        back.dark_shading_dn(0.0).unwrap(),
+        back.maps["fixed_pattern"]
+    );
+    assert!(back.dark_shading_dn(-1.0).is_err());
+
     // Per-pixel calibration reproduces the sensor's per-pixel variance better
     // than the global ("noD") one: synthesise 64 dark frames with each.
     let maps = back.to_pixel_maps().unwrap();

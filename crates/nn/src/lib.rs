@@ -8,6 +8,7 @@ pub mod backend;
 pub mod checkpoint;
 pub mod data;
 pub mod error;
+pub mod infer;
 pub mod named;
 pub mod net;
 pub mod norm;

@@ -8,38 +8,50 @@ use crate::sr3::Sr3Unet;
 use burn::tensor::backend::Backend;
 use burn::tensor::Tensor;
 
+/// A velocity field v(X, T, t). The samplers are written against this so
+/// that their arithmetic can be checked on fields with closed forms.
+pub trait Velocity<B: Backend> {
+    fn velocity(&self, x: Tensor<B, 4>, cond: Tensor<B, 4>, t: Tensor<B, 1>) -> Tensor<B, 4>;
+}
+
+impl<B: Backend> Velocity<B> for Sr3Unet<B> {
+    fn velocity(&self, x: Tensor<B, 4>, cond: Tensor<B, 4>, t: Tensor<B, 1>) -> Tensor<B, 4> {
+        self.forward(x, cond, t)
+    }
+}
+
 fn times<B: Backend>(n: usize, t: f32, device: &B::Device) -> Tensor<B, 1> {
     Tensor::<B, 1>::full([n], t, device)
 }
 
 /// The two-stage sampler with second time `t2`.
 pub fn two_stage<B: Backend>(
-    net: &Sr3Unet<B>,
+    net: &impl Velocity<B>,
     cond: Tensor<B, 4>,
     x0: Tensor<B, 4>,
     t2: f32,
 ) -> Tensor<B, 4> {
     let n = x0.dims()[0];
     let device = x0.device();
-    let xz = net.forward(x0.clone(), cond.clone(), times::<B>(n, 0.0, &device)) + x0.clone();
+    let xz = net.velocity(x0.clone(), cond.clone(), times::<B>(n, 0.0, &device)) + x0.clone();
     let xt2 = xz * t2 + x0.clone() * (1.0 - t2);
-    net.forward(xt2, cond, times::<B>(n, t2, &device)) + x0
+    net.velocity(xt2, cond, times::<B>(n, t2, &device)) + x0
 }
 
 /// One network evaluation: X0 + v(X0, T, 0).
 pub fn one_step<B: Backend>(
-    net: &Sr3Unet<B>,
+    net: &impl Velocity<B>,
     cond: Tensor<B, 4>,
     x0: Tensor<B, 4>,
 ) -> Tensor<B, 4> {
     let n = x0.dims()[0];
     let device = x0.device();
-    net.forward(x0.clone(), cond, times::<B>(n, 0.0, &device)) + x0
+    net.velocity(x0.clone(), cond, times::<B>(n, 0.0, &device)) + x0
 }
 
 /// Euler integration of dX/dt = v(X, T, t) from t = 0 to 1 in `steps` steps.
 pub fn euler<B: Backend>(
-    net: &Sr3Unet<B>,
+    net: &impl Velocity<B>,
     cond: Tensor<B, 4>,
     x0: Tensor<B, 4>,
     steps: usize,
@@ -49,7 +61,7 @@ pub fn euler<B: Backend>(
     let dt = 1.0 / steps.max(1) as f32;
     let mut x = x0;
     for i in 0..steps.max(1) {
-        let v = net.forward(
+        let v = net.velocity(
             x.clone(),
             cond.clone(),
             times::<B>(n, i as f32 * dt, &device),
@@ -57,4 +69,212 @@ pub fn euler<B: Backend>(
         x = x + v * dt;
     }
     x
+}
+
+/// How a flow model turns its start X0 into an image; the denoiser ignores it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Sampler {
+    /// The paper's sampler: two evaluations, second at time `t2`.
+    TwoStage { t2: f32 },
+    /// One evaluation (the first stage alone).
+    OneStep,
+    /// Euler integration with `steps` evaluations.
+    Euler { steps: usize },
+}
+
+impl Sampler {
+    /// Network evaluations per sample (the cost the paper compares).
+    pub fn nfe(&self) -> usize {
+        match self {
+            Sampler::TwoStage { .. } => 2,
+            Sampler::OneStep => 1,
+            Sampler::Euler { steps } => (*steps).max(1),
+        }
+    }
+
+    pub fn run<B: Backend>(
+        &self,
+        net: &impl Velocity<B>,
+        cond: Tensor<B, 4>,
+        x0: Tensor<B, 4>,
+    ) -> Tensor<B, 4> {
+        match *self {
+            Sampler::TwoStage { t2 } => two_stage(net, cond, x0, t2),
+            Sampler::OneStep => one_step(net, cond, x0),
+            Sampler::Euler { steps } => euler(net, cond, x0, steps),
+        }
+    }
+}
+
+impl std::fmt::Display for Sampler {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Sampler::TwoStage { t2 } => write!(f, "two-stage (t2 = {t2})"),
+            Sampler::OneStep => f.write_str("one-step"),
+            Sampler::Euler { steps } => write!(f, "euler-{steps}"),
+        }
+    }
+}
+
+/// The kind of sampler a user names; the two-stage one takes its t2 from
+/// the weight file unless told otherwise, so it is resolved later.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SamplerKind {
+    TwoStage,
+    OneStep,
+    Euler(usize),
+}
+
+impl std::str::FromStr for SamplerKind {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        let lower = s.to_ascii_lowercase();
+        match lower.as_str() {
+            "two-stage" | "twostage" | "2" => return Ok(Self::TwoStage),
+            "one-step" | "onestep" | "1" => return Ok(Self::OneStep),
+            _ => {}
+        }
+        let n = lower
+            .strip_prefix("euler")
+            .map(|r| r.trim_start_matches([':', '-']))
+            .ok_or_else(|| {
+                format!("unknown sampler '{s}' (expected two-stage, one-step or euler:N)")
+            })?;
+        match n.parse::<usize>() {
+            Ok(n) if (1..=10_000).contains(&n) => Ok(Self::Euler(n)),
+            _ => Err(format!(
+                "sampler '{s}': Euler needs a step count from 1 to 10000, e.g. euler:50"
+            )),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::backend::Cpu;
+    use crate::sr3::Sr3Config;
+    use burn::module::{Module, Param};
+    use burn::tensor::{Tensor, TensorData};
+
+    #[test]
+    fn sampler_names_parse() {
+        assert_eq!("two-stage".parse(), Ok(SamplerKind::TwoStage));
+        assert_eq!("one-step".parse(), Ok(SamplerKind::OneStep));
+        assert_eq!("euler:50".parse(), Ok(SamplerKind::Euler(50)));
+        assert_eq!("Euler-8".parse(), Ok(SamplerKind::Euler(8)));
+        assert!("euler:0".parse::<SamplerKind>().is_err());
+        assert!("heun".parse::<SamplerKind>().is_err());
+        assert_eq!(Sampler::Euler { steps: 50 }.nfe(), 50);
+        assert_eq!(Sampler::TwoStage { t2: 0.3 }.nfe(), 2);
+    }
+
+    /// v(X, T, t) = a X + c T + d t, elementwise: closed forms by hand.
+    struct Linear {
+        a: f32,
+        c: f32,
+        d: f32,
+    }
+    impl Velocity<Cpu> for Linear {
+        fn velocity(
+            &self,
+            x: Tensor<Cpu, 4>,
+            cond: Tensor<Cpu, 4>,
+            t: Tensor<Cpu, 1>,
+        ) -> Tensor<Cpu, 4> {
+            let [n, ch, h, w] = x.dims();
+            let tt = t.reshape([n, 1, 1, 1]).expand([n, ch, h, w]);
+            x * self.a + cond * self.c + tt * self.d
+        }
+    }
+
+    fn scalar(s: &Sampler, f: &Linear, x0: f32, cond: f32) -> f32 {
+        let dev = Default::default();
+        let x = Tensor::<Cpu, 4>::full([1, 1, 1, 1], x0, &dev);
+        let c = Tensor::<Cpu, 4>::full([1, 1, 1, 1], cond, &dev);
+        s.run(f, c, x).into_scalar()
+    }
+
+    #[test]
+    fn two_stage_sampler_matches_a_hand_computed_result() {
+        // a = 0.5, c = 2, d = -1, X0 = 0.2, T = 0.3, t2 = 0.6:
+        // XZ  = v(0.2, 0.3, 0) + 0.2 = 0.1 + 0.6 + 0 + 0.2   = 0.9
+        // Xt2 = 0.6 * 0.9 + 0.4 * 0.2                         = 0.62
+        // XM  = v(0.62, 0.3, 0.6) + 0.2 = 0.31 + 0.6 - 0.6 + 0.2 = 0.51
+        let f = Linear {
+            a: 0.5,
+            c: 2.0,
+            d: -1.0,
+        };
+        let got = scalar(&Sampler::TwoStage { t2: 0.6 }, &f, 0.2, 0.3);
+        assert!((got - 0.51).abs() < 1e-6, "{got}");
+        // One step: XZ = 0.9.
+        let got = scalar(&Sampler::OneStep, &f, 0.2, 0.3);
+        assert!((got - 0.9).abs() < 1e-6, "{got}");
+        // Euler, 2 steps of 0.5: x1 = 0.2 + 0.5 (0.1 + 0.6) = 0.55;
+        // x2 = 0.55 + 0.5 (0.275 + 0.6 - 0.5) = 0.7375.
+        let got = scalar(&Sampler::Euler { steps: 2 }, &f, 0.2, 0.3);
+        assert!((got - 0.7375).abs() < 1e-6, "{got}");
+    }
+
+    /// A velocity field whose every weight is zero except the output
+    /// convolution's bias b: v(X, T, t) = b everywhere, whatever X, T, t.
+    /// The samplers then have closed forms to check against by hand:
+    /// two-stage XM = X0 + b (the second evaluation starts from
+    /// Xt2 = t2 (X0 + b) + (1 - t2) X0 but v ignores it), one-step X0 + b,
+    /// Euler-N X0 + N * b / N.
+    fn constant_field(b: [f32; 4]) -> Sr3Unet<Cpu> {
+        let cfg = Sr3Config::new()
+            .with_inner_channels(8)
+            .with_channel_mults(vec![1, 2])
+            .with_res_blocks(1)
+            .with_attn_levels(vec![])
+            .with_norm_groups(4);
+        let dev = Default::default();
+        let net = cfg.init::<Cpu>(&dev).unwrap();
+        let zeroed = net.map(&mut Zero);
+        let mut tensors = crate::named::collect(&zeroed);
+        let bias = tensors
+            .get_mut("final_conv.bias")
+            .expect("the output convolution's bias");
+        assert_eq!(bias.shape, vec![4]);
+        bias.values = b.to_vec();
+        crate::named::assign(zeroed, &tensors, &dev).unwrap()
+    }
+
+    struct Zero;
+    impl burn::module::ModuleMapper<Cpu> for Zero {
+        fn map_float<const D: usize>(
+            &mut self,
+            param: Param<Tensor<Cpu, D>>,
+        ) -> Param<Tensor<Cpu, D>> {
+            param.map(|t| t.zeros_like())
+        }
+    }
+
+    /// The real SR3 network with fixed weights, through the same samplers.
+    #[test]
+    fn samplers_on_an_sr3_network_with_fixed_weights() {
+        let b = [0.25f32, -0.5, 0.125, 1.0];
+        let net = constant_field(b);
+        let dev = Default::default();
+        let x0v: Vec<f32> = (0..4 * 4 * 4).map(|i| (i as f32 * 0.37).sin()).collect();
+        let x0 = Tensor::<Cpu, 4>::from_data(TensorData::new(x0v.clone(), [1, 4, 4, 4]), &dev);
+        let cond = Tensor::<Cpu, 4>::ones([1, 4, 4, 4], &dev) * 0.3;
+        let expect: Vec<f32> = x0v.iter().enumerate().map(|(i, v)| v + b[i / 16]).collect();
+        for s in [
+            Sampler::TwoStage { t2: 0.4 },
+            Sampler::OneStep,
+            Sampler::Euler { steps: 4 },
+        ] {
+            let out: Vec<f32> = s
+                .run(&net, cond.clone(), x0.clone())
+                .into_data()
+                .to_vec()
+                .unwrap();
+            for (o, e) in out.iter().zip(&expect) {
+                assert!((o - e).abs() < 1e-6, "{s}: {o} vs {e}");
+            }
+        }
+    }
 }

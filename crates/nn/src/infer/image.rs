@@ -1,0 +1,96 @@
+//! Restoring a whole packed frame: the flow's start fields, the tiles, the
+//! blend, and the final clamp.
+
+use super::restorer::Restore;
+use super::start::start_noise;
+use super::tiles::{run_tiled, TilePlan};
+use crate::error::{NnError, Result};
+use ndarray::{Array3, ArrayView3};
+
+/// How a frame is cut into tiles and which start noise the flow draws.
+#[derive(Clone, Copy, Debug)]
+pub struct ImageOptions {
+    /// Tile side in packed pixels (a frame that fits is one tile).
+    pub tile: usize,
+    /// Minimum overlap between neighbouring tiles, packed pixels.
+    pub overlap: usize,
+    /// Seed of the flow's X0 (sample k uses stream k).
+    pub seed: u64,
+}
+
+/// Default overlap: 64 packed pixels; a quarter of it on each side is
+/// discarded, the middle half is blended.
+pub const DEFAULT_OVERLAP: usize = 64;
+
+/// The restored frame in [0, 1], `(4, H, W)` like `input`.
+pub fn restore_image(
+    r: &dyn Restore,
+    input: ArrayView3<f32>,
+    opts: &ImageOptions,
+    progress: &mut dyn FnMut(usize, usize),
+) -> Result<Array3<f32>> {
+    let (c, h, w) = input.dim();
+    if let Some(pos) = input.iter().position(|v| !v.is_finite()) {
+        return Err(NnError::Invalid(format!(
+            "network input holds a non-finite value (flat index {pos})"
+        )));
+    }
+    let plan = plan_for(h, w, opts, r.side_multiple())?;
+    let x0s: Vec<Array3<f32>> = (0..r.samples() as u64)
+        .map(|k| start_noise(opts.seed, k, c, h, w))
+        .collect();
+    let mut inputs = vec![input];
+    inputs.extend(x0s.iter().map(|a| a.view()));
+    let total = plan.count();
+    let mut out = run_tiled(&inputs, c, &plan, |tile, views| {
+        let y = r.restore(views[0], &views[1..])?;
+        progress(tile.index + 1, total);
+        Ok(y)
+    })?;
+    if let Some(pos) = out.iter().position(|v| v.is_nan()) {
+        return Err(NnError::Invalid(format!(
+            "the network produced NaN (flat index {pos}); the weight file may be damaged"
+        )));
+    }
+    out.mapv_inplace(|v| v.clamp(0.0, 1.0));
+    Ok(out)
+}
+
+/// Tiles of `opts.tile` rounded down to the network's side multiple (so no
+/// tile is padded inside the network), unless the whole frame fits.
+pub fn plan_for(h: usize, w: usize, opts: &ImageOptions, multiple: usize) -> Result<TilePlan> {
+    let m = multiple.max(1);
+    let tile = if opts.tile >= h.max(w) {
+        opts.tile
+    } else {
+        (opts.tile / m * m).max(m)
+    };
+    if tile < 4 * opts.overlap && tile < h.max(w) {
+        return Err(NnError::Invalid(format!(
+            "tile {} is too small for overlap {} (needs at least 4x the overlap)",
+            opts.tile, opts.overlap
+        )));
+    }
+    TilePlan::new(h, w, tile, opts.overlap)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn tiles_are_multiples_of_the_network_side() {
+        let o = ImageOptions {
+            tile: 300,
+            overlap: 64,
+            seed: 0,
+        };
+        let p = plan_for(1424, 2128, &o, 16).unwrap();
+        assert_eq!(p.rows.len, 288);
+        assert_eq!(p.cols.len, 288);
+        let p = plan_for(200, 250, &o, 16).unwrap();
+        assert_eq!(p.count(), 1);
+        let small = ImageOptions { tile: 128, ..o };
+        assert!(plan_for(1000, 1000, &small, 16).is_err());
+    }
+}

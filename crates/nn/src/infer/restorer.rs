@@ -1,0 +1,212 @@
+//! A loaded network ready to restore packed tiles, whichever it is (the SPC
+//! denoiser in one pass, the flow model through its sampler) and wherever it
+//! runs. Commands hold it as `Box<dyn Restore>` so that they are not generic
+//! over burn's backends.
+
+use crate::backend::{Cpu, DeviceKind};
+use crate::error::{NnError, Result};
+use crate::net::Net;
+use crate::sample::{Sampler, SamplerKind};
+use crate::weights::{self, WeightMeta};
+use burn::tensor::backend::Backend;
+use burn::tensor::{Tensor, TensorData};
+use ndarray::{Array3, ArrayView3};
+use std::path::Path;
+
+/// t2 used when a flow model's file has not been through `pgrf search`.
+pub const UNSEARCHED_T2: f32 = 0.5;
+
+/// How the user asked the flow model to be sampled.
+#[derive(Clone, Copy, Debug)]
+pub struct SamplerChoice {
+    pub kind: SamplerKind,
+    /// Overrides the file's searched t2.
+    pub t2: Option<f32>,
+    /// Samples with different X0 averaged per image (K >= 1).
+    pub samples: usize,
+}
+
+impl Default for SamplerChoice {
+    fn default() -> Self {
+        SamplerChoice {
+            kind: SamplerKind::TwoStage,
+            t2: None,
+            samples: 1,
+        }
+    }
+}
+
+/// Restores packed `(4, h, w)` tiles of amplified noisy raw in [0, 1].
+pub trait Restore {
+    fn meta(&self) -> &WeightMeta;
+    /// The flow model's sampler; None for the one-pass denoiser.
+    fn sampler(&self) -> Option<Sampler>;
+    /// Start fields averaged per image (0 for the denoiser).
+    fn samples(&self) -> usize;
+    /// Sides of tiles should be multiples of this (no internal padding).
+    fn side_multiple(&self) -> usize;
+    /// `input` and one X0 per sample (none for the denoiser).
+    fn restore(&self, input: ArrayView3<f32>, x0s: &[ArrayView3<f32>]) -> Result<Array3<f32>>;
+
+    /// Network evaluations per image.
+    fn nfe(&self) -> usize {
+        self.sampler().map_or(1, |s| s.nfe() * self.samples())
+    }
+}
+
+/// Where t2 came from, for headers.
+pub fn describe_sampler(r: &dyn Restore) -> String {
+    match r.sampler() {
+        None => "one pass".into(),
+        Some(s) => {
+            let src = match (s, r.meta().t2) {
+                (Sampler::TwoStage { .. }, Some(_)) => ", t2 from the file's search",
+                (Sampler::TwoStage { .. }, None) => ", t2 not searched: default",
+                _ => "",
+            };
+            let k = if r.samples() > 1 {
+                format!(", mean of {} samples", r.samples())
+            } else {
+                String::new()
+            };
+            format!("{s}{src}{k}, {} network evaluations", r.nfe())
+        }
+    }
+}
+
+/// A network on backend `B`.
+pub struct Restorer<B: Backend> {
+    net: Net<B>,
+    meta: WeightMeta,
+    sampler: Sampler,
+    samples: usize,
+    device: B::Device,
+}
+
+impl<B: Backend> Restorer<B> {
+    pub fn load(path: &Path, choice: SamplerChoice, device: B::Device) -> Result<Self> {
+        let (net, meta) = weights::load::<B>(path, &device)?;
+        let t2 = choice.t2.or(meta.t2).unwrap_or(UNSEARCHED_T2);
+        Self::new(net, meta, choice, t2, device)
+    }
+
+    pub fn new(
+        net: Net<B>,
+        meta: WeightMeta,
+        choice: SamplerChoice,
+        t2: f32,
+        device: B::Device,
+    ) -> Result<Self> {
+        if !(0.0..=1.0).contains(&t2) {
+            return Err(NnError::Invalid(format!("t2 must be in [0, 1], got {t2}")));
+        }
+        if choice.samples == 0 {
+            return Err(NnError::Invalid("--samples must be at least 1".into()));
+        }
+        let sampler = match choice.kind {
+            SamplerKind::TwoStage => Sampler::TwoStage { t2 },
+            SamplerKind::OneStep => Sampler::OneStep,
+            SamplerKind::Euler(steps) => Sampler::Euler { steps },
+        };
+        Ok(Restorer {
+            net,
+            meta,
+            sampler,
+            samples: choice.samples,
+            device,
+        })
+    }
+
+    fn tensor(&self, a: ArrayView3<f32>) -> Tensor<B, 4> {
+        let (c, h, w) = a.dim();
+        let v: Vec<f32> = a.iter().copied().collect();
+        Tensor::from_data(TensorData::new(v, [1, c, h, w]), &self.device)
+    }
+}
+
+impl<B: Backend> Restore for Restorer<B> {
+    fn meta(&self) -> &WeightMeta {
+        &self.meta
+    }
+
+    fn sampler(&self) -> Option<Sampler> {
+        match self.net {
+            Net::Spc(_) => None,
+            Net::Pgrf(_) => Some(self.sampler),
+        }
+    }
+
+    fn samples(&self) -> usize {
+        match self.net {
+            Net::Spc(_) => 0,
+            Net::Pgrf(_) => self.samples,
+        }
+    }
+
+    fn side_multiple(&self) -> usize {
+        match &self.meta.arch {
+            weights::Architecture::SidUnet(_) => 16,
+            weights::Architecture::Sr3(c) => c.side_multiple(),
+        }
+    }
+
+    fn restore(&self, input: ArrayView3<f32>, x0s: &[ArrayView3<f32>]) -> Result<Array3<f32>> {
+        let (c, h, w) = input.dim();
+        if c != 4 {
+            return Err(NnError::Invalid(format!(
+                "the networks take 4 packed planes, got {c}"
+            )));
+        }
+        let cond = self.tensor(input);
+        let out = match &self.net {
+            Net::Spc(n) => n.forward(cond),
+            Net::Pgrf(n) => {
+                if x0s.len() != self.samples {
+                    return Err(NnError::Invalid(format!(
+                        "{} start fields for {} samples",
+                        x0s.len(),
+                        self.samples
+                    )));
+                }
+                let mut acc: Option<Tensor<B, 4>> = None;
+                for x0 in x0s {
+                    if x0.dim() != (c, h, w) {
+                        return Err(NnError::Invalid("X0 and input differ in shape".into()));
+                    }
+                    let y = self.sampler.run(n, cond.clone(), self.tensor(*x0));
+                    acc = Some(match acc {
+                        None => y,
+                        Some(a) => a + y,
+                    });
+                }
+                acc.expect("samples >= 1") / self.samples as f32
+            }
+        };
+        let v: Vec<f32> = out
+            .into_data()
+            .to_vec()
+            .map_err(|e| NnError::Invalid(format!("reading the network output: {e:?}")))?;
+        Array3::from_shape_vec((c, h, w), v)
+            .map_err(|e| NnError::Invalid(format!("network output shape: {e}")))
+    }
+}
+
+/// Load weights for the chosen device.
+pub fn load(path: &Path, choice: SamplerChoice, device: DeviceKind) -> Result<Box<dyn Restore>> {
+    device.check_available().map_err(NnError::Invalid)?;
+    match device {
+        DeviceKind::Cpu => Ok(Box::new(Restorer::<Cpu>::load(
+            path,
+            choice,
+            Default::default(),
+        )?)),
+        #[cfg(feature = "cuda")]
+        DeviceKind::Cuda => Ok(Box::new(Restorer::<crate::backend::Gpu>::load(
+            path,
+            choice,
+            Default::default(),
+        )?)),
+        #[cfg(not(feature = "cuda"))]
+        DeviceKind::Cuda => unreachable!("checked above"),
+    }
+}
