@@ -1,4 +1,15 @@
-//! Metrics (PSNR/SSIM as scikit-image computes them), dataset protocols
-//! (ELD, SID, paired lists) and comparison tables.
+//! Evaluation for pgrf: image-quality metrics computed exactly as the
+//! low-light RAW literature computes them (scikit-image's PSNR and SSIM under
+//! the ELD protocol), so that numbers pgrf prints can sit in the same table as
+//! published ones. Dataset protocols (ELD, SID, paired lists) and comparison
+//! tables build on these.
 //!
-//! Empty until the evaluation stage lands.
+//! No deep-learning framework here: plain `ndarray` arrays and rayon, like the
+//! physics crates, so the metrics can judge any producer's output.
+
+pub mod metrics;
+
+pub use metrics::{
+    evaluate, illuminance_correct, illuminance_gain, mse, psnr, ssim, ssim_channels,
+    IlluminanceGain, MetricError, Protocol, Scores, SsimOptions,
+};

@@ -1,0 +1,29 @@
+//! PSNR, SSIM and ELD's illuminance correction on packed `(C, H, W)` images.
+//!
+//! One concept per file:
+//! - [`psnr`](mod@psnr): peak signal-to-noise ratio, as `skimage.metrics.peak_signal_noise_ratio`.
+//! - [`ssim`](mod@ssim): structural similarity, as `skimage.metrics.structural_similarity`
+//!   with its defaults (7x7 uniform window, sample covariance, channel mean).
+//! - [`correct`]: ELD's single least-squares brightness gain over unsaturated pixels.
+//! - [`protocol`]: the evaluation protocol that strings them together (clamp,
+//!   optional correction, x255 as floats) and says in one line what it measured.
+//!
+//! All accumulation is f64 and every parallel reduction adds its partial sums
+//! in a fixed order, so a result does not depend on the number of threads.
+
+pub mod correct;
+mod error;
+mod input;
+pub mod protocol;
+pub mod psnr;
+pub mod ssim;
+mod sum;
+
+pub use correct::{illuminance_correct, illuminance_gain, IlluminanceGain};
+pub use error::MetricError;
+pub use protocol::{evaluate, Protocol, Scores};
+pub use psnr::{mse, psnr};
+pub use ssim::{ssim, ssim_channels, SsimOptions};
+
+/// Result type of the metric functions.
+pub type Result<T> = std::result::Result<T, MetricError>;
