@@ -93,7 +93,7 @@ const MAP_MAX_SIDE: usize = 1600;
 /// plotters' default family; registering the embedded font under it means
 /// every text element (captions, tick labels, legends) finds a font without
 /// each call site naming one.
-const FONT_FAMILY: &str = "sans-serif";
+pub const FONT_FAMILY: &str = "sans-serif";
 
 /// Write the report into `dir`: ptc.png, sigma_hist.png, dark_r2_hist.png
 /// (only with dark-current fits), fixed_pattern.png, sigma_map.png and
@@ -200,7 +200,7 @@ fn check_planes(name: &str, a: &ArrayView3<f32>) -> Result<(), ReportError> {
 /// Register the embedded font once per process: the `ab_glyph` backend has
 /// no system-font fallback, and without a registered family every text draw
 /// fails.
-fn ensure_font() -> Result<(), ReportError> {
+pub fn ensure_font() -> Result<(), ReportError> {
     static FONT: OnceLock<Result<(), String>> = OnceLock::new();
     FONT.get_or_init(|| {
         plotters::style::register_font(FONT_FAMILY, FontStyle::Normal, dejavu::sans::regular())
@@ -227,13 +227,13 @@ fn report_title(data: &ReportData) -> String {
 
 // ---------------------------------------------------------------- rendering
 
-type PlotResult = Result<(), Box<dyn std::error::Error>>;
+pub type PlotResult = Result<(), Box<dyn std::error::Error>>;
 
 /// Render with plotters into an in-memory RGB buffer, encode and write
 /// atomically: the crate has no `bitmap_encoder` feature (it would pull in a
 /// second image stack), and writing through a temp file keeps a crashed run
 /// from leaving half a PNG behind.
-fn render_png(
+pub fn render_png(
     path: &Path,
     (w, h): (u32, u32),
     draw: impl FnOnce(&DrawingArea<BitMapBackend, plotters::coord::Shift>) -> PlotResult,

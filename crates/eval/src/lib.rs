@@ -8,6 +8,7 @@
 //! physics crates, so the metrics can judge any producer's output.
 
 pub mod metrics;
+pub mod search_plot;
 
 pub use metrics::{
     evaluate, illuminance_correct, illuminance_gain, mse, psnr, ssim, ssim_channels,

@@ -14,6 +14,7 @@ pub mod net;
 pub mod norm;
 pub mod sample;
 pub mod schedule;
+pub mod search;
 pub mod sr3;
 pub mod step;
 pub mod train;

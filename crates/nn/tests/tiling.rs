@@ -123,8 +123,9 @@ fn check(r: &dyn Restore, name: &str) {
     let mut edge = vec![false; w];
     for k in 1..plan.cols.count() {
         for c in [plan.cols.starts[k], plan.cols.starts[k - 1] + plan.cols.len] {
-            for x in c.saturating_sub(1)..(c + 1).min(w) {
-                edge[x] = true;
+            let from = c.saturating_sub(1);
+            for flag in edge.iter_mut().take(c + 1).skip(from) {
+                *flag = true;
             }
         }
     }

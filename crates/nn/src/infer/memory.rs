@@ -1,30 +1,27 @@
 //! Choosing a tile size from the memory a machine has.
 //!
-//! The peak of a forward pass on the CPU backend is dominated by the widest
-//! full-resolution layers: their activations, the skip connections the
-//! U-Nets keep, and the unfolded (im2col) input of a 3x3 convolution, which
-//! is nine times the input channels. The per-pixel costs below come from
-//! that count and were checked against measured peaks (`pgrf enhance --json`
-//! reports the process's peak memory); see BENCHMARKS.md.
+//! The peak of a forward pass grows with the tile's pixel count times the
+//! widest full-resolution layers' channels (activations, the skips the
+//! U-Nets keep, the unfolded input of a 3x3 convolution). The per-pixel
+//! costs below are measured, not derived: peak resident memory of
+//! `pgrf enhance --json` on this project's 2-core CPU machine at two tile
+//! sizes, the difference divided by the difference in pixels:
+//! - SID U-Net, width 32: 305 MiB at 512^2, 804 MiB at 1024^2 -> ~670 B/px
+//!   (5.2 floats per pixel per channel of width);
+//! - SR3 default (inner 64): 772 MiB at 256^2, 1282 MiB at 512^2 ->
+//!   ~2.7 KB/px (10.6 floats per pixel per inner channel).
+//!
+//! The estimates round these up by about a third.
 
 use crate::weights::Architecture;
 
 /// Estimated peak bytes per packed pixel of one tile's forward pass.
 pub fn bytes_per_pixel(arch: &Architecture) -> f64 {
     let floats = match arch {
-        Architecture::SidUnet(c) => {
-            let w = c.width as f64;
-            // Skips (~2w over all levels), the decoder's concatenated input
-            // (2w) and its unfolded 3x3 form (18w), output and spare (~4w).
-            26.0 * w
-        }
+        Architecture::SidUnet(c) => 7.0 * c.width as f64,
         Architecture::Sr3(c) => {
             let w = c.inner_channels as f64 * c.channel_mults.first().copied().unwrap_or(1) as f64;
-            let per_level_skips = (c.res_blocks + 1) as f64;
-            // Skips kept at full resolution, a concatenated input (2w), its
-            // unfold (18w), normalisation temporaries (3w); the sampler holds
-            // the condition, X0 and the first estimate besides.
-            w * (per_level_skips + 2.0 + 18.0 + 3.0) + 16.0
+            14.0 * w + 16.0
         }
     };
     floats * 4.0

@@ -48,6 +48,9 @@ pub trait Restore {
     /// `input` and one X0 per sample (none for the denoiser).
     fn restore(&self, input: ArrayView3<f32>, x0s: &[ArrayView3<f32>]) -> Result<Array3<f32>>;
 
+    /// Bytes the network's parameters occupy.
+    fn weight_bytes(&self) -> u64;
+
     /// Network evaluations per image.
     fn nfe(&self) -> usize {
         self.sampler().map_or(1, |s| s.nfe() * self.samples())
@@ -141,6 +144,11 @@ impl<B: Backend> Restore for Restorer<B> {
             Net::Spc(_) => 0,
             Net::Pgrf(_) => self.samples,
         }
+    }
+
+    fn weight_bytes(&self) -> u64 {
+        use burn::module::Module;
+        4 * self.net.num_params() as u64
     }
 
     fn side_multiple(&self) -> usize {

@@ -1,0 +1,440 @@
+//! `pgrf enhance`: dark noisy RAW photos in, clean linear DNGs (and sRGB
+//! previews) out, with either network, at full resolution in bounded memory.
+
+use crate::input::InputArgs;
+use anyhow::{bail, Context, Result};
+use clap::Args;
+use indicatif::{ProgressBar, ProgressStyle};
+use pgrf_calib::Calibration;
+use pgrf_nn::backend::DeviceKind;
+use pgrf_nn::infer::memory::{available_memory, peak_rss, tile_for_budget};
+use pgrf_nn::infer::prepare::{network_input, ratio_from_exposure};
+use pgrf_nn::infer::restorer::describe_sampler;
+use pgrf_nn::infer::{restore_image, ImageOptions, Restore, SamplerChoice, DEFAULT_OVERLAP};
+use pgrf_nn::sample::SamplerKind;
+use pgrf_raw::{render_preview, unpack_normalized, write_dng, DngOptions, PreviewOptions};
+use serde::Serialize;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+#[derive(Args, Debug)]
+pub struct EnhanceArgs {
+    /// Noisy RAW files, or folders of them.
+    #[arg(required = true)]
+    pub inputs: Vec<PathBuf>,
+    /// Weight file from `pgrf train` (SPC denoiser or PGRF flow model).
+    #[arg(long, short = 'm')]
+    pub model: PathBuf,
+    /// Exposure ratio: the input is multiplied by it before denoising.
+    #[arg(long, conflicts_with = "target_exposure", allow_hyphen_values = true)]
+    pub ratio: Option<f32>,
+    /// Instead of --ratio: the exposure (seconds) to brighten to; the ratio is
+    /// target / the file's exposure time (x --target-iso / the file's ISO).
+    #[arg(long)]
+    pub target_exposure: Option<f64>,
+    /// With --target-exposure: the ISO of the target exposure (default: the file's).
+    #[arg(long, requires = "target_exposure")]
+    pub target_iso: Option<u32>,
+    /// Calibration file (`pgrf calibrate`): subtract its fixed pattern and
+    /// mean dark current before amplifying.
+    #[arg(long)]
+    pub calib: Option<PathBuf>,
+    /// Apply a calibration of another camera or ISO anyway.
+    #[arg(long)]
+    pub force: bool,
+    /// Output DNG (one input file), or folder for the results (created if its
+    /// parent exists); files keep their names with a .dng extension.
+    #[arg(short, long)]
+    pub output: PathBuf,
+    /// Also write an sRGB preview: to this .png with one input, next to each
+    /// DNG without a value.
+    #[arg(long, num_args = 0..=1)]
+    #[allow(clippy::option_option)]
+    pub png: Option<Option<PathBuf>>,
+    /// Tile side in packed pixels (default: from available memory on the CPU, 1024 on CUDA).
+    #[arg(long)]
+    pub tile: Option<usize>,
+    /// Minimum overlap of neighbouring tiles, packed pixels.
+    #[arg(long, default_value_t = DEFAULT_OVERLAP)]
+    pub overlap: usize,
+    /// cpu, or cuda (needs a build with `--features cuda`).
+    #[arg(long, default_value = "cpu")]
+    pub device: DeviceKind,
+    /// Flow model sampler: two-stage (the paper's, 2 evaluations), one-step, or euler:N.
+    #[arg(long, default_value = "two-stage")]
+    pub sampler: SamplerKind,
+    /// Second time of the two-stage sampler (default: the file's searched t2).
+    #[arg(long, allow_hyphen_values = true)]
+    pub t2: Option<f32>,
+    /// Flow model: average this many samples from different start noise.
+    #[arg(long, default_value_t = 1)]
+    pub samples: usize,
+    /// Seed of the flow model's start noise.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// One JSON line per file on stdout.
+    #[arg(long)]
+    pub json: bool,
+    /// No progress bar or notes.
+    #[arg(long, short)]
+    pub quiet: bool,
+    #[command(flatten)]
+    pub input: InputArgs,
+}
+
+#[derive(Serialize)]
+struct FileReport {
+    input: String,
+    output: String,
+    png: Option<String>,
+    width: usize,
+    height: usize,
+    ratio: f32,
+    method: String,
+    nfe: usize,
+    tile: usize,
+    tiles: usize,
+    seconds: f64,
+    peak_rss_mib: Option<f64>,
+}
+
+/// Where one input's results go.
+struct Job {
+    input: PathBuf,
+    output: PathBuf,
+    png: Option<PathBuf>,
+}
+
+pub fn run(a: &EnhanceArgs) -> Result<()> {
+    if let Some(r) = a.ratio {
+        if !(r.is_finite() && r > 0.0) {
+            bail!("--ratio must be a positive number, got {r}");
+        }
+    }
+    if a.ratio.is_none() && a.target_exposure.is_none() {
+        bail!(
+            "give the exposure ratio (--ratio R) or a target exposure (--target-exposure SECONDS)"
+        );
+    }
+    if let Some(t) = a.t2 {
+        if !(0.0..=1.0).contains(&t) {
+            bail!("--t2 must be in [0, 1], got {t}");
+        }
+    }
+    let jobs = plan_jobs(a)?;
+    a.device.check_available().map_err(anyhow::Error::msg)?;
+    let calib = match &a.calib {
+        Some(p) => Some(Calibration::load(p).with_context(|| format!("--calib {}", p.display()))?),
+        None => None,
+    };
+    let choice = SamplerChoice {
+        kind: a.sampler,
+        t2: a.t2,
+        samples: a.samples,
+    };
+    let restorer = pgrf_nn::infer::load(&a.model, choice, a.device)
+        .with_context(|| format!("--model {}", a.model.display()))?;
+    let method = format!(
+        "{} ({})",
+        restorer.meta().arch.describe(),
+        describe_sampler(restorer.as_ref())
+    );
+    // Printed before the first image is processed, so that an input that
+    // fails at once still gives a single line.
+    let header = std::cell::Cell::new(a.quiet);
+    let print_header = || {
+        if !header.replace(true) {
+            eprintln!(
+                "model: {method}; device {}",
+                pgrf_nn::backend::describe(a.device)
+            );
+            if restorer.sampler().is_some() && restorer.meta().t2.is_none() && a.t2.is_none() {
+                eprintln!(
+                    "note: {} has no searched t2; using {} (run `pgrf search` to find the best)",
+                    a.model.display(),
+                    pgrf_nn::infer::restorer::UNSEARCHED_T2
+                );
+            }
+        }
+    };
+    let mut failed: Vec<(PathBuf, String)> = Vec::new();
+    let n = jobs.len();
+    for (i, job) in jobs.iter().enumerate() {
+        match enhance_one(
+            a,
+            job,
+            restorer.as_ref(),
+            calib.as_ref(),
+            &method,
+            i,
+            n,
+            &print_header,
+        ) {
+            Ok(report) => {
+                if a.json {
+                    println!("{}", serde_json::to_string(&report)?);
+                }
+            }
+            Err(e) => {
+                let msg = format!("{e:#}").replace('\n', " ");
+                if n == 1 {
+                    bail!(msg);
+                }
+                if !a.quiet {
+                    eprintln!("skipped {}: {msg}", job.input.display());
+                }
+                if a.json {
+                    println!(
+                        "{}",
+                        serde_json::json!({"input": job.input.display().to_string(), "error": msg})
+                    );
+                }
+                failed.push((job.input.clone(), msg));
+            }
+        }
+    }
+    if !failed.is_empty() {
+        let list: Vec<String> = failed
+            .iter()
+            .map(|(p, _)| p.display().to_string())
+            .collect();
+        bail!(
+            "{} of {n} files could not be enhanced: {}",
+            failed.len(),
+            list.join(", ")
+        );
+    }
+    Ok(())
+}
+
+/// Expand folders, decide every output path, and check that the outputs can
+/// be written before any work starts.
+fn plan_jobs(a: &EnhanceArgs) -> Result<Vec<Job>> {
+    let mut inputs = Vec::new();
+    let mut had_dir = false;
+    for p in &a.inputs {
+        if p.is_dir() {
+            had_dir = true;
+            inputs.extend(pgrf_calib::stack::list_files(p)?);
+        } else if p.is_file() {
+            inputs.push(p.clone());
+        } else {
+            bail!("{}: no such file or folder", p.display());
+        }
+    }
+    let single = inputs.len() == 1 && !had_dir;
+    let is_dng = a
+        .output
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("dng"));
+    let png_path = a.png.as_ref().and_then(|p| p.as_ref());
+    if let Some(p) = png_path {
+        if !p.extension().is_some_and(|e| e.eq_ignore_ascii_case("png")) {
+            bail!(
+                "--png {}: expected a .png path (give --png after the input files, or without a value to write previews next to the DNGs)",
+                p.display()
+            );
+        }
+        if !single {
+            bail!("--png PATH names one preview; with several inputs give --png without a value");
+        }
+        check_parent(p)?;
+    }
+    if single && is_dng {
+        check_parent(&a.output)?;
+        if same_file(&a.output, &inputs[0]) {
+            bail!(
+                "-o {} is the input file; write the result elsewhere",
+                a.output.display()
+            );
+        }
+        let png = a
+            .png
+            .as_ref()
+            .map(|p| p.clone().unwrap_or_else(|| a.output.with_extension("png")));
+        return Ok(vec![Job {
+            input: inputs.remove(0),
+            output: a.output.clone(),
+            png,
+        }]);
+    }
+    if is_dng {
+        bail!(
+            "-o {}: several inputs need an output folder, not a .dng file",
+            a.output.display()
+        );
+    }
+    if !a.output.is_dir() {
+        check_parent(&a.output)?;
+        std::fs::create_dir(&a.output)
+            .with_context(|| format!("creating output folder {}", a.output.display()))?;
+    }
+    let mut seen = std::collections::HashSet::new();
+    inputs
+        .into_iter()
+        .map(|input| {
+            let stem = input
+                .file_stem()
+                .map(|s| s.to_string_lossy().into_owned())
+                .unwrap_or_else(|| "out".into());
+            let output = a.output.join(format!("{stem}.dng"));
+            if !seen.insert(output.clone()) {
+                bail!(
+                    "two inputs would both be written to {} (same name in different folders)",
+                    output.display()
+                );
+            }
+            if same_file(&output, &input) {
+                bail!(
+                    "{} would overwrite its input; choose another output folder",
+                    output.display()
+                );
+            }
+            let png = a.png.as_ref().map(|_| output.with_extension("png"));
+            Ok(Job { input, output, png })
+        })
+        .collect()
+}
+
+fn check_parent(p: &Path) -> Result<()> {
+    if let Some(dir) = p.parent().filter(|d| !d.as_os_str().is_empty()) {
+        if !dir.is_dir() {
+            bail!("{}: folder {} does not exist", p.display(), dir.display());
+        }
+    }
+    Ok(())
+}
+
+fn same_file(a: &Path, b: &Path) -> bool {
+    match (a.canonicalize(), b.canonicalize()) {
+        (Ok(x), Ok(y)) => x == y,
+        _ => false,
+    }
+}
+
+#[allow(clippy::too_many_arguments)]
+fn enhance_one(
+    a: &EnhanceArgs,
+    job: &Job,
+    restorer: &dyn Restore,
+    calib: Option<&Calibration>,
+    method: &str,
+    index: usize,
+    count: usize,
+    print_header: &dyn Fn(),
+) -> Result<FileReport> {
+    let t0 = Instant::now();
+    let frame = a.input.open(&job.input)?;
+    let ratio = match (a.ratio, a.target_exposure) {
+        (Some(r), _) => r,
+        (None, Some(t)) => ratio_from_exposure(&frame, t, a.target_iso)?,
+        (None, None) => unreachable!("checked in run"),
+    };
+    let dark = match (calib, &a.calib) {
+        (Some(cal), Some(path)) => {
+            cal.check_matches(&frame.make, &frame.model, frame.iso, a.force)
+                .with_context(|| format!("--calib {}", path.display()))?;
+            if (cal.meta.width, cal.meta.height) != (frame.width, frame.height) {
+                bail!(
+                    "--calib {}: calibration is {}x{}, the photo {}x{}",
+                    path.display(),
+                    cal.meta.width,
+                    cal.meta.height,
+                    frame.width,
+                    frame.height
+                );
+            }
+            Some(cal.dark_shading_dn(frame.exposure_s.unwrap_or(0.0))?)
+        }
+        _ => None,
+    };
+    let input = network_input(&frame, ratio, dark.as_ref())?;
+    let (_, ph, pw) = input.dim();
+    let tile = match a.tile {
+        Some(t) => t,
+        None => auto_tile(a.device, restorer, ph, pw),
+    };
+    let opts = ImageOptions {
+        tile,
+        overlap: a.overlap,
+        seed: a.seed,
+    };
+    let plan = pgrf_nn::infer::image::plan_for(ph, pw, &opts, restorer.side_multiple())?;
+    let tiles = plan.count();
+    print_header();
+    let bar = if a.quiet {
+        ProgressBar::hidden()
+    } else {
+        ProgressBar::new(tiles as u64)
+    };
+    bar.set_style(
+        ProgressStyle::with_template("{prefix} [{bar:30}] {pos}/{len} tiles  {per_sec}  eta {eta}")
+            .expect("valid template")
+            .progress_chars("=> "),
+    );
+    let name = job
+        .input
+        .file_name()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    bar.set_prefix(format!("[{}/{count}] {name}", index + 1));
+    let out = restore_image(restorer, input.view(), &opts, &mut |done, _| {
+        bar.set_position(done as u64)
+    })?;
+    bar.finish_and_clear();
+    let result = unpack_normalized(out.view(), &frame)?;
+    write_dng(&result, &job.output, &DngOptions::default())?;
+    if let Some(png) = &job.png {
+        render_preview(&result, &PreviewOptions::default())?.write_png(png, 8)?;
+    }
+    let seconds = t0.elapsed().as_secs_f64();
+    if !a.quiet {
+        eprintln!(
+            "wrote {}{}: {}x{}, ratio {ratio:.1}, {tiles} tile{} of {}, {seconds:.1} s",
+            job.output.display(),
+            job.png
+                .as_ref()
+                .map(|p| format!(" and {}", p.display()))
+                .unwrap_or_default(),
+            frame.width,
+            frame.height,
+            if tiles == 1 { "" } else { "s" },
+            plan.rows.len.max(plan.cols.len),
+        );
+    }
+    Ok(FileReport {
+        input: job.input.display().to_string(),
+        output: job.output.display().to_string(),
+        png: job.png.as_ref().map(|p| p.display().to_string()),
+        width: frame.width,
+        height: frame.height,
+        ratio,
+        method: method.to_string(),
+        nfe: restorer.nfe(),
+        tile: plan.rows.len.max(plan.cols.len),
+        tiles,
+        seconds,
+        peak_rss_mib: peak_rss().map(|b| b as f64 / (1 << 20) as f64),
+    })
+}
+
+/// On the CPU, the largest tile whose estimated peak fits in half the
+/// available memory once the frame's own buffers and the weights are set
+/// aside; on CUDA, where burn does not report free memory, 1024.
+fn auto_tile(device: DeviceKind, r: &dyn Restore, ph: usize, pw: usize) -> usize {
+    let t = match device {
+        DeviceKind::Cuda => 1024,
+        DeviceKind::Cpu => {
+            let frame_buffers = (4 * ph * pw * 4 * (3 + r.samples())) as u64;
+            let budget = (available_memory().unwrap_or(2 << 30) / 2)
+                .saturating_sub(frame_buffers + r.weight_bytes());
+            tile_for_budget(&r.meta().arch, r.side_multiple(), budget)
+        }
+    };
+    // A frame only slightly larger than a tile is cheaper as one pass.
+    if ph.max(pw) <= t + t / 8 {
+        ph.max(pw)
+    } else {
+        t
+    }
+}

@@ -1,0 +1,619 @@
+//! `pgrf enhance` as scripts use it: the written DNG keeps the input's
+//! geometry, levels and metadata and holds exactly the model's output; the
+//! flow model's searched t2 is used; batches skip unreadable files; bad input
+//! gives one line and writes nothing.
+
+use burn::tensor::backend::Backend;
+use pgrf_nn::backend::{Cpu, DeviceKind};
+use pgrf_nn::infer::prepare::network_input;
+use pgrf_nn::infer::{restore_image, ImageOptions, SamplerChoice};
+use pgrf_nn::weights::{Architecture, NoiseSource, WeightMeta};
+use pgrf_nn::{SidUnetConfig, Sr3Config};
+use pgrf_raw::scene::{render_frame, SceneKind, SceneLevels, SceneSpec};
+use pgrf_raw::{
+    decode_file, pack_normalized, unpack_normalized, write_dng, Cfa, DngOptions, LevelOverrides,
+    RawFrame,
+};
+use serde_json::Value;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn pgrf(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_pgrf"))
+        .args(args)
+        .output()
+        .expect("run pgrf")
+}
+
+fn scratch(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("pgrf-enhance-test-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+fn files_in(d: &Path) -> Vec<String> {
+    let mut v: Vec<String> = std::fs::read_dir(d)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    v.sort();
+    v
+}
+
+fn one_line_error(out: &Output) -> String {
+    let err = String::from_utf8_lossy(&out.stderr).to_string();
+    assert_eq!(out.status.code(), Some(1), "stderr: {err}");
+    let lines: Vec<&str> = err.lines().filter(|l| !l.trim().is_empty()).collect();
+    assert_eq!(lines.len(), 1, "expected one line, got: {err}");
+    err
+}
+
+/// Small networks with fixed (seeded) weights: what matters here is the
+/// plumbing, not the denoising.
+fn model(dir: &Path, flow: bool, t2: Option<f32>) -> PathBuf {
+    let device = Default::default();
+    Cpu::seed(&device, 11);
+    let arch = if flow {
+        Architecture::Sr3(
+            Sr3Config::new()
+                .with_inner_channels(8)
+                .with_channel_mults(vec![1, 2])
+                .with_res_blocks(1)
+                .with_attn_levels(vec![])
+                .with_norm_groups(4),
+        )
+    } else {
+        Architecture::SidUnet(SidUnetConfig::new().with_width(4))
+    };
+    let net = arch.init::<Cpu>(&device).unwrap();
+    let mut meta = WeightMeta::new(
+        arch,
+        NoiseSource {
+            profile: Some("sony-a7s2".into()),
+            calibration: None,
+            model: "pgrf".into(),
+            iso: Some(1600),
+            ratio: [100.0, 300.0],
+        },
+    );
+    meta.t2 = t2;
+    let path = dir.join(if flow {
+        "flow.safetensors"
+    } else {
+        "spc.safetensors"
+    });
+    net.save(&path, &meta).unwrap();
+    path
+}
+
+/// A dark dead-leaves frame (values scaled down ~100x above black) with
+/// camera metadata, as a DNG.
+fn dark_dng(path: &Path, w: usize, h: usize, cfa: Cfa, seed: u64) -> RawFrame {
+    let levels = SceneLevels::default();
+    let mut f = render_frame(
+        &SceneSpec::new(SceneKind::DeadLeaves, w, h, seed),
+        cfa,
+        &levels,
+    )
+    .unwrap();
+    for v in f.mosaic.iter_mut() {
+        let above = *v as f32 - 512.0;
+        *v = (512.0 + above / 100.0 + ((seed as usize + *v as usize) % 7) as f32).round() as u16;
+    }
+    f.iso = Some(1600);
+    f.exposure_s = Some(1.0 / 100.0);
+    f.make = "Sony".into();
+    f.model = "ILCE-7SM2".into();
+    f.wb = Some([2.1, 1.0, 1.6]);
+    write_dng(&f, path, &DngOptions::default()).unwrap();
+    decode_file(path, &LevelOverrides::default()).unwrap()
+}
+
+#[test]
+fn the_dng_keeps_the_input_and_holds_the_model_output() {
+    let d = scratch("dng");
+    let noisy = d.join("noisy.dng");
+    // GBRG, 144x80 packed: 3 x 2 tiles of 64 packed pixels.
+    let input = dark_dng(&noisy, 288, 160, Cfa::Gbrg, 3);
+    for flow in [false, true] {
+        let m = model(&d, flow, Some(0.3));
+        let out = d.join(format!("out-{flow}.dng"));
+        let png = d.join(format!("out-{flow}.png"));
+        let r = pgrf(&[
+            "enhance",
+            s(&noisy),
+            "--model",
+            s(&m),
+            "--ratio",
+            "80",
+            "-o",
+            s(&out),
+            "--png",
+            s(&png),
+            "--tile",
+            "64",
+            "--overlap",
+            "16",
+            "--json",
+            "--quiet",
+        ]);
+        assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+        let report: Value = serde_json::from_slice(&r.stdout).unwrap();
+        assert_eq!(report["tiles"], 6, "{report}");
+        assert_eq!(report["nfe"], if flow { 2 } else { 1 });
+
+        let got = decode_file(&out, &LevelOverrides::default()).unwrap();
+        assert_eq!((got.width, got.height), (input.width, input.height));
+        assert_eq!(got.cfa, input.cfa);
+        assert_eq!(got.black, input.black);
+        assert_eq!(got.white, input.white);
+        assert_eq!((got.iso, got.exposure_s), (input.iso, input.exposure_s));
+        assert_eq!((&got.make, &got.model), (&input.make, &input.model));
+        assert_eq!(got.wb, input.wb);
+        assert_eq!(got.color_matrices, input.color_matrices);
+        assert_eq!(got.orientation, input.orientation);
+
+        // The pixels are the model's output, unpacked to the input's levels.
+        let restorer = pgrf_nn::infer::load(&m, SamplerChoice::default(), DeviceKind::Cpu).unwrap();
+        let x = network_input(&input, 80.0, None).unwrap();
+        let y = restore_image(
+            restorer.as_ref(),
+            x.view(),
+            &ImageOptions {
+                tile: 64,
+                overlap: 16,
+                seed: 0,
+            },
+            &mut |_, _| {},
+        )
+        .unwrap();
+        let expect = unpack_normalized(y.view(), &input).unwrap();
+        let differ = got
+            .mosaic
+            .iter()
+            .zip(&expect.mosaic)
+            .filter(|(a, b)| a != b)
+            .count();
+        assert_eq!(differ, 0, "flow {flow}: {differ} pixels differ");
+        // The output is not the input: the network did something.
+        assert_ne!(pack_normalized(&got, true).unwrap(), x);
+        let img = image::open(&png).unwrap();
+        assert_eq!((img.width(), img.height()), (288, 160));
+    }
+}
+
+#[test]
+fn the_flow_model_uses_the_searched_t2_from_its_file() {
+    let d = scratch("t2");
+    let noisy = d.join("noisy.dng");
+    dark_dng(&noisy, 64, 64, Cfa::Rggb, 5);
+    let m = model(&d, true, Some(0.3));
+    let run = |out: &Path, extra: &[&str]| {
+        let mut args = vec![
+            "enhance",
+            s(&noisy),
+            "--model",
+            s(&m),
+            "--ratio",
+            "50",
+            "-o",
+            s(out),
+            "--quiet",
+        ];
+        args.extend_from_slice(extra);
+        let r = pgrf(&args);
+        assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+        decode_file(out, &LevelOverrides::default()).unwrap().mosaic
+    };
+    let from_file = run(&d.join("a.dng"), &[]);
+    let explicit = run(&d.join("b.dng"), &["--t2", "0.3"]);
+    let other = run(&d.join("c.dng"), &["--t2", "0.9"]);
+    assert_eq!(from_file, explicit);
+    assert_ne!(from_file, other);
+    // Averaging two samples differs from one sample.
+    let two = run(&d.join("e.dng"), &["--samples", "2"]);
+    assert_ne!(from_file, two);
+}
+
+#[test]
+fn a_batch_skips_and_lists_unreadable_files() {
+    let d = scratch("batch");
+    let inputs = d.join("in");
+    std::fs::create_dir(&inputs).unwrap();
+    dark_dng(&inputs.join("a.dng"), 48, 32, Cfa::Rggb, 1);
+    dark_dng(&inputs.join("c.dng"), 48, 32, Cfa::Bggr, 2);
+    std::fs::write(inputs.join("b.ARW"), b"not a raw file").unwrap();
+    let m = model(&d, false, None);
+    let out = d.join("out");
+    let r = pgrf(&[
+        "enhance",
+        s(&inputs),
+        "--model",
+        s(&m),
+        "--ratio",
+        "100",
+        "-o",
+        s(&out),
+        "--png",
+        "--quiet",
+    ]);
+    let err = String::from_utf8_lossy(&r.stderr);
+    assert_eq!(r.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("1 of 3 files") && err.contains("b.ARW"),
+        "{err}"
+    );
+    assert_eq!(files_in(&out), ["a.dng", "a.png", "c.dng", "c.png"]);
+}
+
+/// Fuji's 6x6 X-Trans mosaic, written with rawler's DNG writer.
+fn xtrans_dng(path: &Path) {
+    use rawler::cfa::{PlaneColor, CFA};
+    use rawler::decoders::Camera;
+    use rawler::dng::writer::DngWriter;
+    use rawler::dng::{CropMode, DngCompression, DngPhotometricConversion, DNG_VERSION_V1_4};
+    use rawler::pixarray::PixU16;
+    use rawler::rawimage::{CFAConfig, RawImage, RawPhotometricInterpretation, WhiteLevel};
+    let mut cam = Camera::new();
+    cam.make = "Fujifilm".into();
+    cam.model = "X-T3".into();
+    cam.cfa = CFA::new("GGRGGBGGBGGRBRGRBGGGBGGRGGRGGBRBRBRG");
+    cam.plane_color = PlaneColor::new("RGB");
+    cam.real_bps = 14;
+    let photometric = RawPhotometricInterpretation::Cfa(CFAConfig::new(&cam.cfa, &cam.plane_color));
+    let pixels = PixU16::new_with(vec![1000u16; 48 * 36], 48, 36);
+    let image = RawImage::new(
+        cam,
+        pixels,
+        1,
+        [1.0, 1.0, 1.0, f32::NAN],
+        photometric,
+        None,
+        Some(WhiteLevel::new(vec![16383])),
+        false,
+    );
+    let mut buf = std::io::Cursor::new(Vec::new());
+    let mut dng = DngWriter::new(&mut buf, DNG_VERSION_V1_4).unwrap();
+    let mut raw = dng.subframe_on_root(0);
+    raw.raw_image(
+        &image,
+        CropMode::None,
+        DngCompression::Uncompressed,
+        DngPhotometricConversion::Original,
+        1,
+    )
+    .unwrap();
+    raw.finalize().unwrap();
+    dng.load_base_tags(&image).unwrap();
+    dng.close().unwrap();
+    std::fs::write(path, buf.into_inner()).unwrap();
+}
+
+#[test]
+fn bad_input_gives_one_line_and_writes_nothing() {
+    let d = scratch("bad");
+    let noisy = d.join("noisy.dng");
+    dark_dng(&noisy, 48, 32, Cfa::Rggb, 1);
+    let m = model(&d, false, None);
+    let xtrans = d.join("xtrans.dng");
+    xtrans_dng(&xtrans);
+    let truncated = d.join("truncated.safetensors");
+    std::fs::write(&truncated, &std::fs::read(&m).unwrap()[..1000]).unwrap();
+    let before = files_in(&d);
+    let out = d.join("out.dng");
+    let cases: Vec<(Vec<&str>, &[&str])> = vec![
+        // A DNG given as the model: not a weight file.
+        (
+            vec![
+                s(&noisy),
+                "--model",
+                s(&noisy),
+                "--ratio",
+                "100",
+                "-o",
+                s(&out),
+            ],
+            &["noisy.dng"],
+        ),
+        (
+            vec![
+                s(&noisy),
+                "--model",
+                s(&truncated),
+                "--ratio",
+                "100",
+                "-o",
+                s(&out),
+            ],
+            &["truncated.safetensors"],
+        ),
+        (
+            vec![
+                s(&xtrans),
+                "--model",
+                s(&m),
+                "--ratio",
+                "100",
+                "-o",
+                s(&out),
+            ],
+            &["X-Trans"],
+        ),
+        (
+            vec![s(&noisy), "--model", s(&m), "--ratio", "0", "-o", s(&out)],
+            &["--ratio"],
+        ),
+        (
+            vec![s(&noisy), "--model", s(&m), "--ratio", "-3", "-o", s(&out)],
+            &["--ratio"],
+        ),
+        (
+            vec![
+                s(&noisy),
+                "--model",
+                s(&m),
+                "--ratio",
+                "100",
+                "-o",
+                "/nonexistent-dir/x.dng",
+            ],
+            &["/nonexistent-dir", "does not exist"],
+        ),
+        (
+            vec![s(&noisy), "--model", s(&m), "-o", s(&out)],
+            &["--ratio"],
+        ),
+        (
+            vec![
+                s(&noisy),
+                "--model",
+                s(&m),
+                "--ratio",
+                "100",
+                "-o",
+                s(&noisy),
+            ],
+            &["is the input file"],
+        ),
+        (
+            vec![
+                s(&noisy),
+                "--model",
+                s(&m),
+                "--ratio",
+                "100",
+                "--sampler",
+                "euler:0",
+                "-o",
+                s(&out),
+            ],
+            &["euler"],
+        ),
+        (
+            vec![
+                s(&noisy),
+                "--model",
+                s(&m),
+                "--ratio",
+                "100",
+                "--device",
+                "cuda",
+                "-o",
+                s(&out),
+            ],
+            &["CUDA"],
+        ),
+    ];
+    for (args, expect) in cases {
+        let mut full = vec!["enhance"];
+        full.extend(args.iter().copied());
+        let r = pgrf(&full);
+        if expect == ["CUDA"] && cfg!(feature = "cuda") {
+            continue;
+        }
+        if expect == ["euler"] {
+            // clap reports argument errors with usage: exit 2, but still no panic.
+            let err = String::from_utf8_lossy(&r.stderr);
+            assert!(!r.status.success(), "{args:?}");
+            assert!(!err.contains("panicked"), "{err}");
+            assert!(expect.iter().all(|e| err.contains(e)), "{args:?}: {err}");
+        } else {
+            let err = one_line_error(&r);
+            assert!(expect.iter().all(|e| err.contains(e)), "{args:?}: {err}");
+        }
+        assert_eq!(files_in(&d), before, "{args:?} left files behind");
+    }
+}
+
+/// `pgrf search` scores the same two-stage sampler `enhance` runs: its PSNR
+/// at a t equals the library's sampler at t2 = t on the same pairs; the best
+/// t lands in the file's record and nothing else in the file changes.
+#[test]
+fn search_writes_the_best_t2_and_agrees_with_the_sampler() {
+    use pgrf_eval::{evaluate, Protocol};
+    use pgrf_nn::data::source::Source;
+    use pgrf_nn::data::validation::ValSet;
+    use pgrf_nn::infer::{Restore, Restorer};
+    use pgrf_noise::pair::{PairSpec, RatioSpec};
+    use pgrf_noise::{CameraProfile, ModelKind};
+
+    let d = scratch("search");
+    let m = model(&d, true, None);
+    let (_, tensors_before) = pgrf_nn::weights::read(&m).unwrap();
+    let plot = d.join("curve.png");
+    let args = [
+        "search",
+        "--model",
+        s(&m),
+        "--procedural",
+        "2",
+        "--patch",
+        "32",
+        "--step",
+        "0.25",
+        "--plot",
+        s(&plot),
+        "--samples",
+        "2",
+        "--json",
+    ];
+    let r = pgrf(&args);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    let j: Value = serde_json::from_slice(&r.stdout).unwrap();
+    let t: Vec<f64> = serde_json::from_value(j["t"].clone()).unwrap();
+    let psnr: Vec<f64> = serde_json::from_value(j["psnr"].clone()).unwrap();
+    assert_eq!(t, [0.25, 0.5, 0.75, 1.0]);
+    let best = j["best_t2"].as_f64().unwrap();
+    let k = (0..4).fold(0, |b, k| if psnr[k] > psnr[b] { k } else { b });
+    assert_eq!(best, t[k]);
+    // Averaging: K = 1 is the two-stage result at the best t; K = 2 differs.
+    let avg: Vec<(usize, f64, f64)> = serde_json::from_value(j["averaged"].clone()).unwrap();
+    assert_eq!(avg.len(), 2);
+    assert_eq!((avg[0].0, avg[1].0), (1, 2));
+    assert!((avg[0].1 - psnr[k]).abs() < 1e-9, "{avg:?}");
+    assert_ne!(avg[1].1, avg[0].1);
+    let (meta, tensors_after) = pgrf_nn::weights::read(&m).unwrap();
+    assert_eq!(meta.t2, Some(best as f32));
+    assert_eq!(tensors_before, tensors_after);
+    assert!(image::open(&plot).is_ok());
+
+    // The same pairs through the library's two-stage sampler at t = 0.5.
+    let mut spec = PairSpec::new(
+        CameraProfile::built_in("sony-a7s2").unwrap(),
+        ModelKind::Pgrf,
+    );
+    spec.iso = Some(1600);
+    spec.ratio = RatioSpec::Uniform {
+        lo: 100.0,
+        hi: 300.0,
+    };
+    let val = ValSet::build(&Source::Procedural, &spec, 32, 2, 0).unwrap();
+    let (net, meta) = pgrf_nn::weights::load::<Cpu>(&m, &Default::default()).unwrap();
+    let r = Restorer::new(net, meta, SamplerChoice::default(), 0.5, Default::default()).unwrap();
+    let mut mean = 0.0;
+    for p in &val.pairs {
+        let view = |v: &Vec<f32>| {
+            pgrf_raw::ndarray::ArrayView3::from_shape((4, 32, 32), v.as_slice())
+                .unwrap()
+                .to_owned()
+        };
+        let out = r
+            .restore(view(&p.noisy).view(), &[view(&p.x0).view()])
+            .unwrap();
+        mean += evaluate(out.view(), view(&p.clean).view(), &Protocol::eld(false))
+            .unwrap()
+            .psnr
+            / 2.0;
+    }
+    assert!(
+        (mean - psnr[1]).abs() < 1e-6,
+        "library {mean} vs search {}",
+        psnr[1]
+    );
+
+    // A dry run leaves the file byte for byte; a denoiser is refused.
+    let bytes = std::fs::read(&m).unwrap();
+    let r = pgrf(&[
+        "search",
+        "--model",
+        s(&m),
+        "--procedural",
+        "1",
+        "--patch",
+        "32",
+        "--step",
+        "0.5",
+        "--dry-run",
+        "--json",
+        "--plot",
+        s(&plot),
+    ]);
+    assert!(r.status.success());
+    assert_eq!(std::fs::read(&m).unwrap(), bytes);
+    let spc = model(&d, false, None);
+    let err = one_line_error(&pgrf(&["search", "--model", s(&spc), "--procedural", "1"]));
+    assert!(err.contains("flow model"), "{err}");
+}
+
+/// A calibration's fixed pattern is subtracted in DN before amplification:
+/// a frame shot 5 DN brighter everywhere, enhanced with a calibration whose
+/// fixed pattern is 5 DN (and no dark current), gives exactly the result of
+/// the plain frame without one. A calibration of another size is refused.
+#[test]
+fn the_calibrated_fixed_pattern_is_subtracted() {
+    use pgrf_calib::Calibration;
+    use pgrf_raw::ndarray::Array3;
+    let d = scratch("calib");
+    let plain = d.join("plain.dng");
+    let frame = dark_dng(&plain, 64, 48, Cfa::Rggb, 9);
+    let mut brighter = frame.clone();
+    for v in brighter.mosaic.iter_mut() {
+        *v += 5;
+    }
+    let bright = d.join("bright.dng");
+    write_dng(&brighter, &bright, &DngOptions::default()).unwrap();
+    let calib = |w: usize, h: usize, path: &Path| {
+        let meta: pgrf_calib::CalibMeta = serde_json::from_value(serde_json::json!({
+            "kind": "pgrf-calibration", "schema": 1, "pgrf_version": "test",
+            "make": "Sony", "model": "ILCE-7SM2", "iso": 1600, "width": w, "height": h,
+            "cfa": "RGGB", "black": [512.0, 512.0, 512.0, 512.0], "white": 16383,
+            "bias_frames": 16, "bias_exposure_s": 0.000125, "dark_exposures_s": [1.0],
+            "dark_frames": [4], "flat_exposures_s": [0.01], "flat_frames": [4],
+            "K": 1.53, "k_method": "ptc", "row_sigma": 1.0, "read_sigma_median": 3.0,
+            "dsnu": 0.0, "prnu": null, "dark_law": "sqrt", "dark_r2_sqrt": null,
+            "dark_r2_linear": null, "dark_rate_mean": null, "ppcc_pixel_median": null,
+            "ppcc_pooled": null, "hot_pixels": 0, "dead_pixels": 0, "units": "DN"
+        }))
+        .unwrap();
+        let shape = (4, h / 2, w / 2);
+        let maps = [
+            ("fixed_pattern", Array3::from_elem(shape, 5.0f32)),
+            ("sigma_read", Array3::from_elem(shape, 3.0f32)),
+            ("dark_rate", Array3::zeros(shape)),
+            ("defects", Array3::zeros(shape)),
+        ]
+        .into_iter()
+        .map(|(k, v)| (k.to_string(), v))
+        .collect();
+        Calibration { meta, maps }.save(path).unwrap();
+    };
+    let good = d.join("good.safetensors");
+    calib(64, 48, &good);
+    let wrong = d.join("wrong.safetensors");
+    calib(32, 48, &wrong);
+    let m = model(&d, false, None);
+    let run = |input: &Path, out: &Path, extra: &[&str]| {
+        let mut args = vec![
+            "enhance",
+            s(input),
+            "--model",
+            s(&m),
+            "--ratio",
+            "100",
+            "-o",
+            s(out),
+            "--quiet",
+        ];
+        args.extend_from_slice(extra);
+        pgrf(&args)
+    };
+    let a = d.join("a.dng");
+    let b = d.join("b.dng");
+    assert!(run(&plain, &a, &[]).status.success());
+    let r = run(&bright, &b, &["--calib", s(&good)]);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    let (ra, rb) = (
+        decode_file(&a, &LevelOverrides::default()).unwrap(),
+        decode_file(&b, &LevelOverrides::default()).unwrap(),
+    );
+    assert_eq!(ra.mosaic, rb.mosaic);
+    let c = d.join("c.dng");
+    let err = one_line_error(&run(&bright, &c, &["--calib", s(&wrong)]));
+    assert!(err.contains("32x48") && err.contains("64x48"), "{err}");
+    assert!(!c.exists());
+}

@@ -1,0 +1,141 @@
+//! The picture of a sampling search: PSNR against the second time t of the
+//! two-stage sampler, with the one-step result and the noisy input as
+//! reference lines and the chosen t2 marked, so a user sees how sharp the
+//! optimum is before trusting it.
+
+use pgrf_calib::report::{ensure_font, render_png, FONT_FAMILY};
+use plotters::prelude::*;
+use std::path::Path;
+
+/// One search's numbers.
+pub struct SearchCurve<'a> {
+    pub title: &'a str,
+    pub t: &'a [f64],
+    pub psnr: &'a [f64],
+    /// PSNR of the first stage alone (XZ), if measured.
+    pub one_step: Option<f64>,
+    /// PSNR of the amplified noisy input.
+    pub input: Option<f64>,
+    pub best_t: f64,
+}
+
+pub fn write_search_plot(path: &Path, c: &SearchCurve) -> Result<(), String> {
+    if c.t.is_empty() || c.t.len() != c.psnr.len() {
+        return Err("search plot needs one PSNR per t".into());
+    }
+    ensure_font().map_err(|e| e.to_string())?;
+    let finite = |v: f64| v.is_finite().then_some(v);
+    let all: Vec<f64> = c
+        .psnr
+        .iter()
+        .copied()
+        .chain(c.one_step)
+        .chain(c.input)
+        .filter_map(finite)
+        .collect();
+    let lo = all.iter().copied().fold(f64::INFINITY, f64::min);
+    let hi = all.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    if !lo.is_finite() {
+        return Err("search plot: no finite PSNR to draw".into());
+    }
+    let pad = ((hi - lo) * 0.08).max(0.2);
+    let (y0, y1) = (lo - pad, hi + pad);
+    render_png(path, (900, 600), |root| {
+        let mut chart = ChartBuilder::on(root)
+            .caption(c.title, (FONT_FAMILY, 24))
+            .margin(20)
+            .x_label_area_size(50)
+            .y_label_area_size(70)
+            .build_cartesian_2d(0.0f64..1.0f64, y0..y1)?;
+        chart
+            .configure_mesh()
+            .x_desc("second time t of the two-stage sampler")
+            .y_desc("PSNR [dB]")
+            .axis_desc_style((FONT_FAMILY, 18))
+            .label_style((FONT_FAMILY, 15))
+            .light_line_style(RGBColor(235, 235, 235))
+            .draw()?;
+        let pts: Vec<(f64, f64)> =
+            c.t.iter()
+                .zip(c.psnr)
+                .filter(|(_, p)| p.is_finite())
+                .map(|(&t, &p)| (t, p))
+                .collect();
+        chart
+            .draw_series(LineSeries::new(pts.clone(), BLUE.stroke_width(2)))?
+            .label("two-stage sampler")
+            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], BLUE.stroke_width(2)));
+        chart.draw_series(pts.iter().map(|&p| Circle::new(p, 4, BLUE.filled())))?;
+        if let Some(best) = pts.iter().find(|(t, _)| (*t - c.best_t).abs() < 1e-9) {
+            chart
+                .draw_series(std::iter::once(Circle::new(*best, 8, RED.filled())))?
+                .label(format!("t2 = {:.3} ({:.2} dB)", best.0, best.1))
+                .legend(|(x, y)| Circle::new((x + 12, y), 6, RED.filled()));
+        }
+        for (v, label, colour) in [
+            (c.one_step, "one step (first stage only)", GREEN),
+            (c.input, "noisy input", BLACK),
+        ] {
+            if let Some(v) = v.and_then(finite) {
+                chart
+                    .draw_series(DashedLineSeries::new(
+                        vec![(0.0, v), (1.0, v)],
+                        10,
+                        6,
+                        colour.stroke_width(2),
+                    ))?
+                    .label(format!("{label}: {v:.2} dB"))
+                    .legend(move |(x, y)| {
+                        PathElement::new(vec![(x, y), (x + 24, y)], colour.stroke_width(2))
+                    });
+            }
+        }
+        chart
+            .configure_series_labels()
+            .position(SeriesLabelPosition::LowerRight)
+            .label_font((FONT_FAMILY, 15))
+            .background_style(WHITE.mix(0.85))
+            .border_style(BLACK)
+            .draw()?;
+        Ok(())
+    })
+    .map_err(|e| e.to_string())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_plot_is_a_png_written_atomically() {
+        let dir = std::env::temp_dir().join(format!("pgrf-search-plot-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("search.png");
+        let t: Vec<f64> = (1..=10).map(|i| i as f64 / 10.0).collect();
+        let psnr: Vec<f64> = t
+            .iter()
+            .map(|t| 40.0 - 10.0 * (t - 0.4) * (t - 0.4))
+            .collect();
+        let curve = SearchCurve {
+            title: "test",
+            t: &t,
+            psnr: &psnr,
+            one_step: Some(38.0),
+            input: Some(20.0),
+            best_t: 0.4,
+        };
+        write_search_plot(&path, &curve).unwrap();
+        let img = image::open(&path).unwrap();
+        assert_eq!((img.width(), img.height()), (900, 600));
+        let files: Vec<_> = std::fs::read_dir(&dir).unwrap().collect();
+        assert_eq!(files.len(), 1, "no temp file left behind");
+        assert!(write_search_plot(
+            &path,
+            &SearchCurve {
+                psnr: &psnr[..3],
+                ..curve
+            }
+        )
+        .is_err());
+    }
+}
