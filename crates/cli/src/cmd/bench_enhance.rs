@@ -1,0 +1,498 @@
+//! `pgrf bench enhance`: what `pgrf enhance` costs on a whole frame, the
+//! network part of it (`pgrf_nn::infer::restore_image`: start noise, tiles,
+//! network evaluations, blend, clamp), with either network, fresh weights of
+//! any configuration or a trained weight file.
+//!
+//! The input is a deterministic amplified "noisy" packed frame, cheap to
+//! rebuild in numpy so that bench/enhance_torch.py runs PyTorch on the very
+//! same values (a frame of H x W is the top-left crop of any larger one):
+//!
+//! ```text
+//! clean[c, i, j] = f32(4 |(i + 2 j + 16 c) % 512 - 256| + (7 i + 3 j) % 41) / f32(1100)
+//! u[c, i, j]     = (splitmix64(SEED + (c << 42) + (i << 21) + j) >> 40) / 2^24
+//! input          = clamp(0.8 * clean + (u - 0.5) * 0.3, 0, 1)      (f32 operations)
+//! ```
+//!
+//! The default frame is a Sony A7S2 raw (4256 x 2848 mosaic, 12.1 MP) packed:
+//! 4 x 1424 x 2128. The default tile is the one `pgrf enhance` would choose
+//! on this machine (the same rule as its `auto_tile`).
+
+use crate::cmd::bench::median;
+use anyhow::{ensure, Context, Result};
+use burn::module::Module;
+use burn::tensor::backend::Backend;
+use clap::{Args, ValueEnum};
+use pgrf_nn::backend::DeviceKind;
+use pgrf_nn::infer::image::plan_for;
+use pgrf_nn::infer::memory::{available_memory, bytes_per_pixel, peak_rss, tile_for_budget};
+use pgrf_nn::infer::restorer::UNSEARCHED_T2;
+use pgrf_nn::infer::DEFAULT_OVERLAP;
+use pgrf_nn::infer::{restore_image, ImageOptions, Restore, Restorer, SamplerChoice};
+use pgrf_nn::sample::SamplerKind;
+use pgrf_nn::weights::{Architecture, NoiseSource, WeightMeta};
+use pgrf_nn::{SidUnetConfig, Sr3Config};
+use pgrf_raw::ndarray::Array3;
+use rayon::prelude::*;
+use serde::Serialize;
+use std::path::PathBuf;
+use std::time::Instant;
+
+/// Seed of the benchmark frame's noise (see the module docs).
+pub const SEED: u64 = 11;
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum NetKind {
+    /// SPC: the SID U-Net, one network evaluation.
+    Unet,
+    /// PGRF: the SR3 velocity field through the chosen sampler.
+    Sr3,
+}
+
+/// A packed frame size, `HxW` or `N` (square).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct FrameSize {
+    pub h: usize,
+    pub w: usize,
+}
+
+impl std::str::FromStr for FrameSize {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        let parse = |v: &str| {
+            v.trim()
+                .parse::<usize>()
+                .ok()
+                .filter(|n| *n > 0)
+                .ok_or_else(|| format!("'{s}': expected HxW or N in packed pixels, e.g. 1424x2128"))
+        };
+        match s.split_once(['x', 'X']) {
+            Some((h, w)) => Ok(FrameSize {
+                h: parse(h)?,
+                w: parse(w)?,
+            }),
+            None => {
+                let n = parse(s)?;
+                Ok(FrameSize { h: n, w: n })
+            }
+        }
+    }
+}
+
+#[derive(Args, Debug)]
+pub struct EnhanceArgs {
+    /// Which network: the SPC denoiser (SID U-Net) or the PGRF flow model (SR3).
+    #[arg(long, value_enum, default_value = "unet")]
+    pub net: NetKind,
+    /// SID U-Net: width of the first level.
+    #[arg(long, default_value_t = 32)]
+    pub width: usize,
+    /// SR3: channels of the first level.
+    #[arg(long, default_value_t = 64)]
+    pub inner_channels: usize,
+    /// SR3: channel multiplier per level, comma-separated.
+    #[arg(long, value_delimiter = ',', default_value = "1,2,4,8,8")]
+    pub channel_mults: Vec<usize>,
+    /// SR3: levels (0 = full resolution) with self-attention, comma-separated,
+    /// or "none".
+    #[arg(long, default_value = "3")]
+    pub attn_levels: String,
+    /// A trained weight file instead of fresh weights (its architecture wins
+    /// over --net and the configuration flags).
+    #[arg(long, short = 'm')]
+    pub model: Option<PathBuf>,
+    /// Packed frame, HxW or N (square); the default is a 12.1 MP A7S2 frame.
+    /// Smaller frames are the top-left crop of the same image.
+    #[arg(long, default_value = "1424x2128")]
+    pub frame: FrameSize,
+    /// Tile side in packed pixels (default: what `pgrf enhance` chooses here).
+    #[arg(long)]
+    pub tile: Option<usize>,
+    /// Minimum overlap of neighbouring tiles, packed pixels.
+    #[arg(long, default_value_t = DEFAULT_OVERLAP)]
+    pub overlap: usize,
+    /// Flow model sampler: two-stage (2 evaluations), one-step, or euler:N.
+    #[arg(long, default_value = "two-stage")]
+    pub sampler: SamplerKind,
+    /// Second time of the two-stage sampler (default: the file's, else 0.5).
+    #[arg(long)]
+    pub t2: Option<f32>,
+    /// Timed runs (the median is reported).
+    #[arg(long, default_value_t = 1)]
+    pub iters: usize,
+    /// Untimed runs first (a full-frame run takes minutes; the first run pays
+    /// page faults for the buffers and the thread pool's start).
+    #[arg(long, default_value_t = 0)]
+    pub warmup: usize,
+    /// cpu, or cuda (needs a build with `--features cuda`).
+    #[arg(long, default_value = "cpu")]
+    pub device: DeviceKind,
+    /// Print one JSON line instead of text.
+    #[arg(long)]
+    pub json: bool,
+    /// Print the plan (tile, tiles, memory estimates, attention size) and
+    /// stop without running the network.
+    #[arg(long)]
+    pub dry_run: bool,
+}
+
+#[derive(Serialize)]
+struct Report {
+    burn: &'static str,
+    device: String,
+    threads: usize,
+    net: &'static str,
+    model: String,
+    params: usize,
+    weights: String,
+    /// Packed frame `[4, H, W]` and its mosaic size in megapixels.
+    frame: [usize; 3],
+    megapixels: f64,
+    tile: usize,
+    /// Tile shape actually run (an axis that fits is not cut).
+    tile_hw: [usize; 2],
+    tiles: usize,
+    overlap: usize,
+    auto_tile: bool,
+    sampler: String,
+    nfe: usize,
+    iters: usize,
+    warmup: usize,
+    /// Wall time of `restore_image` on the frame, seconds.
+    seconds: f64,
+    seconds_min: f64,
+    /// One network evaluation over the whole frame (all tiles), seconds.
+    seconds_per_eval: f64,
+    /// One network evaluation of one tile, seconds.
+    seconds_per_tile_eval: f64,
+    /// Pixels the network evaluates per evaluation (tiles x tile area) over
+    /// the frame's pixels: the tiling's overlap overhead.
+    tiled_pixel_factor: f64,
+    /// Building the input frame (not timed above), seconds.
+    input_seconds: f64,
+    /// `pgrf_nn::infer::memory`'s estimate of the peak for one tile plus the
+    /// frame buffers and weights, MiB (what the default tile is chosen by).
+    estimated_peak_mib: f64,
+    /// SR3: tokens of the largest self-attention (at the highest-resolution
+    /// attention level of one tile) and the size of one of its score
+    /// matrices (tokens^2 floats), MiB; 0 for the U-Net.
+    attention_tokens: usize,
+    attention_scores_mib: f64,
+    /// Peak resident memory of this process (VmHWM), MiB.
+    peak_rss_mib: Option<f64>,
+    /// Mean of the restored frame (a checksum that the work was done).
+    output_mean: f64,
+}
+
+fn splitmix64(x: u64) -> u64 {
+    let mut z = x.wrapping_add(0x9e3779b97f4a7c15);
+    z = (z ^ (z >> 30)).wrapping_mul(0xbf58476d1ce4e5b9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94d049bb133111eb);
+    z ^ (z >> 31)
+}
+
+/// The benchmark's amplified noisy packed frame `(4, h, w)`; see the module docs.
+pub fn frame(h: usize, w: usize) -> Array3<f32> {
+    let mut a = Array3::<f32>::zeros((4, h, w));
+    a.as_slice_mut()
+        .expect("standard layout")
+        .par_chunks_mut(w)
+        .enumerate()
+        .for_each(|(row, out)| {
+            let (c, i) = (row / h, row % h);
+            for (j, v) in out.iter_mut().enumerate() {
+                let tri = ((i + 2 * j + 16 * c) % 512).abs_diff(256);
+                let clean = (4 * tri + (7 * i + 3 * j) % 41) as f32 / 1100.0;
+                let key = ((c as u64) << 42) + ((i as u64) << 21) + j as u64;
+                let u = (splitmix64(SEED.wrapping_add(key)) >> 40) as f32 / 16_777_216.0;
+                *v = (0.8 * clean + (u - 0.5) * 0.3).clamp(0.0, 1.0);
+            }
+        });
+    a
+}
+
+fn parse_levels(s: &str) -> Result<Vec<usize>> {
+    let s = s.trim();
+    if s.is_empty() || s.eq_ignore_ascii_case("none") {
+        return Ok(Vec::new());
+    }
+    s.split(',')
+        .map(|v| {
+            v.trim().parse::<usize>().with_context(|| {
+                format!("--attn-levels '{s}': expected levels like 3 or 2,3, or none")
+            })
+        })
+        .collect()
+}
+
+/// The network to time and its parameter count, on backend `B`.
+fn build<B: Backend>(
+    a: &EnhanceArgs,
+    device: B::Device,
+) -> Result<(Box<dyn Restore>, usize, String)> {
+    let choice = SamplerChoice {
+        kind: a.sampler,
+        t2: a.t2,
+        samples: 1,
+    };
+    let (net, meta, weights) = match &a.model {
+        Some(path) => {
+            let (net, meta) = pgrf_nn::weights::load::<B>(path, &device)
+                .with_context(|| format!("--model {}", path.display()))?;
+            (net, meta, path.display().to_string())
+        }
+        None => {
+            let arch = match a.net {
+                NetKind::Unet => Architecture::SidUnet(SidUnetConfig::new().with_width(a.width)),
+                NetKind::Sr3 => Architecture::Sr3(
+                    Sr3Config::new()
+                        .with_inner_channels(a.inner_channels)
+                        .with_channel_mults(a.channel_mults.clone())
+                        .with_attn_levels(parse_levels(&a.attn_levels)?),
+                ),
+            };
+            let net = arch.init::<B>(&device)?;
+            let meta = WeightMeta::new(
+                arch,
+                NoiseSource {
+                    model: "none (fresh weights)".into(),
+                    ..Default::default()
+                },
+            );
+            (net, meta, "fresh (random initialisation)".to_string())
+        }
+    };
+    let params = net.num_params();
+    let t2 = choice.t2.or(meta.t2).unwrap_or(UNSEARCHED_T2);
+    let r = Restorer::<B>::new(net, meta, choice, t2, device)?;
+    Ok((Box::new(r), params, weights))
+}
+
+/// `pgrf enhance`'s default tile (its private `auto_tile`, same rule): on
+/// the CPU the largest tile whose estimated peak fits in half the available
+/// memory, on CUDA 1024; a frame only slightly larger than a tile is one pass.
+fn enhance_tile(device: DeviceKind, r: &dyn Restore, ph: usize, pw: usize) -> usize {
+    let t = match device {
+        DeviceKind::Cuda => 1024,
+        DeviceKind::Cpu => {
+            let frame_buffers = (4 * ph * pw * 4 * (3 + r.samples())) as u64;
+            let budget = (available_memory().unwrap_or(2 << 30) / 2)
+                .saturating_sub(frame_buffers + r.weight_bytes());
+            tile_for_budget(&r.meta().arch, r.side_multiple(), budget)
+        }
+    };
+    if ph.max(pw) <= t + t / 8 {
+        ph.max(pw)
+    } else {
+        t
+    }
+}
+
+/// Tokens of the largest self-attention of an `h` x `w` tile: SR3 attends at
+/// its `attn_levels` and in the first middle block (the last level); each
+/// level halves the side (stride-2 convolution, padding 1: rounding up).
+fn attention_tokens(arch: &Architecture, h: usize, w: usize) -> usize {
+    let Architecture::Sr3(c) = arch else {
+        return 0;
+    };
+    let last = c.channel_mults.len().saturating_sub(1);
+    c.attn_levels
+        .iter()
+        .copied()
+        .filter(|&l| l <= last)
+        .chain(std::iter::once(last))
+        .map(|l| h.div_ceil(1 << l) * w.div_ceil(1 << l))
+        .max()
+        .unwrap_or(0)
+}
+
+pub fn run(a: &EnhanceArgs) -> Result<()> {
+    ensure!(a.iters > 0, "--iters must be at least 1");
+    if let Some(t) = a.t2 {
+        ensure!((0.0..=1.0).contains(&t), "--t2 must be in [0, 1], got {t}");
+    }
+    a.device.check_available().map_err(anyhow::Error::msg)?;
+    let (r, params, weights) = match a.device {
+        DeviceKind::Cpu => build::<pgrf_nn::backend::Cpu>(a, Default::default())?,
+        #[cfg(feature = "cuda")]
+        DeviceKind::Cuda => build::<pgrf_nn::backend::Gpu>(a, Default::default())?,
+        #[cfg(not(feature = "cuda"))]
+        DeviceKind::Cuda => unreachable!("checked above"),
+    };
+    let r = r.as_ref();
+    let (ph, pw) = (a.frame.h, a.frame.w);
+    let t0 = Instant::now();
+    let input = frame(ph, pw);
+    let input_seconds = t0.elapsed().as_secs_f64();
+    let tile = a.tile.unwrap_or_else(|| enhance_tile(a.device, r, ph, pw));
+    let opts = ImageOptions {
+        tile,
+        overlap: a.overlap,
+        seed: 0,
+    };
+    let plan = plan_for(ph, pw, &opts, r.side_multiple())?;
+    let tiles = plan.count();
+    let (th, tw) = (plan.rows.len, plan.cols.len);
+    let sampler = match r.sampler() {
+        None => "one pass".to_string(),
+        Some(s) => s.to_string(),
+    };
+    let nfe = r.nfe();
+    let mib = |b: f64| b / (1 << 20) as f64;
+    let estimated_peak_mib = mib(bytes_per_pixel(&r.meta().arch) * (th * tw) as f64
+        + (4 * ph * pw * 4 * (3 + r.samples())) as f64
+        + r.weight_bytes() as f64);
+    let attention_tokens = attention_tokens(&r.meta().arch, th, tw);
+    let attention_scores_mib = mib(4.0 * (attention_tokens as f64).powi(2));
+    if a.dry_run {
+        let plan = serde_json::json!({
+            "model": r.meta().arch.describe(),
+            "params": params,
+            "frame": [4, ph, pw],
+            "tile": tile,
+            "auto_tile": a.tile.is_none(),
+            "tile_hw": [th, tw],
+            "tiles": tiles,
+            "nfe": nfe,
+            "estimated_peak_mib": estimated_peak_mib,
+            "available_mib": available_memory().map(|b| mib(b as f64)),
+            "attention_tokens": attention_tokens,
+            "attention_scores_mib": attention_scores_mib,
+        });
+        println!("{plan}");
+        return Ok(());
+    }
+    if !a.json {
+        eprintln!(
+            "{} ({} parameters, {weights} weights); frame 4 x {ph} x {pw}; {tiles} tile{} of {th} x {tw}; {sampler}, {nfe} evaluation{}; {} threads",
+            r.meta().arch.describe(),
+            params,
+            if tiles == 1 { "" } else { "s" },
+            if nfe == 1 { "" } else { "s" },
+            rayon::current_num_threads(),
+        );
+    }
+    let mut times = Vec::with_capacity(a.iters);
+    let mut output_mean = f64::NAN;
+    for i in 0..a.warmup + a.iters {
+        let t = Instant::now();
+        let out = restore_image(r, input.view(), &opts, &mut |_, _| {})?;
+        let s = t.elapsed().as_secs_f64();
+        output_mean = out.iter().map(|&v| v as f64).sum::<f64>() / out.len() as f64;
+        let timed = i >= a.warmup;
+        if timed {
+            times.push(s);
+        }
+        if !a.json {
+            eprintln!(
+                "  run {}/{}{}: {s:.2} s",
+                i + 1,
+                a.warmup + a.iters,
+                if timed { "" } else { " (warm-up)" }
+            );
+        }
+    }
+    let seconds_min = times.iter().cloned().fold(f64::MAX, f64::min);
+    let seconds = median(&mut times);
+    let report = Report {
+        burn: "0.21.0",
+        // backend::describe counts the machine's cores, not rayon's pool.
+        device: match a.device {
+            DeviceKind::Cpu => "Flex (CPU)".to_string(),
+            DeviceKind::Cuda => pgrf_nn::backend::describe(a.device),
+        },
+        threads: rayon::current_num_threads(),
+        net: match r.meta().arch {
+            Architecture::SidUnet(_) => "unet",
+            Architecture::Sr3(_) => "sr3",
+        },
+        model: r.meta().arch.describe(),
+        params,
+        weights,
+        frame: [4, ph, pw],
+        megapixels: (4 * ph * pw) as f64 / 1e6,
+        tile,
+        tile_hw: [th, tw],
+        tiles,
+        overlap: a.overlap,
+        auto_tile: a.tile.is_none(),
+        sampler,
+        nfe,
+        iters: a.iters,
+        warmup: a.warmup,
+        seconds,
+        seconds_min,
+        seconds_per_eval: seconds / nfe as f64,
+        seconds_per_tile_eval: seconds / (nfe * tiles) as f64,
+        tiled_pixel_factor: (tiles * th * tw) as f64 / (ph * pw) as f64,
+        input_seconds,
+        estimated_peak_mib,
+        attention_tokens,
+        attention_scores_mib,
+        peak_rss_mib: peak_rss().map(|b| b as f64 / (1 << 20) as f64),
+        output_mean,
+    };
+    if a.json {
+        println!("{}", serde_json::to_string(&report)?);
+    } else {
+        println!(
+            "{:.2} s/image (median of {}, min {:.2} s), {} NFE: {:.2} s per evaluation of the frame, {:.3} s per tile evaluation; {} tiles of {}x{} ({:.2}x the frame's pixels); peak {} MiB",
+            report.seconds,
+            report.iters,
+            report.seconds_min,
+            report.nfe,
+            report.seconds_per_eval,
+            report.seconds_per_tile_eval,
+            report.tiles,
+            th,
+            tw,
+            report.tiled_pixel_factor,
+            report
+                .peak_rss_mib
+                .map_or("?".to_string(), |m| format!("{m:.0}")),
+        );
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn frame_sizes_parse() {
+        assert_eq!(
+            "1424x2128".parse::<FrameSize>(),
+            Ok(FrameSize { h: 1424, w: 2128 })
+        );
+        assert_eq!("512".parse::<FrameSize>(), Ok(FrameSize { h: 512, w: 512 }));
+        assert!("0x5".parse::<FrameSize>().is_err());
+        assert!("ax5".parse::<FrameSize>().is_err());
+    }
+
+    #[test]
+    fn smaller_frames_are_crops_of_larger_ones() {
+        let big = frame(40, 70);
+        let small = frame(16, 24);
+        assert_eq!(
+            small,
+            big.slice(pgrf_raw::ndarray::s![.., ..16, ..24]).to_owned()
+        );
+        assert!(big.iter().all(|v| (0.0..=1.0).contains(v)));
+        // The value bench/enhance_torch.py's numpy `frame(2, 3)[1, 1, 2]` gives.
+        assert_eq!(frame(2, 3)[[1, 1, 2]] as f64, 0.6646702885627747);
+        assert_eq!(parse_levels("none").unwrap(), Vec::<usize>::new());
+        assert_eq!(parse_levels("2,3").unwrap(), vec![2, 3]);
+    }
+
+    #[test]
+    fn attention_sizes() {
+        let sr3 = Architecture::Sr3(Sr3Config::new());
+        // Attention at level 3 (64 x 64 of a 512 tile) and in the middle (32 x 32).
+        assert_eq!(attention_tokens(&sr3, 512, 512), 4096);
+        assert_eq!(attention_tokens(&sr3, 1424, 2128), 178 * 266);
+        let none = Architecture::Sr3(Sr3Config::new().with_attn_levels(vec![]));
+        assert_eq!(attention_tokens(&none, 512, 512), 32 * 32);
+        let unet = Architecture::SidUnet(SidUnetConfig::new());
+        assert_eq!(attention_tokens(&unet, 512, 512), 0);
+    }
+}
