@@ -33,6 +33,12 @@ enum Command {
     Chart(cmd::chart::ChartArgs),
     /// Train the SPC denoiser or the PGRF flow model on synthetic pairs (procedural scenes or clean RAWs).
     Train(Box<cmd::train::TrainArgs>),
+    /// Denoise dark RAW photos with a trained model: clean linear DNGs and sRGB previews.
+    Enhance(Box<cmd::enhance::EnhanceArgs>),
+    /// Sampling search: find the flow model's best second time t2 and store it in its weight file.
+    Search(cmd::search::SearchArgs),
+    /// Raw-domain PSNR and SSIM of a result against its reference (ELD protocol).
+    Metrics(cmd::metrics::MetricsArgs),
     /// Time pgrf's hot paths (results go to BENCHMARKS.md).
     Bench(cmd::bench::BenchArgs),
 }
@@ -66,6 +72,9 @@ fn main() -> ExitCode {
         Command::SimulateSensor(a) => cmd::simulate::run(a),
         Command::Calibrate(a) => cmd::calibrate::run(a),
         Command::Train(a) => cmd::train::run(a),
+        Command::Enhance(a) => cmd::enhance::run(a),
+        Command::Search(a) => cmd::search::run(a),
+        Command::Metrics(a) => cmd::metrics::run(a),
         Command::Bench(a) => cmd::bench::run(a),
     };
     match result {

@@ -60,15 +60,9 @@ impl DeviceKind {
 /// One line about the compute device, for headers and summaries.
 pub fn describe(kind: DeviceKind) -> String {
     match kind {
-        DeviceKind::Cpu => format!("Flex, {} threads", rayon_threads()),
+        DeviceKind::Cpu => format!("Flex, {} threads", rayon::current_num_threads()),
         DeviceKind::Cuda => "CUDA device 0".into(),
     }
-}
-
-fn rayon_threads() -> usize {
-    std::thread::available_parallelism()
-        .map(|n| n.get())
-        .unwrap_or(1)
 }
 
 /// Run the training loop on the chosen device.

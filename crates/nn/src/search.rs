@@ -32,6 +32,11 @@ pub fn grid(step: f64) -> Result<Vec<f64>> {
     Ok((1..=n).map(|i| i as f64 * step).collect())
 }
 
+/// Receives each search result: (pair index, candidate).
+pub type ScoreFn<'s> = dyn FnMut(usize, Candidate) -> Result<()> + 's;
+/// Receives each averaged result: (pair index, samples K, mean of K samples).
+pub type AverageFn<'s> = dyn FnMut(usize, usize, &Array3<f32>) -> Result<()> + 's;
+
 /// What the search hands back for one pair.
 pub enum Candidate<'a> {
     /// The first stage alone (one-step sampler).
@@ -48,7 +53,7 @@ pub fn search(
     pairs: &[ValPair],
     patch: usize,
     times: &[f64],
-    score: &mut dyn FnMut(usize, Candidate) -> Result<()>,
+    score: &mut ScoreFn,
     progress: &mut dyn FnMut(),
 ) -> Result<()> {
     device.check_available().map_err(NnError::Invalid)?;
@@ -83,7 +88,7 @@ fn run<B: Backend>(
     pairs: &[ValPair],
     patch: usize,
     times: &[f64],
-    score: &mut dyn FnMut(usize, Candidate) -> Result<()>,
+    score: &mut ScoreFn,
     progress: &mut dyn FnMut(),
 ) -> Result<()> {
     let (net, _) = weights::load_flow::<B>(path, device)?;
@@ -129,7 +134,7 @@ pub fn averaging(
     pairs: &[ValPair],
     patch: usize,
     avg: Averaging,
-    score: &mut dyn FnMut(usize, usize, &Array3<f32>) -> Result<()>,
+    score: &mut AverageFn,
     progress: &mut dyn FnMut(),
 ) -> Result<()> {
     device.check_available().map_err(NnError::Invalid)?;
@@ -179,7 +184,7 @@ fn average_on<B: Backend>(
     device: &B::Device,
     (pairs, patch): (&[ValPair], usize),
     Averaging { t2, k_max, seed }: Averaging,
-    score: &mut dyn FnMut(usize, usize, &Array3<f32>) -> Result<()>,
+    score: &mut AverageFn,
     progress: &mut dyn FnMut(),
 ) -> Result<()> {
     let (net, _) = weights::load_flow::<B>(path, device)?;

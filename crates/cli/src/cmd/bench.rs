@@ -51,6 +51,19 @@ pub enum BenchWhat {
     /// Forward and training-step time of the SID U-Net and the SR3 velocity
     /// field on the CPU (bench/train.sh runs PyTorch beside it).
     Train(crate::cmd::bench_train::TrainArgs),
+    /// Inference on a whole frame (`pgrf enhance`'s network part: tiles,
+    /// sampler, blend) with either network; bench/enhance.sh runs PyTorch beside it.
+    Enhance(crate::cmd::bench_enhance::EnhanceArgs),
+    /// PSNR + SSIM under the ELD protocol on a deterministic A7S2-sized pair
+    /// (4 x 1424 x 2128 packed); bench/ssim.sh times scikit-image beside it.
+    Ssim {
+        /// Timed repetitions (after one warm-up).
+        #[arg(long, default_value_t = 10)]
+        iters: usize,
+        /// Print one JSON line instead of text.
+        #[arg(long)]
+        json: bool,
+    },
 }
 
 #[derive(Serialize)]
@@ -80,6 +93,8 @@ pub fn run(a: &BenchArgs) -> Result<()> {
         BenchWhat::Synth { frames, json } => crate::cmd::bench_synth::run(*frames, *json),
         BenchWhat::Stack { dir, json } => bench_stack(dir, *json),
         BenchWhat::Train(t) => crate::cmd::bench_train::run(t),
+        BenchWhat::Enhance(e) => crate::cmd::bench_enhance::run(e),
+        BenchWhat::Ssim { iters, json } => crate::cmd::bench_ssim::run(*iters, *json),
         BenchWhat::Decode { files, iters, json } => {
             if *iters == 0 {
                 bail!("--iters must be at least 1");

@@ -15,7 +15,7 @@
 //!
 //! The default frame is a Sony A7S2 raw (4256 x 2848 mosaic, 12.1 MP) packed:
 //! 4 x 1424 x 2128. The default tile is the one `pgrf enhance` would choose
-//! on this machine (the same rule as its `auto_tile`).
+//! on this machine (`pgrf_nn::infer::memory::auto_tile`).
 
 use crate::cmd::bench::median;
 use anyhow::{ensure, Context, Result};
@@ -24,7 +24,9 @@ use burn::tensor::backend::Backend;
 use clap::{Args, ValueEnum};
 use pgrf_nn::backend::DeviceKind;
 use pgrf_nn::infer::image::plan_for;
-use pgrf_nn::infer::memory::{available_memory, bytes_per_pixel, peak_rss, tile_for_budget};
+use pgrf_nn::infer::memory::{
+    attention_tokens, auto_tile, available_memory, bytes_per_pixel, peak_rss,
+};
 use pgrf_nn::infer::restorer::UNSEARCHED_T2;
 use pgrf_nn::infer::DEFAULT_OVERLAP;
 use pgrf_nn::infer::{restore_image, ImageOptions, Restore, Restorer, SamplerChoice};
@@ -267,44 +269,6 @@ fn build<B: Backend>(
     Ok((Box::new(r), params, weights))
 }
 
-/// `pgrf enhance`'s default tile (its private `auto_tile`, same rule): on
-/// the CPU the largest tile whose estimated peak fits in half the available
-/// memory, on CUDA 1024; a frame only slightly larger than a tile is one pass.
-fn enhance_tile(device: DeviceKind, r: &dyn Restore, ph: usize, pw: usize) -> usize {
-    let t = match device {
-        DeviceKind::Cuda => 1024,
-        DeviceKind::Cpu => {
-            let frame_buffers = (4 * ph * pw * 4 * (3 + r.samples())) as u64;
-            let budget = (available_memory().unwrap_or(2 << 30) / 2)
-                .saturating_sub(frame_buffers + r.weight_bytes());
-            tile_for_budget(&r.meta().arch, r.side_multiple(), budget)
-        }
-    };
-    if ph.max(pw) <= t + t / 8 {
-        ph.max(pw)
-    } else {
-        t
-    }
-}
-
-/// Tokens of the largest self-attention of an `h` x `w` tile: SR3 attends at
-/// its `attn_levels` and in the first middle block (the last level); each
-/// level halves the side (stride-2 convolution, padding 1: rounding up).
-fn attention_tokens(arch: &Architecture, h: usize, w: usize) -> usize {
-    let Architecture::Sr3(c) = arch else {
-        return 0;
-    };
-    let last = c.channel_mults.len().saturating_sub(1);
-    c.attn_levels
-        .iter()
-        .copied()
-        .filter(|&l| l <= last)
-        .chain(std::iter::once(last))
-        .map(|l| h.div_ceil(1 << l) * w.div_ceil(1 << l))
-        .max()
-        .unwrap_or(0)
-}
-
 pub fn run(a: &EnhanceArgs) -> Result<()> {
     ensure!(a.iters > 0, "--iters must be at least 1");
     if let Some(t) = a.t2 {
@@ -323,7 +287,7 @@ pub fn run(a: &EnhanceArgs) -> Result<()> {
     let t0 = Instant::now();
     let input = frame(ph, pw);
     let input_seconds = t0.elapsed().as_secs_f64();
-    let tile = a.tile.unwrap_or_else(|| enhance_tile(a.device, r, ph, pw));
+    let tile = a.tile.unwrap_or_else(|| auto_tile(a.device, r, ph, pw));
     let opts = ImageOptions {
         tile,
         overlap: a.overlap,
@@ -338,10 +302,11 @@ pub fn run(a: &EnhanceArgs) -> Result<()> {
     };
     let nfe = r.nfe();
     let mib = |b: f64| b / (1 << 20) as f64;
+    let attention_tokens = attention_tokens(&r.meta().arch, th, tw);
     let estimated_peak_mib = mib(bytes_per_pixel(&r.meta().arch) * (th * tw) as f64
+        + 2.0 * 4.0 * (attention_tokens as f64).powi(2)
         + (4 * ph * pw * 4 * (3 + r.samples())) as f64
         + r.weight_bytes() as f64);
-    let attention_tokens = attention_tokens(&r.meta().arch, th, tw);
     let attention_scores_mib = mib(4.0 * (attention_tokens as f64).powi(2));
     if a.dry_run {
         let plan = serde_json::json!({
@@ -482,17 +447,5 @@ mod tests {
         assert_eq!(frame(2, 3)[[1, 1, 2]] as f64, 0.6646702885627747);
         assert_eq!(parse_levels("none").unwrap(), Vec::<usize>::new());
         assert_eq!(parse_levels("2,3").unwrap(), vec![2, 3]);
-    }
-
-    #[test]
-    fn attention_sizes() {
-        let sr3 = Architecture::Sr3(Sr3Config::new());
-        // Attention at level 3 (64 x 64 of a 512 tile) and in the middle (32 x 32).
-        assert_eq!(attention_tokens(&sr3, 512, 512), 4096);
-        assert_eq!(attention_tokens(&sr3, 1424, 2128), 178 * 266);
-        let none = Architecture::Sr3(Sr3Config::new().with_attn_levels(vec![]));
-        assert_eq!(attention_tokens(&none, 512, 512), 32 * 32);
-        let unet = Architecture::SidUnet(SidUnetConfig::new());
-        assert_eq!(attention_tokens(&unet, 512, 512), 0);
     }
 }

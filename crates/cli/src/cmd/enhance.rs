@@ -7,7 +7,7 @@ use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use pgrf_calib::Calibration;
 use pgrf_nn::backend::DeviceKind;
-use pgrf_nn::infer::memory::{available_memory, peak_rss, tile_for_budget};
+use pgrf_nn::infer::memory::{auto_tile, peak_rss};
 use pgrf_nn::infer::prepare::{network_input, ratio_from_exposure};
 use pgrf_nn::infer::restorer::describe_sampler;
 use pgrf_nn::infer::{restore_image, ImageOptions, Restore, SamplerChoice, DEFAULT_OVERLAP};
@@ -416,25 +416,4 @@ fn enhance_one(
         seconds,
         peak_rss_mib: peak_rss().map(|b| b as f64 / (1 << 20) as f64),
     })
-}
-
-/// On the CPU, the largest tile whose estimated peak fits in half the
-/// available memory once the frame's own buffers and the weights are set
-/// aside; on CUDA, where burn does not report free memory, 1024.
-fn auto_tile(device: DeviceKind, r: &dyn Restore, ph: usize, pw: usize) -> usize {
-    let t = match device {
-        DeviceKind::Cuda => 1024,
-        DeviceKind::Cpu => {
-            let frame_buffers = (4 * ph * pw * 4 * (3 + r.samples())) as u64;
-            let budget = (available_memory().unwrap_or(2 << 30) / 2)
-                .saturating_sub(frame_buffers + r.weight_bytes());
-            tile_for_budget(&r.meta().arch, r.side_multiple(), budget)
-        }
-    };
-    // A frame only slightly larger than a tile is cheaper as one pass.
-    if ph.max(pw) <= t + t / 8 {
-        ph.max(pw)
-    } else {
-        t
-    }
 }

@@ -1,13 +1,18 @@
 //! One module per subcommand: argument struct plus `run`.
 
 pub mod bench;
+pub mod bench_enhance;
+pub mod bench_ssim;
 pub mod bench_synth;
 pub mod bench_train;
 pub mod calibrate;
 pub mod chart;
 pub mod convert;
+pub mod enhance;
 pub mod info;
+pub mod metrics;
 pub mod preview;
+pub mod search;
 pub mod simulate;
 pub mod synth;
 pub mod train;

@@ -47,14 +47,86 @@ pub fn peak_rss() -> Option<u64> {
         .map(|kb| kb * 1024)
 }
 
-/// The largest square tile, a multiple of `multiple` between `multiple` x 8
-/// and 2048, whose estimated peak fits in `budget` bytes.
-pub fn tile_for_budget(arch: &Architecture, multiple: usize, budget: u64) -> usize {
+/// Tokens of the largest self-attention in an `h` x `w` tile: SR3 attends
+/// at its `attn_levels` and in the first middle block (the last level); each
+/// level halves the side, rounding up. Zero for the SID U-Net.
+pub fn attention_tokens(arch: &Architecture, h: usize, w: usize) -> usize {
+    let Architecture::Sr3(c) = arch else {
+        return 0;
+    };
+    let last = c.channel_mults.len().saturating_sub(1);
+    c.attn_levels
+        .iter()
+        .copied()
+        .chain(std::iter::once(last))
+        .filter(|&l| l <= last)
+        .map(|l| h.div_ceil(1 << l) * w.div_ceil(1 << l))
+        .max()
+        .unwrap_or(0)
+}
+
+/// Estimated peak bytes of one square tile of side `side`: the per-pixel
+/// activations plus the attention scores and their softmax (tokens^2 floats
+/// each), which grow with the square of the pixel count.
+pub fn tile_bytes(arch: &Architecture, side: usize) -> f64 {
+    let tokens = attention_tokens(arch, side, side) as f64;
+    bytes_per_pixel(arch) * (side * side) as f64 + 2.0 * 4.0 * tokens * tokens
+}
+
+/// The largest square tile, a multiple of `multiple` between 128 (or
+/// 8 x `multiple`) and `cap`, whose estimated peak fits in `budget` bytes.
+pub fn tile_for_budget(arch: &Architecture, multiple: usize, budget: u64, cap: usize) -> usize {
     let m = multiple.max(1);
-    let per_px = bytes_per_pixel(arch);
-    let side = (budget as f64 / per_px).sqrt() as usize;
     let lo = (8 * m).max(128);
-    (side / m * m).clamp(lo, 2048.max(lo))
+    let mut side = (cap.max(lo) / m) * m;
+    while side > lo && tile_bytes(arch, side) > budget as f64 {
+        side -= m;
+    }
+    side.max(lo)
+}
+
+/// Largest tile a file's network should see. Self-attention relates every
+/// position of a tile to every other: on tiles much larger than the
+/// training crops its softmax spreads over far more tokens than it learned
+/// with (and its memory grows with their square), so flow models are held
+/// to twice the training patch (512 when the file does not record it). The
+/// convolutional denoiser has no such limit.
+pub fn tile_cap(meta: &crate::weights::WeightMeta) -> usize {
+    match meta.arch {
+        Architecture::SidUnet(_) => 2048,
+        Architecture::Sr3(_) => meta
+            .training
+            .as_ref()
+            .map_or(512, |t| (2 * t.patch).clamp(128, 2048)),
+    }
+}
+
+/// The tile `pgrf enhance` uses unless told: on the CPU the largest tile
+/// whose estimated peak fits in half the available memory once the frame's
+/// buffers and the weights are set aside, on CUDA (where burn does not
+/// report free memory) 1024, both within [`tile_cap`]; a frame only slightly
+/// larger than the tile is done in one pass.
+pub fn auto_tile(
+    device: crate::backend::DeviceKind,
+    r: &dyn crate::infer::Restore,
+    ph: usize,
+    pw: usize,
+) -> usize {
+    let cap = tile_cap(r.meta());
+    let t = match device {
+        crate::backend::DeviceKind::Cuda => 1024.min(cap),
+        crate::backend::DeviceKind::Cpu => {
+            let frame_buffers = (4 * ph * pw * 4 * (3 + r.samples())) as u64;
+            let budget = (available_memory().unwrap_or(2 << 30) / 2)
+                .saturating_sub(frame_buffers + r.weight_bytes());
+            tile_for_budget(&r.meta().arch, r.side_multiple(), budget, cap)
+        }
+    };
+    if ph.max(pw) <= t + t / 8 && ph.max(pw) <= cap {
+        ph.max(pw)
+    } else {
+        t
+    }
 }
 
 #[cfg(test)]
@@ -66,15 +138,32 @@ mod tests {
     #[test]
     fn tiles_grow_with_memory_and_stay_aligned() {
         let a = Architecture::SidUnet(SidUnetConfig::new());
-        let small = tile_for_budget(&a, 16, 256 << 20);
-        let big = tile_for_budget(&a, 16, 8 << 30);
+        let small = tile_for_budget(&a, 16, 256 << 20, 2048);
+        let big = tile_for_budget(&a, 16, 8 << 30, 2048);
         assert!(small < big, "{small} {big}");
         assert_eq!(small % 16, 0);
         assert_eq!(big % 16, 0);
         assert!(big <= 2048);
-        assert_eq!(tile_for_budget(&a, 16, 1), 128);
+        assert_eq!(tile_for_budget(&a, 16, 1, 2048), 128);
+        assert_eq!(tile_for_budget(&a, 16, 8 << 30, 512), 512);
         let f = Architecture::Sr3(Sr3Config::new());
-        assert!(tile_for_budget(&f, 16, 1 << 30) < tile_for_budget(&a, 16, 1 << 30));
+        assert!(tile_for_budget(&f, 16, 1 << 30, 2048) < tile_for_budget(&a, 16, 1 << 30, 2048));
         assert!(available_memory().unwrap_or(1) > 0);
+    }
+
+    #[test]
+    fn attention_dominates_large_flow_tiles() {
+        // Default SR3 attends at level 3 and in the middle (level 4): at a
+        // 1024 tile, level 3 has 128^2 = 16384 tokens, scores 16384^2 floats.
+        let f = Architecture::Sr3(Sr3Config::new());
+        assert_eq!(attention_tokens(&f, 1024, 1024), 128 * 128);
+        assert_eq!(attention_tokens(&f, 100, 60), 13 * 8);
+        assert_eq!(attention_tokens(&f, 1424, 2128), 178 * 266);
+        let mid_only = Architecture::Sr3(Sr3Config::new().with_attn_levels(vec![]));
+        assert_eq!(attention_tokens(&mid_only, 512, 512), 32 * 32);
+        let scores = 2.0 * 4.0 * (16384.0f64).powi(2);
+        assert!(tile_bytes(&f, 1024) > scores);
+        let a = Architecture::SidUnet(SidUnetConfig::new());
+        assert_eq!(attention_tokens(&a, 1024, 1024), 0);
     }
 }
