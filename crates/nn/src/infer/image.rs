@@ -3,7 +3,7 @@
 
 use super::restorer::Restore;
 use super::start::start_noise;
-use super::tiles::{run_tiled, TilePlan};
+use super::tiles::{run_tiled, AxisPlan, TilePlan};
 use crate::error::{NnError, Result};
 use ndarray::{Array3, ArrayView3};
 
@@ -57,21 +57,40 @@ pub fn restore_image(
 }
 
 /// Tiles of `opts.tile` rounded down to the network's side multiple (so no
-/// tile is padded inside the network), unless the whole frame fits.
+/// tile is padded inside the network), unless the whole frame fits. Along
+/// each axis the tiles are then shrunk to the smallest multiple that still
+/// covers it with as many tiles: 2128 columns in tiles of 2048 become two
+/// tiles of 1104, not a second tile of 2048 that repeats 1968 columns.
 pub fn plan_for(h: usize, w: usize, opts: &ImageOptions, multiple: usize) -> Result<TilePlan> {
     let m = multiple.max(1);
+    let o = opts.overlap;
     let tile = if opts.tile >= h.max(w) {
         opts.tile
     } else {
         (opts.tile / m * m).max(m)
     };
-    if tile < 4 * opts.overlap && tile < h.max(w) {
+    if tile < 4 * o && tile < h.max(w) {
         return Err(NnError::Invalid(format!(
             "tile {} is too small for overlap {} (needs at least 4x the overlap)",
-            opts.tile, opts.overlap
+            opts.tile, o
         )));
     }
-    TilePlan::new(h, w, tile, opts.overlap)
+    let balanced = |len: usize| -> usize {
+        if tile >= len {
+            return tile;
+        }
+        let n = (len - o).div_ceil(tile - o);
+        let even = (len + (n - 1) * o).div_ceil(n).div_ceil(m) * m;
+        if even >= 4 * o && even <= tile {
+            even
+        } else {
+            tile
+        }
+    };
+    Ok(TilePlan {
+        rows: AxisPlan::new(h, balanced(h), o)?,
+        cols: AxisPlan::new(w, balanced(w), o)?,
+    })
 }
 
 #[cfg(test)]
@@ -85,9 +104,14 @@ mod tests {
             overlap: 64,
             seed: 0,
         };
+        // 300 -> 288; 1424 rows need 7 tiles of 288 (stride 224), which
+        // tiles of 272 also cover; 2128 columns need 10, also of 272.
         let p = plan_for(1424, 2128, &o, 16).unwrap();
-        assert_eq!(p.rows.len, 288);
-        assert_eq!(p.cols.len, 288);
+        assert_eq!((p.rows.len, p.rows.count()), (272, 7));
+        assert_eq!((p.cols.len, p.cols.count()), (272, 10));
+        let wide = ImageOptions { tile: 2048, ..o };
+        let p = plan_for(1424, 2128, &wide, 16).unwrap();
+        assert_eq!((p.cols.len, p.cols.count()), (1104, 2));
         let p = plan_for(200, 250, &o, 16).unwrap();
         assert_eq!(p.count(), 1);
         let small = ImageOptions { tile: 128, ..o };

@@ -65,12 +65,12 @@ pub fn attention_tokens(arch: &Architecture, h: usize, w: usize) -> usize {
         .unwrap_or(0)
 }
 
-/// Estimated peak bytes of one square tile of side `side`: the per-pixel
-/// activations plus the attention scores and their softmax (tokens^2 floats
-/// each), which grow with the square of the pixel count.
-pub fn tile_bytes(arch: &Architecture, side: usize) -> f64 {
-    let tokens = attention_tokens(arch, side, side) as f64;
-    bytes_per_pixel(arch) * (side * side) as f64 + 2.0 * 4.0 * tokens * tokens
+/// Estimated peak bytes of one `h` x `w` tile: the per-pixel activations
+/// plus the attention scores and their softmax (tokens^2 floats each),
+/// which grow with the square of the pixel count.
+pub fn tile_bytes(arch: &Architecture, h: usize, w: usize) -> f64 {
+    let tokens = attention_tokens(arch, h, w) as f64;
+    bytes_per_pixel(arch) * (h * w) as f64 + 2.0 * 4.0 * tokens * tokens
 }
 
 /// The largest square tile, a multiple of `multiple` between 128 (or
@@ -78,8 +78,9 @@ pub fn tile_bytes(arch: &Architecture, side: usize) -> f64 {
 pub fn tile_for_budget(arch: &Architecture, multiple: usize, budget: u64, cap: usize) -> usize {
     let m = multiple.max(1);
     let lo = (8 * m).max(128);
-    let mut side = (cap.max(lo) / m) * m;
-    while side > lo && tile_bytes(arch, side) > budget as f64 {
+    let by_pixels = (budget as f64 / bytes_per_pixel(arch)).sqrt() as usize;
+    let mut side = (by_pixels.min(cap).max(lo) / m) * m;
+    while side > lo && tile_bytes(arch, side, side) > budget as f64 {
         side -= m;
     }
     side.max(lo)
@@ -90,10 +91,10 @@ pub fn tile_for_budget(arch: &Architecture, multiple: usize, budget: u64, cap: u
 /// training crops its softmax spreads over far more tokens than it learned
 /// with (and its memory grows with their square), so flow models are held
 /// to twice the training patch (512 when the file does not record it). The
-/// convolutional denoiser has no such limit.
+/// convolutional denoiser is limited by memory alone.
 pub fn tile_cap(meta: &crate::weights::WeightMeta) -> usize {
     match meta.arch {
-        Architecture::SidUnet(_) => 2048,
+        Architecture::SidUnet(_) => 8192,
         Architecture::Sr3(_) => meta
             .training
             .as_ref()
@@ -103,9 +104,9 @@ pub fn tile_cap(meta: &crate::weights::WeightMeta) -> usize {
 
 /// The tile `pgrf enhance` uses unless told: on the CPU the largest tile
 /// whose estimated peak fits in half the available memory once the frame's
-/// buffers and the weights are set aside, on CUDA (where burn does not
-/// report free memory) 1024, both within [`tile_cap`]; a frame only slightly
-/// larger than the tile is done in one pass.
+/// buffers and the weights are set aside (the whole frame when it fits), on
+/// CUDA (where burn does not report free memory) 1024, both within
+/// [`tile_cap`].
 pub fn auto_tile(
     device: crate::backend::DeviceKind,
     r: &dyn crate::infer::Restore,
@@ -113,19 +114,20 @@ pub fn auto_tile(
     pw: usize,
 ) -> usize {
     let cap = tile_cap(r.meta());
-    let t = match device {
+    let side = ph.max(pw);
+    match device {
         crate::backend::DeviceKind::Cuda => 1024.min(cap),
         crate::backend::DeviceKind::Cpu => {
             let frame_buffers = (4 * ph * pw * 4 * (3 + r.samples())) as u64;
             let budget = (available_memory().unwrap_or(2 << 30) / 2)
                 .saturating_sub(frame_buffers + r.weight_bytes());
-            tile_for_budget(&r.meta().arch, r.side_multiple(), budget, cap)
+            let arch = &r.meta().arch;
+            if side <= cap && tile_bytes(arch, ph, pw) <= budget as f64 {
+                side
+            } else {
+                tile_for_budget(arch, r.side_multiple(), budget, cap)
+            }
         }
-    };
-    if ph.max(pw) <= t + t / 8 && ph.max(pw) <= cap {
-        ph.max(pw)
-    } else {
-        t
     }
 }
 
@@ -162,7 +164,7 @@ mod tests {
         let mid_only = Architecture::Sr3(Sr3Config::new().with_attn_levels(vec![]));
         assert_eq!(attention_tokens(&mid_only, 512, 512), 32 * 32);
         let scores = 2.0 * 4.0 * (16384.0f64).powi(2);
-        assert!(tile_bytes(&f, 1024) > scores);
+        assert!(tile_bytes(&f, 1024, 1024) > scores);
         let a = Architecture::SidUnet(SidUnetConfig::new());
         assert_eq!(attention_tokens(&a, 1024, 1024), 0);
     }
