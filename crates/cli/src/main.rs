@@ -39,6 +39,10 @@ enum Command {
     Search(cmd::search::SearchArgs),
     /// Raw-domain PSNR and SSIM of a result against its reference (ELD protocol).
     Metrics(cmd::metrics::MetricsArgs),
+    /// Evaluate models on ELD / SID / a pair list: the paper's ratio x PSNR/SSIM table, per-image CSV, worst images.
+    Eval(Box<cmd::eval::EvalArgs>),
+    /// Write a miniature benchmark folder in the ELD or SID layout (procedural scenes, A7S2 noise).
+    MakeDataset(cmd::make_dataset::MakeDatasetArgs),
     /// Time pgrf's hot paths (results go to BENCHMARKS.md).
     Bench(cmd::bench::BenchArgs),
 }
@@ -75,6 +79,8 @@ fn main() -> ExitCode {
         Command::Enhance(a) => cmd::enhance::run(a),
         Command::Search(a) => cmd::search::run(a),
         Command::Metrics(a) => cmd::metrics::run(a),
+        Command::Eval(a) => cmd::eval::run(a),
+        Command::MakeDataset(a) => cmd::make_dataset::run(a),
         Command::Bench(a) => cmd::bench::run(a),
     };
     match result {

@@ -7,6 +7,7 @@
 //! No deep-learning framework here: plain `ndarray` arrays and rayon, like the
 //! physics crates, so the metrics can judge any producer's output.
 
+pub mod dataset;
 pub mod metrics;
 pub mod search_plot;
 

@@ -1,0 +1,373 @@
+//! `pgrf eval`: one or more models on a benchmark (ELD Sony A7S2, SID Sony,
+//! or a CSV of pairs), measured under the ELD protocol, printed as the
+//! paper's tables print them (one row per ratio, PSNR/SSIM per method), with
+//! per-image CSV, a Markdown table and a PNG of the worst images.
+
+use anyhow::{bail, Context, Result};
+use clap::{Args, ValueEnum};
+use pgrf_eval::dataset::table::{csv, summarise, Row};
+use pgrf_eval::dataset::{centre_crop, eld, load_pair, pairs, sid, DatasetKind, Sample};
+use pgrf_eval::{evaluate, Protocol};
+use pgrf_nn::backend::DeviceKind;
+use pgrf_nn::infer::memory::auto_tile;
+use pgrf_nn::infer::restorer::describe_sampler;
+use pgrf_nn::infer::{restore_image, ImageOptions, Restore, SamplerChoice, DEFAULT_OVERLAP};
+use pgrf_raw::ndarray::{Array3, ArrayView3};
+use pgrf_raw::{render_preview, unpack_normalized, Preview, PreviewOptions, RawFrame};
+use std::path::{Path, PathBuf};
+
+/// Name of the amplified-input baseline in tables.
+pub const NOISY: &str = "noisy input";
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum Baseline {
+    /// A "noisy input" column: the amplified input clamped to [0, 1], measured like a model.
+    Input,
+    /// No baseline column.
+    None,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum OnOff {
+    On,
+    Off,
+}
+
+#[derive(Args, Debug)]
+#[command(after_help = "Protocols (stated again in the header of every run):\n\
+  eld    ROOT/SonyA7S2/scene-1..10/IMG_00NN.ARW (or .dng); x100 = frames 4, 9, 14, x200 = 5, 10, 15; \
+each paired with the nearest reference of frames 1, 6, 11, 16; ratio = ISO x exposure of the reference over the \
+noisy frame's (EXIF); full images; illuminance correction on (ELD's test_ELD.py).\n\
+  sid    pairs of ROOT/Sony_test_list.txt (or --list, SID or paired format); ratio = long / short exposure from \
+the file names, capped at 300, rows x100/x250/x300; scenes 10034, 10045, 10172 left out (misaligned); centre \
+512x512 of the packed planes; illuminance correction on (ELD's test_SID.py).\n\
+  pairs  ROOT (a CSV, or a folder with pairs.csv) of noisy,reference,ratio (ratio empty: from EXIF); full \
+images; no correction.\n\n\
+Inputs are packed R,G1,B,G2, normalised by their own black/white levels, multiplied by the ratio and clamped \
+to [0,1]; references are clamped to [0,1]; then ELD's measurement (x255 floats, PSNR data range 255, SSIM 7x7).")]
+pub struct EvalArgs {
+    /// Benchmark: eld, sid or pairs.
+    #[arg(long)]
+    pub protocol: DatasetKind,
+    /// Dataset folder (pairs: the CSV or its folder).
+    #[arg(long)]
+    pub root: PathBuf,
+    /// Weight file from `pgrf train`; repeat for a comparison table.
+    #[arg(long, short = 'm')]
+    pub model: Vec<PathBuf>,
+    /// `input` adds the amplified noisy input as a "noisy input" column; `none` leaves it out.
+    #[arg(long, default_value = "input")]
+    pub noise_baseline: Baseline,
+    /// ELD's least-squares brightness correction (default: the protocol's, on for eld and sid).
+    #[arg(long)]
+    pub illuminance_correct: Option<OnOff>,
+    /// Centre crop of the packed planes before measuring: a side in packed pixels, or `none`
+    /// (default: the protocol's, 512 for sid).
+    #[arg(long)]
+    pub crop: Option<String>,
+    /// ELD scenes, e.g. 1-10 (default) or 1,2.
+    #[arg(long, default_value = "1-10")]
+    pub scenes: String,
+    /// SID list file (default ROOT/Sony_test_list.txt).
+    #[arg(long)]
+    pub list: Option<PathBuf>,
+    /// SID: keep the misaligned scenes 10034, 10045, 10172.
+    #[arg(long)]
+    pub keep_misaligned: bool,
+    /// Per-image results as CSV.
+    #[arg(long)]
+    pub csv: Option<PathBuf>,
+    /// The table in Markdown.
+    #[arg(long)]
+    pub markdown: Option<PathBuf>,
+    /// PNG of the worst images (by the first model's PSNR) side by side: noisy input, each
+    /// model, reference. Default: next to --csv as NAME_worst.png; none without --csv.
+    #[arg(long)]
+    pub worst: Option<PathBuf>,
+    /// Images in the worst-images PNG.
+    #[arg(long, default_value_t = 4)]
+    pub worst_count: usize,
+    /// Tile side in packed pixels (default: as pgrf enhance chooses).
+    #[arg(long)]
+    pub tile: Option<usize>,
+    /// cpu, or cuda (needs a build with `--features cuda`).
+    #[arg(long, default_value = "cpu")]
+    pub device: DeviceKind,
+    /// Seed of the flow model's start noise.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// No per-image progress lines on stderr.
+    #[arg(long, short)]
+    pub quiet: bool,
+}
+
+/// Centre thumbnails kept for the worst-images PNG (packed pixels).
+const THUMB: usize = 128;
+
+struct Worst {
+    score: f64,
+    id: String,
+    template: RawFrame,
+    /// Noisy input (if any), each model, reference.
+    tiles: Vec<Array3<f32>>,
+}
+
+fn thumb(a: ArrayView3<f32>) -> Array3<f32> {
+    centre_crop(a, Some(THUMB)).to_owned()
+}
+
+fn parse_crop(a: &EvalArgs) -> Result<Option<usize>> {
+    match a.crop.as_deref() {
+        None => Ok(a.protocol.default_crop()),
+        Some("none") | Some("0") => Ok(None),
+        Some(v) => match v.parse::<usize>() {
+            Ok(n) if n > 0 => Ok(Some(n)),
+            _ => bail!("--crop {v:?}: expected a side in packed pixels or `none`"),
+        },
+    }
+}
+
+fn header(a: &EvalArgs, samples: &[Sample], crop: Option<usize>, correct: bool) -> String {
+    let what = match a.protocol {
+        DatasetKind::Eld => format!(
+            "ELD Sony A7S2, scenes {}: x100 = frames 4,9,14, x200 = frames 5,10,15, reference = nearest of frames 1,6,11,16, ratio = ISO x exposure of reference / noisy (EXIF)",
+            a.scenes
+        ),
+        DatasetKind::Sid => format!(
+            "SID Sony, {}: ratio = long / short exposure from file names, capped at 300; {}",
+            a.list
+                .as_ref()
+                .map(|p| p.display().to_string())
+                .unwrap_or_else(|| sid::DEFAULT_LIST.into()),
+            if a.keep_misaligned {
+                "misaligned 10034, 10045, 10172 kept"
+            } else {
+                "misaligned 10034, 10045, 10172 excluded"
+            }
+        ),
+        DatasetKind::Pairs => format!("pairs of {}", a.root.display()),
+    };
+    let crop = match crop {
+        Some(c) => format!("centre {c}x{c} of the packed planes"),
+        None => "full image".into(),
+    };
+    format!(
+        "protocol {}: {what}; {} images; {crop}\nmeasure  input x ratio clamped [0,1], reference clamped [0,1], packed R,G1,B,G2; {}",
+        a.protocol,
+        samples.len(),
+        Protocol::eld(correct).describe()
+    )
+}
+
+fn walk(a: &EvalArgs) -> Result<Vec<Sample>> {
+    Ok(match a.protocol {
+        DatasetKind::Eld => {
+            let scenes = eld::parse_scenes(&a.scenes).map_err(anyhow::Error::msg)?;
+            eld::walk(&a.root, &scenes)?
+        }
+        DatasetKind::Sid => sid::walk(&a.root, a.list.as_deref(), a.keep_misaligned)?,
+        DatasetKind::Pairs => pairs::walk(&a.root)?,
+    })
+}
+
+fn write_file(path: &Path, text: &str) -> Result<()> {
+    std::fs::write(path, text).with_context(|| format!("{}", path.display()))
+}
+
+pub fn run(a: &EvalArgs) -> Result<()> {
+    let crop = parse_crop(a)?;
+    let correct = match a.illuminance_correct {
+        Some(v) => v == OnOff::On,
+        None => a.protocol.default_correct(),
+    };
+    let baseline = a.noise_baseline == Baseline::Input;
+    if a.model.is_empty() && !baseline {
+        bail!("nothing to evaluate: give --model (or keep the noisy-input baseline)");
+    }
+    let samples = walk(a)?;
+    a.device.check_available().map_err(anyhow::Error::msg)?;
+    let mut models: Vec<(String, Box<dyn Restore>)> = Vec::new();
+    for m in &a.model {
+        let r = pgrf_nn::infer::load(m, SamplerChoice::default(), a.device)
+            .with_context(|| format!("--model {}", m.display()))?;
+        let mut name = m
+            .file_stem()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_else(|| m.display().to_string());
+        while models.iter().any(|(n, _)| *n == name) || name == NOISY {
+            name.push('\'');
+        }
+        if !a.quiet {
+            eprintln!(
+                "model {name}: {} ({})",
+                r.meta().arch.describe(),
+                describe_sampler(r.as_ref())
+            );
+        }
+        models.push((name, r));
+    }
+    let protocol = Protocol::eld(correct);
+    let head = header(a, &samples, crop, correct);
+    let mut rows: Vec<Row> = Vec::new();
+    let mut worst: Vec<Worst> = Vec::new();
+    let n = samples.len();
+    for (i, smp) in samples.iter().enumerate() {
+        let pair = load_pair(smp)?;
+        let reference = centre_crop(pair.reference.view(), crop);
+        let mut outputs: Vec<(String, Array3<f32>)> = Vec::new();
+        if baseline {
+            outputs.push((NOISY.into(), pair.input.clone()));
+        }
+        for (name, r) in &models {
+            let (_, ph, pw) = pair.input.dim();
+            let tile = a
+                .tile
+                .unwrap_or_else(|| auto_tile(a.device, r.as_ref(), ph, pw));
+            let opts = ImageOptions {
+                tile,
+                overlap: DEFAULT_OVERLAP,
+                seed: a.seed,
+            };
+            let out = restore_image(r.as_ref(), pair.input.view(), &opts, &mut |_, _| {})
+                .with_context(|| format!("{}: model {name}", smp.noisy.display()))?;
+            outputs.push((name.clone(), out));
+        }
+        // The worst-images ranking follows the first model (the noisy input
+        // when there is none).
+        let rank = outputs.iter().position(|(n, _)| n != NOISY).unwrap_or(0);
+        let mut first = None;
+        let mut line = format!("[{}/{n}] {} x{:.1}", i + 1, smp.id, pair.ratio);
+        for (k, (name, out)) in outputs.iter().enumerate() {
+            let sc = evaluate(centre_crop(out.view(), crop), reference, &protocol)
+                .with_context(|| smp.id.clone())?;
+            if k == rank {
+                first = Some(sc.psnr);
+            }
+            line.push_str(&format!("  {name} {:.2}/{:.4}", sc.psnr, sc.ssim));
+            rows.push(Row {
+                protocol: smp.kind.name().into(),
+                id: smp.id.clone(),
+                group: smp.group,
+                ratio: pair.ratio,
+                noisy: smp.noisy.display().to_string(),
+                reference: smp.reference.display().to_string(),
+                method: name.clone(),
+                psnr: sc.psnr,
+                ssim: sc.ssim,
+                gain: sc.gain,
+            });
+        }
+        if !a.quiet {
+            eprintln!("{line}");
+        }
+        if a.worst_count > 0 {
+            let score = first.unwrap_or(f64::INFINITY);
+            let mut tiles: Vec<Array3<f32>> = outputs
+                .iter()
+                .map(|(_, o)| thumb(centre_crop(o.view(), crop)))
+                .collect();
+            if !baseline {
+                tiles.insert(0, thumb(centre_crop(pair.input.view(), crop)));
+            }
+            tiles.push(thumb(reference));
+            let (_, th, tw) = tiles[0].dim();
+            let mut template = pair.reference_frame.clone();
+            template.width = 2 * tw;
+            template.height = 2 * th;
+            template.mosaic = vec![0; 4 * tw * th];
+            worst.push(Worst {
+                score,
+                id: smp.id.clone(),
+                template,
+                tiles,
+            });
+            worst.sort_by(|x, y| x.score.total_cmp(&y.score));
+            worst.truncate(a.worst_count);
+        }
+    }
+    let summary = summarise(&rows);
+    println!("{head}");
+    print!("{}", summary.text());
+    if let Some(p) = &a.csv {
+        write_file(p, &csv(&rows))?;
+        eprintln!("wrote {}", p.display());
+    }
+    if let Some(p) = &a.markdown {
+        let text = format!(
+            "{}\n\n{}",
+            head.lines()
+                .map(|l| format!("> {l}"))
+                .collect::<Vec<_>>()
+                .join("  \n"),
+            summary.markdown()
+        );
+        write_file(p, &text)?;
+        eprintln!("wrote {}", p.display());
+    }
+    let worst_path = a.worst.clone().or_else(|| {
+        a.csv.as_ref().map(|c| {
+            let stem = c.file_stem().unwrap_or_default().to_string_lossy();
+            c.with_file_name(format!("{stem}_worst.png"))
+        })
+    });
+    if let Some(p) = worst_path {
+        if !worst.is_empty() {
+            let mut cols: Vec<String> = Vec::new();
+            if !baseline {
+                cols.push(NOISY.into());
+            }
+            cols.extend(summary.methods.iter().cloned());
+            cols.push("reference".into());
+            write_worst(&worst, &p)?;
+            eprintln!(
+                "wrote {}: {} (columns: {})",
+                p.display(),
+                worst
+                    .iter()
+                    .map(|w| w.id.as_str())
+                    .collect::<Vec<_>>()
+                    .join(", "),
+                cols.join(", ")
+            );
+        }
+    }
+    Ok(())
+}
+
+/// Rows of previews (one per worst image), 4-pixel white gaps.
+fn write_worst(worst: &[Worst], path: &Path) -> Result<()> {
+    let gap = 4;
+    let mut grid: Vec<Vec<Preview>> = Vec::new();
+    for w in worst {
+        let mut row = Vec::new();
+        for t in &w.tiles {
+            let f = unpack_normalized(t.view(), &w.template)?;
+            row.push(render_preview(&f, &PreviewOptions::default())?);
+        }
+        grid.push(row);
+    }
+    let cw = grid.iter().flatten().map(|p| p.width).max().unwrap_or(1);
+    let ch = grid.iter().flatten().map(|p| p.height).max().unwrap_or(1);
+    let ncols = grid.iter().map(|r| r.len()).max().unwrap_or(1);
+    let width = ncols * cw + (ncols - 1) * gap;
+    let height = grid.len() * ch + (grid.len() - 1) * gap;
+    let mut rgb = vec![1.0f32; width * height * 3];
+    for (ri, row) in grid.iter().enumerate() {
+        for (ci, p) in row.iter().enumerate() {
+            let (x0, y0) = (ci * (cw + gap), ri * (ch + gap));
+            for y in 0..p.height {
+                let src = &p.rgb[y * p.width * 3..(y + 1) * p.width * 3];
+                let o = ((y0 + y) * width + x0) * 3;
+                rgb[o..o + p.width * 3].copy_from_slice(src);
+            }
+        }
+    }
+    let out = Preview {
+        width,
+        height,
+        rgb,
+        warnings: Vec::new(),
+    };
+    out.write_png(path, 8)?;
+    Ok(())
+}

@@ -1,0 +1,254 @@
+//! Dataset protocols: which noisy/reference files a benchmark pairs, at which
+//! exposure ratio, and how a pair is loaded before it is measured. The
+//! *measurement* (clamp, gain, PSNR/SSIM) is [`crate::metrics::Protocol`];
+//! this layer decides *what* is measured.
+//!
+//! - [`eld`]: the ELD Sony A7S2 folder layout (ELD's `ELDEvalDataset`).
+//! - [`sid`]: the SID Sony test list, as ELD evaluates SID (`test_SID.py`).
+//! - [`pairs`]: a user's own CSV of noisy, reference, ratio.
+//!
+//! Walkers only look at the file system (every file they name must exist,
+//! else an error naming it); pixels and EXIF are read by [`load_pair`].
+//! Loading follows ELD's datasets: noisy packed R,G1,B,G2, normalised by its
+//! own black/white levels, multiplied by the ratio and clamped to [0, 1];
+//! reference packed, normalised and clamped to [0, 1].
+
+pub mod eld;
+pub mod pairs;
+pub mod sid;
+pub mod table;
+
+use ndarray::{s, Array3, ArrayView3};
+use pgrf_raw::{decode_file, pack_normalized, LevelOverrides, RawFrame};
+use std::fmt;
+use std::path::{Path, PathBuf};
+
+/// One line, naming the file or setting at fault.
+#[derive(Debug, thiserror::Error)]
+#[error("{0}")]
+pub struct DatasetError(pub String);
+
+pub type Result<T> = std::result::Result<T, DatasetError>;
+
+fn err<T>(msg: impl Into<String>) -> Result<T> {
+    Err(DatasetError(msg.into()))
+}
+
+/// Which benchmark a sample belongs to.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum DatasetKind {
+    Eld,
+    Sid,
+    Pairs,
+}
+
+impl DatasetKind {
+    pub fn name(self) -> &'static str {
+        match self {
+            DatasetKind::Eld => "eld",
+            DatasetKind::Sid => "sid",
+            DatasetKind::Pairs => "pairs",
+        }
+    }
+
+    /// The protocol's own illuminance-correction setting: ELD's `test_ELD.py`
+    /// and `test_SID.py` both call `engine.eval(..., correct=True)`; a user's
+    /// pairs are measured without it unless asked.
+    pub fn default_correct(self) -> bool {
+        !matches!(self, DatasetKind::Pairs)
+    }
+
+    /// The protocol's own centre crop (packed pixels): ELD measures SID on
+    /// the centre 512x512 of the packed planes (`crop=True`) and ELD's own
+    /// set on full images (`crop=False`).
+    pub fn default_crop(self) -> Option<usize> {
+        match self {
+            DatasetKind::Sid => Some(512),
+            _ => None,
+        }
+    }
+}
+
+impl fmt::Display for DatasetKind {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl std::str::FromStr for DatasetKind {
+    type Err = String;
+    fn from_str(s: &str) -> std::result::Result<Self, String> {
+        match s.to_ascii_lowercase().as_str() {
+            "eld" => Ok(DatasetKind::Eld),
+            "sid" => Ok(DatasetKind::Sid),
+            "pairs" => Ok(DatasetKind::Pairs),
+            _ => Err(format!(
+                "unknown protocol {s:?}: expected eld, sid or pairs"
+            )),
+        }
+    }
+}
+
+/// How a sample's amplification is found.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum RatioRule {
+    /// (ISO x exposure time) of the reference over that of the noisy frame,
+    /// both from the files' EXIF (ELD's `metainfo`).
+    IsoExposure,
+    /// Given by the list (SID's exposure times from the file names, or a
+    /// CSV's ratio column).
+    Fixed(f32),
+}
+
+/// One noisy/reference pair of a benchmark.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Sample {
+    pub kind: DatasetKind,
+    /// Scene/pair identifier for tables and CSV ("scene-3/IMG_0009", "10003_00_0.1s").
+    pub id: String,
+    /// The table row the pair is averaged into (100, 200, 250, 300, ...).
+    pub group: u32,
+    pub ratio: RatioRule,
+    pub noisy: PathBuf,
+    pub reference: PathBuf,
+}
+
+/// A loaded pair, ready for a network and the metrics.
+pub struct LoadedPair {
+    /// The noisy frame as decoded (geometry and metadata for previews).
+    pub noisy_frame: RawFrame,
+    pub reference_frame: RawFrame,
+    /// Packed noisy x ratio, clamped to [0, 1]: the network input, and the
+    /// "noisy input" baseline.
+    pub input: Array3<f32>,
+    /// Packed reference clamped to [0, 1].
+    pub reference: Array3<f32>,
+    pub ratio: f32,
+}
+
+/// (ISO x exposure) of a frame, for ELD's ratio.
+fn iso_exposure(f: &RawFrame, path: &Path) -> Result<f64> {
+    match (f.iso.filter(|i| *i > 0), f.exposure_s.filter(|t| *t > 0.0)) {
+        (Some(i), Some(t)) => Ok(i as f64 * t),
+        _ => err(format!(
+            "{}: the file records no ISO or exposure time, needed for the exposure ratio",
+            path.display()
+        )),
+    }
+}
+
+/// Decode both files of `s`, compute the ratio, and pack them.
+pub fn load_pair(s: &Sample) -> Result<LoadedPair> {
+    let o = LevelOverrides::default();
+    let (n, r) = rayon::join(
+        || decode_file(&s.noisy, &o),
+        || decode_file(&s.reference, &o),
+    );
+    let n = n.map_err(|e| DatasetError(e.to_string()))?;
+    let r = r.map_err(|e| DatasetError(e.to_string()))?;
+    if (n.width, n.height, n.cfa) != (r.width, r.height, r.cfa) {
+        return err(format!(
+            "{} ({}x{} {}) and {} ({}x{} {}) differ in size or CFA phase",
+            s.noisy.display(),
+            n.width,
+            n.height,
+            n.cfa,
+            s.reference.display(),
+            r.width,
+            r.height,
+            r.cfa
+        ));
+    }
+    let ratio = match s.ratio {
+        RatioRule::Fixed(v) => v,
+        RatioRule::IsoExposure => {
+            (iso_exposure(&r, &s.reference)? / iso_exposure(&n, &s.noisy)?) as f32
+        }
+    };
+    if !(ratio.is_finite() && ratio > 0.0) {
+        return err(format!("{}: exposure ratio {ratio} is not positive", s.id));
+    }
+    let mut input = pack_normalized(&n, false).map_err(|e| DatasetError(e.to_string()))?;
+    input.mapv_inplace(|v| (v * ratio).clamp(0.0, 1.0));
+    let reference = pack_normalized(&r, true).map_err(|e| DatasetError(e.to_string()))?;
+    Ok(LoadedPair {
+        noisy_frame: n,
+        reference_frame: r,
+        input,
+        reference,
+        ratio,
+    })
+}
+
+/// ELD's `crop_center` on packed planes: the centre `side` x `side` window
+/// starting at (h/2 - side/2, w/2 - side/2); a plane smaller than `side` is
+/// kept whole along that axis.
+pub fn centre_crop(a: ArrayView3<'_, f32>, side: Option<usize>) -> ArrayView3<'_, f32> {
+    let Some(side) = side else { return a };
+    let (_, h, w) = a.dim();
+    let (ch, cw) = (side.min(h), side.min(w));
+    let (y0, x0) = (h / 2 - ch / 2, w / 2 - cw / 2);
+    a.slice_move(s![.., y0..y0 + ch, x0..x0 + cw])
+}
+
+/// The first of `candidates` that exists, else an error naming the first
+/// (the name the protocol prescribes).
+pub(crate) fn existing(candidates: &[PathBuf], what: &str) -> Result<PathBuf> {
+    for c in candidates {
+        if c.is_file() {
+            return Ok(c.clone());
+        }
+    }
+    let alts: Vec<String> = candidates[1..]
+        .iter()
+        .filter_map(|p| p.file_name().map(|n| n.to_string_lossy().into_owned()))
+        .collect();
+    let also = if alts.is_empty() {
+        String::new()
+    } else {
+        format!(" (nor {})", alts.join(", "))
+    };
+    err(format!(
+        "missing {what}: {} not found{also}",
+        candidates[0].display()
+    ))
+}
+
+/// `path` and the same stem with the other raw extensions pgrf accepts in a
+/// benchmark folder (.ARW as published, .dng as `pgrf make-dataset` writes).
+pub(crate) fn with_alternatives(path: &Path) -> Vec<PathBuf> {
+    let mut v = vec![path.to_path_buf()];
+    for ext in ["ARW", "arw", "dng", "DNG"] {
+        let p = path.with_extension(ext);
+        if !v.contains(&p) {
+            v.push(p);
+        }
+    }
+    v
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn centre_crop_matches_eld() {
+        let a = Array3::from_shape_fn((4, 10, 12), |(c, i, j)| (c * 1000 + i * 100 + j) as f32);
+        let c = centre_crop(a.view(), Some(4));
+        assert_eq!(c.dim(), (4, 4, 4));
+        // starty = 10/2 - 2 = 3, startx = 12/2 - 2 = 4.
+        assert_eq!(c[[0, 0, 0]], 304.0);
+        let c = centre_crop(a.view(), Some(64));
+        assert_eq!(c.dim(), (4, 10, 12));
+        assert_eq!(centre_crop(a.view(), None).dim(), (4, 10, 12));
+    }
+
+    #[test]
+    fn protocol_defaults() {
+        assert!(DatasetKind::Eld.default_correct());
+        assert!(DatasetKind::Sid.default_correct());
+        assert!(!DatasetKind::Pairs.default_correct());
+        assert_eq!(DatasetKind::Sid.default_crop(), Some(512));
+        assert_eq!(DatasetKind::Eld.default_crop(), None);
+    }
+}
