@@ -166,6 +166,10 @@ fn eld_miniature_end_to_end() {
             .all(|(p, s)| p.is_finite() && *p > 0.0 && (0.0..=1.0).contains(s)));
     }
     assert!(out.contains("noisy input") && out.contains("spc") && out.contains("flow"));
+    assert!(
+        out.contains("white 16383") && out.contains("res_in"),
+        "{out}"
+    );
 
     let text = std::fs::read_to_string(&csv).unwrap();
     let lines: Vec<&str> = text.lines().collect();
@@ -180,6 +184,11 @@ fn eld_miniature_end_to_end() {
         .find(|l| l.starts_with("eld,scene-1/IMG_0009,100,100,") && l.contains(",spc,"))
         .unwrap_or_else(|| panic!("{text}"));
     assert!(row.contains("scene-1/IMG_0011.dng"), "{row}");
+    // The noisy input is measured without the correction (ELD's res_in), models with it.
+    for l in &lines[1..] {
+        let gain = l.rsplit(',').next().unwrap();
+        assert_eq!(gain.is_empty(), l.contains(",noisy input,"), "{l}");
+    }
     let frames: std::collections::BTreeSet<&str> = lines[1..]
         .iter()
         .map(|l| l.split(',').nth(1).unwrap())
@@ -304,6 +313,28 @@ fn sid_miniature_and_pair_list() {
     assert!(t.iter().all(|r| r.2.iter().all(|c| c.0.is_finite())));
     // The worst-images PNG defaults to a name next to the CSV.
     assert!(d.join("sid_worst.png").is_file());
+    // A smaller crop: input and reference cut before the network (16 packed
+    // pixels -> 32-pixel previews: noisy, spc, reference).
+    let png = d.join("crop.png");
+    let out = ok(&pgrf(&[
+        "eval",
+        "--protocol",
+        "sid",
+        "--root",
+        s(&root),
+        "--model",
+        s(&spc),
+        "--crop",
+        "16",
+        "--worst",
+        s(&png),
+        "--worst-count",
+        "1",
+        "-q",
+    ]));
+    assert!(out.contains("centre 16x16"), "{out}");
+    let img = image::open(&png).unwrap();
+    assert_eq!((img.width(), img.height()), (3 * 32 + 8, 32));
 
     // A pair list of the user's own: ratio given, and from EXIF.
     let short = root.join("Sony/short");

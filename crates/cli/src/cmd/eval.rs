@@ -43,8 +43,10 @@ the file names, capped at 300, rows x100/x250/x300; scenes 10034, 10045, 10172 l
 512x512 of the packed planes; illuminance correction on (ELD's test_SID.py).\n\
   pairs  ROOT (a CSV, or a folder with pairs.csv) of noisy,reference,ratio (ratio empty: from EXIF); full \
 images; no correction.\n\n\
-Inputs are packed R,G1,B,G2, normalised by their own black/white levels, multiplied by the ratio and clamped \
-to [0,1]; references are clamped to [0,1]; then ELD's measurement (x255 floats, PSNR data range 255, SSIM 7x7).")]
+Inputs are packed R,G1,B,G2, normalised by the files' black levels and white 16383 (eld, sid: ELD's \
+pack_raw_bayer; pairs: the files' white), multiplied by the ratio and clamped to [0,1]; references are clamped \
+to [0,1]; a crop is applied before the network runs; then ELD's measurement (x255 floats, PSNR data range 255, \
+SSIM 7x7). The `noisy input` column is measured without the correction, as ELD's res_in.")]
 pub struct EvalArgs {
     /// Benchmark: eld, sid or pairs.
     #[arg(long)]
@@ -65,6 +67,10 @@ pub struct EvalArgs {
     /// (default: the protocol's, 512 for sid).
     #[arg(long)]
     pub crop: Option<String>,
+    /// White level for normalising both files: a number, or `file` for each file's own
+    /// (default: the protocol's, 16383 for eld and sid as ELD's pack_raw_bayer; file for pairs).
+    #[arg(long)]
+    pub white: Option<String>,
     /// ELD scenes, e.g. 1-10 (default) or 1,2.
     #[arg(long, default_value = "1-10")]
     pub scenes: String,
@@ -127,7 +133,24 @@ fn parse_crop(a: &EvalArgs) -> Result<Option<usize>> {
     }
 }
 
-fn header(a: &EvalArgs, samples: &[Sample], crop: Option<usize>, correct: bool) -> String {
+fn parse_white(a: &EvalArgs) -> Result<Option<u32>> {
+    match a.white.as_deref() {
+        None => Ok(a.protocol.default_white()),
+        Some("file") => Ok(None),
+        Some(v) => match v.parse::<u32>() {
+            Ok(n) if n > 0 => Ok(Some(n)),
+            _ => bail!("--white {v:?}: expected a level in DN or `file`"),
+        },
+    }
+}
+
+fn header(
+    a: &EvalArgs,
+    samples: &[Sample],
+    crop: Option<usize>,
+    correct: bool,
+    white: Option<u32>,
+) -> String {
     let what = match a.protocol {
         DatasetKind::Eld => format!(
             "ELD Sony A7S2, scenes {}: x100 = frames 4,9,14, x200 = frames 5,10,15, reference = nearest of frames 1,6,11,16, ratio = ISO x exposure of reference / noisy (EXIF)",
@@ -148,14 +171,25 @@ fn header(a: &EvalArgs, samples: &[Sample], crop: Option<usize>, correct: bool) 
         DatasetKind::Pairs => format!("pairs of {}", a.root.display()),
     };
     let crop = match crop {
-        Some(c) => format!("centre {c}x{c} of the packed planes"),
+        Some(c) => {
+            format!("centre {c}x{c} of the packed planes (input cropped before the network)")
+        }
         None => "full image".into(),
     };
+    let white = match white {
+        Some(w) => format!("white {w}"),
+        None => "white from each file".into(),
+    };
     format!(
-        "protocol {}: {what}; {} images; {crop}\nmeasure  input x ratio clamped [0,1], reference clamped [0,1], packed R,G1,B,G2; {}",
+        "protocol {}: {what}; {} images; {crop}\nmeasure  packed R,G1,B,G2, black per channel from the files, {white}; input x ratio clamped [0,1], reference clamped [0,1]; {}{}",
         a.protocol,
         samples.len(),
-        Protocol::eld(correct).describe()
+        Protocol::eld(correct).describe(),
+        if correct && a.noise_baseline == Baseline::Input {
+            format!("; `{NOISY}` without the correction (ELD's res_in)")
+        } else {
+            String::new()
+        }
     )
 }
 
@@ -176,6 +210,8 @@ fn write_file(path: &Path, text: &str) -> Result<()> {
 
 pub fn run(a: &EvalArgs) -> Result<()> {
     let crop = parse_crop(a)?;
+    let white = parse_white(a)?;
+    let levels = pgrf_raw::LevelOverrides { black: None, white };
     let correct = match a.illuminance_correct {
         Some(v) => v == OnOff::On,
         None => a.protocol.default_correct(),
@@ -207,19 +243,22 @@ pub fn run(a: &EvalArgs) -> Result<()> {
         models.push((name, r));
     }
     let protocol = Protocol::eld(correct);
-    let head = header(a, &samples, crop, correct);
+    let plain = Protocol::eld(false);
+    let head = header(a, &samples, crop, correct, white);
     let mut rows: Vec<Row> = Vec::new();
     let mut worst: Vec<Worst> = Vec::new();
     let n = samples.len();
     for (i, smp) in samples.iter().enumerate() {
-        let pair = load_pair(smp)?;
+        let pair = load_pair(smp, &levels)?;
+        // ELD crops input and reference before the network runs.
+        let input = centre_crop(pair.input.view(), crop).to_owned();
         let reference = centre_crop(pair.reference.view(), crop);
         let mut outputs: Vec<(String, Array3<f32>)> = Vec::new();
         if baseline {
-            outputs.push((NOISY.into(), pair.input.clone()));
+            outputs.push((NOISY.into(), input.clone()));
         }
         for (name, r) in &models {
-            let (_, ph, pw) = pair.input.dim();
+            let (_, ph, pw) = input.dim();
             let tile = a
                 .tile
                 .unwrap_or_else(|| auto_tile(a.device, r.as_ref(), ph, pw));
@@ -228,7 +267,7 @@ pub fn run(a: &EvalArgs) -> Result<()> {
                 overlap: DEFAULT_OVERLAP,
                 seed: a.seed,
             };
-            let out = restore_image(r.as_ref(), pair.input.view(), &opts, &mut |_, _| {})
+            let out = restore_image(r.as_ref(), input.view(), &opts, &mut |_, _| {})
                 .with_context(|| format!("{}: model {name}", smp.noisy.display()))?;
             outputs.push((name.clone(), out));
         }
@@ -238,8 +277,9 @@ pub fn run(a: &EvalArgs) -> Result<()> {
         let mut first = None;
         let mut line = format!("[{}/{n}] {} x{:.1}", i + 1, smp.id, pair.ratio);
         for (k, (name, out)) in outputs.iter().enumerate() {
-            let sc = evaluate(centre_crop(out.view(), crop), reference, &protocol)
-                .with_context(|| smp.id.clone())?;
+            // The noisy input is measured as ELD's `res_in`: no correction.
+            let p = if name == NOISY { &plain } else { &protocol };
+            let sc = evaluate(out.view(), reference, p).with_context(|| smp.id.clone())?;
             if k == rank {
                 first = Some(sc.psnr);
             }
@@ -262,12 +302,10 @@ pub fn run(a: &EvalArgs) -> Result<()> {
         }
         if a.worst_count > 0 {
             let score = first.unwrap_or(f64::INFINITY);
-            let mut tiles: Vec<Array3<f32>> = outputs
-                .iter()
-                .map(|(_, o)| thumb(centre_crop(o.view(), crop)))
-                .collect();
+            let mut tiles: Vec<Array3<f32>> =
+                outputs.iter().map(|(_, o)| thumb(o.view())).collect();
             if !baseline {
-                tiles.insert(0, thumb(centre_crop(pair.input.view(), crop)));
+                tiles.insert(0, thumb(input.view()));
             }
             tiles.push(thumb(reference));
             let (_, th, tw) = tiles[0].dim();

@@ -9,9 +9,11 @@
 //!
 //! Walkers only look at the file system (every file they name must exist,
 //! else an error naming it); pixels and EXIF are read by [`load_pair`].
-//! Loading follows ELD's datasets: noisy packed R,G1,B,G2, normalised by its
-//! own black/white levels, multiplied by the ratio and clamped to [0, 1];
-//! reference packed, normalised and clamped to [0, 1].
+//! Loading follows ELD's datasets (`pack_raw_bayer`, `ELDEvalDataset`,
+//! `SIDDataset`): noisy packed R,G1,B,G2, normalised by black per channel
+//! and the white level (16383 for ELD/SID, see
+//! [`DatasetKind::default_white`]), multiplied by the ratio and clamped to
+//! [0, 1]; reference packed, normalised and clamped to [0, 1].
 
 pub mod eld;
 pub mod pairs;
@@ -56,6 +58,17 @@ impl DatasetKind {
     /// pairs are measured without it unless asked.
     pub fn default_correct(self) -> bool {
         !matches!(self, DatasetKind::Pairs)
+    }
+
+    /// The protocol's white level: ELD's `pack_raw_bayer` normalises by
+    /// `(x - black[c]) / (16383 - black[c])` whatever the file says (Sony's
+    /// compressed ARW reports 15360), black per channel from the file; a
+    /// user's pairs use each file's own levels.
+    pub fn default_white(self) -> Option<u32> {
+        match self {
+            DatasetKind::Pairs => None,
+            _ => Some(16383),
+        }
     }
 
     /// The protocol's own centre crop (packed pixels): ELD measures SID on
@@ -137,12 +150,12 @@ fn iso_exposure(f: &RawFrame, path: &Path) -> Result<f64> {
     }
 }
 
-/// Decode both files of `s`, compute the ratio, and pack them.
-pub fn load_pair(s: &Sample) -> Result<LoadedPair> {
-    let o = LevelOverrides::default();
+/// Decode both files of `s` (with `levels` overriding the files' black or
+/// white levels), compute the ratio, and pack them.
+pub fn load_pair(s: &Sample, levels: &LevelOverrides) -> Result<LoadedPair> {
     let (n, r) = rayon::join(
-        || decode_file(&s.noisy, &o),
-        || decode_file(&s.reference, &o),
+        || decode_file(&s.noisy, levels),
+        || decode_file(&s.reference, levels),
     );
     let n = n.map_err(|e| DatasetError(e.to_string()))?;
     let r = r.map_err(|e| DatasetError(e.to_string()))?;
@@ -180,7 +193,7 @@ pub fn load_pair(s: &Sample) -> Result<LoadedPair> {
     })
 }
 
-/// ELD's `crop_center` on packed planes: the centre `side` x `side` window
+/// ELD's `crop_center` (`util.crop_center`) on packed planes: the centre `side` x `side` window
 /// starting at (h/2 - side/2, w/2 - side/2); a plane smaller than `side` is
 /// kept whole along that axis.
 pub fn centre_crop(a: ArrayView3<'_, f32>, side: Option<usize>) -> ArrayView3<'_, f32> {
@@ -250,5 +263,7 @@ mod tests {
         assert!(!DatasetKind::Pairs.default_correct());
         assert_eq!(DatasetKind::Sid.default_crop(), Some(512));
         assert_eq!(DatasetKind::Eld.default_crop(), None);
+        assert_eq!(DatasetKind::Eld.default_white(), Some(16383));
+        assert_eq!(DatasetKind::Pairs.default_white(), None);
     }
 }

@@ -5,15 +5,17 @@
 //!   (`./Sony/short/10003_00_0.1s.ARW ./Sony/long/10003_00_10s.ARW ISO200 F9`,
 //!   paths relative to ROOT) or ELD/PMN's paired format
 //!   (`10003_00_0.1s.ARW 10003_00_10s.ARW 100`, names under ROOT/Sony/short
-//!   and ROOT/Sony/long, third column the ratio);
-//! - the ratio is the long exposure time over the short one, read from the
-//!   file names as ELD does, capped at 300; the table row is its integer
-//!   part (`min(int(long/short), 300)`): 100 (0.1 s), 250 (0.04 s), 300
-//!   (0.033 s and 30 s/0.1 s);
+//!   and ROOT/Sony/long, third column the table row); ELD's own `test_SID.py`
+//!   evaluates `SID_Sony_15_paired.txt` (15 indoor scenes) in this format;
+//! - the amplification is `min(long / short, 300)` with both exposure times
+//!   read from the file names (ELD's `compute_expo_ratio`);
+//! - the table row of SID's list format is `min(int(long / short), 300)`
+//!   (`test_SID.py`): 100 (0.1 s), 250 (0.04 s), 300 (0.033 s and 30 s/0.1 s);
 //! - scenes 10034, 10045 and 10172 are left out by default: SID's authors
 //!   found their references misaligned (SID README, Aug 2018);
-//! - measured on the centre 512x512 of the packed planes (ELD's `crop=True`:
-//!   "fixed pattern noise appeared at the bottom corner of some pictures")
+//! - input and reference cropped to the centre 512x512 of the packed planes
+//!   *before* the network runs (ELD's `eval(crop=True)`: "fixed pattern noise
+//!   appeared at the bottom corner of some pictures")
 //!   with the illuminance correction (`correct=True`).
 
 use super::{err, existing, with_alternatives, DatasetKind, RatioRule, Result, Sample};
@@ -111,7 +113,12 @@ pub fn walk(root: &Path, list: Option<&Path>, keep_misaligned: bool) -> Result<V
             continue;
         }
         let ratio = (tl / ts).min(MAX_RATIO);
-        let group = ((tl / ts) + 1e-9).floor().min(MAX_RATIO) as u32;
+        // ELD groups a paired list by its third column, SID's list by
+        // `min(int(long / short), 300)`.
+        let group = match f.get(2).and_then(|g| g.parse::<u32>().ok()) {
+            Some(g) if !f[0].contains('/') => g,
+            _ => ((tl / ts) + 1e-9).floor().min(MAX_RATIO) as u32,
+        };
         let noisy = existing(&with_alternatives(&short), "SID short exposure")?;
         let reference = existing(&with_alternatives(&long), "SID long exposure")?;
         out.push(Sample {
