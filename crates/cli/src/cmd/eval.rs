@@ -205,7 +205,8 @@ fn walk(a: &EvalArgs) -> Result<Vec<Sample>> {
 }
 
 fn write_file(path: &Path, text: &str) -> Result<()> {
-    std::fs::write(path, text).with_context(|| format!("{}", path.display()))
+    pgrf_raw::atomic::write_atomic(path, text.as_bytes())
+        .with_context(|| format!("{}", path.display()))
 }
 
 pub fn run(a: &EvalArgs) -> Result<()> {

@@ -198,7 +198,8 @@ pub fn run(a: &MakeDatasetArgs) -> Result<()> {
                 }
             }
             let list_path = a.output.join(sid::DEFAULT_LIST);
-            std::fs::write(&list_path, list).with_context(|| format!("{}", list_path.display()))?;
+            pgrf_raw::atomic::write_atomic(&list_path, list.as_bytes())
+                .with_context(|| format!("{}", list_path.display()))?;
             eprintln!(
                 "wrote {files} DNGs in the SID layout under {} and {}",
                 a.output.join("Sony").display(),
