@@ -389,3 +389,44 @@ fn sid_miniature_and_pair_list() {
     assert!(e.contains("no such folder"), "{e}");
     let _ = std::fs::remove_dir_all(&d);
 }
+
+/// The walker's frame choice and ratio rule against ELD's published frame
+/// table (skipped without ../shared/data).
+#[test]
+fn eld_frame_table_gives_the_walker_ratios() {
+    use pgrf_eval::dataset::eld;
+    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../../shared/data/protocols/ELD_SonyA7S2_frames.json");
+    let Ok(text) = std::fs::read_to_string(&path) else {
+        eprintln!("skipped: {} not found", path.display());
+        return;
+    };
+    let rows: Vec<serde_json::Value> = serde_json::from_str(&text).unwrap();
+    let get = |scene: u64, frame: u32| {
+        let r = rows
+            .iter()
+            .find(|r| r["scene"] == scene && r["frame"] == frame)
+            .unwrap();
+        (
+            r["ISO"].as_f64().unwrap(),
+            r["ExposureTime_s"].as_f64().unwrap(),
+        )
+    };
+    for scene in 1..=10u64 {
+        for (want, frames) in [(100.0, eld::X100), (200.0, eld::X200)] {
+            for f in frames {
+                let (i, t) = get(scene, f);
+                let (ri, rt) = get(scene, eld::reference_for(f));
+                let ratio = ri * rt / (i * t);
+                assert!(
+                    (ratio - want).abs() < 1e-6,
+                    "scene {scene} frame {f}: {ratio}"
+                );
+                assert_eq!(i as u32, eld::FRAME_TABLE[f as usize - 1].0);
+            }
+        }
+        for r in eld::REFERENCES {
+            assert_eq!(get(scene, r).0, 100.0);
+        }
+    }
+}
