@@ -249,6 +249,18 @@ pub fn run(a: &EvalArgs) -> Result<()> {
     let mut rows: Vec<Row> = Vec::new();
     let mut worst: Vec<Worst> = Vec::new();
     let n = samples.len();
+    let bar = if a.quiet {
+        indicatif::ProgressBar::hidden()
+    } else {
+        indicatif::ProgressBar::new(n as u64)
+    };
+    bar.set_style(
+        indicatif::ProgressStyle::with_template(
+            "eval [{bar:30}] {pos}/{len} images  {per_sec}  eta {eta}",
+        )
+        .expect("valid template")
+        .progress_chars("=> "),
+    );
     for (i, smp) in samples.iter().enumerate() {
         let pair = load_pair(smp, &levels)?;
         // ELD crops input and reference before the network runs.
@@ -299,8 +311,13 @@ pub fn run(a: &EvalArgs) -> Result<()> {
             });
         }
         if !a.quiet {
-            eprintln!("{line}");
+            if bar.is_hidden() {
+                eprintln!("{line}");
+            } else {
+                bar.println(&line);
+            }
         }
+        bar.inc(1);
         if a.worst_count > 0 {
             let score = first.unwrap_or(f64::INFINITY);
             let mut tiles: Vec<Array3<f32>> =
@@ -324,6 +341,7 @@ pub fn run(a: &EvalArgs) -> Result<()> {
             worst.truncate(a.worst_count);
         }
     }
+    bar.finish_and_clear();
     let summary = summarise(&rows);
     println!("{head}");
     print!("{}", summary.text());
