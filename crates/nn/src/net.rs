@@ -23,7 +23,15 @@ impl Architecture {
     /// A freshly initialised network of this architecture.
     pub fn init<B: Backend>(&self, device: &B::Device) -> Result<Net<B>> {
         Ok(match self {
-            Architecture::SidUnet(c) => Net::Spc(c.init(device)),
+            Architecture::SidUnet(c) => {
+                if c.residual && c.in_channels != c.out_channels {
+                    return Err(NnError::Invalid(format!(
+                        "a residual SID U-Net needs as many output channels as input ({} vs {})",
+                        c.out_channels, c.in_channels
+                    )));
+                }
+                Net::Spc(c.init(device))
+            }
             Architecture::Sr3(c) => Net::Pgrf(c.init(device).map_err(NnError::Invalid)?),
         })
     }

@@ -43,7 +43,11 @@ impl Architecture {
 
     pub fn describe(&self) -> String {
         match self {
-            Architecture::SidUnet(c) => format!("SPC denoiser (SID U-Net, width {})", c.width),
+            Architecture::SidUnet(c) => format!(
+                "SPC denoiser (SID U-Net, width {}{})",
+                c.width,
+                if c.residual { ", residual" } else { "" }
+            ),
             Architecture::Sr3(c) => format!(
                 "PGRF flow model (SR3, {} channels x {:?})",
                 c.inner_channels, c.channel_mults
@@ -114,6 +118,18 @@ fn err(path: &Path, reason: impl std::fmt::Display) -> NnError {
     NnError::Invalid(format!("{}: {reason}", path.display()))
 }
 
+/// Config keys added after files were first written, with the value that
+/// reproduces the older network: burn's `Config` has no serde defaults, so
+/// they are filled in before the record is read.
+fn fill_defaults(value: &mut serde_json::Value) {
+    if value.get("arch").and_then(|a| a.as_str()) == Some("sid-unet") {
+        if let Some(c) = value.get_mut("config").and_then(|c| c.as_object_mut()) {
+            c.entry("residual")
+                .or_insert(serde_json::Value::Bool(false));
+        }
+    }
+}
+
 /// Serialise named tensors and the record to safetensors bytes.
 pub fn encode(tensors: &BTreeMap<String, NamedTensor>, meta: &WeightMeta) -> Result<Vec<u8>> {
     let bytes: Vec<(&String, Vec<u8>, &Vec<usize>)> = tensors
@@ -159,8 +175,9 @@ pub fn decode(path: &Path, bytes: &[u8]) -> Result<(WeightMeta, BTreeMap<String,
                 "no pgrf record in the metadata (not a pgrf weight file)",
             )
         })?;
-    let value: serde_json::Value =
+    let mut value: serde_json::Value =
         serde_json::from_str(text).map_err(|e| err(path, format!("bad metadata: {e}")))?;
+    fill_defaults(&mut value);
     if value.get("format").and_then(|f| f.as_str()) != Some(FORMAT) {
         return Err(err(
             path,
@@ -280,6 +297,22 @@ mod tests {
         let d = std::env::temp_dir().join(format!("pgrf-nn-weights-{}", std::process::id()));
         std::fs::create_dir_all(&d).unwrap();
         d.join(name)
+    }
+
+    #[test]
+    fn records_from_before_the_residual_option_read_as_plain_sid() {
+        let mut v = serde_json::json!({
+            "format": FORMAT, "version": 1, "arch": "sid-unet",
+            "config": {"width": 8, "in_channels": 4, "out_channels": 4},
+            "noise": {"profile": null, "calibration": null, "model": "pgrf", "iso": null, "ratio": [100.0, 300.0]},
+            "training": null, "t2": null
+        });
+        fill_defaults(&mut v);
+        let m: WeightMeta = serde_json::from_value(v).unwrap();
+        match m.arch {
+            Architecture::SidUnet(c) => assert!(!c.residual && c.width == 8),
+            _ => panic!("wrong architecture"),
+        }
     }
 
     fn noise() -> NoiseSource {

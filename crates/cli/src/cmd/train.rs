@@ -91,6 +91,9 @@ pub struct Settings {
     /// Width of the first level: SID U-Net channels [default: 32]; for the flow model the SR3 inner channels unless --inner-channels is given.
     #[arg(long)]
     pub width: Option<usize>,
+    /// SID U-Net: add the input to the output (learn the correction; not SID's design, converges far faster for small CPU-trained models).
+    #[arg(long, num_args = 0..=1, default_missing_value = "true")]
+    pub residual: Option<bool>,
     /// SR3 channels of the first level [default: 64, or --width].
     #[arg(long)]
     pub inner_channels: Option<usize>,
@@ -199,6 +202,7 @@ fn merged(a: &TrainArgs) -> Result<Settings> {
         seed,
         no_augment,
         width,
+        residual,
         inner_channels,
         channel_mults,
         res_blocks,
@@ -234,7 +238,11 @@ fn architecture(task: Task, s: &Settings) -> Result<Architecture> {
             if w == 0 {
                 bail!("--width must be at least 1");
             }
-            Architecture::SidUnet(SidUnetConfig::new().with_width(w))
+            Architecture::SidUnet(
+                SidUnetConfig::new()
+                    .with_width(w)
+                    .with_residual(s.residual.unwrap_or(false)),
+            )
         }
         Task::Flow => {
             let inner = s.inner_channels.or(s.width).unwrap_or(64);
