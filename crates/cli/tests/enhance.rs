@@ -3,12 +3,12 @@
 //! flow model's searched t2 is used; batches skip unreadable files; bad input
 //! gives one line and writes nothing.
 
-use burn::tensor::backend::Backend;
+mod common;
+use common::{one_line_error, pgrf, s};
+
 use pgrf_nn::backend::{Cpu, DeviceKind};
 use pgrf_nn::infer::prepare::network_input;
 use pgrf_nn::infer::{restore_image, ImageOptions, SamplerChoice};
-use pgrf_nn::weights::{Architecture, NoiseSource, WeightMeta};
-use pgrf_nn::{SidUnetConfig, Sr3Config};
 use pgrf_raw::scene::{render_frame, SceneKind, SceneLevels, SceneSpec};
 use pgrf_raw::{
     decode_file, pack_normalized, unpack_normalized, write_dng, Cfa, DngOptions, LevelOverrides,
@@ -16,24 +16,9 @@ use pgrf_raw::{
 };
 use serde_json::Value;
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
-
-fn pgrf(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_pgrf"))
-        .args(args)
-        .output()
-        .expect("run pgrf")
-}
 
 fn scratch(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("pgrf-enhance-test-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
+    common::scratch("enhance", name)
 }
 
 fn files_in(d: &Path) -> Vec<String> {
@@ -45,50 +30,10 @@ fn files_in(d: &Path) -> Vec<String> {
     v
 }
 
-fn one_line_error(out: &Output) -> String {
-    let err = String::from_utf8_lossy(&out.stderr).to_string();
-    assert_eq!(out.status.code(), Some(1), "stderr: {err}");
-    let lines: Vec<&str> = err.lines().filter(|l| !l.trim().is_empty()).collect();
-    assert_eq!(lines.len(), 1, "expected one line, got: {err}");
-    err
-}
-
 /// Small networks with fixed (seeded) weights: what matters here is the
 /// plumbing, not the denoising.
 fn model(dir: &Path, flow: bool, t2: Option<f32>) -> PathBuf {
-    let device = Default::default();
-    Cpu::seed(&device, 11);
-    let arch = if flow {
-        Architecture::Sr3(
-            Sr3Config::new()
-                .with_inner_channels(8)
-                .with_channel_mults(vec![1, 2])
-                .with_res_blocks(1)
-                .with_attn_levels(vec![])
-                .with_norm_groups(4),
-        )
-    } else {
-        Architecture::SidUnet(SidUnetConfig::new().with_width(4))
-    };
-    let net = arch.init::<Cpu>(&device).unwrap();
-    let mut meta = WeightMeta::new(
-        arch,
-        NoiseSource {
-            profile: Some("sony-a7s2".into()),
-            calibration: None,
-            model: "pgrf".into(),
-            iso: Some(1600),
-            ratio: [100.0, 300.0],
-        },
-    );
-    meta.t2 = t2;
-    let path = dir.join(if flow {
-        "flow.safetensors"
-    } else {
-        "spc.safetensors"
-    });
-    net.save(&path, &meta).unwrap();
-    path
+    common::tiny_model(dir, flow, t2, 11)
 }
 
 /// A dark dead-leaves frame (values scaled down ~100x above black) with

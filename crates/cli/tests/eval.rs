@@ -3,29 +3,14 @@
 //! one row per ratio with the right image counts, the CSV one line per image
 //! and method, and errors are one line naming what is wrong.
 
-use burn::tensor::backend::Backend;
-use pgrf_nn::backend::Cpu;
-use pgrf_nn::weights::{Architecture, NoiseSource, WeightMeta};
-use pgrf_nn::{SidUnetConfig, Sr3Config};
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+mod common;
+use common::{one_line_error, pgrf, s};
 
-fn pgrf(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_pgrf"))
-        .args(args)
-        .output()
-        .expect("run pgrf")
-}
+use std::path::{Path, PathBuf};
+use std::process::Output;
 
 fn scratch(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("pgrf-eval-test-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
+    common::scratch("eval", name)
 }
 
 fn ok(out: &Output) -> String {
@@ -37,48 +22,9 @@ fn ok(out: &Output) -> String {
     String::from_utf8_lossy(&out.stdout).into_owned()
 }
 
-fn one_line_error(out: &Output) -> String {
-    let err = String::from_utf8_lossy(&out.stderr).to_string();
-    assert_eq!(out.status.code(), Some(1), "stderr: {err}");
-    let lines: Vec<&str> = err.lines().filter(|l| !l.trim().is_empty()).collect();
-    assert_eq!(lines.len(), 1, "expected one line, got: {err}");
-    err
-}
-
 /// Tiny networks with seeded weights: the plumbing is under test.
 fn model(dir: &Path, flow: bool) -> PathBuf {
-    let device = Default::default();
-    Cpu::seed(&device, 5);
-    let arch = if flow {
-        Architecture::Sr3(
-            Sr3Config::new()
-                .with_inner_channels(8)
-                .with_channel_mults(vec![1, 2])
-                .with_res_blocks(1)
-                .with_attn_levels(vec![])
-                .with_norm_groups(4),
-        )
-    } else {
-        Architecture::SidUnet(SidUnetConfig::new().with_width(4))
-    };
-    let net = arch.init::<Cpu>(&device).unwrap();
-    let meta = WeightMeta::new(
-        arch,
-        NoiseSource {
-            profile: Some("sony-a7s2".into()),
-            calibration: None,
-            model: "pgrf".into(),
-            iso: Some(1600),
-            ratio: [100.0, 300.0],
-        },
-    );
-    let path = dir.join(if flow {
-        "flow.safetensors"
-    } else {
-        "spc.safetensors"
-    });
-    net.save(&path, &meta).unwrap();
-    path
+    common::tiny_model(dir, flow, None, 5)
 }
 
 /// (ratio label, images, [(psnr, ssim) per method]): one row of the stdout table.

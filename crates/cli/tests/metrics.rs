@@ -1,10 +1,13 @@
 //! `pgrf metrics` as scripts see it: DNGs in, one line of scores (or one
 //! line of error) out.
 
+mod common;
+use common::{pgrf, s};
+
 use pgrf_raw::{write_dng, Cfa, DngOptions, RawFrame};
 use serde_json::Value;
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::process::Output;
 
 const W: usize = 96;
 const H: usize = 64;
@@ -13,22 +16,8 @@ const WHITE: u32 = 16383;
 /// DN added to the perturbed pixels.
 const BUMP: u16 = 40;
 
-fn pgrf(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_pgrf"))
-        .args(args)
-        .output()
-        .expect("run pgrf")
-}
-
 fn scratch(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("pgrf-metrics-test-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
+    common::scratch("metrics", name)
 }
 
 /// A deterministic scene well inside black..white.

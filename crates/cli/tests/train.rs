@@ -1,26 +1,15 @@
 //! `pgrf train` as scripts use it: flags and TOML config, the JSON summary,
 //! weight files with their record, resume, and one-line errors.
 
+mod common;
+use common::{one_line_error, pgrf, s};
+
 use serde_json::Value;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
-fn pgrf(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_pgrf"))
-        .args(args)
-        .output()
-        .expect("run pgrf")
-}
-
 fn scratch(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("pgrf-train-test-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
+    common::scratch("train", name)
 }
 
 fn summary(out: &Output) -> Value {
@@ -31,14 +20,6 @@ fn summary(out: &Output) -> Value {
     );
     let text = String::from_utf8_lossy(&out.stdout);
     serde_json::from_str(text.lines().last().expect("a JSON line")).expect("JSON summary")
-}
-
-fn one_line_error(out: &Output) -> String {
-    let err = String::from_utf8_lossy(&out.stderr).to_string();
-    assert_eq!(out.status.code(), Some(1), "stderr: {err}");
-    let lines: Vec<&str> = err.lines().filter(|l| !l.trim().is_empty()).collect();
-    assert_eq!(lines.len(), 1, "expected one line, got: {err}");
-    err
 }
 
 /// Small settings shared by the tests: seconds on two cores.
