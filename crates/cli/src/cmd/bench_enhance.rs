@@ -25,7 +25,7 @@ use clap::{Args, ValueEnum};
 use pgrf_nn::backend::DeviceKind;
 use pgrf_nn::infer::image::plan_for;
 use pgrf_nn::infer::memory::{
-    attention_tokens, auto_tile, available_memory, bytes_per_pixel, peak_rss,
+    attention_tokens, auto_tile, available_memory, fixed_bytes, peak_rss, tile_bytes,
 };
 use pgrf_nn::infer::restorer::UNSEARCHED_T2;
 use pgrf_nn::infer::DEFAULT_OVERLAP;
@@ -303,10 +303,8 @@ pub fn run(a: &EnhanceArgs) -> Result<()> {
     let nfe = r.nfe();
     let mib = |b: f64| b / (1 << 20) as f64;
     let attention_tokens = attention_tokens(&r.meta().arch, th, tw);
-    let estimated_peak_mib = mib(bytes_per_pixel(&r.meta().arch) * (th * tw) as f64
-        + 2.0 * 4.0 * (attention_tokens as f64).powi(2)
-        + (4 * ph * pw * 4 * (3 + r.samples())) as f64
-        + r.weight_bytes() as f64);
+    let estimated_peak_mib =
+        mib(tile_bytes(&r.meta().arch, th, tw) + fixed_bytes(r, ph, pw) as f64);
     let attention_scores_mib = mib(4.0 * (attention_tokens as f64).powi(2));
     if a.dry_run {
         let plan = serde_json::json!({

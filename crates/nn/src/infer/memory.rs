@@ -102,6 +102,13 @@ pub fn tile_cap(meta: &crate::weights::WeightMeta) -> usize {
     }
 }
 
+/// Bytes held for the whole run besides the tiles: the frame's input,
+/// output and blend buffers, one start field per flow sample, and the
+/// network's weights.
+pub fn fixed_bytes(r: &dyn crate::infer::Restore, ph: usize, pw: usize) -> u64 {
+    (4 * ph * pw * 4 * (3 + r.samples())) as u64 + r.weight_bytes()
+}
+
 /// The tile `pgrf enhance` uses unless told: on the CPU the largest tile
 /// whose estimated peak fits in half the available memory once the frame's
 /// buffers and the weights are set aside (the whole frame when it fits), on
@@ -118,9 +125,8 @@ pub fn auto_tile(
     match device {
         crate::backend::DeviceKind::Cuda => 1024.min(cap),
         crate::backend::DeviceKind::Cpu => {
-            let frame_buffers = (4 * ph * pw * 4 * (3 + r.samples())) as u64;
-            let budget = (available_memory().unwrap_or(2 << 30) / 2)
-                .saturating_sub(frame_buffers + r.weight_bytes());
+            let budget =
+                (available_memory().unwrap_or(2 << 30) / 2).saturating_sub(fixed_bytes(r, ph, pw));
             let arch = &r.meta().arch;
             if side <= cap && tile_bytes(arch, ph, pw) <= budget as f64 {
                 side
