@@ -2,6 +2,7 @@
 //! previews) out, with either network, at full resolution in bounded memory.
 
 use crate::input::InputArgs;
+use crate::output::require_parent_dir;
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
@@ -238,10 +239,10 @@ fn plan_jobs(a: &EnhanceArgs) -> Result<Vec<Job>> {
         if !single {
             bail!("--png PATH names one preview; with several inputs give --png without a value");
         }
-        check_parent(p)?;
+        require_parent_dir(p)?;
     }
     if single && is_dng {
-        check_parent(&a.output)?;
+        require_parent_dir(&a.output)?;
         if same_file(&a.output, &inputs[0]) {
             bail!(
                 "-o {} is the input file; write the result elsewhere",
@@ -265,7 +266,7 @@ fn plan_jobs(a: &EnhanceArgs) -> Result<Vec<Job>> {
         );
     }
     if !a.output.is_dir() {
-        check_parent(&a.output)?;
+        require_parent_dir(&a.output)?;
         std::fs::create_dir(&a.output)
             .with_context(|| format!("creating output folder {}", a.output.display()))?;
     }
@@ -294,15 +295,6 @@ fn plan_jobs(a: &EnhanceArgs) -> Result<Vec<Job>> {
             Ok(Job { input, output, png })
         })
         .collect()
-}
-
-fn check_parent(p: &Path) -> Result<()> {
-    if let Some(dir) = p.parent().filter(|d| !d.as_os_str().is_empty()) {
-        if !dir.is_dir() {
-            bail!("{}: folder {} does not exist", p.display(), dir.display());
-        }
-    }
-    Ok(())
 }
 
 fn same_file(a: &Path, b: &Path) -> bool {

@@ -106,15 +106,7 @@ pub fn run(a: &SearchArgs) -> Result<()> {
         .plot
         .clone()
         .unwrap_or_else(|| a.model.with_extension("search.png"));
-    if let Some(dir) = plot.parent().filter(|d| !d.as_os_str().is_empty()) {
-        if !dir.is_dir() {
-            bail!(
-                "--plot {}: folder {} does not exist",
-                plot.display(),
-                dir.display()
-            );
-        }
-    }
+    crate::output::require_parent_dir(&plot).context("--plot")?;
     a.device.check_available().map_err(anyhow::Error::msg)?;
 
     // Pairs made as the model's training pairs were (its record's noise source).

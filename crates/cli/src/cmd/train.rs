@@ -445,11 +445,7 @@ pub fn run(a: &TrainArgs) -> Result<()> {
         device: device.to_string(),
     };
     for p in [&out, &settings.checkpoint] {
-        if let Some(dir) = p.parent().filter(|d| !d.as_os_str().is_empty()) {
-            if !dir.is_dir() {
-                bail!("{}: folder {} does not exist", p.display(), dir.display());
-            }
-        }
+        crate::output::require_parent_dir(p)?;
     }
     if a.resume && !settings.checkpoint.exists() {
         bail!(
