@@ -2,7 +2,7 @@
 //! line of error) out.
 
 mod common;
-use common::{pgrf, s};
+use common::{one_line_error, pgrf, s};
 
 use pgrf_raw::{write_dng, Cfa, DngOptions, RawFrame};
 use serde_json::Value;
@@ -135,8 +135,7 @@ fn known_perturbation_gives_the_formula_psnr() {
 }
 
 fn assert_one_line_failure(out: &Output, names: &[&str]) {
-    let err = String::from_utf8_lossy(&out.stderr).to_string();
-    assert_eq!(out.status.code(), Some(1), "stderr: {err}");
+    let err = one_line_error(out);
     assert!(
         out.stdout.is_empty(),
         "stdout: {}",
