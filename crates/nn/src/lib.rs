@@ -15,6 +15,7 @@ pub mod norm;
 pub mod sample;
 pub mod schedule;
 pub mod search;
+pub mod seeded;
 pub mod sr3;
 pub mod step;
 pub mod train;

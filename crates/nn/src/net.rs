@@ -37,6 +37,16 @@ impl Architecture {
     }
 }
 
+impl Architecture {
+    /// A network of this architecture with weights drawn from `seed`: the
+    /// same seed gives the same weights whatever else the process is doing.
+    pub fn init_seeded<B: Backend>(&self, device: &B::Device, seed: u64) -> Result<Net<B>> {
+        crate::seeded::seeded::<B, _>(device, seed, || {
+            self.init(device).map(crate::seeded::materialise)
+        })
+    }
+}
+
 impl<B: Backend> Net<B> {
     /// The denoised batch: one pass for SPC, the two-stage sampler at `t2`
     /// for the flow model.

@@ -108,9 +108,12 @@ mod tests {
     #[test]
     fn the_denoiser_learns() {
         let device = Default::default();
-        <B as burn::tensor::backend::Backend>::seed(&device, 7);
-        let (noisy, clean) = batch(&device);
-        let mut net = SidUnetConfig::new().with_width(4).init::<B>(&device);
+        let ((noisy, clean), mut net) = crate::seeded::seeded::<B, _>(&device, 7, || {
+            (
+                batch(&device),
+                crate::seeded::materialise(SidUnetConfig::new().with_width(4).init::<B>(&device)),
+            )
+        });
         let mut optim = AdamConfig::new().init();
         let mut losses = Vec::new();
         for _ in 0..60 {
@@ -125,18 +128,22 @@ mod tests {
     #[test]
     fn the_flow_field_learns() {
         let device = Default::default();
-        <B as burn::tensor::backend::Backend>::seed(&device, 11);
-        let (noisy, clean) = batch(&device);
-        let mut net = Sr3Config::new()
-            .with_inner_channels(8)
-            .with_channel_mults(vec![1, 2])
-            .with_res_blocks(1)
-            .with_attn_levels(vec![])
-            .with_norm_groups(4)
-            .init::<B>(&device)
-            .unwrap();
+        let ((noisy, clean), mut net, x0) = crate::seeded::seeded::<B, _>(&device, 11, || {
+            let (noisy, clean) = batch(&device);
+            let net = crate::seeded::materialise(
+                Sr3Config::new()
+                    .with_inner_channels(8)
+                    .with_channel_mults(vec![1, 2])
+                    .with_res_blocks(1)
+                    .with_attn_levels(vec![])
+                    .with_norm_groups(4)
+                    .init::<B>(&device)
+                    .unwrap(),
+            );
+            let x0 = Tensor::<B, 4>::random(clean.dims(), Distribution::Normal(0.0, 1.0), &device);
+            ((noisy, clean), net, x0)
+        });
         let mut optim = AdamConfig::new().init();
-        let x0 = Tensor::<B, 4>::random(clean.dims(), Distribution::Normal(0.0, 1.0), &device);
         let t = Tensor::<B, 1>::from_floats([0.3, 0.8], &device);
         let mut losses = Vec::new();
         for _ in 0..60 {

@@ -211,8 +211,7 @@ pub fn train<B: AutodiffBackend>(
         )));
     }
     let arch_json = serde_json::to_value(&s.arch).map_err(|e| NnError::Invalid(e.to_string()))?;
-    B::seed(device, s.seed);
-    let mut net: Net<B> = s.arch.init(device)?;
+    let mut net: Net<B> = s.arch.init_seeded(device, s.seed)?;
     let mut adam = AdamConfig::new().with_epsilon(1e-8);
     if let Some(c) = s.clip_grad {
         adam = adam.with_grad_clipping(Some(GradientClippingConfig::Norm(c)));

@@ -12,6 +12,7 @@ use burn::tensor::{Distribution, Tensor, TensorData};
 use pgrf_nn::backend::{Cpu, CpuTrain};
 use pgrf_nn::named::{assign, collect};
 use pgrf_nn::norm::group_norm;
+use pgrf_nn::seeded::seeded;
 
 const H: f32 = 1e-2;
 
@@ -50,14 +51,16 @@ fn loss_plain<M: Module<Cpu>>(
 #[test]
 fn conv3x3_gradients_match_finite_differences() {
     let device = Default::default();
-    <CpuTrain as Backend>::seed(&device, 3);
     let shape = [2, 3, 7, 6];
     let cfg = Conv2dConfig::new([3, 4], [3, 3]).with_padding(PaddingConfig2d::Same);
-    let conv = cfg.init::<CpuTrain>(&device);
-    let x = Tensor::<CpuTrain, 4>::random(shape, Distribution::Normal(0.0, 1.0), &device)
-        .require_grad();
-    let out = conv.forward(x.clone());
-    let r = Tensor::<CpuTrain, 4>::random(out.dims(), Distribution::Normal(0.0, 1.0), &device);
+    let (conv, x, out, r) = seeded::<CpuTrain, _>(&device, 3, || {
+        let conv = cfg.init::<CpuTrain>(&device);
+        let x = Tensor::<CpuTrain, 4>::random(shape, Distribution::Normal(0.0, 1.0), &device)
+            .require_grad();
+        let out = conv.forward(x.clone());
+        let r = Tensor::<CpuTrain, 4>::random(out.dims(), Distribution::Normal(0.0, 1.0), &device);
+        (conv, x, out, r)
+    });
     let grads = (out * r.clone()).sum().backward();
     let gw = values(conv.weight.val().grad(&grads).unwrap());
     let gb = values(conv.bias.as_ref().unwrap().val().grad(&grads).unwrap());
@@ -103,7 +106,6 @@ fn conv3x3_gradients_match_finite_differences() {
 #[test]
 fn group_norm_gradients_match_finite_differences() {
     let device = Default::default();
-    <CpuTrain as Backend>::seed(&device, 4);
     let shape = [2, 8, 5, 4];
     let cfg = GroupNormConfig::new(4, 8);
     let gn = cfg.init::<CpuTrain>(&device);
@@ -119,10 +121,13 @@ fn group_norm_gradients_match_finite_differences() {
         }
     }
     let gn = assign(gn, &named, &device).unwrap();
-    let x = Tensor::<CpuTrain, 4>::random(shape, Distribution::Normal(0.3, 2.0), &device)
-        .require_grad();
-    let out = group_norm(&gn, x.clone());
-    let r = Tensor::<CpuTrain, 4>::random(out.dims(), Distribution::Normal(0.0, 1.0), &device);
+    let (x, out, r) = seeded::<CpuTrain, _>(&device, 4, || {
+        let x = Tensor::<CpuTrain, 4>::random(shape, Distribution::Normal(0.3, 2.0), &device)
+            .require_grad();
+        let out = group_norm(&gn, x.clone());
+        let r = Tensor::<CpuTrain, 4>::random(out.dims(), Distribution::Normal(0.0, 1.0), &device);
+        (x, out, r)
+    });
     let grads = (out * r.clone()).sum().backward();
     let gg = values(gn.gamma.as_ref().unwrap().val().grad(&grads).unwrap());
     let gx = values(x.grad(&grads).unwrap());

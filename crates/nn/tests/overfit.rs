@@ -8,6 +8,7 @@ use burn::tensor::{Tensor, TensorData};
 use pgrf_nn::backend::{Cpu, CpuTrain};
 use pgrf_nn::data::validation::psnr;
 use pgrf_nn::sample::two_stage;
+use pgrf_nn::seeded::{materialise, seeded};
 use pgrf_nn::step::{denoiser_step, flow_step};
 use pgrf_nn::{SidUnetConfig, Sr3Config};
 use pgrf_noise::pair::{PairSpec, RatioSpec};
@@ -49,12 +50,15 @@ fn out(t: Tensor<Cpu, 4>) -> Vec<f32> {
 #[test]
 fn the_denoiser_memorises_one_pair_past_35_db() {
     let device = Default::default();
-    <CpuTrain as burn::tensor::backend::Backend>::seed(&device, 1);
     let (noisy, clean) = pair();
     let input_psnr = psnr(&noisy, &clean);
-    let mut net = SidUnetConfig::new()
-        .with_width(16)
-        .init::<CpuTrain>(&device);
+    let mut net = seeded::<CpuTrain, _>(&device, 1, || {
+        materialise(
+            SidUnetConfig::new()
+                .with_width(16)
+                .init::<CpuTrain>(&device),
+        )
+    });
     let mut optim = AdamConfig::new().with_epsilon(1e-8).init();
     let (x, y) = (
         t4::<CpuTrain>(&noisy, &device),
@@ -93,7 +97,6 @@ fn the_denoiser_memorises_one_pair_past_35_db() {
 /// slowly: 15, 20, 22, 22, 25 dB at 100..500 steps.
 fn flow_overfit(max_steps: usize, target: f32) -> (f32, usize) {
     let device = Default::default();
-    <CpuTrain as burn::tensor::backend::Backend>::seed(&device, 2);
     let (noisy, clean) = pair();
     let cfg = Sr3Config::new()
         .with_inner_channels(16)
@@ -101,7 +104,10 @@ fn flow_overfit(max_steps: usize, target: f32) -> (f32, usize) {
         .with_res_blocks(1)
         .with_attn_levels(vec![])
         .with_norm_groups(8);
-    let mut net = cfg.init::<CpuTrain>(&device).unwrap();
+    let mut net = seeded::<CpuTrain, _>(&device, 2, || {
+        cfg.init::<CpuTrain>(&device).map(materialise)
+    })
+    .unwrap();
     let mut optim = AdamConfig::new().with_epsilon(1e-8).init();
     let mut rng = rand_xoshiro::Xoshiro256PlusPlus::seed_from_u64(5);
     let (cond, x1) = (

@@ -3,7 +3,6 @@
 //! differs from the whole-frame result only smoothly, with no step along the
 //! tile borders (a hard cut between the same tiles shows one).
 
-use burn::tensor::backend::Backend;
 use ndarray::{s, Array3, ArrayView3};
 use pgrf_nn::backend::Cpu;
 use pgrf_nn::infer::image::plan_for;
@@ -28,8 +27,7 @@ impl burn::module::ModuleMapper<Cpu> for Scale {
 
 fn restorer(arch: Architecture, scale: f32) -> Restorer<Cpu> {
     let device = Default::default();
-    Cpu::seed(&device, 5);
-    let net = arch.init::<Cpu>(&device).unwrap();
+    let net = arch.init_seeded::<Cpu>(&device, 5).unwrap();
     let net = burn::module::Module::map(net, &mut Scale(scale));
     let meta = WeightMeta::new(arch, NoiseSource::default());
     Restorer::new(net, meta, SamplerChoice::default(), 0.5, device).unwrap()

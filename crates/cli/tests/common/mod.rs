@@ -40,12 +40,10 @@ pub fn one_line_error(out: &Output) -> String {
 /// (`spc.safetensors` or `flow.safetensors`): for tests of the plumbing,
 /// not of denoising.
 pub fn tiny_model(dir: &Path, flow: bool, t2: Option<f32>, seed: u64) -> PathBuf {
-    use burn::tensor::backend::Backend;
     use pgrf_nn::backend::Cpu;
     use pgrf_nn::weights::{Architecture, NoiseSource, WeightMeta};
     use pgrf_nn::{SidUnetConfig, Sr3Config};
     let device = Default::default();
-    Cpu::seed(&device, seed);
     let arch = if flow {
         Architecture::Sr3(
             Sr3Config::new()
@@ -58,7 +56,7 @@ pub fn tiny_model(dir: &Path, flow: bool, t2: Option<f32>, seed: u64) -> PathBuf
     } else {
         Architecture::SidUnet(SidUnetConfig::new().with_width(4))
     };
-    let net = arch.init::<Cpu>(&device).unwrap();
+    let net = arch.init_seeded::<Cpu>(&device, seed).unwrap();
     let mut meta = WeightMeta::new(
         arch,
         NoiseSource {
