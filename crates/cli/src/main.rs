@@ -5,6 +5,7 @@
 mod cmd;
 mod input;
 mod output;
+mod shipped;
 
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;
@@ -18,6 +19,8 @@ struct Cli {
 
 #[derive(Subcommand, Debug)]
 enum Command {
+    /// Show the whole product on built-in data: a procedural scene captured x100 and x200 too dark, restored by the built-in SPC and PGRF models, scored and pictured.
+    Demo(cmd::demo::DemoArgs),
     /// Print what pgrf reads from a RAW file: size, CFA, levels, white balance, colour matrix, exposure.
     Info(cmd::info::InfoArgs),
     /// Render a RAW file to an sRGB PNG (demosaic, white balance, colour matrix, gamma).
@@ -69,6 +72,7 @@ fn main() -> ExitCode {
     }));
     let cli = Cli::parse();
     let result = match &cli.command {
+        Command::Demo(a) => cmd::demo::run(a),
         Command::Info(a) => cmd::info::run(a),
         Command::Preview(a) => cmd::preview::run(a),
         Command::Convert(a) => cmd::convert::run(a),

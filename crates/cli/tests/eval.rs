@@ -150,8 +150,12 @@ fn eld_miniature_end_to_end() {
         "{md}"
     );
     let img = image::open(&png).unwrap();
-    // 3 worst images x (noisy, spc, flow, reference), 64x64 packed -> 128 px tiles.
-    assert_eq!((img.width(), img.height()), (4 * 128 + 12, 3 * 128 + 8));
+    // 3 worst images x (noisy, spc, flow, reference), 64x64 packed -> 128 px
+    // tiles, 8 px apart, each under a 30 px caption.
+    assert_eq!(
+        (img.width(), img.height()),
+        (4 * 128 + 3 * 8, 3 * (128 + 30) + 2 * 8)
+    );
 
     // Without the baseline: one column per model.
     let out = ok(&pgrf(&[
@@ -280,7 +284,7 @@ fn sid_miniature_and_pair_list() {
     ]));
     assert!(out.contains("centre 16x16"), "{out}");
     let img = image::open(&png).unwrap();
-    assert_eq!((img.width(), img.height()), (3 * 32 + 8, 32));
+    assert_eq!((img.width(), img.height()), (3 * 32 + 2 * 8, 32 + 30));
 
     // A pair list of the user's own: ratio given, and from EXIF.
     let short = root.join("Sony/short");

@@ -9,6 +9,7 @@
 
 pub mod dataset;
 pub mod metrics;
+pub mod montage;
 pub mod search_plot;
 
 pub use metrics::{

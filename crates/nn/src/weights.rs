@@ -49,8 +49,10 @@ impl Architecture {
                 if c.residual { ", residual" } else { "" }
             ),
             Architecture::Sr3(c) => format!(
-                "PGRF flow model (SR3, {} channels x {:?})",
-                c.inner_channels, c.channel_mults
+                "PGRF flow model (SR3, {} channels x {:?}{})",
+                c.inner_channels,
+                c.channel_mults,
+                if c.residual { ", residual" } else { "" }
             ),
         }
     }
@@ -122,7 +124,10 @@ fn err(path: &Path, reason: impl std::fmt::Display) -> NnError {
 /// reproduces the older network: burn's `Config` has no serde defaults, so
 /// they are filled in before the record is read.
 fn fill_defaults(value: &mut serde_json::Value) {
-    if value.get("arch").and_then(|a| a.as_str()) == Some("sid-unet") {
+    if matches!(
+        value.get("arch").and_then(|a| a.as_str()),
+        Some("sid-unet") | Some("sr3")
+    ) {
         if let Some(c) = value.get_mut("config").and_then(|c| c.as_object_mut()) {
             c.entry("residual")
                 .or_insert(serde_json::Value::Bool(false));
@@ -238,7 +243,18 @@ pub fn read(path: &Path) -> Result<(WeightMeta, BTreeMap<String, NamedTensor>)> 
 
 /// Build the network the file describes and load its weights.
 pub fn load<B: Backend>(path: &Path, device: &B::Device) -> Result<(Net<B>, WeightMeta)> {
-    let (meta, tensors) = read(path)?;
+    let bytes = std::fs::read(path).map_err(|e| err(path, e))?;
+    load_bytes(path, &bytes, device)
+}
+
+/// [`load`] from a weight file's bytes (weights built into the binary);
+/// `path` names them in errors.
+pub fn load_bytes<B: Backend>(
+    path: &Path,
+    bytes: &[u8],
+    device: &B::Device,
+) -> Result<(Net<B>, WeightMeta)> {
+    let (meta, tensors) = decode(path, bytes)?;
     let fit = |e: String| {
         err(
             path,

@@ -7,6 +7,7 @@
 //! Images are packed `(4, H/2, W/2)` normalised arrays as produced by
 //! `pgrf_raw::pack_normalized`.
 
+pub mod capture;
 pub mod components;
 pub mod error;
 pub mod mapfile;

@@ -110,6 +110,14 @@ fn camera_rgb(rgb: [f64; 3]) -> [f64; 3] {
     mul(&x2c, mul(&SRGB_TO_XYZ, rgb))
 }
 
+/// Camera RGB of ColorChecker patch `i` (0..24), scaled so a perfect white
+/// reflector's strongest channel is 1: the chart's colours for scenes that
+/// place a chart themselves.
+pub fn patch_camera_rgb(i: usize) -> [f32; 3] {
+    let (_, peak) = white_response();
+    camera_rgb(COLORCHECKER_SRGB[i].map(srgb_decode_u8)).map(|v| (v / peak) as f32)
+}
+
 /// Camera response to a perfect white reflector and its strongest channel.
 fn white_response() -> ([f64; 3], f64) {
     let white = camera_rgb([1.0; 3]);

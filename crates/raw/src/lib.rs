@@ -34,6 +34,6 @@ pub use headerless::{read_headerless, HeaderlessSpec};
 pub use pack::{pack_normalized, pack_u16, unpack_normalized, unpack_u16};
 pub use preview::{render_preview, Preview, PreviewOptions};
 pub use scene::{
-    render_frame, render_packed, render_packed_cfa, render_rgb, Scene, SceneKind, SceneLevels,
-    SceneSpec,
+    render_demo, render_frame, render_packed, render_packed_cfa, render_rgb, DemoLayout, Scene,
+    SceneKind, SceneLevels, SceneSpec,
 };

@@ -43,6 +43,7 @@ impl Default for PreviewOptions {
 }
 
 /// A rendered preview: linear-light-free, sRGB-encoded RGB in [0, 1].
+#[derive(Clone, Debug)]
 pub struct Preview {
     pub width: usize,
     pub height: usize,

@@ -11,7 +11,7 @@ use pgrf_nn::backend::DeviceKind;
 use pgrf_nn::infer::memory::{auto_tile, peak_rss};
 use pgrf_nn::infer::prepare::{network_input, ratio_from_exposure};
 use pgrf_nn::infer::restorer::describe_sampler;
-use pgrf_nn::infer::{restore_image, ImageOptions, Restore, SamplerChoice, DEFAULT_OVERLAP};
+use pgrf_nn::infer::{overlap_for, restore_image, ImageOptions, Restore, SamplerChoice};
 use pgrf_nn::sample::SamplerKind;
 use pgrf_raw::{render_preview, unpack_normalized, write_dng, DngOptions, PreviewOptions};
 use serde::Serialize;
@@ -55,9 +55,9 @@ pub struct EnhanceArgs {
     /// Tile side in packed pixels (default: from available memory on the CPU, 1024 on CUDA).
     #[arg(long)]
     pub tile: Option<usize>,
-    /// Minimum overlap of neighbouring tiles, packed pixels.
-    #[arg(long, default_value_t = DEFAULT_OVERLAP)]
-    pub overlap: usize,
+    /// Minimum overlap of neighbouring tiles, packed pixels [default: 64, or a quarter of a smaller tile].
+    #[arg(long)]
+    pub overlap: Option<usize>,
     /// cpu, or cuda (needs a build with `--features cuda`).
     #[arg(long, default_value = "cpu")]
     pub device: DeviceKind,
@@ -133,7 +133,7 @@ pub fn run(a: &EnhanceArgs) -> Result<()> {
         t2: a.t2,
         samples: a.samples,
     };
-    let restorer = pgrf_nn::infer::load(&a.model, choice, a.device)
+    let restorer = crate::shipped::load_model(&a.model, choice, a.device)
         .with_context(|| format!("--model {}", a.model.display()))?;
     let method = format!(
         "{} ({})",
@@ -348,7 +348,7 @@ fn enhance_one(
     };
     let opts = ImageOptions {
         tile,
-        overlap: a.overlap,
+        overlap: a.overlap.unwrap_or_else(|| overlap_for(tile)),
         seed: a.seed,
     };
     let plan = pgrf_nn::infer::image::plan_for(ph, pw, &opts, restorer.side_multiple())?;

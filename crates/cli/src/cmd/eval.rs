@@ -7,13 +7,14 @@ use anyhow::{bail, Context, Result};
 use clap::{Args, ValueEnum};
 use pgrf_eval::dataset::table::{csv, summarise, Row};
 use pgrf_eval::dataset::{centre_crop, eld, load_pair, pairs, sid, DatasetKind, Sample};
+use pgrf_eval::montage::{write_montage, Panel};
 use pgrf_eval::{evaluate, Protocol};
 use pgrf_nn::backend::DeviceKind;
 use pgrf_nn::infer::memory::auto_tile;
 use pgrf_nn::infer::restorer::describe_sampler;
-use pgrf_nn::infer::{restore_image, ImageOptions, Restore, SamplerChoice, DEFAULT_OVERLAP};
+use pgrf_nn::infer::{overlap_for, restore_image, ImageOptions, Restore, SamplerChoice};
 use pgrf_raw::ndarray::{Array3, ArrayView3};
-use pgrf_raw::{render_preview, unpack_normalized, Preview, PreviewOptions, RawFrame};
+use pgrf_raw::{render_preview, unpack_normalized, PreviewOptions, RawFrame};
 use std::path::{Path, PathBuf};
 
 /// Name of the amplified-input baseline in tables.
@@ -225,7 +226,7 @@ pub fn run(a: &EvalArgs) -> Result<()> {
     a.device.check_available().map_err(anyhow::Error::msg)?;
     let mut models: Vec<(String, Box<dyn Restore>)> = Vec::new();
     for m in &a.model {
-        let r = pgrf_nn::infer::load(m, SamplerChoice::default(), a.device)
+        let r = crate::shipped::load_model(m, SamplerChoice::default(), a.device)
             .with_context(|| format!("--model {}", m.display()))?;
         let mut name = m
             .file_stem()
@@ -277,7 +278,7 @@ pub fn run(a: &EvalArgs) -> Result<()> {
                 .unwrap_or_else(|| auto_tile(a.device, r.as_ref(), ph, pw));
             let opts = ImageOptions {
                 tile,
-                overlap: DEFAULT_OVERLAP,
+                overlap: overlap_for(tile),
                 seed: a.seed,
             };
             let out = restore_image(r.as_ref(), input.view(), &opts, &mut |_, _| {})
@@ -375,7 +376,7 @@ pub fn run(a: &EvalArgs) -> Result<()> {
             }
             cols.extend(summary.methods.iter().cloned());
             cols.push("reference".into());
-            write_worst(&worst, &p)?;
+            write_worst(&worst, &cols, &p)?;
             eprintln!(
                 "wrote {}: {} (columns: {})",
                 p.display(),
@@ -391,40 +392,20 @@ pub fn run(a: &EvalArgs) -> Result<()> {
     Ok(())
 }
 
-/// Rows of previews (one per worst image), 4-pixel white gaps.
-fn write_worst(worst: &[Worst], path: &Path) -> Result<()> {
-    let gap = 4;
-    let mut grid: Vec<Vec<Preview>> = Vec::new();
+/// Rows of previews (one per worst image), each captioned with its image
+/// id and column name.
+fn write_worst(worst: &[Worst], cols: &[String], path: &Path) -> Result<()> {
+    let mut rows: Vec<Vec<Panel>> = Vec::new();
     for w in worst {
         let mut row = Vec::new();
-        for t in &w.tiles {
+        for (t, col) in w.tiles.iter().zip(cols) {
             let f = unpack_normalized(t.view(), &w.template)?;
-            row.push(render_preview(&f, &PreviewOptions::default())?);
+            row.push(Panel {
+                caption: format!("{}: {col}", w.id),
+                image: render_preview(&f, &PreviewOptions::default())?,
+            });
         }
-        grid.push(row);
+        rows.push(row);
     }
-    let cw = grid.iter().flatten().map(|p| p.width).max().unwrap_or(1);
-    let ch = grid.iter().flatten().map(|p| p.height).max().unwrap_or(1);
-    let ncols = grid.iter().map(|r| r.len()).max().unwrap_or(1);
-    let width = ncols * cw + (ncols - 1) * gap;
-    let height = grid.len() * ch + (grid.len() - 1) * gap;
-    let mut rgb = vec![1.0f32; width * height * 3];
-    for (ri, row) in grid.iter().enumerate() {
-        for (ci, p) in row.iter().enumerate() {
-            let (x0, y0) = (ci * (cw + gap), ri * (ch + gap));
-            for y in 0..p.height {
-                let src = &p.rgb[y * p.width * 3..(y + 1) * p.width * 3];
-                let o = ((y0 + y) * width + x0) * 3;
-                rgb[o..o + p.width * 3].copy_from_slice(src);
-            }
-        }
-    }
-    let out = Preview {
-        width,
-        height,
-        rgb,
-        warnings: Vec::new(),
-    };
-    out.write_png(path, 8)?;
-    Ok(())
+    write_montage(path, &rows).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))
 }

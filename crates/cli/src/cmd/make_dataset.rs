@@ -11,10 +11,10 @@
 use anyhow::{bail, Context, Result};
 use clap::{Args, ValueEnum};
 use pgrf_eval::dataset::{eld, sid};
-use pgrf_noise::pair::{ExposureSpec, PairSpec, RatioSpec};
+use pgrf_noise::capture::DarkCapture;
 use pgrf_noise::{CameraProfile, ModelKind};
 use pgrf_raw::scene::{render_frame, SceneKind, SceneLevels, SceneSpec};
-use pgrf_raw::{pack_normalized, unpack_normalized, write_dng, Cfa, DngOptions, RawFrame};
+use pgrf_raw::{write_dng, Cfa, DngOptions, RawFrame};
 use std::path::{Path, PathBuf};
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
@@ -91,20 +91,15 @@ fn dark_capture(
     seed: u64,
     path: &Path,
 ) -> Result<()> {
-    let mut spec = PairSpec::new(
-        CameraProfile::built_in("sony-a7s2").context("no sony-a7s2 profile")?,
-        ModelKind::Pgrf,
-    );
-    spec.iso = Some(iso);
-    spec.ratio = RatioSpec::Fixed(ratio);
-    spec.exposure = ExposureSpec::Fixed(t as f32);
-    let packed = pack_normalized(clean, true)?;
-    let plane_rows = clean.cfa.offsets().map(|(r, _)| r);
-    let pair = spec.synthesize(packed.view(), plane_rows, seed)?;
-    let dark = pair.noisy.mapv(|v| (v / ratio).min(1.0));
-    let mut out = unpack_normalized(dark.view(), clean)?;
-    out.iso = Some(iso);
-    out.exposure_s = Some(t);
+    let out = DarkCapture {
+        profile: CameraProfile::built_in("sony-a7s2").context("no sony-a7s2 profile")?,
+        model: ModelKind::Pgrf,
+        iso,
+        exposure_s: t,
+        ratio,
+        seed,
+    }
+    .take(clean)?;
     write_dng(&out, path, &DngOptions::default())?;
     Ok(())
 }

@@ -8,6 +8,7 @@ pub mod bench_train;
 pub mod calibrate;
 pub mod chart;
 pub mod convert;
+pub mod demo;
 pub mod enhance;
 pub mod eval;
 pub mod info;

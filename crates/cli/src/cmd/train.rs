@@ -91,7 +91,7 @@ pub struct Settings {
     /// Width of the first level: SID U-Net channels [default: 32]; for the flow model the SR3 inner channels unless --inner-channels is given.
     #[arg(long)]
     pub width: Option<usize>,
-    /// SID U-Net: add the input to the output (learn the correction; not SID's design, converges far faster for small CPU-trained models).
+    /// Learn a correction: the SID U-Net adds its input to its output; the flow model adds T - Xt to its velocity (its first stage starts as the noisy input). Not the papers' design; converges far faster for small CPU-trained models.
     #[arg(long, num_args = 0..=1, default_missing_value = "true")]
     pub residual: Option<bool>,
     /// SR3 channels of the first level [default: 64, or --width].
@@ -267,7 +267,8 @@ fn architecture(task: Task, s: &Settings) -> Result<Architecture> {
                     s.norm_groups
                         .unwrap_or_else(|| default_groups(inner, &mults)),
                 )
-                .with_dropout(s.dropout.unwrap_or(0.0));
+                .with_dropout(s.dropout.unwrap_or(0.0))
+                .with_residual(s.residual.unwrap_or(false));
             cfg.validate()
                 .map_err(|e| anyhow::anyhow!("flow network: {e}"))?;
             Architecture::Sr3(cfg)

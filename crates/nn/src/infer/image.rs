@@ -22,6 +22,14 @@ pub struct ImageOptions {
 /// discarded, the middle half is blended.
 pub const DEFAULT_OVERLAP: usize = 64;
 
+/// The overlap used when none is given: [`DEFAULT_OVERLAP`], or a quarter of
+/// a smaller tile (a tile must be at least 4x its overlap). Flow models
+/// trained on small crops are capped at small tiles, and a fixed 64 would
+/// refuse them.
+pub fn overlap_for(tile: usize) -> usize {
+    DEFAULT_OVERLAP.min(tile / 4)
+}
+
 /// The restored frame in [0, 1], `(4, H, W)` like `input`.
 pub fn restore_image(
     r: &dyn Restore,
@@ -116,5 +124,17 @@ mod tests {
         assert_eq!(p.count(), 1);
         let small = ImageOptions { tile: 128, ..o };
         assert!(plan_for(1000, 1000, &small, 16).is_err());
+        // The default overlap for a small tile is a quarter of it, which
+        // plans: 1000 / (128 - 32) -> 11 tiles a side.
+        assert_eq!(
+            (overlap_for(1024), overlap_for(256), overlap_for(128)),
+            (64, 64, 32)
+        );
+        let fitted = ImageOptions {
+            overlap: overlap_for(128),
+            ..small
+        };
+        let p = plan_for(1000, 1000, &fitted, 8).unwrap();
+        assert_eq!((p.rows.count(), p.cols.count()), (11, 11));
     }
 }

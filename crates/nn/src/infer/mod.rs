@@ -9,5 +9,5 @@ pub mod restorer;
 pub mod start;
 pub mod tiles;
 
-pub use image::{restore_image, ImageOptions, DEFAULT_OVERLAP};
+pub use image::{overlap_for, restore_image, ImageOptions, DEFAULT_OVERLAP};
 pub use restorer::{load, Restore, Restorer, SamplerChoice};

@@ -88,7 +88,19 @@ pub struct Restorer<B: Backend> {
 
 impl<B: Backend> Restorer<B> {
     pub fn load(path: &Path, choice: SamplerChoice, device: B::Device) -> Result<Self> {
-        let (net, meta) = weights::load::<B>(path, &device)?;
+        let bytes = std::fs::read(path)
+            .map_err(|e| NnError::Invalid(format!("{}: {e}", path.display())))?;
+        Self::load_bytes(path, &bytes, choice, device)
+    }
+
+    /// [`Restorer::load`] from a weight file's bytes; `path` names them.
+    pub fn load_bytes(
+        path: &Path,
+        bytes: &[u8],
+        choice: SamplerChoice,
+        device: B::Device,
+    ) -> Result<Self> {
+        let (net, meta) = weights::load_bytes::<B>(path, bytes, &device)?;
         let t2 = choice.t2.or(meta.t2).unwrap_or(UNSEARCHED_T2);
         Self::new(net, meta, choice, t2, device)
     }
@@ -201,16 +213,31 @@ impl<B: Backend> Restore for Restorer<B> {
 
 /// Load weights for the chosen device.
 pub fn load(path: &Path, choice: SamplerChoice, device: DeviceKind) -> Result<Box<dyn Restore>> {
+    let bytes =
+        std::fs::read(path).map_err(|e| NnError::Invalid(format!("{}: {e}", path.display())))?;
+    load_bytes(path, &bytes, choice, device)
+}
+
+/// [`load`] from a weight file's bytes (weights built into the binary);
+/// `path` names them in errors.
+pub fn load_bytes(
+    path: &Path,
+    bytes: &[u8],
+    choice: SamplerChoice,
+    device: DeviceKind,
+) -> Result<Box<dyn Restore>> {
     device.check_available().map_err(NnError::Invalid)?;
     match device {
-        DeviceKind::Cpu => Ok(Box::new(Restorer::<Cpu>::load(
+        DeviceKind::Cpu => Ok(Box::new(Restorer::<Cpu>::load_bytes(
             path,
+            bytes,
             choice,
             Default::default(),
         )?)),
         #[cfg(feature = "cuda")]
-        DeviceKind::Cuda => Ok(Box::new(Restorer::<crate::backend::Gpu>::load(
+        DeviceKind::Cuda => Ok(Box::new(Restorer::<crate::backend::Gpu>::load_bytes(
             path,
+            bytes,
             choice,
             Default::default(),
         )?)),

@@ -23,7 +23,10 @@
 
 mod cover;
 mod deadleaves;
+mod demo;
 mod leaf;
+
+pub use demo::{render_demo, DemoLayout, DEMO_CHART_EXPOSURE, DEMO_RAMP_TOP};
 
 use crate::cfa::Cfa;
 use crate::chart::A7S2_D65_MATRIX;

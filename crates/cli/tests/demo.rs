@@ -1,0 +1,148 @@
+//! `pgrf demo` end to end at a reduced size with the built-in models: the
+//! JSON contract, both models beating the noisy input by a stated margin,
+//! the shipped weights reproducing the scores MODELS.md records, the files
+//! it writes, and its refusals.
+
+mod common;
+
+use common::{one_line_error, pgrf, s, scratch};
+use serde_json::Value;
+use std::path::Path;
+
+/// The reduced demo every test here runs (MODELS.md, "Check").
+const SIZE: &str = "384x256";
+
+fn run_demo(dir: &Path) -> Value {
+    let out = pgrf(&["demo", "-o", s(dir), "--size", SIZE, "--json", "--quiet"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "demo failed: {err}");
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let last = stdout.lines().last().expect("a JSON line");
+    // The table and header go to stderr: stdout is exactly one line.
+    assert_eq!(stdout.lines().count(), 1, "{stdout}");
+    assert!(
+        err.contains("PSNR / SSIM") && err.contains("protocol:"),
+        "{err}"
+    );
+    serde_json::from_str(last).unwrap()
+}
+
+fn psnr(v: &Value, ratio: &str, method: &str) -> f64 {
+    v[ratio][method]["psnr"].as_f64().unwrap()
+}
+
+fn ssim(v: &Value, ratio: &str, method: &str) -> f64 {
+    v[ratio][method]["ssim"].as_f64().unwrap()
+}
+
+#[test]
+fn demo_models_beat_the_noisy_input_and_write_every_file() {
+    let dir = scratch("demo", "e2e");
+    let v = run_demo(&dir);
+    let keys: Vec<&str> = v.as_object().unwrap().keys().map(|k| k.as_str()).collect();
+    assert_eq!(keys, ["seconds", "x100", "x200"]);
+    assert!(v["seconds"].as_f64().unwrap() > 0.0);
+    for ratio in ["x100", "x200"] {
+        let noisy = psnr(&v, ratio, "noisy");
+        for (method, margin) in [("spc", SPC_MARGIN_DB), ("pgrf", PGRF_MARGIN_DB)] {
+            let got = psnr(&v, ratio, method);
+            assert!(
+                got >= noisy + margin,
+                "{ratio} {method}: {got:.2} dB, noisy input {noisy:.2} dB (margin {margin} dB)"
+            );
+            assert!(
+                ssim(&v, ratio, method) > ssim(&v, ratio, "noisy") + 0.05,
+                "{ratio} {method} SSIM {v}"
+            );
+        }
+        // x200 is the harder capture.
+        assert!(psnr(&v, "x200", "noisy") < psnr(&v, "x100", "noisy"));
+    }
+    for name in [
+        "clean",
+        "noisy_x100",
+        "spc_x100",
+        "pgrf_x100",
+        "noisy_x200",
+        "spc_x200",
+        "pgrf_x200",
+    ] {
+        let f = pgrf_raw::decode_file(
+            &dir.join(format!("{name}.dng")),
+            &pgrf_raw::LevelOverrides::default(),
+        )
+        .unwrap();
+        assert_eq!((f.width, f.height), (384, 256), "{name}");
+        assert_eq!(f.cfa, pgrf_raw::Cfa::Rggb, "{name}");
+    }
+    // The picture: 4 columns of half-size frames (192 x 128; the 2x crops
+    // are 192 x 128 too), 4 rows with captions.
+    let png = image::open(dir.join("demo.png")).unwrap();
+    assert_eq!(png.width(), 4 * 192 + 3 * 8);
+    assert_eq!(png.height(), 4 * (128 + 30) + 3 * 8);
+}
+
+/// Scores of the built-in models on the reduced demo, as MODELS.md records
+/// them. Inference and metrics are deterministic; the tolerance covers
+/// floating-point summation order in other builds.
+const RECORDED: [(&str, &str, f64, f64); 6] = [
+    ("x100", "noisy", 24.9240, 0.70078),
+    ("x100", "spc", 29.1058, 0.89326),
+    ("x100", "pgrf", 30.0909, 0.90597),
+    ("x200", "noisy", 20.2170, 0.51481),
+    ("x200", "spc", 26.0370, 0.80953),
+    ("x200", "pgrf", 25.9564, 0.78854),
+];
+/// Both models must beat the noisy input by this much at both ratios. The
+/// shipped ones do by 4.2 / 5.8 dB (SPC) and 5.2 / 5.7 dB (PGRF).
+const SPC_MARGIN_DB: f64 = 3.0;
+const PGRF_MARGIN_DB: f64 = 3.0;
+
+#[test]
+fn shipped_models_reproduce_the_recorded_scores() {
+    let dir = scratch("demo", "recorded");
+    let v = run_demo(&dir);
+    for (ratio, method, p, q) in RECORDED {
+        let (gp, gq) = (psnr(&v, ratio, method), ssim(&v, ratio, method));
+        assert!(
+            (gp - p).abs() < 0.02 && (gq - q).abs() < 5e-4,
+            "{ratio} {method}: {gp:.4} dB / {gq:.5}, MODELS.md records {p} / {q}"
+        );
+    }
+}
+
+#[test]
+fn bad_demo_arguments_are_one_line_errors() {
+    let dir = scratch("demo", "bad");
+    let models = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../models");
+    // The flow model where the SPC denoiser belongs.
+    let e = one_line_error(&pgrf(&[
+        "demo",
+        "-o",
+        s(&dir.join("a")),
+        "--spc",
+        s(&models.join("pgrf.safetensors")),
+    ]));
+    assert!(e.contains("not the SPC model"), "{e}");
+    let e = one_line_error(&pgrf(&["demo", "-o", s(&dir.join("b")), "--size", "100x7"]));
+    assert!(e.contains("--size 100x7"), "{e}");
+    let e = one_line_error(&pgrf(&["demo", "-o", s(&dir.join("missing/out"))]));
+    assert!(e.contains("does not exist"), "{e}");
+    let e = one_line_error(&pgrf(&[
+        "demo",
+        "-o",
+        s(&dir.join("c")),
+        "--pgrf",
+        s(&dir.join("nothing.safetensors")),
+    ]));
+    assert!(e.contains("--pgrf"), "{e}");
+    // Nothing was written for any of them.
+    for d in ["a", "b", "c"] {
+        let p = dir.join(d);
+        assert!(
+            !p.exists() || std::fs::read_dir(&p).unwrap().next().is_none(),
+            "{}",
+            p.display()
+        );
+    }
+}

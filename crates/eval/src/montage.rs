@@ -1,0 +1,66 @@
+//! Pictures side by side: rows of sRGB previews with a caption over each,
+//! written as one PNG. Comparisons (noisy input, each method, reference) are
+//! judged by eye as much as by PSNR, and only side by side at the same scale.
+
+use pgrf_calib::report::{ensure_font, render_png, FONT_FAMILY};
+use pgrf_raw::Preview;
+use plotters::prelude::*;
+use std::path::Path;
+
+/// One picture and the words above it.
+pub struct Panel {
+    pub caption: String,
+    pub image: Preview,
+}
+
+/// White space between panels, in pixels.
+const GAP: usize = 8;
+/// Height of the caption band over each panel when any panel has one.
+const CAPTION: usize = 30;
+
+/// Write `rows` of panels as a grid (cells as large as the largest panel,
+/// white between them), atomically.
+pub fn write_montage(path: &Path, rows: &[Vec<Panel>]) -> Result<(), String> {
+    let panels = || rows.iter().flatten();
+    let cw = panels().map(|p| p.image.width).max().unwrap_or(0);
+    let ch = panels().map(|p| p.image.height).max().unwrap_or(0);
+    let ncols = rows.iter().map(|r| r.len()).max().unwrap_or(0);
+    if cw == 0 || ch == 0 || ncols == 0 {
+        return Err("nothing to put side by side".into());
+    }
+    let band = if panels().any(|p| !p.caption.is_empty()) {
+        ensure_font().map_err(|e| e.to_string())?;
+        CAPTION
+    } else {
+        0
+    };
+    let width = ncols * cw + (ncols - 1) * GAP;
+    let height = rows.len() * (ch + band) + (rows.len() - 1) * GAP;
+    render_png(path, (width as u32, height as u32), |root| {
+        for (ri, row) in rows.iter().enumerate() {
+            for (ci, p) in row.iter().enumerate() {
+                let (x0, y0) = (ci * (cw + GAP), ri * (ch + band + GAP));
+                if !p.caption.is_empty() {
+                    root.draw_text(
+                        &p.caption,
+                        &(FONT_FAMILY, 20).into_font().color(&BLACK),
+                        (x0 as i32 + 4, y0 as i32 + 5),
+                    )?;
+                }
+                let img = &p.image;
+                for y in 0..img.height {
+                    for x in 0..img.width {
+                        let o = (y * img.width + x) * 3;
+                        let c = |k: usize| (img.rgb[o + k].clamp(0.0, 1.0) * 255.0).round() as u8;
+                        root.draw_pixel(
+                            ((x0 + x) as i32, (y0 + band + y) as i32),
+                            &RGBColor(c(0), c(1), c(2)),
+                        )?;
+                    }
+                }
+            }
+        }
+        Ok(())
+    })
+    .map_err(|e| e.to_string())
+}

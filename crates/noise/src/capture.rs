@@ -1,0 +1,56 @@
+//! A simulated dark capture of a clean frame: what the camera would have
+//! recorded with `ratio` times less light, at a given ISO and exposure time.
+//!
+//! The demo, `pgrf make-dataset` and tests all need a noisy RAW that a
+//! denoiser can be run on exactly as on a real one: un-amplified, in the
+//! clean frame's mosaic and levels, with ISO and exposure in its metadata so
+//! that the ratio can be read back from EXIF. The noise is the training
+//! pairs' own synthesis (the same pack, the same model, the same seed
+//! streams), so a network sees at inference what it was trained on.
+
+use crate::error::{NoiseError, Result};
+use crate::pair::{ExposureSpec, PairSpec, RatioSpec};
+use crate::{CameraProfile, ModelKind};
+use pgrf_raw::{pack_normalized, unpack_normalized, RawFrame};
+
+/// How the dark frame is taken.
+#[derive(Clone, Debug)]
+pub struct DarkCapture {
+    pub profile: CameraProfile,
+    pub model: ModelKind,
+    pub iso: u32,
+    /// Exposure time of the dark frame, written to its EXIF.
+    pub exposure_s: f64,
+    /// How many times less light than the clean frame (> 0).
+    pub ratio: f32,
+    pub seed: u64,
+}
+
+impl DarkCapture {
+    /// The dark frame of `clean`: noise added to clean / ratio in the
+    /// model's physics, clipped at white, unpacked to `clean`'s mosaic,
+    /// levels and metadata, with this capture's ISO and exposure.
+    pub fn take(&self, clean: &RawFrame) -> Result<RawFrame> {
+        if !(self.ratio.is_finite() && self.ratio > 0.0) {
+            return Err(NoiseError::Invalid(format!(
+                "ratio must be a positive number, got {}",
+                self.ratio
+            )));
+        }
+        let raw = |e: pgrf_raw::RawError| NoiseError::Invalid(e.to_string());
+        let mut spec = PairSpec::new(self.profile.clone(), self.model);
+        spec.iso = Some(self.iso);
+        spec.ratio = RatioSpec::Fixed(self.ratio);
+        spec.exposure = ExposureSpec::Fixed(self.exposure_s as f32);
+        let packed = pack_normalized(clean, true).map_err(raw)?;
+        let plane_rows = clean.cfa.offsets().map(|(r, _)| r);
+        let pair = spec.synthesize(packed.view(), plane_rows, self.seed)?;
+        // The pair's noisy image is amplified by the ratio, as networks see
+        // it; the camera records it un-amplified.
+        let dark = pair.noisy.mapv(|v| (v / self.ratio).min(1.0));
+        let mut out = unpack_normalized(dark.view(), clean).map_err(raw)?;
+        out.iso = Some(self.iso);
+        out.exposure_s = Some(self.exposure_s);
+        Ok(out)
+    }
+}
