@@ -70,21 +70,6 @@ pub struct DemoArgs {
     pub quiet: bool,
 }
 
-fn parse_size(s: &str) -> Result<(usize, usize)> {
-    let parsed = s.split_once(['x', 'X']).and_then(|(w, h)| {
-        Some((
-            w.trim().parse::<usize>().ok()?,
-            h.trim().parse::<usize>().ok()?,
-        ))
-    });
-    match parsed {
-        Some((w, h)) if w >= 64 && h >= 64 && w.is_multiple_of(2) && h.is_multiple_of(2) => {
-            Ok((w, h))
-        }
-        _ => bail!("--size {s}: expected WxH, even and at least 64x64, e.g. 1536x1024"),
-    }
-}
-
 /// A model given as a file, or the built-in one, checked to be of the
 /// expected method.
 fn model(file: Option<&Path>, builtin: &str, method: &str, flag: &str) -> Result<Box<dyn Restore>> {
@@ -112,7 +97,7 @@ struct Capture {
 
 pub fn run(a: &DemoArgs) -> Result<()> {
     let t0 = Instant::now();
-    let (w, h) = parse_size(&a.size)?;
+    let (w, h) = super::make_dataset::parse_size(&a.size, 64)?;
     if !a.output.is_dir() {
         require_parent_dir(&a.output)?;
     }

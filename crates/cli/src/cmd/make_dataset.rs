@@ -51,18 +51,20 @@ pub struct MakeDatasetArgs {
     pub seed: u64,
 }
 
-fn parse_size(s: &str) -> Result<(usize, usize)> {
-    let (w, h) = s
-        .split_once(['x', 'X'])
-        .with_context(|| format!("--size {s:?}: expected WxH, e.g. 256x256"))?;
-    let (w, h): (usize, usize) = (
-        w.trim().parse().with_context(|| format!("--size {s:?}"))?,
-        h.trim().parse().with_context(|| format!("--size {s:?}"))?,
-    );
-    if w < 32 || h < 32 || w % 2 != 0 || h % 2 != 0 {
-        bail!("--size {s}: width and height must be even and at least 32");
+/// `--size WxH` of a rendered frame: even sides of at least `min` pixels.
+pub fn parse_size(s: &str, min: usize) -> Result<(usize, usize)> {
+    let parsed = s.split_once(['x', 'X']).and_then(|(w, h)| {
+        Some((
+            w.trim().parse::<usize>().ok()?,
+            h.trim().parse::<usize>().ok()?,
+        ))
+    });
+    match parsed {
+        Some((w, h)) if w >= min && h >= min && w.is_multiple_of(2) && h.is_multiple_of(2) => {
+            Ok((w, h))
+        }
+        _ => bail!("--size {s}: expected WxH, even and at least {min}x{min}, e.g. 256x256"),
     }
-    Ok((w, h))
 }
 
 /// The clean long exposure of scene `k`: a dead-leaves scene, dimmed so a
@@ -110,7 +112,7 @@ fn write_ref(clean: &RawFrame, path: &Path) -> Result<()> {
 }
 
 pub fn run(a: &MakeDatasetArgs) -> Result<()> {
-    let (w, h) = parse_size(&a.size)?;
+    let (w, h) = parse_size(&a.size, 32)?;
     if a.scenes == 0 {
         bail!("--scenes must be at least 1");
     }
