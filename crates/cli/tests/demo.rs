@@ -75,6 +75,43 @@ fn demo_models_beat_the_noisy_input_and_write_every_file() {
         assert_eq!((f.width, f.height), (384, 256), "{name}");
         assert_eq!(f.cfa, pgrf_raw::Cfa::Rggb, "{name}");
     }
+    // `pgrf enhance --model builtin:...` on the demo's noisy DNG, scored by
+    // `pgrf metrics`, agrees with the demo's own numbers (the DNG rounds to
+    // whole DN, hence 0.05 dB).
+    for (model, method) in [("builtin:spc", "spc"), ("builtin:pgrf", "pgrf")] {
+        let out = dir.join(format!("enhanced_{method}.dng"));
+        let r = pgrf(&[
+            "enhance",
+            s(&dir.join("noisy_x100.dng")),
+            "--model",
+            model,
+            "--ratio",
+            "100",
+            "-o",
+            s(&out),
+            "--quiet",
+        ]);
+        assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+        let m = pgrf(&["metrics", s(&out), s(&dir.join("clean.dng")), "--json"]);
+        assert!(m.status.success(), "{}", String::from_utf8_lossy(&m.stderr));
+        let m: Value = serde_json::from_slice(&m.stdout).unwrap();
+        let (got, want) = (m["psnr"].as_f64().unwrap(), psnr(&v, "x100", method));
+        assert!(
+            (got - want).abs() < 0.05,
+            "{model}: metrics {got} vs demo {want}"
+        );
+    }
+    let e = one_line_error(&pgrf(&[
+        "enhance",
+        s(&dir.join("noisy_x100.dng")),
+        "--model",
+        "builtin:nope",
+        "--ratio",
+        "100",
+        "-o",
+        s(&dir.join("nope.dng")),
+    ]));
+    assert!(e.contains("no such built-in model"), "{e}");
     // The picture: 4 columns of half-size frames (192 x 128; the 2x crops
     // are 192 x 128 too), 4 rows with captions.
     let png = image::open(dir.join("demo.png")).unwrap();
