@@ -154,8 +154,7 @@ impl Sr3Config {
             upsamples,
             final_norm: GroupNormConfig::new(self.norm_groups, pre).init(device),
             final_conv: if self.residual {
-                Conv2dConfig::new([pre, self.out_channels], [3, 3])
-                    .with_padding(PaddingConfig2d::Explicit(1, 1, 1, 1))
+                conv3_config(pre, self.out_channels, 1)
                     .with_initializer(burn::nn::Initializer::Zeros)
                     .init(device)
             } else {
@@ -169,11 +168,15 @@ impl Sr3Config {
     }
 }
 
-fn conv3<B: Backend>(cin: usize, cout: usize, stride: usize, device: &B::Device) -> Conv2d<B> {
+/// 3 x 3 convolution, padding 1.
+fn conv3_config(cin: usize, cout: usize, stride: usize) -> Conv2dConfig {
     Conv2dConfig::new([cin, cout], [3, 3])
         .with_stride([stride, stride])
         .with_padding(PaddingConfig2d::Explicit(1, 1, 1, 1))
-        .init(device)
+}
+
+fn conv3<B: Backend>(cin: usize, cout: usize, stride: usize, device: &B::Device) -> Conv2d<B> {
+    conv3_config(cin, cout, stride).init(device)
 }
 
 #[derive(Module, Debug)]

@@ -237,14 +237,17 @@ pub fn read_meta(path: &Path) -> Result<WeightMeta> {
 }
 
 pub fn read(path: &Path) -> Result<(WeightMeta, BTreeMap<String, NamedTensor>)> {
-    let bytes = std::fs::read(path).map_err(|e| err(path, e))?;
-    decode(path, &bytes)
+    decode(path, &read_bytes(path)?)
+}
+
+/// A weight file's bytes, with the path in the error.
+pub fn read_bytes(path: &Path) -> Result<Vec<u8>> {
+    std::fs::read(path).map_err(|e| err(path, e))
 }
 
 /// Build the network the file describes and load its weights.
 pub fn load<B: Backend>(path: &Path, device: &B::Device) -> Result<(Net<B>, WeightMeta)> {
-    let bytes = std::fs::read(path).map_err(|e| err(path, e))?;
-    load_bytes(path, &bytes, device)
+    load_bytes(path, &read_bytes(path)?, device)
 }
 
 /// [`load`] from a weight file's bytes (weights built into the binary);

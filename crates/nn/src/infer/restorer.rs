@@ -87,13 +87,7 @@ pub struct Restorer<B: Backend> {
 }
 
 impl<B: Backend> Restorer<B> {
-    pub fn load(path: &Path, choice: SamplerChoice, device: B::Device) -> Result<Self> {
-        let bytes = std::fs::read(path)
-            .map_err(|e| NnError::Invalid(format!("{}: {e}", path.display())))?;
-        Self::load_bytes(path, &bytes, choice, device)
-    }
-
-    /// [`Restorer::load`] from a weight file's bytes; `path` names them.
+    /// Build from a weight file's bytes; `path` names them in errors.
     pub fn load_bytes(
         path: &Path,
         bytes: &[u8],
@@ -213,9 +207,7 @@ impl<B: Backend> Restore for Restorer<B> {
 
 /// Load weights for the chosen device.
 pub fn load(path: &Path, choice: SamplerChoice, device: DeviceKind) -> Result<Box<dyn Restore>> {
-    let bytes =
-        std::fs::read(path).map_err(|e| NnError::Invalid(format!("{}: {e}", path.display())))?;
-    load_bytes(path, &bytes, choice, device)
+    load_bytes(path, &weights::read_bytes(path)?, choice, device)
 }
 
 /// [`load`] from a weight file's bytes (weights built into the binary);
