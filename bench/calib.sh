@@ -7,12 +7,12 @@ cd "$(dirname "$0")/.."
 frames="${1:-64}"
 work="$(mktemp -d)"
 trap 'rm -rf "$work"' EXIT
-cargo build --release --locked -p pgrf-cli >/dev/null
+cargo build --release --locked -p pgrf-cli -p pgrf-bench >/dev/null
 python3 -c "import rawpy, numpy" 2>/dev/null || python3 -m pip install --quiet rawpy numpy
 echo "machine: $(nproc) cores, $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | xargs), $(free -g | awk '/Mem:/{print $2}') GiB"
 target/release/pgrf simulate-sensor --preset a7s2-iso1600 --frames "$frames" --width 4256 --height 2848 --stacks bias -o "$work/vs" 2>/dev/null
 sync
-p=$(target/release/pgrf bench stack "$work/vs/bias" --json)
+p=$(target/release/pgrf-bench stack "$work/vs/bias" --json)
 n=$(python3 bench/calib_numpy.py "$work/vs/bias")
 python3 - "$p" "$n" <<'PY'
 import json, sys

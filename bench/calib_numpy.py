@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Peer benchmark for `pgrf bench stack`: the straightforward numpy way to get
+"""Peer benchmark for `pgrf-bench stack`: the straightforward numpy way to get
 per-pixel mean and variance of a bias stack: decode every DNG with rawpy
 (LibRaw), stack the visible mosaics into one (N, H, W) array, np.mean and
 np.var over the frame axis (float64). Prints one JSON line with wall time and

@@ -8,7 +8,7 @@ data="../shared/data/raw"
 work="$(mktemp -d)"
 trap 'rm -rf "$work"' EXIT
 
-cargo build --release --locked -p pgrf-cli >/dev/null
+cargo build --release --locked -p pgrf-cli -p pgrf-bench >/dev/null
 pgrf=target/release/pgrf
 python3 -c "import rawpy, numpy" 2>/dev/null || python3 -m pip install --quiet rawpy numpy
 
@@ -18,7 +18,7 @@ python3 -c "import rawpy, numpy" 2>/dev/null || python3 -m pip install --quiet r
 files=("$data/canon550d_colorchart.dng" "$work/chart12mp.dng")
 
 echo "machine: $(nproc) cores, $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | xargs)"
-"$pgrf" bench decode "${files[@]}" --iters "$iters" --json > "$work/pgrf.jsonl"
+target/release/pgrf-bench decode "${files[@]}" --iters "$iters" --json > "$work/pgrf.jsonl"
 python3 bench/rawpy_decode.py "${files[@]}" --iters "$iters" > "$work/rawpy.jsonl"
 python3 - "$work/pgrf.jsonl" "$work/rawpy.jsonl" <<'PY'
 import json, sys, os

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Whole-frame inference (issue 6): `pgrf bench enhance` (pgrf_nn::infer::restore_image,
+# Whole-frame inference (issue 6): `pgrf-bench enhance` (pgrf_nn::infer::restore_image,
 # burn Flex on the CPU) against the same networks, tiling and samplers in PyTorch
 # (bench/enhance_torch.py), measured one after the other in this run (pgrf first, then
 # PyTorch, per configuration), same thread count, same input frame, same tiles.
@@ -22,7 +22,7 @@ threads="${THREADS:-$(nproc)}"
 unet_iters="${UNET_ITERS:-3}"
 configs=("$@")
 [ ${#configs[@]} -gt 0 ] || configs=(unet sr3-small sr3-crop euler)
-cargo build --release --locked -q -p pgrf-cli
+cargo build --release --locked -q -p pgrf-bench
 python3 -c "import torch" 2>/dev/null || python3 -m pip install --quiet torch --index-url https://download.pytorch.org/whl/cpu \
   || python3 -m pip install --quiet torch
 echo "machine: $(nproc) cores, $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | xargs), $(free -g | awk '/Mem:/ {print $2}') GiB; $threads threads; load $(cut -d' ' -f1-3 /proc/loadavg)"
@@ -33,7 +33,7 @@ run() { # LABEL ITERS WARMUP PGRF_ARGS... ; appends "LABEL<TAB>pgrf_json<TAB>tor
   local label="$1" iters="$2" warmup="$3" p t tile params
   shift 3
   echo "== $label: $* (load $(cut -d' ' -f1-3 /proc/loadavg))" >&2
-  p=$(RAYON_NUM_THREADS="$threads" target/release/pgrf bench enhance "$@" --iters "$iters" --warmup "$warmup" --json)
+  p=$(RAYON_NUM_THREADS="$threads" target/release/pgrf-bench enhance "$@" --iters "$iters" --warmup "$warmup" --json)
   echo "   pgrf:    $p" >&2
   tile=$(python3 -c 'import json,sys; print(json.loads(sys.argv[1])["tile"])' "$p")
   params=$(python3 -c 'import json,sys; print(json.loads(sys.argv[1])["params"])' "$p")

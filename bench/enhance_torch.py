@@ -1,8 +1,8 @@
 #!/usr/bin/env python3
-"""Peer benchmark for `pgrf bench enhance`: the same whole-frame inference in
+"""Peer benchmark for `pgrf-bench enhance`: the same whole-frame inference in
 PyTorch, with the networks of bench/train_torch.py (imported, not copied).
 
-Same input frame (the formula of crates/cli/src/cmd/bench_enhance.rs, in
+Same input frame (the formula of crates/bench/src/enhance.rs, in
 numpy), same tiling as pgrf_nn::infer (tile rounded down to the network's side
 multiple unless the frame fits; tiles of `tile` overlapping by at least
 `overlap`, stride tile - overlap, the last tile flush with the end; an axis
@@ -34,12 +34,12 @@ import torch
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from train_torch import SidUnet, Sr3Unet  # noqa: E402
 
-SEED = 11  # bench_enhance.rs SEED
+SEED = 11  # crates/bench/src/enhance.rs SEED
 DEFAULT_OVERLAP = 64
 
 
 # --------------------------------------------------------------------------
-# Input frame (bench_enhance.rs `frame`)
+# Input frame (crates/bench/src/enhance.rs `frame`)
 # --------------------------------------------------------------------------
 def splitmix64(x):
     with np.errstate(over="ignore"):

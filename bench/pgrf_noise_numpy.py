@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Peer benchmark for `pgrf bench synth`: the same PGRF composite noise model
+"""Peer benchmark for `pgrf-bench synth`: the same PGRF composite noise model
 written with numpy, on the same frame size (4 x 1424 x 2128 packed), with the
 same kinds of per-pixel maps and the same constants (A7S2 at ISO 1600, ratio
 100, exposure 0.1 s, sqrt dark law). numpy's Poisson sampler is also exact

@@ -1,9 +1,9 @@
 #!/usr/bin/env python3
-"""Peer benchmark for `pgrf bench decode`: LibRaw (via rawpy) decode + pack to
+"""Peer benchmark for `pgrf-bench decode`: LibRaw (via rawpy) decode + pack to
 4 planes (R, G1, B, G2) + per-channel normalisation, the same work pgrf times.
 
 Prints one JSON line per file with median/min milliseconds over --iters runs
-after one warm-up, in the same shape as `pgrf bench decode --json`.
+after one warm-up, in the same shape as `pgrf-bench decode --json`.
 """
 import argparse
 import json

@@ -10,11 +10,11 @@ cd "$(dirname "$0")/.."
 iters="${1:-10}"
 sk_iters="${2:-3}"
 py="${PYTHON:-python3}"
-cargo build --release --locked -p pgrf-cli >/dev/null
+cargo build --release --locked -p pgrf-bench >/dev/null
 "$py" -c "import numpy, skimage" 2>/dev/null || "$py" -m pip install --quiet numpy scikit-image
 echo "machine: $(nproc) cores, $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | xargs)"
-p=$(target/release/pgrf bench ssim --iters "$iters" --json)
-p1=$(RAYON_NUM_THREADS=1 target/release/pgrf bench ssim --iters "$iters" --json)
+p=$(target/release/pgrf-bench ssim --iters "$iters" --json)
+p1=$(RAYON_NUM_THREADS=1 target/release/pgrf-bench ssim --iters "$iters" --json)
 k=$("$py" bench/ssim_skimage.py --iters "$sk_iters")
 "$py" - "$p" "$p1" "$k" <<'PY'
 import json, sys

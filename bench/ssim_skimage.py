@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
-"""Peer benchmark for `pgrf bench ssim`: scikit-image's PSNR + SSIM under the
+"""Peer benchmark for `pgrf-bench ssim`: scikit-image's PSNR + SSIM under the
 ELD protocol on the same A7S2-sized packed pair (4 x 1424 x 2128), built from
-the same formula as crates/cli/src/cmd/bench_ssim.rs (identical float32 values),
+the same formula as crates/bench/src/ssim.rs (identical float32 values),
 so the scores can be compared as well as the times.
 
 ELD's evaluation: output clamped to [0, 1], least-squares gain over reference

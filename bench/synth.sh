@@ -5,10 +5,10 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 frames="${1:-10}"
-cargo build --release --locked -p pgrf-cli >/dev/null
+cargo build --release --locked -p pgrf-bench >/dev/null
 python3 -c "import numpy" 2>/dev/null || python3 -m pip install --quiet numpy
 echo "machine: $(nproc) cores, $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | xargs)"
-p=$(target/release/pgrf bench synth --frames "$frames" --json)
+p=$(target/release/pgrf-bench synth --frames "$frames" --json)
 n=$(python3 bench/pgrf_noise_numpy.py --frames "$frames")
 python3 - "$p" "$n" <<'PY'
 import json, sys

@@ -13,13 +13,13 @@ cd "$(dirname "$0")/.."
 iters="${1:-10}"
 threads="${2:-$(nproc)}"
 sr3_iters="${3:-$iters}"
-cargo build --release --locked -q -p pgrf-cli
+cargo build --release --locked -q -p pgrf-bench
 python3 -c "import torch" 2>/dev/null || python3 -m pip install --quiet torch --index-url https://download.pytorch.org/whl/cpu \
   || python3 -m pip install --quiet torch
 echo "machine: $(nproc) cores, $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | xargs); $threads threads; load $(cut -d' ' -f1-3 /proc/loadavg)"
 run() { # NET ITERS WARMUP -> "pgrf_json torch_json"
   local p t expect
-  p=$(RAYON_NUM_THREADS="$threads" target/release/pgrf bench train --net "$1" --iters "$2" --warmup "$3" --json)
+  p=$(RAYON_NUM_THREADS="$threads" target/release/pgrf-bench train --net "$1" --iters "$2" --warmup "$3" --json)
   expect=$(python3 -c 'import json,sys; r=json.loads(sys.argv[1]); print(json.dumps({sys.argv[2]: r[sys.argv[2]]["params"]}))' "$p" "$1")
   t=$(python3 bench/train_torch.py --net "$1" --iters "$2" --warmup "$3" --threads "$threads" --expect-params "$expect")
   printf '%s\n%s\n' "$p" "$t"

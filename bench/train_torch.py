@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Peer benchmark for `pgrf bench train`: the two pgrf networks re-implemented
+"""Peer benchmark for `pgrf-bench train`: the two pgrf networks re-implemented
 in PyTorch, layer for layer as in crates/nn, timed the same way on the CPU.
 
 - SID U-Net (crates/nn/src/unet.rs): five levels of two 3x3 convolutions
@@ -31,7 +31,7 @@ import torch.nn as nn
 import torch.nn.functional as F
 
 # Parameter counts of the Rust networks at the default sizes (SidUnetConfig
-# width 32, 4 -> 4; default Sr3Config), as `pgrf bench train` prints them.
+# width 32, 4 -> 4; default Sr3Config), as `pgrf-bench train` prints them.
 RUST_PARAMS = {"unet": 7_760_484, "sr3": 97_818_436}
 
 
@@ -296,7 +296,7 @@ def main():
     ap.add_argument("--threads", type=int, default=None,
                     help="torch.set_num_threads (default: torch's own choice)")
     ap.add_argument("--expect-params", type=str, default=None,
-                    help='JSON {"unet": N, "sr3": N} from pgrf bench train; checked')
+                    help='JSON {"unet": N, "sr3": N} from pgrf-bench train; checked')
     ap.add_argument("--profile", action="store_true",
                     help="also print torch.profiler tables to stderr")
     args = ap.parse_args()

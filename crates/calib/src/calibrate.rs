@@ -1,14 +1,13 @@
 //! One calibration run: read the stacks, estimate, assemble the file.
 
-use crate::calibration::{CalibMeta, Calibration};
+use crate::calibration::{CalibMaps, CalibMeta, Calibration};
 use crate::error::{invalid, Result};
 use crate::estimate::{
-    defects, estimate_bias, estimate_dark, estimate_gain, median_of, BiasEstimate, DarkEstimate,
-    GainEstimate,
+    defects, estimate_bias, estimate_dark, estimate_gain, BiasEstimate, DarkEstimate, GainEstimate,
 };
 use crate::stack::{read_stack, ReadOptions};
+use pgrf_core::Progress;
 use pgrf_noise::DarkLaw;
-use std::collections::BTreeMap;
 use std::path::PathBuf;
 
 pub struct CalibrateInput {
@@ -23,12 +22,125 @@ pub struct CalibrateInput {
 
 pub struct CalibrationRun {
     pub calibration: Calibration,
-    pub bias: BiasEstimate,
+    pub(crate) bias: BiasEstimate,
     pub gain: GainEstimate,
     pub dark: Option<DarkEstimate>,
 }
 
-pub fn calibrate(input: &CalibrateInput, progress: &(dyn Fn() + Sync)) -> Result<CalibrationRun> {
+/// The dark law's name as the record writes it.
+pub fn law_name(law: Option<DarkLaw>) -> &'static str {
+    match law {
+        Some(DarkLaw::Sqrt) => "sqrt",
+        Some(DarkLaw::Linear) => "linear",
+        None => "none",
+    }
+}
+
+impl CalibrationRun {
+    /// The run's figures as (quantity, value, unit) rows in EMVA 1288's
+    /// vocabulary (system gain, temporal dark noise, DSNU, PRNU, dark
+    /// current, ...), formatted for the report's summary table.
+    pub fn summary(&self) -> Vec<(String, String, String)> {
+        let m = &self.calibration.meta;
+        let row = |q: &str, v: String, u: &str| (q.to_string(), v, u.to_string());
+        let mut summary = vec![
+            row(
+                "System gain K",
+                format!("{:.4} ({})", m.k, m.k_method),
+                "DN/e-",
+            ),
+            row(
+                "Inverse system gain 1/K",
+                format!("{:.4}", 1.0 / m.k),
+                "e-/DN",
+            ),
+            row(
+                "System gain, eq. 3.15 at the brightest level",
+                format!("{:.4}", self.gain.k_var_mean),
+                "DN/e-",
+            ),
+            row(
+                "Temporal dark noise (median per-pixel read sigma)",
+                format!(
+                    "{:.3} ({:.3} e-)",
+                    m.read_sigma_median,
+                    m.read_sigma_median / m.k
+                ),
+                "DN",
+            ),
+            row("Row noise sigma", format!("{:.3}", m.row_sigma), "DN"),
+            row(
+                "DSNU (spatial sd of the dark offset)",
+                format!("{:.3} ({:.3} e-)", m.dsnu, m.dsnu / m.k),
+                "DN",
+            ),
+            row(
+                "PRNU (spatial sd of the response / mean)",
+                m.prnu
+                    .map(|p| format!("{:.3}", 100.0 * p))
+                    .unwrap_or_else(|| "-".into()),
+                "%",
+            ),
+        ];
+        match (m.dark_rate_mean, m.dark_r2_sqrt, m.dark_r2_linear) {
+            (Some(rate), Some(rs), Some(rl)) => {
+                let unit = if m.dark_law == Some(DarkLaw::Linear) {
+                    "e-/s"
+                } else {
+                    "e-/sqrt(s)"
+                };
+                summary.push(row(
+                    &format!("Dark current (mean, {} law)", law_name(m.dark_law)),
+                    format!("{rate:.4}"),
+                    unit,
+                ));
+                summary.push(row(
+                    "Dark signal fit R^2, a*sqrt(t) / a*t",
+                    format!("{rs:.5} / {rl:.5}"),
+                    "",
+                ));
+            }
+            _ => summary.push(row(
+                "Dark current",
+                "not measured (no dark frames)".into(),
+                "",
+            )),
+        }
+        summary.push(row(
+            "Hot / dead pixels",
+            format!("{} / {}", m.hot_pixels, m.dead_pixels),
+            "pixels",
+        ));
+        if let (Some(p), Some(g)) = (m.ppcc_pixel_median, m.ppcc_pooled) {
+            summary.push(row(
+                "Read-noise normality: PPCC per pixel (median) / pooled",
+                format!("{p:.4} / {g:.4}"),
+                "",
+            ));
+        }
+        summary.push(row(
+            "Frames: bias / dark / flat",
+            format!(
+                "{} / {} / {}",
+                m.bias_frames,
+                m.dark_frames
+                    .iter()
+                    .map(|n| n.to_string())
+                    .collect::<Vec<_>>()
+                    .join("+"),
+                m.flat_frames
+                    .iter()
+                    .map(|n| n.to_string())
+                    .collect::<Vec<_>>()
+                    .join("+")
+            ),
+            "",
+        ));
+        summary
+    }
+}
+
+pub fn calibrate(input: &CalibrateInput, progress: &dyn Progress) -> Result<CalibrationRun> {
     let bias_stack = read_stack(
         &input.bias,
         &ReadOptions {
@@ -72,25 +184,17 @@ pub fn calibrate(input: &CalibrateInput, progress: &(dyn Fn() + Sync)) -> Result
     };
     let defect_map = defects(&bias, Some(&gain), dark.as_ref());
 
-    let mut maps = BTreeMap::new();
-    maps.insert("fixed_pattern".to_string(), bias.fixed_pattern.clone());
-    maps.insert("sigma_read".to_string(), bias.sigma_read.clone());
-    maps.insert("gain".to_string(), gain.k_map.clone());
-    maps.insert("response".to_string(), gain.response.clone());
-    maps.insert("defects".to_string(), defect_map.clone());
-    match &dark {
-        Some(d) => {
-            maps.insert("dark_rate".to_string(), d.rate.clone());
-            maps.insert("r2_sqrt".to_string(), d.r2_sqrt.clone());
-            maps.insert("r2_linear".to_string(), d.r2_linear.clone());
-        }
-        None => {
-            maps.insert(
-                "dark_rate".to_string(),
-                ndarray::Array3::zeros(bias.fixed_pattern.raw_dim()),
-            );
-        }
-    }
+    let zeros = || ndarray::Array3::zeros(bias.fixed_pattern.raw_dim());
+    let maps = CalibMaps {
+        fixed_pattern: bias.fixed_pattern.clone(),
+        sigma_read: bias.sigma_read.clone(),
+        dark_rate: dark.as_ref().map_or_else(zeros, |d| d.rate.clone()),
+        defects: defect_map.clone(),
+        gain: Some(gain.k_map.clone()),
+        response: Some(gain.response.clone()),
+        r2_sqrt: dark.as_ref().map(|d| d.r2_sqrt.clone()),
+        r2_linear: dark.as_ref().map(|d| d.r2_linear.clone()),
+    };
     let mut pp = bias.ppcc_pixels.clone();
     pp.sort_by(|a, b| a.total_cmp(b));
     let meta = CalibMeta {
@@ -112,16 +216,12 @@ pub fn calibrate(input: &CalibrateInput, progress: &(dyn Fn() + Sync)) -> Result
         flat_exposures_s: gain.levels.iter().map(|l| l.exposure_s).collect(),
         flat_frames: gain.levels.iter().map(|l| l.frames).collect(),
         k: gain.k,
-        k_method: gain.method.into(),
+        k_method: gain.method,
         row_sigma: bias.row_sigma,
-        read_sigma_median: median_of(&bias.sigma_read),
+        read_sigma_median: pgrf_core::stats::median_finite(&bias.sigma_read),
         dsnu: bias.dsnu,
         prnu: Some(gain.prnu),
-        dark_law: match dark.as_ref().map(|d| d.law) {
-            Some(DarkLaw::Linear) => "linear".into(),
-            Some(DarkLaw::Sqrt) => "sqrt".into(),
-            None => "none".into(),
-        },
+        dark_law: dark.as_ref().map(|d| d.law),
         dark_r2_sqrt: dark.as_ref().map(|d| d.r2_sqrt_global),
         dark_r2_linear: dark.as_ref().map(|d| d.r2_linear_global),
         dark_rate_mean: dark.as_ref().map(|d| d.rate_mean),

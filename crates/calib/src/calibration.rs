@@ -13,60 +13,177 @@ use std::sync::Arc;
 /// Everything about how a calibration was made; units in `units`.
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
 pub struct CalibMeta {
-    pub kind: String,
-    pub schema: u32,
-    pub pgrf_version: String,
+    pub(crate) kind: String,
+    pub(crate) schema: u32,
+    pub(crate) pgrf_version: String,
     pub make: String,
     pub model: String,
     pub iso: Option<u32>,
     pub width: usize,
     pub height: usize,
-    pub cfa: String,
-    pub black: [f32; 4],
-    pub white: u32,
-    pub bias_frames: usize,
-    pub bias_exposure_s: f64,
-    pub dark_exposures_s: Vec<f64>,
-    pub dark_frames: Vec<usize>,
-    pub flat_exposures_s: Vec<f64>,
-    pub flat_frames: Vec<usize>,
-    /// System gain, DN per electron, and how it was estimated ("ptc" or "var/mean").
+    pub(crate) cfa: String,
+    pub(crate) black: [f32; 4],
+    pub(crate) white: u32,
+    pub(crate) bias_frames: usize,
+    pub(crate) bias_exposure_s: f64,
+    pub(crate) dark_exposures_s: Vec<f64>,
+    pub(crate) dark_frames: Vec<usize>,
+    pub(crate) flat_exposures_s: Vec<f64>,
+    pub(crate) flat_frames: Vec<usize>,
+    /// System gain, DN per electron, and how it was estimated.
     #[serde(rename = "K")]
     pub k: f64,
-    pub k_method: String,
+    pub k_method: GainMethod,
     pub row_sigma: f64,
     pub read_sigma_median: f64,
     pub dsnu: f64,
     pub prnu: Option<f64>,
-    /// "sqrt" or "linear", chosen by the better R^2 of the pixel-averaged dark signal.
-    pub dark_law: String,
+    /// The dark-signal law chosen by the better R^2 of the pixel-averaged
+    /// dark signal; "none" in the record without dark frames.
+    #[serde(with = "law_or_none")]
+    pub dark_law: Option<DarkLaw>,
     pub dark_r2_sqrt: Option<f64>,
     pub dark_r2_linear: Option<f64>,
     pub dark_rate_mean: Option<f64>,
     pub ppcc_pixel_median: Option<f64>,
-    pub ppcc_pooled: Option<f64>,
+    pub(crate) ppcc_pooled: Option<f64>,
     pub hot_pixels: usize,
     pub dead_pixels: usize,
-    pub units: String,
+    pub(crate) units: String,
+}
+
+/// How the system gain K was estimated.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub enum GainMethod {
+    /// Photon transfer: the slope of temporal variance over mean signal
+    /// across flat levels.
+    #[serde(rename = "ptc")]
+    PhotonTransfer,
+    /// Eq. 3.15 at the brightest level: temporal variance / mean signal
+    /// (one level, or a failed transfer fit).
+    #[serde(rename = "var/mean")]
+    VarOverMean,
+}
+
+impl std::fmt::Display for GainMethod {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            GainMethod::PhotonTransfer => "ptc",
+            GainMethod::VarOverMean => "var/mean",
+        })
+    }
+}
+
+/// The record writes the law's name, or "none" without dark frames.
+mod law_or_none {
+    use pgrf_noise::DarkLaw;
+    use serde::{Deserialize, Deserializer, Serialize, Serializer};
+
+    pub(crate) fn serialize<S: Serializer>(law: &Option<DarkLaw>, s: S) -> Result<S::Ok, S::Error> {
+        match law {
+            Some(l) => l.serialize(s),
+            None => s.serialize_str("none"),
+        }
+    }
+
+    pub(crate) fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<Option<DarkLaw>, D::Error> {
+        let name = String::deserialize(d)?;
+        match name.as_str() {
+            "none" => Ok(None),
+            "sqrt" => Ok(Some(DarkLaw::Sqrt)),
+            "linear" => Ok(Some(DarkLaw::Linear)),
+            o => Err(serde::de::Error::custom(format!(
+                "unknown dark law '{o}' (sqrt, linear or none)"
+            ))),
+        }
+    }
 }
 
 /// A loaded calibration.
 #[derive(Clone, Debug)]
 pub struct Calibration {
     pub meta: CalibMeta,
-    pub maps: BTreeMap<String, Array3<f32>>,
+    pub maps: CalibMaps,
 }
 
-/// Maps every calibration file must hold.
-pub const REQUIRED_MAPS: [&str; 4] = ["fixed_pattern", "sigma_read", "dark_rate", "defects"];
+/// The per-pixel maps of a calibration, each packed `(4, H/2, W/2)` in the
+/// order R, G1, B, G2. In the file each is a tensor of the field's name.
+#[derive(Clone, Debug)]
+pub struct CalibMaps {
+    /// Bias mean minus black level, DN: the fixed-pattern offset.
+    pub fixed_pattern: Array3<f32>,
+    /// Temporal read-noise sigma (row noise removed), DN: sigma of N_r.
+    pub sigma_read: Array3<f32>,
+    /// Dark-current rate, electrons per second or per sqrt(second) after the
+    /// record's law (N_FP absorbed); zero without dark frames.
+    pub dark_rate: Array3<f32>,
+    /// 0 good, 1 hot, 2 dead.
+    pub defects: Array3<f32>,
+    /// Per-pixel system gain, DN per electron (eq. 3.15).
+    pub gain: Option<Array3<f32>>,
+    /// Per-pixel response to light relative to the mean (PRNU).
+    pub response: Option<Array3<f32>>,
+    /// R^2 of the per-pixel dark fit a*sqrt(t).
+    pub r2_sqrt: Option<Array3<f32>>,
+    /// R^2 of the per-pixel dark fit a*t.
+    pub r2_linear: Option<Array3<f32>>,
+}
+
+impl CalibMaps {
+    /// Every present map with its file name, in name order.
+    pub fn named(&self) -> Vec<(&'static str, &Array3<f32>)> {
+        let mut v: Vec<(&'static str, &Array3<f32>)> = vec![
+            ("dark_rate", &self.dark_rate),
+            ("defects", &self.defects),
+            ("fixed_pattern", &self.fixed_pattern),
+            ("sigma_read", &self.sigma_read),
+        ];
+        for (name, m) in [
+            ("gain", &self.gain),
+            ("r2_linear", &self.r2_linear),
+            ("r2_sqrt", &self.r2_sqrt),
+            ("response", &self.response),
+        ] {
+            if let Some(m) = m {
+                v.push((name, m));
+            }
+        }
+        v.sort_by_key(|(n, _)| *n);
+        v
+    }
+
+    /// The maps of a file, by name: the four required ones must be there,
+    /// and a name pgrf does not know is refused.
+    fn from_named(mut maps: BTreeMap<String, Array3<f32>>) -> std::result::Result<CalibMaps, String> {
+        let mut need = |n: &str| {
+            maps.remove(n)
+                .ok_or_else(|| format!("calibration has no '{n}' map"))
+        };
+        let out = CalibMaps {
+            fixed_pattern: need("fixed_pattern")?,
+            sigma_read: need("sigma_read")?,
+            dark_rate: need("dark_rate")?,
+            defects: need("defects")?,
+            gain: maps.remove("gain"),
+            response: maps.remove("response"),
+            r2_sqrt: maps.remove("r2_sqrt"),
+            r2_linear: maps.remove("r2_linear"),
+        };
+        if let Some(n) = maps.keys().next() {
+            return Err(format!("unknown map '{n}' in a calibration file"));
+        }
+        Ok(out)
+    }
+}
 
 impl Calibration {
     pub fn save(&self, path: &Path) -> Result<()> {
         let meta = serde_json::to_value(&self.meta).map_err(|e| invalid(e.to_string()))?;
         let views: Vec<(&str, ndarray::ArrayView3<f32>)> = self
             .maps
-            .iter()
-            .map(|(k, v)| (k.as_str(), v.view()))
+            .named()
+            .into_iter()
+            .map(|(k, v)| (k, v.view()))
             .collect();
         write_maps(path, &views, &meta)?;
         Ok(())
@@ -82,14 +199,6 @@ impl Calibration {
         }
         let meta: CalibMeta = serde_json::from_value(meta)
             .map_err(|e| invalid(format!("{}: bad calibration record: {e}", path.display())))?;
-        for m in REQUIRED_MAPS {
-            if !maps.contains_key(m) {
-                return Err(invalid(format!(
-                    "{}: calibration has no '{m}' map",
-                    path.display()
-                )));
-            }
-        }
         let shape = [4, meta.height / 2, meta.width / 2];
         for (name, a) in &maps {
             if a.shape() != shape {
@@ -101,6 +210,8 @@ impl Calibration {
                 )));
             }
         }
+        let maps = CalibMaps::from_named(maps)
+            .map_err(|e| invalid(format!("{}: {e}", path.display())))?;
         let c = Calibration { meta, maps };
         c.to_pixel_maps()?.check_values()?;
         Ok(c)
@@ -137,20 +248,12 @@ impl Calibration {
     /// The noise model's per-pixel maps. N_FP is not separated from the dark
     /// rate by this calibration (it is absorbed in it), so it is zero.
     pub fn to_pixel_maps(&self) -> Result<PixelMaps> {
-        let get = |n: &str| -> Result<Map> {
-            self.maps
-                .get(n)
-                .map(|a| Map::Pixel(Arc::new(a.clone())))
-                .ok_or_else(|| invalid(format!("calibration has no '{n}' map")))
-        };
-        let law = match self.meta.dark_law.as_str() {
-            "linear" => DarkLaw::Linear,
-            _ => DarkLaw::Sqrt,
-        };
+        let pixel = |a: &Array3<f32>| Map::Pixel(Arc::new(a.clone()));
+        let law = self.meta.dark_law.unwrap_or(DarkLaw::Sqrt);
         Ok(PixelMaps {
-            bias: get("fixed_pattern")?,
-            sigma_read: get("sigma_read")?,
-            dark_rate: get("dark_rate")?,
+            bias: pixel(&self.maps.fixed_pattern),
+            sigma_read: pixel(&self.maps.sigma_read),
+            dark_rate: pixel(&self.maps.dark_rate),
             n_fp: Map::Scalar(0.0),
             dark_law: law,
         })
@@ -192,19 +295,11 @@ impl Calibration {
                 "exposure time must be a non-negative number of seconds, got {exposure_s}"
             )));
         }
-        let get = |n: &str| {
-            self.maps
-                .get(n)
-                .ok_or_else(|| invalid(format!("calibration has no '{n}' map")))
-        };
-        let law = match self.meta.dark_law.as_str() {
-            "linear" => DarkLaw::Linear,
-            _ => DarkLaw::Sqrt,
-        };
+        let law = self.meta.dark_law.unwrap_or(DarkLaw::Sqrt);
         let dn_per_rate = law.electrons(1.0, exposure_s) * self.meta.k;
-        let mut out = get("fixed_pattern")?.clone();
+        let mut out = self.maps.fixed_pattern.clone();
         ndarray::Zip::from(&mut out)
-            .and(get("dark_rate")?)
+            .and(&self.maps.dark_rate)
             .for_each(|o, &r| *o += (r as f64 * dn_per_rate) as f32);
         Ok(out)
     }

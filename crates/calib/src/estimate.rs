@@ -1,53 +1,71 @@
 //! The estimators: what each stack says about each pixel.
 //!
 //! All maps are packed `(4, H/2, W/2)`, in DN unless stated. Equations refer
-//! to the paper and EMVA 1288.
+//! to the paper and EMVA 1288; one function per estimator of the paper
+//! (PAPER.md at the repository root lists them):
+//!
+//! - fixed pattern, per-pixel bias mean minus black: [`fixed_pattern`];
+//! - source-follower (read) sigma, sqrt(var - sigma_H^2): [`read_sigma`];
+//! - row noise sigma_H: `PixelStats::row_variance` (`crate::stats`);
+//! - system gain K = Var / mean (eq. 3.15): [`gain_var_mean`], and its
+//!   regression over light levels (photon transfer): [`photon_transfer`];
+//! - dark signal, dark mean minus bias mean: [`dark_signal`]; its fit
+//!   y = a g(t), g(t) = sqrt(t) or t: [`fit_origin`]; E(N) = K2 E(N_RS),
+//!   K2 = 1 + N_FP, as a rate in electrons: [`dark_rate`].
 
+use crate::calibration::GainMethod;
 use crate::error::{invalid, Result};
 use crate::ppcc::ppcc;
 use crate::stack::Stack;
 use ndarray::{Array3, Zip};
+use pgrf_core::stats::{median, median_finite};
 use pgrf_noise::DarkLaw;
 
 /// From bias frames (shortest exposure, no light).
 #[derive(Clone, Debug)]
 pub struct BiasEstimate {
     /// Per-pixel mean minus the black level: the fixed-pattern offset.
-    pub fixed_pattern: Array3<f32>,
+    pub(crate) fixed_pattern: Array3<f32>,
     /// Per-pixel temporal mean (DN, black included).
-    pub mean: Array3<f64>,
+    pub(crate) mean: Array3<f64>,
     /// Per-pixel temporal variance (row noise included).
-    pub var: Array3<f64>,
+    pub(crate) var: Array3<f64>,
     /// Source-follower sigma: sqrt(var - row variance).
     pub sigma_read: Array3<f32>,
-    pub row_sigma: f64,
+    pub(crate) row_sigma: f64,
     /// DSNU: spatial sd of the fixed pattern, temporal noise of the mean removed.
-    pub dsnu: f64,
-    pub frames: usize,
+    pub(crate) dsnu: f64,
+    pub(crate) frames: usize,
     /// PPCC of sampled pixels' temporal samples vs a Gaussian (paper Fig. 2),
     /// and of all those samples pooled without per-pixel centring/scaling.
-    pub ppcc_pixels: Vec<f64>,
-    pub ppcc_pooled: f64,
+    pub(crate) ppcc_pixels: Vec<f64>,
+    pub(crate) ppcc_pooled: f64,
 }
 
-fn median(v: &mut [f64]) -> f64 {
-    v.sort_by(|a, b| a.partial_cmp(b).unwrap_or(std::cmp::Ordering::Equal));
-    if v.is_empty() {
-        f64::NAN
-    } else {
-        v[v.len() / 2]
+/// The fixed pattern (the pixel's constant offset, inferred eq. 3.12): the
+/// per-pixel temporal mean of the bias frames minus the black level of its
+/// plane, in DN. `mean` is `(4, h, w)` including black.
+pub(crate) fn fixed_pattern(mean: &Array3<f64>, black: [f32; 4]) -> Array3<f32> {
+    let mut out = Array3::<f32>::zeros(mean.raw_dim());
+    for (p, mut plane) in out.outer_iter_mut().enumerate() {
+        let m = mean.index_axis(ndarray::Axis(0), p);
+        Zip::from(&mut plane)
+            .and(&m)
+            .for_each(|f, &x| *f = (x - black[p] as f64) as f32);
     }
+    out
 }
 
-pub fn median_of(a: &Array3<f32>) -> f64 {
-    let mut v: Vec<f64> = a
-        .iter()
-        .filter(|x| x.is_finite())
-        .map(|&x| x as f64)
-        .collect();
-    median(&mut v)
+/// The source-follower (read) noise sigma_r of N_r per pixel (inferred
+/// eq. 3.13): sqrt(Var(bias) - sigma_H^2), the per-pixel temporal variance
+/// of the bias frames with the row-noise variance `row_var` removed
+/// (clamped at 0), in DN.
+pub(crate) fn read_sigma(var: &Array3<f64>, row_var: f64) -> Array3<f32> {
+    var.mapv(|v| (v - row_var).max(0.0).sqrt() as f32)
 }
 
+/// Bias-frame estimates: fixed pattern ([`fixed_pattern`]), read sigma
+/// ([`read_sigma`]), row noise (`PixelStats::row_variance`), DSNU, PPCC.
 pub fn estimate_bias(stack: &Stack, black: [f32; 4]) -> Result<BiasEstimate> {
     let g = stack
         .groups
@@ -55,14 +73,8 @@ pub fn estimate_bias(stack: &Stack, black: [f32; 4]) -> Result<BiasEstimate> {
         .ok_or_else(|| invalid("bias stack is empty"))?;
     let (mean, var) = (g.stats.mean(), g.stats.var());
     let row_var = g.stats.row_variance();
-    let mut fixed_pattern = Array3::<f32>::zeros(mean.raw_dim());
-    for (p, mut plane) in fixed_pattern.outer_iter_mut().enumerate() {
-        let m = mean.index_axis(ndarray::Axis(0), p);
-        Zip::from(&mut plane)
-            .and(&m)
-            .for_each(|f, &x| *f = (x - black[p] as f64) as f32);
-    }
-    let sigma_read = var.mapv(|v| (v - row_var).max(0.0).sqrt() as f32);
+    let fixed_pattern = fixed_pattern(&mean, black);
+    let sigma_read = read_sigma(&var, row_var);
     let n = g.files.len() as f64;
     let fp_mean = fixed_pattern.iter().map(|&v| v as f64).sum::<f64>() / fixed_pattern.len() as f64;
     let fp_var = fixed_pattern
@@ -95,35 +107,70 @@ pub fn estimate_bias(stack: &Stack, black: [f32; 4]) -> Result<BiasEstimate> {
 /// One flat level of the photon-transfer curve.
 #[derive(Clone, Copy, Debug, serde::Serialize)]
 pub struct PtcLevel {
-    pub exposure_s: f64,
+    pub(crate) exposure_s: f64,
     /// Spatial mean of (flat mean - bias mean), DN.
     pub mean_dn: f64,
     /// Spatial mean of (flat variance - bias variance), DN^2: the shot-noise variance.
     pub var_dn2: f64,
-    pub frames: usize,
+    pub(crate) frames: usize,
 }
 
 #[derive(Clone, Debug)]
 pub struct GainEstimate {
     /// Global system gain, DN per electron.
-    pub k: f64,
+    pub(crate) k: f64,
     /// "ptc" (regression over levels) or "var/mean" (eq. 3.15, one level).
-    pub method: &'static str,
+    pub(crate) method: GainMethod,
     /// Eq. 3.15 per pixel at the brightest level: (var_flat - var_bias) / (mean_flat - mean_bias).
-    pub k_map: Array3<f32>,
+    pub(crate) k_map: Array3<f32>,
     /// Eq. 3.15 globally at the brightest level.
-    pub k_var_mean: f64,
+    pub(crate) k_var_mean: f64,
     /// Per-pixel signal at the brightest level (flat mean - bias mean), DN.
-    pub response: Array3<f32>,
+    pub(crate) response: Array3<f32>,
     pub levels: Vec<PtcLevel>,
     /// var = slope mean + intercept over the levels, when there are two or more.
     pub ptc_fit: Option<(f64, f64)>,
     /// PRNU: spatial sd of the per-pixel response at the brightest level,
     /// relative to its mean, temporal noise removed.
-    pub prnu: f64,
+    pub(crate) prnu: f64,
 }
 
-pub fn estimate_gain(flat: &Stack, bias: &BiasEstimate) -> Result<GainEstimate> {
+/// The system gain from one flat level, eq. 3.15: K = Var(D) / E(D) with
+/// the bias removed from both (`var` = flat variance - bias variance, DN^2;
+/// `mean` = flat mean - bias mean, DN), in DN per electron. Used per pixel
+/// (the gain map) and globally (the level's spatial means).
+pub(crate) fn gain_var_mean(var: f64, mean: f64) -> f64 {
+    var / mean
+}
+
+/// Photon transfer: the least-squares line var = slope mean + intercept
+/// through the flat levels' (mean, shot variance) points; its slope is K,
+/// the robust form of eq. 3.15 over several light levels. `None` with fewer
+/// than two levels or no spread in their means.
+pub(crate) fn photon_transfer(levels: &[PtcLevel]) -> Option<(f64, f64)> {
+    if levels.len() >= 2 {
+        let n = levels.len() as f64;
+        let mx = levels.iter().map(|l| l.mean_dn).sum::<f64>() / n;
+        let my = levels.iter().map(|l| l.var_dn2).sum::<f64>() / n;
+        let sxx: f64 = levels.iter().map(|l| (l.mean_dn - mx).powi(2)).sum();
+        let sxy: f64 = levels
+            .iter()
+            .map(|l| (l.mean_dn - mx) * (l.var_dn2 - my))
+            .sum();
+        if sxx > 0.0 {
+            let slope = sxy / sxx;
+            Some((slope, my - slope * mx))
+        } else {
+            None
+        }
+    } else {
+        None
+    }
+}
+
+/// Flat-field estimates: K by photon transfer ([`photon_transfer`]) or
+/// eq. 3.15 ([`gain_var_mean`]), the per-pixel gain map, PRNU.
+pub(crate) fn estimate_gain(flat: &Stack, bias: &BiasEstimate) -> Result<GainEstimate> {
     let mut levels: Vec<PtcLevel> = Vec::new();
     // Mean and variance of the brightest level so far: each is a full-frame
     // f64 copy, so they are kept from the loop rather than recomputed.
@@ -169,12 +216,12 @@ pub fn estimate_gain(flat: &Stack, bias: &BiasEstimate) -> Result<GainEstimate> 
         .for_each(|k, &fm, &fv, &m0, &v0| {
             let s = fm - m0;
             *k = if s > 0.0 {
-                ((fv - v0) / s) as f32
+                gain_var_mean(fv - v0, s) as f32
             } else {
                 f32::NAN
             };
         });
-    let k_var_mean = bright_level.var_dn2 / bright_level.mean_dn;
+    let k_var_mean = gain_var_mean(bright_level.var_dn2, bright_level.mean_dn);
     // PRNU from the spread of the per-pixel signal at the brightest level.
     let response = Zip::from(&bm)
         .and(&bias.mean)
@@ -186,27 +233,10 @@ pub fn estimate_gain(flat: &Stack, bias: &BiasEstimate) -> Result<GainEstimate> 
         (bright_level.var_dn2 + bias.var.mean().unwrap_or(0.0)) / bright_level.frames as f64;
     let prnu = (sv - temporal - bias.dsnu.powi(2)).max(0.0).sqrt() / sm;
 
-    let ptc_fit = if levels.len() >= 2 {
-        let n = levels.len() as f64;
-        let mx = levels.iter().map(|l| l.mean_dn).sum::<f64>() / n;
-        let my = levels.iter().map(|l| l.var_dn2).sum::<f64>() / n;
-        let sxx: f64 = levels.iter().map(|l| (l.mean_dn - mx).powi(2)).sum();
-        let sxy: f64 = levels
-            .iter()
-            .map(|l| (l.mean_dn - mx) * (l.var_dn2 - my))
-            .sum();
-        if sxx > 0.0 {
-            let slope = sxy / sxx;
-            Some((slope, my - slope * mx))
-        } else {
-            None
-        }
-    } else {
-        None
-    };
+    let ptc_fit = photon_transfer(&levels);
     let (k, method) = match ptc_fit {
-        Some((slope, _)) if slope > 0.0 => (slope, "ptc"),
-        _ => (k_var_mean, "var/mean"),
+        Some((slope, _)) if slope > 0.0 => (slope, GainMethod::PhotonTransfer),
+        _ => (k_var_mean, GainMethod::VarOverMean),
     };
     if !(k.is_finite() && k > 0.0) {
         return Err(invalid(format!(
@@ -227,24 +257,27 @@ pub fn estimate_gain(flat: &Stack, bias: &BiasEstimate) -> Result<GainEstimate> 
 
 #[derive(Clone, Debug)]
 pub struct DarkEstimate {
-    pub exposures: Vec<f64>,
+    pub(crate) exposures: Vec<f64>,
     /// The law with the better fit of the pixel-averaged dark signal.
-    pub law: DarkLaw,
+    pub(crate) law: DarkLaw,
     /// R^2 of the pixel-averaged dark signal under each law.
     pub r2_sqrt_global: f64,
     pub r2_linear_global: f64,
     /// Per-pixel R^2 of each law (NaN where the pixel has no dark signal variation).
-    pub r2_sqrt: Array3<f32>,
-    pub r2_linear: Array3<f32>,
+    pub(crate) r2_sqrt: Array3<f32>,
+    pub(crate) r2_linear: Array3<f32>,
     /// Per-pixel dark rate in electrons per sqrt(s) or per s (chosen law),
     /// N_FP absorbed (mean dark DN = K rate g(t)).
-    pub rate: Array3<f32>,
+    pub(crate) rate: Array3<f32>,
     /// Mean dark rate, electrons per unit of g(t).
     pub rate_mean: f64,
 }
 
-/// Least-squares fit through the origin, y = a g, and its R^2 against the mean of y.
-fn fit_origin(g: &[f64], y: &[f64]) -> (f64, f64) {
+/// The dark-current law fit: least squares through the origin, y = a g,
+/// and its R^2 against the mean of y. With g = sqrt(t) it is the paper's
+/// y = a sqrt(t), with g = t the linear y = a t ([`DarkLaw`]); `y` is the
+/// dark signal ([`dark_signal`]) at the exposure times t.
+pub(crate) fn fit_origin(g: &[f64], y: &[f64]) -> (f64, f64) {
     let sgg: f64 = g.iter().map(|v| v * v).sum();
     let a = g.iter().zip(y).map(|(g, y)| g * y).sum::<f64>() / sgg;
     let my = y.iter().sum::<f64>() / y.len() as f64;
@@ -260,7 +293,30 @@ fn fit_origin(g: &[f64], y: &[f64]) -> (f64, f64) {
     )
 }
 
-pub fn estimate_dark(dark: &Stack, bias: &BiasEstimate, k: f64) -> Result<DarkEstimate> {
+/// The dark signal of every pixel at one exposure time (inferred eq. 3.16):
+/// the dark frames' temporal mean minus the bias frames' (fixed pattern and
+/// black cancel), DN, flattened in packed order.
+pub(crate) fn dark_signal(dark_mean: &Array3<f64>, bias_mean: &Array3<f64>) -> Vec<f64> {
+    Zip::from(dark_mean)
+        .and(bias_mean)
+        .map_collect(|a, b| a - b)
+        .into_iter()
+        .collect()
+}
+
+/// The pixel's dark-current rate in electrons per unit of g(t) (sqrt(s) or
+/// s) from its fitted dark-signal slope `a` (DN per unit of g(t)) and the
+/// gain K (inferred eq. 3.17, E(N) = K2 E(N_RS) with K2 = 1 + N_FP): the
+/// dark signal's mean is K rate g(t) with the pixel's K2 absorbed into its
+/// rate, so rate = a / K (clamped at 0).
+pub(crate) fn dark_rate(a: f64, k: f64) -> f32 {
+    (a / k).max(0.0) as f32
+}
+
+/// Dark-frame estimates: dark signal ([`dark_signal`]) per exposure, the
+/// better law of y = a sqrt(t) and y = a t ([`fit_origin`]) on the
+/// pixel-averaged signal, per-pixel rates ([`dark_rate`]) and R^2 maps.
+pub(crate) fn estimate_dark(dark: &Stack, bias: &BiasEstimate, k: f64) -> Result<DarkEstimate> {
     let exposures: Vec<f64> = dark.groups.iter().map(|g| g.exposure_s).collect();
     if exposures.len() < 2 {
         return Err(invalid(format!(
@@ -272,14 +328,7 @@ pub fn estimate_dark(dark: &Stack, bias: &BiasEstimate, k: f64) -> Result<DarkEs
     let sig: Vec<Vec<f64>> = dark
         .groups
         .iter()
-        .map(|g| {
-            let m = g.stats.mean();
-            Zip::from(&m)
-                .and(&bias.mean)
-                .map_collect(|a, b| a - b)
-                .into_iter()
-                .collect()
-        })
+        .map(|g| dark_signal(&g.stats.mean(), &bias.mean))
         .collect();
     let gs = exposures.iter().map(|t| t.sqrt()).collect::<Vec<_>>();
     let gl = exposures.clone();
@@ -309,7 +358,7 @@ pub fn estimate_dark(dark: &Stack, bias: &BiasEstimate, k: f64) -> Result<DarkEs
         r2_sqrt[x] = r2a as f32;
         r2_linear[x] = r2b as f32;
         let a = if law == DarkLaw::Sqrt { as_ } else { al };
-        rate[x] = (a / k).max(0.0) as f32;
+        rate[x] = dark_rate(a, k);
     }
     let rate = Array3::from_shape_vec(shape, rate).expect("shape");
     Ok(DarkEstimate {
@@ -327,7 +376,7 @@ pub fn estimate_dark(dark: &Stack, bias: &BiasEstimate, k: f64) -> Result<DarkEs
 /// Defect map: 1 hot (dark rate or bias offset far above the rest), 2 dead
 /// (response to light far below the rest), 0 good. Thresholds are robust:
 /// median + 10 MAD (scaled to sigma) for hot, below half the median response for dead.
-pub fn defects(
+pub(crate) fn defects(
     bias: &BiasEstimate,
     gain: Option<&GainEstimate>,
     dark: Option<&DarkEstimate>,
@@ -354,7 +403,7 @@ pub fn defects(
     // Dead: the mean response, not the per-pixel gain, which is too noisy
     // (its variance term has a relative error of sqrt(2/(F-1))).
     if let Some(g) = gain {
-        let mr = median_of(&g.response);
+        let mr = median_finite(&g.response);
         Zip::from(&mut out).and(&g.response).for_each(|o, &v| {
             if (v as f64) < 0.5 * mr || !v.is_finite() {
                 *o = 2.0;

@@ -3,15 +3,16 @@
 //!
 //! Physics-side crate: ndarray and rayon, no deep-learning framework.
 
+#![warn(missing_docs)]
+
 pub mod calibrate;
 pub mod calibration;
 pub mod error;
 pub mod estimate;
 pub mod ppcc;
-pub mod report;
 pub mod stack;
 pub mod stats;
 
 pub use calibrate::{calibrate, CalibrateInput, CalibrationRun};
-pub use calibration::{CalibMeta, Calibration};
+pub use calibration::{CalibMaps, CalibMeta, Calibration, GainMethod};
 pub use error::{CalibError, Result};

@@ -5,7 +5,7 @@
 
 /// Inverse of the standard normal CDF (Acklam's rational approximation,
 /// relative error below 1.2e-9), for 0 < p < 1.
-pub fn norm_ppf(p: f64) -> f64 {
+pub(crate) fn norm_ppf(p: f64) -> f64 {
     const A: [f64; 6] = [
         -3.969683028665376e1,
         2.209460984245205e2,
@@ -54,7 +54,7 @@ pub fn norm_ppf(p: f64) -> f64 {
 /// PPCC of `sample` against the normal distribution, with Filliben's
 /// plotting positions. 1 is a perfect fit; NaN for fewer than 3 values or a
 /// constant sample.
-pub fn ppcc(sample: &[f64]) -> f64 {
+pub(crate) fn ppcc(sample: &[f64]) -> f64 {
     let n = sample.len();
     if n < 3 {
         return f64::NAN;

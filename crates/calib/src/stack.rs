@@ -9,24 +9,23 @@
 use crate::error::{invalid, Result};
 use crate::stats::PixelStats;
 use pgrf_raw::{decode_file, pack_u16, Cfa, LevelOverrides, RawFrame};
-use rayon::prelude::*;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 /// What every frame of a calibration must share.
 #[derive(Clone, Debug, PartialEq)]
 pub struct FrameKey {
     pub width: usize,
     pub height: usize,
-    pub cfa: Cfa,
-    pub iso: Option<u32>,
+    pub(crate) cfa: Cfa,
+    pub(crate) iso: Option<u32>,
     pub black: [f32; 4],
-    pub white: u32,
-    pub make: String,
-    pub model: String,
+    pub(crate) white: u32,
+    pub(crate) make: String,
+    pub(crate) model: String,
 }
 
 impl FrameKey {
-    pub fn of(f: &RawFrame) -> FrameKey {
+    pub(crate) fn of(f: &RawFrame) -> FrameKey {
         FrameKey {
             width: f.width,
             height: f.height,
@@ -77,44 +76,21 @@ impl FrameKey {
 
 /// Frames of one exposure time.
 #[derive(Clone, Debug)]
-pub struct Group {
-    pub exposure_s: f64,
-    pub stats: PixelStats,
-    pub files: Vec<PathBuf>,
+pub(crate) struct Group {
+    pub(crate) exposure_s: f64,
+    pub(crate) stats: PixelStats,
+    pub(crate) files: Vec<PathBuf>,
 }
 
 /// A decoded stack: groups by exposure, sorted by exposure time.
 #[derive(Clone, Debug)]
 pub struct Stack {
     pub key: FrameKey,
-    pub groups: Vec<Group>,
+    pub(crate) groups: Vec<Group>,
     /// Temporal samples of a sparse grid of pixels (packed flat indices),
     /// kept for the per-pixel normality check.
-    pub tap_index: Vec<usize>,
-    pub tap: Vec<Vec<f32>>,
-}
-
-/// RAW files in `dir`, sorted by name (hidden files skipped).
-pub fn list_files(dir: &Path) -> Result<Vec<PathBuf>> {
-    if !dir.is_dir() {
-        return Err(invalid(format!("{}: not a folder", dir.display())));
-    }
-    let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
-        .map_err(|e| invalid(format!("{}: {e}", dir.display())))?
-        .filter_map(|e| e.ok().map(|e| e.path()))
-        .filter(|p| {
-            p.is_file()
-                && !p
-                    .file_name()
-                    .map(|n| n.to_string_lossy().starts_with('.'))
-                    .unwrap_or(true)
-        })
-        .collect();
-    files.sort();
-    if files.is_empty() {
-        return Err(invalid(format!("{}: folder has no files", dir.display())));
-    }
-    Ok(files)
+    pub(crate) tap_index: Vec<usize>,
+    pub(crate) tap: Vec<Vec<f32>>,
 }
 
 /// Options for reading one stack.
@@ -130,7 +106,7 @@ pub struct ReadOptions<'a> {
     /// How many pixels to keep temporal samples of (0 for none).
     pub tap_pixels: usize,
     /// Called once per frame accumulated.
-    pub progress: &'a (dyn Fn() + Sync),
+    pub progress: &'a dyn pgrf_core::Progress,
 }
 
 /// Decode and accumulate `files`.
@@ -144,42 +120,58 @@ pub fn read_stack(files: &[PathBuf], opt: &ReadOptions) -> Result<Stack> {
         )));
     }
     let (tx, rx) = std::sync::mpsc::sync_channel::<Result<(usize, RawFrame)>>(2);
+    let next = std::sync::atomic::AtomicUsize::new(0);
     std::thread::scope(|scope| -> Result<Stack> {
-        // Decoders run on their own pool: they block on the channel when the
-        // accumulator is behind, and blocking the global pool's workers would
-        // deadlock the accumulator's own parallel loops.
+        // Decoders take files in index order from a shared counter, so a
+        // frame is never more than about `threads` places ahead of the next
+        // one to accumulate; the reader below restores file order, which
+        // makes the sums (and so the calibration's bytes) independent of
+        // thread timing while memory stays at a few frames.
         let threads = std::thread::available_parallelism()
             .map(|n| n.get())
-            .unwrap_or(2);
-        let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .thread_name(|i| format!("pgrf-decode-{i}"))
-            .build()
-            .map_err(|e| invalid(format!("cannot start decoder threads: {e}")))?;
-        scope.spawn(move || {
-            pool.install(|| {
-                files
-                    .par_iter()
-                    .enumerate()
-                    .try_for_each_with(tx, |tx, (i, f)| {
-                        let r = decode_file(f, &LevelOverrides::default())
-                            .map(|fr| (i, fr))
-                            .map_err(Into::into);
-                        let failed = r.is_err();
-                        // A closed channel means the reader stopped on an error: stop too.
-                        if tx.send(r).is_err() || failed {
-                            Err(())
-                        } else {
-                            Ok(())
-                        }
-                    })
-            })
+            .unwrap_or(2)
+            .min(files.len());
+        for _ in 0..threads {
+            let tx = tx.clone();
+            let next = &next;
+            scope.spawn(move || loop {
+                let i = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                if i >= files.len() {
+                    break;
+                }
+                let r = decode_file(&files[i], &LevelOverrides::default())
+                    .map(|fr| (i, fr))
+                    .map_err(Into::into);
+                let failed = r.is_err();
+                // A closed channel means the reader stopped on an error: stop too.
+                if tx.send(r).is_err() || failed {
+                    break;
+                }
+            });
+        }
+        drop(tx);
+        let mut pending = std::collections::BTreeMap::new();
+        let mut want = 0usize;
+        // Owns the receiver, so an early error return drops it and unblocks
+        // the decoders before the scope joins them.
+        let in_order = std::iter::from_fn(move || loop {
+            if let Some(frame) = pending.remove(&want) {
+                want += 1;
+                return Some(Ok((want - 1, frame)));
+            }
+            match rx.recv() {
+                Ok(Ok((i, frame))) => {
+                    pending.insert(i, frame);
+                }
+                Ok(Err(e)) => return Some(Err(e)),
+                Err(_) => return None,
+            }
         });
         let mut key: Option<FrameKey> = opt.expect.cloned();
         let mut groups: Vec<Group> = Vec::new();
         let mut tap_index: Vec<usize> = Vec::new();
         let mut tap: Vec<Vec<f32>> = Vec::new();
-        for msg in rx {
+        for msg in in_order {
             let (i, frame) = msg?;
             let file = &files[i];
             let k = FrameKey::of(&frame);
@@ -245,7 +237,7 @@ pub fn read_stack(files: &[PathBuf], opt: &ReadOptions) -> Result<Stack> {
             }
             groups[slot].stats.push(data);
             groups[slot].files.push(file.clone());
-            (opt.progress)();
+            opt.progress.advance(1);
         }
         for g in &groups {
             if g.files.len() < 2 {

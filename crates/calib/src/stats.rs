@@ -9,11 +9,11 @@ use ndarray::Array3;
 use rayon::prelude::*;
 
 #[derive(Clone, Debug)]
-pub struct PixelStats {
-    pub ph: usize,
-    pub pw: usize,
+pub(crate) struct PixelStats {
+    pub(crate) ph: usize,
+    pub(crate) pw: usize,
     /// Sensor-row parity of each packed plane (from the CFA).
-    pub plane_rows: [usize; 4],
+    pub(crate) plane_rows: [usize; 4],
     n: u32,
     mean: Vec<f64>,
     m2: Vec<f64>,
@@ -22,7 +22,7 @@ pub struct PixelStats {
 }
 
 impl PixelStats {
-    pub fn new(ph: usize, pw: usize, plane_rows: [usize; 4]) -> PixelStats {
+    pub(crate) fn new(ph: usize, pw: usize, plane_rows: [usize; 4]) -> PixelStats {
         PixelStats {
             ph,
             pw,
@@ -34,12 +34,12 @@ impl PixelStats {
         }
     }
 
-    pub fn count(&self) -> u32 {
+    pub(crate) fn count(&self) -> u32 {
         self.n
     }
 
     /// Add one packed frame `(4, ph, pw)` of DN.
-    pub fn push(&mut self, frame: &[u16]) {
+    pub(crate) fn push(&mut self, frame: &[u16]) {
         assert_eq!(
             frame.len(),
             self.mean.len(),
@@ -83,12 +83,12 @@ impl PixelStats {
         self.row_means.push(means);
     }
 
-    pub fn mean(&self) -> Array3<f64> {
+    pub(crate) fn mean(&self) -> Array3<f64> {
         Array3::from_shape_vec((4, self.ph, self.pw), self.mean.clone()).expect("shape")
     }
 
     /// Unbiased temporal variance (n - 1 in the denominator).
-    pub fn var(&self) -> Array3<f64> {
+    pub(crate) fn var(&self) -> Array3<f64> {
         let d = (self.n.max(2) - 1) as f64;
         Array3::from_shape_vec(
             (4, self.ph, self.pw),
@@ -103,7 +103,7 @@ impl PixelStats {
     /// variance (sigma_H^2 + mean(sigma_e^2)/W)(F-1)/F, and each pixel's
     /// temporal variance is v = sigma_e^2 + sigma_H^2. Solving both:
     /// sigma_H^2 = (var_o F/(F-1) - mean(v)/W) / (1 - 1/W).
-    pub fn row_variance(&self) -> f64 {
+    pub(crate) fn row_variance(&self) -> f64 {
         let f = self.row_means.len();
         if f < 2 {
             return 0.0;

@@ -5,6 +5,7 @@
 mod cmd;
 mod input;
 mod output;
+mod progress;
 mod shipped;
 
 use clap::{Parser, Subcommand};
@@ -47,8 +48,6 @@ enum Command {
     Eval(Box<cmd::eval::EvalArgs>),
     /// Write a miniature benchmark folder in the ELD or SID layout (procedural scenes, A7S2 noise).
     MakeDataset(cmd::make_dataset::MakeDatasetArgs),
-    /// Time pgrf's hot paths (results go to BENCHMARKS.md).
-    Bench(cmd::bench::BenchArgs),
 }
 
 fn main() -> ExitCode {
@@ -86,7 +85,6 @@ fn main() -> ExitCode {
         Command::Metrics(a) => cmd::metrics::run(a),
         Command::Eval(a) => cmd::eval::run(a),
         Command::MakeDataset(a) => cmd::make_dataset::run(a),
-        Command::Bench(a) => cmd::bench::run(a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -14,14 +14,9 @@ fn pgrf(args: &[&str]) -> Output {
         .expect("run pgrf")
 }
 
-fn data_dir() -> Option<PathBuf> {
-    let d = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data");
-    if d.is_dir() {
-        Some(d)
-    } else {
-        eprintln!("skipping: {} not found", d.display());
-        None
-    }
+/// `../shared/data`; tests that call this are ignored without it.
+fn data_dir() -> PathBuf {
+    pgrf_core::shared_data_dir().expect("../shared/data (the test should be ignored without it)")
 }
 
 fn scratch(name: &str) -> PathBuf {
@@ -52,8 +47,9 @@ fn assert_one_line_failure(out: &Output, file: &str) -> String {
 }
 
 #[test]
+#[cfg_attr(not(shared_data), ignore = "needs ../shared/data")]
 fn info_json_reports_the_550d_metadata() {
-    let Some(d) = data_dir() else { return };
+    let d = data_dir();
     let f = d.join("raw/canon550d_colorchart.dng");
     let out = pgrf(&["info", s(&f), "--json"]);
     assert!(
@@ -79,8 +75,9 @@ fn info_json_reports_the_550d_metadata() {
 }
 
 #[test]
+#[cfg_attr(not(shared_data), ignore = "needs ../shared/data")]
 fn broken_inputs_fail_with_one_line() {
-    let Some(d) = data_dir() else { return };
+    let d = data_dir();
     for entry in std::fs::read_dir(d.join("raw/broken")).unwrap() {
         let p = entry.unwrap().path();
         for cmd in ["info", "convert", "preview"] {
@@ -113,8 +110,9 @@ fn broken_inputs_fail_with_one_line() {
 }
 
 #[test]
+#[cfg_attr(not(shared_data), ignore = "needs ../shared/data")]
 fn convert_then_decode_gives_the_same_frame() {
-    let Some(d) = data_dir() else { return };
+    let d = data_dir();
     let src = d.join("raw/canon550d_colorchart.dng");
     let dir = scratch("convert");
     let out = dir.join("out.dng");
@@ -132,8 +130,9 @@ fn convert_then_decode_gives_the_same_frame() {
 }
 
 #[test]
+#[cfg_attr(not(shared_data), ignore = "needs ../shared/data")]
 fn headerless_convert_keeps_the_dump_exactly() {
-    let Some(d) = data_dir() else { return };
+    let d = data_dir();
     let src = d.join("raw/dslr_crop_768x512_rggb14.raw");
     let dir = scratch("headerless");
     let out = dir.join("dump.dng");
@@ -224,7 +223,6 @@ fn every_command_has_help() {
         vec!["preview", "--help"],
         vec!["convert", "--help"],
         vec!["chart", "--help"],
-        vec!["bench", "decode", "--help"],
     ] {
         let out = pgrf(&cmd);
         assert!(out.status.success(), "{cmd:?}");

@@ -114,7 +114,7 @@ fn the_dng_keeps_the_input_and_holds_the_model_output() {
                 overlap: 16,
                 seed: 0,
             },
-            &mut |_, _| {},
+            &pgrf_core::NoProgress,
         )
         .unwrap();
         let expect = unpack_normalized(y.view(), &input).unwrap();
@@ -516,15 +516,16 @@ fn the_calibrated_fixed_pattern_is_subtracted() {
         }))
         .unwrap();
         let shape = (4, h / 2, w / 2);
-        let maps = [
-            ("fixed_pattern", Array3::from_elem(shape, 5.0f32)),
-            ("sigma_read", Array3::from_elem(shape, 3.0f32)),
-            ("dark_rate", Array3::zeros(shape)),
-            ("defects", Array3::zeros(shape)),
-        ]
-        .into_iter()
-        .map(|(k, v)| (k.to_string(), v))
-        .collect();
+        let maps = pgrf_calib::CalibMaps {
+            fixed_pattern: Array3::from_elem(shape, 5.0f32),
+            sigma_read: Array3::from_elem(shape, 3.0f32),
+            dark_rate: Array3::zeros(shape),
+            defects: Array3::zeros(shape),
+            gain: None,
+            response: None,
+            r2_sqrt: None,
+            r2_linear: None,
+        };
         Calibration { meta, maps }.save(path).unwrap();
     };
     let good = d.join("good.safetensors");

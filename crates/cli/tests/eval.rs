@@ -343,14 +343,13 @@ fn sid_miniature_and_pair_list() {
 /// The walker's frame choice and ratio rule against ELD's published frame
 /// table (skipped without ../shared/data).
 #[test]
+#[cfg_attr(not(shared_data), ignore = "needs ../shared/data")]
 fn eld_frame_table_gives_the_walker_ratios() {
     use pgrf_eval::dataset::eld;
-    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../../../shared/data/protocols/ELD_SonyA7S2_frames.json");
-    let Ok(text) = std::fs::read_to_string(&path) else {
-        eprintln!("skipped: {} not found", path.display());
-        return;
-    };
+    let path = pgrf_core::shared_data_dir()
+        .expect("../shared/data")
+        .join("protocols/ELD_SonyA7S2_frames.json");
+    let text = std::fs::read_to_string(&path).unwrap();
     let rows: Vec<serde_json::Value> = serde_json::from_str(&text).unwrap();
     let get = |scene: u64, frame: u32| {
         let r = rows

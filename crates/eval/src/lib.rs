@@ -7,10 +7,10 @@
 //! No deep-learning framework here: plain `ndarray` arrays and rayon, like the
 //! physics crates, so the metrics can judge any producer's output.
 
+#![warn(missing_docs)]
+
 pub mod dataset;
 pub mod metrics;
-pub mod montage;
-pub mod search_plot;
 
 pub use metrics::{
     evaluate, illuminance_correct, illuminance_gain, mse, psnr, ssim, ssim_channels,

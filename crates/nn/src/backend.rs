@@ -72,7 +72,7 @@ pub fn train(
     source: std::sync::Arc<crate::data::Source>,
     spec: std::sync::Arc<pgrf_noise::pair::PairSpec>,
     val: Option<&crate::data::validation::ValSet>,
-    progress: &mut dyn crate::train::Progress,
+    progress: &dyn pgrf_core::Progress,
     stop: &std::sync::atomic::AtomicBool,
 ) -> crate::Result<crate::train::Outcome> {
     kind.check_available().map_err(crate::NnError::Invalid)?;

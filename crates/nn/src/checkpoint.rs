@@ -17,8 +17,8 @@ const VERSION: u32 = 1;
 /// The JSON part of a checkpoint.
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
 pub struct CheckpointState {
-    /// "denoiser" or "flow".
-    pub task: String,
+    /// The method being trained.
+    pub task: crate::Method,
     /// The architecture record (same JSON as in weight files).
     pub arch: serde_json::Value,
     /// Steps completed.
@@ -59,7 +59,7 @@ pub fn encode(state: &CheckpointState, model: &[u8], optim: &[u8]) -> Result<Vec
 
 pub fn save(path: &Path, state: &CheckpointState, model: &[u8], optim: &[u8]) -> Result<()> {
     let bytes = encode(state, model, optim)?;
-    pgrf_raw::atomic::write_atomic(path, &bytes).map_err(|e| err(path, e))
+    Ok(pgrf_core::write_atomic(path, &bytes)?)
 }
 
 pub fn decode(path: &Path, bytes: &[u8]) -> Result<Checkpoint> {
@@ -113,7 +113,7 @@ mod tests {
 
     fn state() -> CheckpointState {
         CheckpointState {
-            task: "flow".into(),
+            task: crate::Method::Pgrf,
             arch: serde_json::json!({"arch": "sr3"}),
             step: 40,
             steps: 100,

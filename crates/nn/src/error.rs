@@ -9,6 +9,9 @@ pub enum NnError {
     Raw(#[from] pgrf_raw::RawError),
     #[error(transparent)]
     Noise(#[from] pgrf_noise::NoiseError),
+    /// An output file could not be written.
+    #[error(transparent)]
+    Write(#[from] pgrf_core::WriteError),
 }
 
 pub type Result<T> = std::result::Result<T, NnError>;

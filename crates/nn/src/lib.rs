@@ -6,15 +6,16 @@
 
 pub mod backend;
 pub mod checkpoint;
+pub mod config;
 pub mod data;
 pub mod error;
+pub mod flow;
 pub mod infer;
+pub mod layers;
 pub mod named;
 pub mod net;
 pub mod norm;
-pub mod sample;
 pub mod schedule;
-pub mod search;
 pub mod seeded;
 pub mod sr3;
 pub mod step;
@@ -22,6 +23,10 @@ pub mod train;
 pub mod unet;
 pub mod weights;
 
+pub use config::{Method, TrainConfig};
 pub use error::{NnError, Result};
+/// The samplers under their former path (`pgrf_nn::sample::SamplerKind`);
+/// they live in [`flow::sample`].
+pub use flow::sample;
 pub use sr3::{Sr3Config, Sr3Unet};
 pub use unet::{SidUnet, SidUnetConfig};

@@ -8,12 +8,8 @@ use burn::tensor::backend::Backend;
 use burn::tensor::{Tensor, TensorData};
 use std::collections::BTreeMap;
 
-/// A tensor's values (f32) and shape.
-#[derive(Clone, Debug, PartialEq)]
-pub struct NamedTensor {
-    pub shape: Vec<usize>,
-    pub values: Vec<f32>,
-}
+/// A named parameter: pgrf's one tensor record type (shape + row-major f32).
+pub use pgrf_core::record::Tensor as NamedTensor;
 
 struct Collector {
     path: Vec<String>,

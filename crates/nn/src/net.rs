@@ -53,7 +53,7 @@ impl<B: Backend> Net<B> {
     pub fn restore(&self, noisy: Tensor<B, 4>, x0: Tensor<B, 4>, t2: f32) -> Tensor<B, 4> {
         match self {
             Net::Spc(n) => n.forward(noisy),
-            Net::Pgrf(n) => crate::sample::two_stage(n, noisy, x0, t2),
+            Net::Pgrf(n) => crate::flow::sample::two_stage(n, noisy, x0, t2),
         }
     }
 

@@ -9,6 +9,7 @@
 //! pgrf runs on any crop size: with 128 x 128 training crops and five levels,
 //! level 3 is the paper's 16 x 16 level.
 
+use crate::layers::Layer;
 use crate::norm::group_norm;
 use burn::config::Config;
 use burn::module::Module;
@@ -186,6 +187,21 @@ struct SelfAttention<B: Backend> {
     out: Conv2d<B>,
 }
 
+/// The core of SR3's single-head self-attention: `qkv` is the 1x1
+/// projection `(batch, 3c, tokens)` holding queries, keys and values one
+/// after the other along the channels; returns the attended values
+/// `(batch, c, tokens)`: out_i = sum_j softmax_j(q_i . k_j / sqrt(c)) v_j.
+/// Public so that benchmarks time exactly what the network runs.
+pub fn attention_core<B: Backend>(qkv: Tensor<B, 3>, c: usize) -> Tensor<B, 3> {
+    let [n, _, hw] = qkv.dims();
+    let q = qkv.clone().slice([0..n, 0..c, 0..hw]);
+    let k = qkv.clone().slice([0..n, c..2 * c, 0..hw]);
+    let v = qkv.slice([0..n, 2 * c..3 * c, 0..hw]);
+    let scores = q.swap_dims(1, 2).matmul(k) / (c as f64).sqrt();
+    let weights = softmax(scores, 2);
+    v.matmul(weights.swap_dims(1, 2))
+}
+
 impl<B: Backend> SelfAttention<B> {
     fn forward(&self, x: Tensor<B, 4>) -> Tensor<B, 4> {
         let [n, c, h, w] = x.dims();
@@ -193,14 +209,19 @@ impl<B: Backend> SelfAttention<B> {
             .qkv
             .forward(group_norm(&self.norm, x.clone()))
             .reshape([n, 3 * c, h * w]);
-        let q = qkv.clone().slice([0..n, 0..c, 0..h * w]);
-        let k = qkv.clone().slice([0..n, c..2 * c, 0..h * w]);
-        let v = qkv.slice([0..n, 2 * c..3 * c, 0..h * w]);
-        // weights[n, i, j] = softmax_j(q_i . k_j / sqrt(c)); out_i = sum_j weights v_j.
-        let scores = q.swap_dims(1, 2).matmul(k) / (c as f64).sqrt();
-        let weights = softmax(scores, 2);
-        let out = v.matmul(weights.swap_dims(1, 2)).reshape([n, c, h, w]);
+        let out = attention_core(qkv, c).reshape([n, c, h, w]);
         x + self.out.forward(out)
+    }
+
+    /// What `forward` runs on an `h` x `w` input, appended to `out`.
+    fn layers(&self, h: usize, w: usize, out: &mut Vec<Layer>) {
+        let channels = self.norm.num_channels;
+        out.extend([
+            Layer::group_norm(&self.norm, h, w),
+            Layer::conv(&self.qkv, h, w),
+            Layer::Attention { channels, h, w },
+            Layer::conv(&self.out, h, w),
+        ]);
     }
 }
 
@@ -258,6 +279,28 @@ impl<B: Backend> ResBlock<B> {
         match &self.attn {
             Some(a) => a.forward(out),
             None => out,
+        }
+    }
+
+    /// What `forward` runs on an `h` x `w` input, appended to `out`.
+    fn layers(&self, h: usize, w: usize, out: &mut Vec<Layer>) {
+        let silu = |norm: &GroupNorm<B>| Layer::Silu {
+            channels: norm.num_channels,
+            h,
+            w,
+        };
+        out.extend([
+            Layer::group_norm(&self.norm1, h, w),
+            silu(&self.norm1),
+            Layer::conv(&self.conv1, h, w),
+            Layer::linear(&self.emb),
+            Layer::group_norm(&self.norm2, h, w),
+            silu(&self.norm2),
+            Layer::conv(&self.conv2, h, w),
+        ]);
+        out.extend(self.skip.iter().map(|s| Layer::conv(s, h, w)));
+        if let Some(a) = &self.attn {
+            a.layers(h, w, out);
         }
     }
 }
@@ -368,6 +411,60 @@ impl<B: Backend> Sr3Unet<B> {
             None => out,
         }
     }
+
+    /// The layers [`Sr3Unet::forward`] runs on `(batch, 4, h, w)` inputs, in
+    /// order, at the sizes they run at (after the padding to a multiple of
+    /// 2^(levels-1)), read from this network's modules; see
+    /// [`crate::layers`]. The time MLP (two linear layers around a SiLU)
+    /// comes after the first convolution, whose input is the data.
+    pub fn layers(&self, h: usize, w: usize) -> Vec<Layer> {
+        let m = 1 << (self.levels - 1);
+        let (mut h, mut w) = (h.div_ceil(m) * m, w.div_ceil(m) * m);
+        let mut out = vec![
+            Layer::conv(&self.first, h, w),
+            Layer::linear(&self.t_in),
+            Layer::Silu {
+                channels: self.t_in.weight.dims()[1],
+                h: 1,
+                w: 1,
+            },
+            Layer::linear(&self.t_out),
+        ];
+        let mut res = self.downs.iter();
+        for level in 0..self.levels {
+            for _ in 0..self.res_blocks {
+                res.next().expect("res block").layers(h, w, &mut out);
+            }
+            if level + 1 < self.levels {
+                out.push(Layer::conv(&self.downsamples[level], h, w));
+                (h, w) = (h / 2, w / 2);
+            }
+        }
+        for block in &self.mid {
+            block.layers(h, w, &mut out);
+        }
+        let mut ups = self.ups.iter();
+        let mut upsamples = self.upsamples.iter();
+        for level in (0..self.levels).rev() {
+            for _ in 0..=self.res_blocks {
+                ups.next().expect("up block").layers(h, w, &mut out);
+            }
+            if level > 0 {
+                (h, w) = (2 * h, 2 * w);
+                out.push(Layer::conv(upsamples.next().expect("upsample"), h, w));
+            }
+        }
+        out.extend([
+            Layer::group_norm(&self.final_norm, h, w),
+            Layer::Silu {
+                channels: self.final_norm.num_channels,
+                h,
+                w,
+            },
+            Layer::conv(&self.final_conv, h, w),
+        ]);
+        out
+    }
 }
 
 #[cfg(test)]
@@ -434,6 +531,49 @@ mod tests {
             let f = (-(10000f32).ln() * k as f32 / 4.0).exp();
             assert!((got[k] - (0.5 * f).sin()).abs() < 1e-6);
             assert!((got[4 + k] - (0.5 * f).cos()).abs() < 1e-6);
+        }
+    }
+
+    #[test]
+    fn the_layer_list_covers_every_parameter_at_the_right_sizes() {
+        use crate::weights::Architecture;
+        let device = Default::default();
+        for cfg in [
+            small(),
+            small().with_attn_levels(vec![0, 2]).with_res_blocks(2),
+            Sr3Config::new().with_inner_channels(16).with_norm_groups(8),
+        ] {
+            let net = cfg.init::<B>(&device).unwrap();
+            // 20 x 36 runs padded to the next multiple of 2^(levels - 1).
+            let layers = net.layers(20, 36);
+            let params: usize = layers.iter().map(Layer::params).sum();
+            assert_eq!(params, net.num_params(), "{cfg:?}");
+            let m = cfg.side_multiple();
+            let (h, w) = (20usize.div_ceil(m) * m, 36usize.div_ceil(m) * m);
+            let Layer::Conv { h: h0, w: w0, .. } = layers[0] else {
+                panic!("{:?}", layers[0])
+            };
+            assert_eq!((h0, w0), (h, w));
+            let Some(&Layer::Conv {
+                h: hl, w: wl, cout, ..
+            }) = layers.last()
+            else {
+                panic!("{:?}", layers.last())
+            };
+            assert_eq!((hl, wl, cout), (h, w, 4));
+            // The largest attention is the one the memory estimate sizes.
+            let tokens = layers
+                .iter()
+                .filter_map(|l| match *l {
+                    Layer::Attention { h, w, .. } => Some(h * w),
+                    _ => None,
+                })
+                .max()
+                .unwrap();
+            assert_eq!(
+                tokens,
+                crate::infer::memory::attention_tokens(&Architecture::Sr3(cfg.clone()), h, w)
+            );
         }
     }
 

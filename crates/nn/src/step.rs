@@ -3,7 +3,8 @@
 //!
 //! - Denoiser (SPC): L1(net(noisy x ratio), clean).
 //! - Rectified flow (PGRF): X1 clean, X0 ~ N(0, I), T the noisy condition,
-//!   t ~ U(0, 1), Xt = t X1 + (1 - t) X0, loss |X1 - X0 - v(Xt, T, t)|_1.
+//!   t ~ U(0, 1), Xt = t X1 + (1 - t) X0, loss |X1 - X0 - v(Xt, T, t)|_1;
+//!   the path and the loss are [`crate::flow`]'s.
 
 use crate::sr3::Sr3Unet;
 use crate::unet::SidUnet;
@@ -25,17 +26,11 @@ pub fn denoiser_loss<B: burn::tensor::backend::Backend>(
     l1(net.forward(noisy), clean)
 }
 
-/// The rectified-flow loss |X1 - X0 - v(Xt, T, t)|_1 at Xt = t X1 + (1 - t) X0.
-pub fn flow_loss<B: burn::tensor::backend::Backend>(
-    net: &Sr3Unet<B>,
-    cond: Tensor<B, 4>,
-    x1: Tensor<B, 4>,
-    x0: Tensor<B, 4>,
-    t: Tensor<B, 1>,
-) -> Tensor<B, 1> {
-    let xt = interpolate_path(x1.clone(), x0.clone(), t.clone());
-    l1(x1 - x0, net.forward(xt, cond, t))
-}
+/// The rectified-flow loss and the path, defined in [`crate::flow`]; named
+/// here too for the training loop and benchmarks that import them from
+/// `step`.
+pub use crate::flow::loss::flow_loss;
+pub use crate::flow::path::interpolate as interpolate_path;
 
 /// One Adam (or other optimiser) step of the denoiser; returns the updated
 /// network and the loss before the update.
@@ -52,19 +47,11 @@ pub fn denoiser_step<B: AutodiffBackend, O: Optimizer<SidUnet<B>, B>>(
     (optim.step(lr, net, grads), value)
 }
 
-/// Xt = t X1 + (1 - t) X0 with one t per batch item.
-pub fn interpolate_path<B: burn::tensor::backend::Backend>(
-    x1: Tensor<B, 4>,
-    x0: Tensor<B, 4>,
-    t: Tensor<B, 1>,
-) -> Tensor<B, 4> {
-    let n = t.dims()[0];
-    let t4 = t.reshape([n, 1, 1, 1]);
-    x1 * t4.clone() + x0 * (t4.neg() + 1.0)
-}
-
-/// One rectified-flow step: `x0` ~ N(0, I) and `t` ~ U(0, 1) are drawn by the
-/// caller (so the loop owns the randomness and its seed).
+/// One rectified-flow step (Algorithm 1's update): the loss
+/// |X1 - X0 - v(Xt, T, t)|_1 of [`crate::flow::loss::flow_loss`] with `cond`
+/// T, `x1` X1, `x0` X0 ~ N(0, I) and `t` ~ U(0, 1), the latter two drawn by
+/// the caller (so the loop owns the randomness and its seed;
+/// [`crate::flow::draw`]).
 pub fn flow_step<B: AutodiffBackend, O: Optimizer<Sr3Unet<B>, B>>(
     net: Sr3Unet<B>,
     optim: &mut O,
@@ -161,16 +148,5 @@ mod tests {
         }
         let (first, last) = (losses[0], *losses.last().unwrap());
         assert!(last < 0.7 * first, "loss {first} -> {last}");
-    }
-
-    #[test]
-    fn path_interpolation_endpoints() {
-        let device = Default::default();
-        let x1 = Tensor::<Flex, 4>::ones([2, 1, 2, 2], &device);
-        let x0 = Tensor::<Flex, 4>::zeros([2, 1, 2, 2], &device);
-        let xt = interpolate_path(x1, x0, Tensor::from_floats([0.0, 0.25], &device));
-        let v: Vec<f32> = xt.into_data().to_vec().unwrap();
-        assert_eq!(&v[..4], &[0.0; 4]);
-        assert_eq!(&v[4..], &[0.25; 4]);
     }
 }

@@ -17,6 +17,7 @@ use burn::optim::{AdamConfig, GradientsParams, Optimizer};
 use burn::record::{BinBytesRecorder, FullPrecisionSettings, Recorder};
 use burn::tensor::backend::{AutodiffBackend, Backend};
 use burn::tensor::{ElementConversion, Tensor, TensorData};
+use pgrf_core::Progress;
 use pgrf_noise::pair::PairSpec;
 use std::io::Write;
 use std::path::PathBuf;
@@ -52,32 +53,9 @@ pub struct TrainSettings {
     pub noise: NoiseSource,
     pub data: String,
     pub device: String,
-}
-
-impl TrainSettings {
-    pub fn task(&self) -> &'static str {
-        match self.arch {
-            Architecture::SidUnet(_) => "denoiser",
-            Architecture::Sr3(_) => "flow",
-        }
-    }
-}
-
-/// What the loop reports as it goes (the CLI draws a progress bar).
-pub trait Progress {
-    fn start(&mut self, from: u64, total: u64);
-    fn step(&mut self, step: u64, loss: f32, lr: f64, images_per_s: f64);
-    fn note(&mut self, msg: &str);
-    fn finish(&mut self);
-}
-
-/// Silent progress, for tests and scripts.
-pub struct Quiet;
-impl Progress for Quiet {
-    fn start(&mut self, _: u64, _: u64) {}
-    fn step(&mut self, _: u64, _: f32, _: f64, _: f64) {}
-    fn note(&mut self, _: &str) {}
-    fn finish(&mut self) {}
+    /// The configuration the run was started from (stored in the weight
+    /// file, so the run can be repeated with `pgrf train --config`).
+    pub config: Option<crate::TrainConfig>,
 }
 
 /// How a run ended.
@@ -196,7 +174,7 @@ pub fn train<B: AutodiffBackend>(
     spec: Arc<PairSpec>,
     val: Option<&ValSet>,
     device: &B::Device,
-    progress: &mut dyn Progress,
+    progress: &dyn Progress,
     stop: &AtomicBool,
 ) -> Result<Outcome> {
     if s.batch == 0 || s.patch == 0 {
@@ -223,7 +201,7 @@ pub fn train<B: AutodiffBackend>(
     if s.resume {
         let ck = checkpoint::load(&s.checkpoint)?;
         let st = &ck.state;
-        if st.task != s.task() || st.arch != arch_json {
+        if st.task != s.arch.method() || st.arch != arch_json {
             return Err(NnError::Invalid(format!(
                 "{}: checkpoint is of another network ({} {}), not this configuration",
                 s.checkpoint.display(),
@@ -286,7 +264,7 @@ pub fn train<B: AutodiffBackend>(
                 .map_err(bad)?;
             let opt = recorder.record(optim.to_record(), ()).map_err(bad)?;
             let state = CheckpointState {
-                task: s.task().into(),
+                task: s.arch.method(),
                 arch: arch_json.clone(),
                 step,
                 steps: s.steps,
@@ -300,7 +278,8 @@ pub fn train<B: AutodiffBackend>(
             checkpoint::save(&s.checkpoint, &state, &model, &opt)
         };
 
-    progress.start(start, s.steps);
+    progress.start(s.steps, "steps");
+    progress.set_position(start);
     while step < s.steps {
         if stop.load(Ordering::Relaxed) {
             interrupted = true;
@@ -333,7 +312,8 @@ pub fn train<B: AutodiffBackend>(
         window.1 += 1;
         let secs = clock.elapsed().as_secs_f64();
         let ips = ((step - start) as usize * s.batch) as f64 / secs.max(1e-9);
-        progress.step(step, value, lr, ips);
+        progress.set_position(step);
+        progress.message(&format!("loss {value:.4}  lr {lr:.1e}  {ips:.2} img/s"));
         let mut val_now = None;
         if let Some(v) = val {
             if s.val_every > 0 && step % s.val_every == 0 && step < s.steps {
@@ -398,6 +378,7 @@ pub fn train<B: AutodiffBackend>(
         seconds: elapsed0 + seconds,
         images_per_s,
         device: s.device.clone(),
+        config: s.config.clone(),
     });
     net.valid().save(&s.out, &meta)?;
     progress.finish();

@@ -8,6 +8,7 @@
 //! (zeros when the image is too small to reflect) and the output is cropped
 //! back, so any packed image size works.
 
+use crate::layers::Layer;
 use burn::config::Config;
 use burn::module::Module;
 use burn::nn::conv::{Conv2d, Conv2dConfig, ConvTranspose2d, ConvTranspose2dConfig};
@@ -62,6 +63,15 @@ impl<B: Backend> DoubleConv<B> {
     fn forward(&self, x: Tensor<B, 4>) -> Tensor<B, 4> {
         let x = self.act.forward(self.first.forward(x));
         self.act.forward(self.second.forward(x))
+    }
+
+    /// What `forward` runs on an `h` x `w` input, appended to `out`.
+    fn layers(&self, h: usize, w: usize, out: &mut Vec<Layer>) {
+        for conv in [&self.first, &self.second] {
+            let layer = Layer::conv(conv, h, w);
+            let channels = layer.out_channels().expect("a convolution");
+            out.extend([layer, Layer::LeakyRelu { channels, h, w }]);
+        }
     }
 }
 
@@ -154,6 +164,31 @@ impl<B: Backend> SidUnet<B> {
     }
 }
 
+impl<B: Backend> SidUnet<B> {
+    /// The layers [`SidUnet::forward`] runs on a `(batch, 4, h, w)` input, in
+    /// order, at the sizes they run at (after the padding to a multiple of
+    /// 16), read from this network's modules; see [`crate::layers`]. Max
+    /// pooling, concatenation and the residual add are not listed.
+    pub fn layers(&self, h: usize, w: usize) -> Vec<Layer> {
+        let (mut h, mut w) = (h + pad_to(h), w + pad_to(w));
+        let mut out = Vec::new();
+        let levels = self.down.len();
+        for (level, block) in self.down.iter().enumerate() {
+            block.layers(h, w, &mut out);
+            if level + 1 < levels {
+                (h, w) = (h / 2, w / 2);
+            }
+        }
+        for (up, merge) in self.up.iter().zip(&self.merge) {
+            out.push(Layer::conv_transpose(up, h, w));
+            (h, w) = (2 * h, 2 * w);
+            merge.layers(h, w, &mut out);
+        }
+        out.push(Layer::conv(&self.head, h, w));
+        out
+    }
+}
+
 /// Padding that brings `side` up to a multiple of 16.
 fn pad_to(side: usize) -> usize {
     (SIDE_MULTIPLE - side % SIDE_MULTIPLE) % SIDE_MULTIPLE
@@ -229,6 +264,55 @@ mod tests {
             let y2 = net.forward(x);
             let d: f32 = (y - y2).abs().max().into_scalar();
             assert_eq!(d, 0.0);
+        }
+    }
+
+    #[test]
+    fn the_layer_list_covers_every_parameter_at_the_right_sizes() {
+        let device = Default::default();
+        for width in [32, 8] {
+            let net = SidUnetConfig::new().with_width(width).init::<B>(&device);
+            // 36 x 50 runs padded to 48 x 64.
+            let layers = net.layers(36, 50);
+            let params: usize = layers.iter().map(Layer::params).sum();
+            assert_eq!(params, net.num_params());
+            assert_eq!(
+                layers
+                    .iter()
+                    .filter(|l| matches!(l, Layer::Conv { .. }))
+                    .count(),
+                19
+            );
+            assert_eq!(
+                layers[0],
+                Layer::Conv {
+                    cin: 4,
+                    cout: width,
+                    kernel: 3,
+                    stride: 1,
+                    padding: 1,
+                    h: 48,
+                    w: 64
+                }
+            );
+            // The bottom level runs at 1/16 of the padded size, the head at full size.
+            assert!(layers.contains(&Layer::LeakyRelu {
+                channels: 16 * width,
+                h: 3,
+                w: 4
+            }));
+            assert_eq!(
+                *layers.last().unwrap(),
+                Layer::Conv {
+                    cin: width,
+                    cout: 4,
+                    kernel: 1,
+                    stride: 1,
+                    padding: 0,
+                    h: 48,
+                    w: 64
+                }
+            );
         }
     }
 

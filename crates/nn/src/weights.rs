@@ -11,13 +11,11 @@ use crate::sr3::{Sr3Config, Sr3Unet};
 use crate::unet::{SidUnet, SidUnetConfig};
 use burn::module::Module;
 use burn::tensor::backend::Backend;
-use safetensors::tensor::{Dtype, SafeTensors, TensorView};
+use pgrf_core::record::{self, RecordError};
 use serde::{Deserialize, Serialize};
-use std::collections::{BTreeMap, HashMap};
+use std::collections::BTreeMap;
 use std::path::Path;
 
-/// Metadata key of pgrf's record (the same key calibration files use).
-pub const META_KEY: &str = "pgrf";
 /// Value of `format` in every weight file.
 pub const FORMAT: &str = "pgrf-weights";
 pub const VERSION: u32 = 1;
@@ -33,11 +31,12 @@ pub enum Architecture {
 }
 
 impl Architecture {
-    /// "spc" or "pgrf": the method the weights implement.
-    pub fn method(&self) -> &'static str {
+    /// The method the weights implement: the SID U-Net is SPC, the SR3
+    /// velocity field is PGRF.
+    pub fn method(&self) -> crate::Method {
         match self {
-            Architecture::SidUnet(_) => "spc",
-            Architecture::Sr3(_) => "pgrf",
+            Architecture::SidUnet(_) => crate::Method::Spc,
+            Architecture::Sr3(_) => crate::Method::Pgrf,
         }
     }
 
@@ -65,8 +64,8 @@ pub struct NoiseSource {
     pub profile: Option<String>,
     /// Identity of the calibration file (camera, ISO, file name), when one was used.
     pub calibration: Option<String>,
-    /// Noise model: pg, eld or pgrf.
-    pub model: String,
+    /// Noise model (pg, eld or pgrf in the record).
+    pub model: pgrf_noise::ModelKind,
     /// Fixed ISO, or None for ELD-sampled parameters.
     pub iso: Option<u32>,
     /// Exposure-ratio range the pairs were drawn from.
@@ -87,6 +86,10 @@ pub struct TrainingSummary {
     pub seconds: f64,
     pub images_per_s: f64,
     pub device: String,
+    /// The whole training configuration (files written before it was
+    /// recorded have none).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub config: Option<crate::TrainConfig>,
 }
 
 /// The record stored in every weight file.
@@ -137,51 +140,48 @@ fn fill_defaults(value: &mut serde_json::Value) {
 
 /// Serialise named tensors and the record to safetensors bytes.
 pub fn encode(tensors: &BTreeMap<String, NamedTensor>, meta: &WeightMeta) -> Result<Vec<u8>> {
-    let bytes: Vec<(&String, Vec<u8>, &Vec<usize>)> = tensors
-        .iter()
-        .map(|(n, t)| {
-            let b: Vec<u8> = t.values.iter().flat_map(|v| v.to_le_bytes()).collect();
-            (n, b, &t.shape)
-        })
-        .collect();
-    let views = bytes
-        .iter()
-        .map(|(n, b, s)| {
-            TensorView::new(Dtype::F32, (*s).clone(), b)
-                .map(|v| ((*n).clone(), v))
-                .map_err(|e| NnError::Invalid(e.to_string()))
-        })
-        .collect::<Result<Vec<_>>>()?;
-    let mut info = HashMap::new();
-    info.insert(
-        META_KEY.to_string(),
-        serde_json::to_string(meta).map_err(|e| NnError::Invalid(e.to_string()))?,
-    );
-    safetensors::tensor::serialize(views, Some(info)).map_err(|e| NnError::Invalid(e.to_string()))
+    let text = serde_json::to_string(meta).map_err(|e| NnError::Invalid(e.to_string()))?;
+    record::encode(
+        tensors
+            .iter()
+            .map(|(n, t)| (n.as_str(), &t.shape[..], &t.values[..])),
+        &text,
+    )
+    .map_err(|e| NnError::Invalid(e.to_string()))
 }
 
 /// Write `module`'s parameters and `meta` atomically.
 pub fn save<B: Backend, M: Module<B>>(path: &Path, module: &M, meta: &WeightMeta) -> Result<()> {
     let bytes = encode(&named::collect::<B, M>(module), meta)?;
-    pgrf_raw::atomic::write_atomic(path, &bytes).map_err(|e| err(path, e))
+    Ok(pgrf_core::write_atomic(path, &bytes)?)
 }
 
 /// Parse weight-file bytes into the record and the tensors.
 pub fn decode(path: &Path, bytes: &[u8]) -> Result<(WeightMeta, BTreeMap<String, NamedTensor>)> {
-    let (_, header) = SafeTensors::read_metadata(bytes)
-        .map_err(|e| err(path, format!("not a safetensors file ({e})")))?;
-    let text = header
-        .metadata()
-        .as_ref()
-        .and_then(|m| m.get(META_KEY))
-        .ok_or_else(|| {
-            err(
+    let meta = decode_meta(path, bytes)?;
+    let rec = record::decode(bytes).map_err(|e| err(path, e))?;
+    for (name, t) in &rec.tensors {
+        if let Some(bad) = t.values.iter().position(|v| !v.is_finite()) {
+            return Err(err(
                 path,
-                "no pgrf record in the metadata (not a pgrf weight file)",
-            )
-        })?;
+                format!("tensor {name} holds a non-finite value at index {bad}"),
+            ));
+        }
+    }
+    Ok((meta, rec.tensors))
+}
+
+/// The record of weight-file bytes, checked to be a weight file this pgrf reads.
+fn decode_meta(path: &Path, bytes: &[u8]) -> Result<WeightMeta> {
+    let text = record::read_meta(bytes).map_err(|e| match e {
+        RecordError::NoRecord => err(
+            path,
+            "no pgrf record in the metadata (not a pgrf weight file)",
+        ),
+        e => err(path, e),
+    })?;
     let mut value: serde_json::Value =
-        serde_json::from_str(text).map_err(|e| err(path, format!("bad metadata: {e}")))?;
+        serde_json::from_str(&text).map_err(|e| err(path, format!("bad metadata: {e}")))?;
     fill_defaults(&mut value);
     if value.get("format").and_then(|f| f.as_str()) != Some(FORMAT) {
         return Err(err(
@@ -200,35 +200,7 @@ pub fn decode(path: &Path, bytes: &[u8]) -> Result<(WeightMeta, BTreeMap<String,
             ),
         ));
     }
-    let st = SafeTensors::deserialize(bytes).map_err(|e| err(path, e))?;
-    let mut out = BTreeMap::new();
-    for (name, view) in st.tensors() {
-        if view.dtype() != Dtype::F32 {
-            return Err(err(
-                path,
-                format!("tensor {name} is {:?}, expected F32", view.dtype()),
-            ));
-        }
-        let values: Vec<f32> = view
-            .data()
-            .chunks_exact(4)
-            .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
-            .collect();
-        if let Some(bad) = values.iter().position(|v| !v.is_finite()) {
-            return Err(err(
-                path,
-                format!("tensor {name} holds a non-finite value at index {bad}"),
-            ));
-        }
-        out.insert(
-            name,
-            NamedTensor {
-                shape: view.shape().to_vec(),
-                values,
-            },
-        );
-    }
-    Ok((meta, out))
+    Ok(meta)
 }
 
 /// Read a weight file's record without building the network.
@@ -302,7 +274,7 @@ pub fn update_meta(path: &Path, f: impl FnOnce(&mut WeightMeta)) -> Result<Weigh
     let (mut meta, tensors) = read(path)?;
     f(&mut meta);
     let bytes = encode(&tensors, &meta)?;
-    pgrf_raw::atomic::write_atomic(path, &bytes).map_err(|e| err(path, e))?;
+    pgrf_core::write_atomic(path, &bytes)?;
     Ok(meta)
 }
 
@@ -338,7 +310,7 @@ mod tests {
         NoiseSource {
             profile: Some("sony-a7s2".into()),
             calibration: None,
-            model: "pgrf".into(),
+            model: pgrf_noise::ModelKind::Pgrf,
             iso: None,
             ratio: [100.0, 300.0],
         }
@@ -351,14 +323,21 @@ mod tests {
         let net = cfg.init::<Cpu>(&device);
         let p = tmp("spc.safetensors");
         let mut meta = WeightMeta::new(Architecture::SidUnet(cfg), noise());
+        let config = crate::TrainConfig {
+            steps: 12,
+            width: Some(4),
+            ..Default::default()
+        };
         meta.training = Some(TrainingSummary {
             steps: 12,
             final_loss: 0.25,
+            config: Some(config.clone()),
             ..Default::default()
         });
         save::<Cpu, _>(&p, &net, &meta).unwrap();
         let (back, m) = load_denoiser::<Cpu>(&p, &device).unwrap();
         assert_eq!(m.training.as_ref().unwrap().steps, 12);
+        assert_eq!(m.training.as_ref().unwrap().config, Some(config));
         assert_eq!(m.noise, noise());
         let x = Tensor::<Cpu, 4>::random([1, 4, 20, 36], Distribution::Default, &device);
         let a: Vec<f32> = net.forward(x.clone()).into_data().to_vec().unwrap();

@@ -7,7 +7,7 @@ use burn::optim::AdamConfig;
 use burn::tensor::{Tensor, TensorData};
 use pgrf_nn::backend::{Cpu, CpuTrain};
 use pgrf_nn::data::validation::psnr;
-use pgrf_nn::sample::two_stage;
+use pgrf_nn::flow::sample::two_stage;
 use pgrf_nn::seeded::{materialise, seeded};
 use pgrf_nn::step::{denoiser_step, flow_step};
 use pgrf_nn::{SidUnetConfig, Sr3Config};

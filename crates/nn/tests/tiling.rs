@@ -72,7 +72,7 @@ fn check(r: &dyn Restore, name: &str) {
         overlap: 16,
         seed: 3,
     };
-    let whole = restore_image(r, x.view(), &whole_opts, &mut |_, _| {}).unwrap();
+    let whole = restore_image(r, x.view(), &whole_opts, &pgrf_core::NoProgress).unwrap();
     // One tile is the untiled network output itself (to 1e-5).
     let x0s: Vec<Array3<f32>> = (0..r.samples() as u64)
         .map(|k| start_noise(3, k, 4, h, w))
@@ -95,7 +95,7 @@ fn check(r: &dyn Restore, name: &str) {
     };
     let plan = plan_for(h, w, &opts, r.side_multiple()).unwrap();
     assert!(plan.cols.count() >= 3, "{name}");
-    let tiled = restore_image(r, x.view(), &opts, &mut |_, _| {}).unwrap();
+    let tiled = restore_image(r, x.view(), &opts, &pgrf_core::NoProgress).unwrap();
     // The same tiles averaged with equal weights where they overlap: the
     // common naive blend, which steps wherever a tile begins or ends.
     let mut sum = Array3::<f32>::zeros((4, h, w));

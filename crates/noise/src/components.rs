@@ -8,12 +8,12 @@ use std::fmt;
 /// F fixed pattern, A dark-current shot.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Components {
-    pub photon: bool,
-    pub read: bool,
-    pub row: bool,
-    pub quant: bool,
-    pub fixed_pattern: bool,
-    pub dark: bool,
+    pub(crate) photon: bool,
+    pub(crate) read: bool,
+    pub(crate) row: bool,
+    pub(crate) quant: bool,
+    pub(crate) fixed_pattern: bool,
+    pub(crate) dark: bool,
 }
 
 impl Components {
@@ -25,7 +25,7 @@ impl Components {
         fixed_pattern: true,
         dark: true,
     };
-    pub const NONE: Components = Components {
+    pub(crate) const NONE: Components = Components {
         photon: false,
         read: false,
         row: false,

@@ -7,6 +7,8 @@
 //! Images are packed `(4, H/2, W/2)` normalised arrays as produced by
 //! `pgrf_raw::pack_normalized`.
 
+#![warn(missing_docs)]
+
 pub mod capture;
 pub mod components;
 pub mod error;
@@ -17,7 +19,6 @@ pub mod pair;
 pub mod params;
 pub mod poisson;
 pub mod profile;
-pub mod rng;
 pub mod sensor;
 pub mod tukey;
 

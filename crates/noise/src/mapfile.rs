@@ -5,12 +5,9 @@
 
 use crate::error::{NoiseError, Result};
 use ndarray::{Array3, ArrayView3};
-use safetensors::tensor::{Dtype, SafeTensors, TensorView};
-use std::collections::{BTreeMap, HashMap};
+use pgrf_core::record::{self, RecordError};
+use std::collections::BTreeMap;
 use std::path::Path;
-
-/// Metadata key holding pgrf's JSON record.
-pub const META_KEY: &str = "pgrf";
 
 fn err(path: &Path, reason: impl std::fmt::Display) -> NoiseError {
     NoiseError::Invalid(format!("{}: {reason}", path.display()))
@@ -22,63 +19,39 @@ pub fn write_maps(
     maps: &[(&str, ArrayView3<f32>)],
     meta: &serde_json::Value,
 ) -> Result<()> {
-    let owned: Vec<(String, Vec<u8>, Vec<usize>)> = maps
+    let owned: Vec<(&str, Vec<usize>, Vec<f32>)> = maps
         .iter()
-        .map(|(name, a)| {
-            let bytes: Vec<u8> = a.iter().flat_map(|v| v.to_le_bytes()).collect();
-            (name.to_string(), bytes, a.shape().to_vec())
-        })
+        .map(|(name, a)| (*name, a.shape().to_vec(), a.iter().copied().collect()))
         .collect();
-    let views: Vec<(String, TensorView)> = owned
-        .iter()
-        .map(|(n, b, s)| {
-            Ok((
-                n.clone(),
-                TensorView::new(Dtype::F32, s.clone(), b).map_err(|e| err(path, e))?,
-            ))
-        })
-        .collect::<Result<_>>()?;
-    let mut info = HashMap::new();
-    info.insert(META_KEY.to_string(), meta.to_string());
-    let bytes = safetensors::tensor::serialize(views, Some(info)).map_err(|e| err(path, e))?;
-    pgrf_raw::atomic::write_atomic(path, &bytes).map_err(|e| NoiseError::Invalid(e.to_string()))
+    let bytes = record::encode(
+        owned.iter().map(|(n, s, v)| (*n, &s[..], &v[..])),
+        &meta.to_string(),
+    )
+    .map_err(|e| err(path, e))?;
+    pgrf_core::write_atomic(path, &bytes)?;
+    Ok(())
 }
 
 /// Read a maps file: its JSON record and every tensor, which must be f32 of
 /// rank 3 with 4 planes.
 pub fn read_maps(path: &Path) -> Result<(serde_json::Value, BTreeMap<String, Array3<f32>>)> {
     let bytes = std::fs::read(path).map_err(|e| err(path, e))?;
-    let st = SafeTensors::deserialize(&bytes)
-        .map_err(|e| err(path, format!("not a safetensors file ({e})")))?;
-    let (_, header) = SafeTensors::read_metadata(&bytes).map_err(|e| err(path, e))?;
-    let meta_text = header
-        .metadata()
-        .as_ref()
-        .and_then(|m| m.get(META_KEY))
-        .ok_or_else(|| err(path, "no pgrf metadata record (not a pgrf maps file)"))?;
+    let rec = record::decode(&bytes).map_err(|e| match e {
+        RecordError::NoRecord => err(path, "no pgrf metadata record (not a pgrf maps file)"),
+        e => err(path, e),
+    })?;
     let meta: serde_json::Value =
-        serde_json::from_str(meta_text).map_err(|e| err(path, format!("bad metadata: {e}")))?;
+        serde_json::from_str(&rec.meta).map_err(|e| err(path, format!("bad metadata: {e}")))?;
     let mut maps = BTreeMap::new();
-    for (name, view) in st.tensors() {
-        if view.dtype() != Dtype::F32 {
-            return Err(err(
-                path,
-                format!("tensor '{name}' is {:?}, expected F32", view.dtype()),
-            ));
-        }
-        let s = view.shape();
+    for (name, t) in rec.tensors {
+        let s = &t.shape;
         if s.len() != 3 || s[0] != 4 {
             return Err(err(
                 path,
                 format!("tensor '{name}' has shape {s:?}, expected [4, H, W]"),
             ));
         }
-        let data: Vec<f32> = view
-            .data()
-            .chunks_exact(4)
-            .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
-            .collect();
-        let a = Array3::from_shape_vec((s[0], s[1], s[2]), data).map_err(|e| err(path, e))?;
+        let a = Array3::from_shape_vec((s[0], s[1], s[2]), t.values).map_err(|e| err(path, e))?;
         maps.insert(name, a);
     }
     Ok((meta, maps))

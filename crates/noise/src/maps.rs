@@ -19,7 +19,7 @@ pub enum Map {
 
 impl Map {
     #[inline(always)]
-    pub fn at(&self, plane: usize, flat_in_plane: usize) -> f32 {
+    pub(crate) fn at(&self, plane: usize, flat_in_plane: usize) -> f32 {
         match self {
             Map::Scalar(v) => *v,
             Map::Plane(v) => v[plane],
@@ -32,7 +32,7 @@ impl Map {
 
     /// Row of a per-pixel map, or None for scalar/plane maps.
     #[inline]
-    pub fn row(&self, plane: usize, i: usize, pw: usize) -> Option<&[f32]> {
+    pub(crate) fn row(&self, plane: usize, i: usize, pw: usize) -> Option<&[f32]> {
         match self {
             Map::Pixel(a) => {
                 let s = a.as_slice().expect("maps are standard layout");
@@ -46,7 +46,7 @@ impl Map {
 
     /// The global value that replaces this map in the "noD" ablation: its mean
     /// per plane.
-    pub fn global(&self) -> Map {
+    pub(crate) fn global(&self) -> Map {
         match self {
             Map::Pixel(a) => {
                 let m: [f32; 4] = std::array::from_fn(|p| {
@@ -62,7 +62,7 @@ impl Map {
     /// The window `(y, x, h, w)` of a per-pixel map (packed coordinates);
     /// scalar and per-plane maps are unchanged. Training crops need the maps
     /// of the sensor region the crop stands for.
-    pub fn crop(&self, y: usize, x: usize, h: usize, w: usize) -> Result<Map> {
+    pub(crate) fn crop(&self, y: usize, x: usize, h: usize, w: usize) -> Result<Map> {
         match self {
             Map::Pixel(a) => {
                 let (ph, pw) = (a.shape()[1], a.shape()[2]);
@@ -79,7 +79,7 @@ impl Map {
     }
 
     /// Packed size `(H/2, W/2)` of a per-pixel map.
-    pub fn pixel_shape(&self) -> Option<(usize, usize)> {
+    pub(crate) fn pixel_shape(&self) -> Option<(usize, usize)> {
         match self {
             Map::Pixel(a) => Some((a.shape()[1], a.shape()[2])),
             _ => None,
@@ -131,9 +131,10 @@ fn check_fp(min_fp: f32) -> Result<()> {
 pub struct PixelMaps {
     /// Fixed-pattern offset of the dark level, DN (bias frames' mean - black).
     pub bias: Map,
-    /// Source-follower read-noise standard deviation, DN.
+    /// Source-follower read-noise standard deviation (sigma_r of N_r), DN.
     pub sigma_read: Map,
-    /// Dark-current rate, electrons per sqrt(s) or per s (see `dark_law`).
+    /// Dark-current rate, electrons per sqrt(s) or per s (see `dark_law`):
+    /// N_RS = K Poisson(rate x law(t)).
     pub dark_rate: Map,
     /// Fixed-pattern deviation N_FP multiplying the dark signal: D = N_RS (1 + N_FP).
     pub n_fp: Map,
@@ -145,7 +146,7 @@ impl PixelMaps {
     /// values. Constant time, because the sampler calls it on every frame;
     /// per-pixel values are scanned once where maps are loaded
     /// ([`Self::check_values`]) and non-finite results are caught by the sampler.
-    pub fn check(&self, shape: (usize, usize)) -> Result<()> {
+    pub(crate) fn check(&self, shape: (usize, usize)) -> Result<()> {
         self.bias.check("bias", shape, false)?;
         self.sigma_read.check("sigma_read", shape, true)?;
         self.dark_rate.check("dark_rate", shape, true)?;

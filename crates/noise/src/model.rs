@@ -1,18 +1,27 @@
 //! The noise models and the one sampling engine they share.
 //!
-//! All three models are special cases of the PGRF composite, in DN above
-//! black on the profile's scale:
+//! The paper's composite model for one pixel (x, y), in DN above black:
 //!
-//!   D = K Poisson(S/K)                       P  photon shot (S = clean signal)
-//!     + K Poisson(d(t)) (1 + N_FP)           A  dark-current shot, F its fixed pattern
-//!     + b(x, y)                              F  fixed-pattern offset / colour bias
-//!     + sigma_r(x, y) N(0,1) or Tukey        G  source-follower read noise
-//!     + N(0, sigma_H) per sensor row         H  row noise
-//!     + U(-q/2, q/2)                         Q  quantisation
+//! ```text
+//! D = K (I + N_s) + N_RS (1 + N_FP) + N_H + N_r + N_q
+//! ```
+//!
+//! with one function per term, used by [`NoiseModel::sample`] (synthetic
+//! pairs) and by the virtual sensor ([`crate::sensor`]) alike:
+//!
+//! | term | meaning | letter | function |
+//! |---|---|---|---|
+//! | K (I + N_s) | photon shot: K times Poisson(I electrons) | P | [`photon_shot`] |
+//! | N_RS (1 + N_FP) | dark-current shot K Poisson(d(t)), times the pixel's fixed-pattern factor | A, F | [`dark_shot`] |
+//! | b(x, y) | fixed-pattern offset (calibrated bias mean) / ELD's colour bias | F | added in [`NoiseModel::sample`] |
+//! | N_r | source-follower (read) noise sigma_r(x, y) N(0, 1) or Tukey | G | [`read_noise`] |
+//! | N_H | row noise, one N(0, sigma_H) per sensor row | H | [`row_noise`] |
+//! | N_q | quantisation, U(-q/2, q/2) | Q | [`quantisation`] |
 //!
 //! - P-G (Foi): P + Gaussian G.
 //! - ELD: P + Tukey-lambda (or Gaussian) G + H + Q + per-channel colour bias.
-//! - PGRF: everything, with per-pixel maps; "noD" replaces them by their means.
+//! - PGRF: everything, with per-pixel maps; "noD" replaces them by their
+//!   means ([`PixelMaps::global`]).
 //!
 //! A component that is switched off contributes nothing; with P off the
 //! signal passes through noiselessly. The ADC's range is respected: results
@@ -24,9 +33,9 @@ use crate::maps::{Map, PixelMaps};
 use crate::params::CaptureParams;
 use crate::poisson::poisson;
 use crate::profile::{CameraProfile, DarkLaw};
-use crate::rng::{open01, stream, Domain};
 use crate::tukey;
 use ndarray::{Array3, ArrayView3};
+use pgrf_core::seed::{open01, stream, Domain};
 use rand::Rng;
 use rand_distr::StandardNormal;
 use rayon::prelude::*;
@@ -42,12 +51,37 @@ pub enum ReadDist {
     },
 }
 
-/// Which model a user asked for.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+/// Which model a user asked for (`pg`, `eld` or `pgrf` in flags, files and
+/// records).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
 pub enum ModelKind {
+    /// Foi's Poisson-Gaussian model: shot noise plus Gaussian read noise.
+    #[serde(rename = "pg", alias = "poissongaussian")]
     PoissonGaussian,
+    /// ELD's model: shot, Tukey-lambda or Gaussian read, row, quantisation.
     Eld,
+    /// The paper's composite model with per-pixel calibration maps
+    /// (pgrf's default).
+    #[default]
     Pgrf,
+}
+
+impl ModelKind {
+    /// The name in flags, files and records.
+    pub(crate) fn name(self) -> &'static str {
+        match self {
+            ModelKind::PoissonGaussian => "pg",
+            ModelKind::Eld => "eld",
+            ModelKind::Pgrf => "pgrf",
+        }
+    }
+}
+
+impl std::fmt::Display for ModelKind {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
 }
 
 impl std::str::FromStr for ModelKind {
@@ -62,15 +96,21 @@ impl std::str::FromStr for ModelKind {
     }
 }
 
-/// A noise model resolved for one capture.
+/// A noise model resolved for one capture: the parameters of
+/// D = K (I + N_s) + N_RS (1 + N_FP) + N_H + N_r + N_q (plus the
+/// fixed-pattern offset b(x, y)).
 #[derive(Clone, Debug)]
 pub struct NoiseModel {
-    /// System gain, DN per electron.
+    /// K, the system gain, DN per electron.
     pub k: f32,
+    /// Distribution of N_r (Gaussian, or ELD's Tukey-lambda).
     pub read: ReadDist,
+    /// Per-pixel (or per-plane, or scalar) maps: offset b(x, y), N_r's sigma,
+    /// the dark rate of N_RS with its time law, and N_FP.
     pub maps: PixelMaps,
+    /// sigma_H, the standard deviation of N_H, DN.
     pub row_sigma: f32,
-    /// Quantisation step, DN.
+    /// Quantisation step q of N_q, DN.
     pub quant_step: f32,
     pub components: Components,
     /// white - black in DN: maps normalised images to the model's DN.
@@ -92,9 +132,61 @@ pub struct Capture {
     pub seed: u64,
 }
 
+/// Photon shot noise, the paper's K (I + N_s): `electrons` I of signal
+/// (I + N_s ~ Poisson(I)) converted at `k` DN per electron (K, or the
+/// virtual sensor's per-pixel gain). One Poisson draw from `rng`.
+#[inline]
+pub(crate) fn photon_shot<R: Rng + ?Sized>(rng: &mut R, k: f32, electrons: f64) -> f32 {
+    k * poisson(rng, electrons) as f32
+}
+
+/// Dark-current shot noise times the fixed pattern, the paper's
+/// N_RS (1 + N_FP): N_RS = K Poisson(d) DN for `electrons` d of dark signal
+/// (rate x law(t), [`DarkLaw::electrons`]), multiplied by (1 + N_FP) when
+/// the pixel's fixed-pattern deviation `n_fp` is given (component F).
+#[inline]
+pub(crate) fn dark_shot<R: Rng + ?Sized>(rng: &mut R, k: f32, electrons: f64, n_fp: Option<f32>) -> f32 {
+    let d = photon_shot(rng, k, electrons);
+    match n_fp {
+        Some(fp) => d * (1.0 + fp),
+        None => d,
+    }
+}
+
+/// Source-follower (read) noise, the paper's N_r: `sigma` (the pixel's
+/// sigma_r in DN) times a standard Gaussian or Tukey-lambda draw.
+#[inline]
+pub(crate) fn read_noise<R: Rng + ?Sized>(rng: &mut R, sigma: f32, dist: ReadDist) -> f32 {
+    let z = match dist {
+        ReadDist::Gaussian => rng.sample::<f32, _>(StandardNormal),
+        ReadDist::Tukey { lambda } => tukey::quantile(open01(rng), lambda as f64) as f32,
+    };
+    sigma * z
+}
+
+/// Row noise, the paper's N_H: one N(0, `sigma`^2) value per sensor row for
+/// `rows` rows, drawn from per-row streams of `seed` (`lane` keeps two
+/// users of one seed apart), so the values do not depend on the thread
+/// count.
+pub(crate) fn row_noise(seed: u64, rows: usize, sigma: f32, lane: u64) -> Vec<f32> {
+    (0..rows)
+        .map(|r| {
+            let z: f32 = stream(seed, Domain::Row, r as u64, lane).sample(StandardNormal);
+            z * sigma
+        })
+        .collect()
+}
+
+/// Quantisation noise, the paper's N_q: uniform on (-q/2, q/2) for a step of
+/// `q` DN. (The virtual sensor quantises by rounding instead, as an ADC does.)
+#[inline]
+pub(crate) fn quantisation<R: Rng + ?Sized>(rng: &mut R, q: f32) -> f32 {
+    q * (open01(rng) as f32 - 0.5)
+}
+
 impl NoiseModel {
     /// Foi's Poisson-Gaussian model: shot noise and a Gaussian read noise.
-    pub fn poisson_gaussian(profile: &CameraProfile, p: &CaptureParams) -> NoiseModel {
+    pub(crate) fn poisson_gaussian(profile: &CameraProfile, p: &CaptureParams) -> NoiseModel {
         NoiseModel {
             k: p.k as f32,
             read: ReadDist::Gaussian,
@@ -115,7 +207,7 @@ impl NoiseModel {
 
     /// ELD's model: shot, Tukey-lambda (or Gaussian) read, row, quantisation,
     /// per-channel colour bias.
-    pub fn eld(profile: &CameraProfile, p: &CaptureParams, tukey: bool) -> NoiseModel {
+    pub(crate) fn eld(profile: &CameraProfile, p: &CaptureParams, tukey: bool) -> NoiseModel {
         let (read, sigma) = if tukey {
             (
                 ReadDist::Tukey {
@@ -144,7 +236,9 @@ impl NoiseModel {
         }
     }
 
-    /// The paper's composite. `maps` come from a calibration; without one the
+    /// The paper's composite, D = K (I + N_s) + N_RS (1 + N_FP) + N_H +
+    /// N_r + N_q, with the components `components` (letters P A F G H Q).
+    /// `maps` (b, sigma_r, dark rate, N_FP per pixel) come from a calibration; without one the
     /// profile's global values are used (Gaussian read at the ISO's sigma,
     /// per-channel dark-level offset, the profile's dark current if measured).
     /// `global` is the "noD" ablation: per-pixel maps replaced by their means.
@@ -222,9 +316,22 @@ impl NoiseModel {
         self.maps.check((s[1], s[2]))
     }
 
-    /// Synthesise the noisy capture of `clean` (normalised, packed) taken
-    /// `ratio` times darker, and return it multiplied back by the ratio, in
-    /// the same normalised units (what a low-light pipeline feeds a denoiser).
+    /// The composite model, per pixel: synthesise the noisy capture of
+    /// `clean` (normalised, packed) taken `ratio` times darker, and return it
+    /// multiplied back by the ratio, in the same normalised units (what a
+    /// low-light pipeline feeds a denoiser). With I = clean x dn_range /
+    /// ratio / K electrons, each pixel is, in DN,
+    ///
+    /// ```text
+    /// D = K (I + N_s)         photon_shot        (P; I passes through without P)
+    ///   + N_RS (1 + N_FP)     dark_shot          (A; the factor with F)
+    ///   + b(x, y)             fixed-pattern offset (F)
+    ///   + N_r                 read_noise         (G)
+    ///   + N_H                 row_noise          (H)
+    ///   + N_q                 quantisation       (Q)
+    /// ```
+    ///
+    /// clipped to [-black, white - black], in this order of draws.
     /// Deterministic in `capture.seed`, whatever the number of threads.
     pub fn sample(&self, clean: ArrayView3<f32>, capture: &Capture) -> Result<Array3<f32>> {
         self.validate(&clean, capture)?;
@@ -235,13 +342,7 @@ impl NoiseModel {
 
         // Row noise: one value per sensor row, shared by the planes on it.
         let rows: Vec<f32> = if c.row && self.row_sigma > 0.0 {
-            (0..2 * ph)
-                .map(|r| {
-                    let z: f32 =
-                        stream(capture.seed, Domain::Row, r as u64, 0).sample(StandardNormal);
-                    z * self.row_sigma
-                })
-                .collect()
+            row_noise(capture.seed, 2 * ph, self.row_sigma, 0)
         } else {
             vec![0.0; 2 * ph]
         };
@@ -277,7 +378,7 @@ impl NoiseModel {
                 let s = srow[j] * to_dn;
                 row_ok &= s.is_finite();
                 let mut v = if c.photon {
-                    k * poisson(&mut rng, s as f64 * inv_k) as f32
+                    photon_shot(&mut rng, k, s as f64 * inv_k)
                 } else {
                     s
                 };
@@ -285,11 +386,10 @@ impl NoiseModel {
                     let rate = dark_row.map_or_else(|| m.dark_rate.at(plane, base + j), |r| r[j]);
                     let e = rate * dark_time;
                     if e > 0.0 {
-                        let mut d = k * poisson(&mut rng, e as f64) as f32;
-                        if c.fixed_pattern {
-                            d *= 1.0 + fp_row.map_or_else(|| m.n_fp.at(plane, base + j), |r| r[j]);
-                        }
-                        v += d;
+                        let fp = c
+                            .fixed_pattern
+                            .then(|| fp_row.map_or_else(|| m.n_fp.at(plane, base + j), |r| r[j]));
+                        v += dark_shot(&mut rng, k, e as f64, fp);
                     }
                 }
                 if c.fixed_pattern {
@@ -297,19 +397,13 @@ impl NoiseModel {
                 }
                 if c.read {
                     let sigma = sig_row.map_or_else(|| m.sigma_read.at(plane, base + j), |r| r[j]);
-                    let z = match self.read {
-                        ReadDist::Gaussian => rng.sample::<f32, _>(StandardNormal),
-                        ReadDist::Tukey { lambda } => {
-                            tukey::quantile(open01(&mut rng), lambda as f64) as f32
-                        }
-                    };
-                    v += sigma * z;
+                    v += read_noise(&mut rng, sigma, self.read);
                 }
                 if c.row {
                     v += row_off;
                 }
                 if c.quant {
-                    v += q * (open01(&mut rng) as f32 - 0.5);
+                    v += quantisation(&mut rng, q);
                 }
                 row_ok &= v.is_finite();
                 dst[j] = v.clamp(lo, hi) * from_dn;

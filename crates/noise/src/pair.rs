@@ -12,8 +12,8 @@ use crate::maps::PixelMaps;
 use crate::model::{Capture, ModelKind, NoiseModel};
 use crate::params::CaptureParams;
 use crate::profile::CameraProfile;
-use crate::rng::{open01, stream, Domain};
 use ndarray::{Array3, ArrayView3};
+use pgrf_core::seed::{open01, stream, Domain};
 
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum RatioSpec {
@@ -53,7 +53,7 @@ impl Default for ExposureSpec {
 
 #[derive(Clone, Debug)]
 pub struct PairSpec {
-    pub profile: CameraProfile,
+    pub(crate) profile: CameraProfile,
     pub kind: ModelKind,
     /// Components for the PGRF model (P-G and ELD have fixed sets).
     pub components: Components,
@@ -111,7 +111,7 @@ impl PairSpec {
     }
 
     /// Resolve the model for one capture.
-    pub fn model(&self, seed: u64) -> Result<(NoiseModel, CaptureParams)> {
+    pub(crate) fn model(&self, seed: u64) -> Result<(NoiseModel, CaptureParams)> {
         let mut params = match self.iso {
             Some(iso) => self.profile.params_at_iso(iso)?,
             None => self.profile.sample_params(seed),

@@ -4,7 +4,7 @@
 
 use crate::error::{NoiseError, Result};
 use crate::profile::CameraProfile;
-use crate::rng::{open01, stream, Domain};
+use pgrf_core::seed::{open01, stream, Domain};
 use rand::Rng;
 use rand_distr::StandardNormal;
 
@@ -14,7 +14,7 @@ use rand_distr::StandardNormal;
 pub struct CaptureParams {
     /// System gain, DN per electron.
     pub k: f64,
-    pub tukey_lambda: f64,
+    pub(crate) tukey_lambda: f64,
     /// Tukey-lambda read-noise scale, DN.
     pub sigma_tukey: f64,
     /// Gaussian read-noise standard deviation, DN.
@@ -22,7 +22,7 @@ pub struct CaptureParams {
     /// Row-noise standard deviation, DN.
     pub sigma_row: f64,
     /// Per-plane (R, G1, B, G2) offset of the dark level, DN.
-    pub bias: [f64; 4],
+    pub(crate) bias: [f64; 4],
 }
 
 impl CameraProfile {
@@ -90,7 +90,7 @@ impl CameraProfile {
     /// ELD's sampling: ln K ~ U(ln k_min, ln k_max); each scale
     /// ln(sigma) = slope ln K + bias + N(0, sigma_fit^2); Tukey shape and colour
     /// bias from one calibration setting drawn uniformly.
-    pub fn sample_params(&self, seed: u64) -> CaptureParams {
+    pub(crate) fn sample_params(&self, seed: u64) -> CaptureParams {
         let mut rng = stream(seed, Domain::Params, 0, 0);
         let log_k = self.k_min.ln() + open01(&mut rng) * (self.k_max.ln() - self.k_min.ln());
         let k = log_k.exp();

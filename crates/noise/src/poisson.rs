@@ -7,15 +7,15 @@
 //! comparisons, one uniform), and Hörmann's PTRS transformed rejection with
 //! squeeze above (about 1.1 uniform pairs per sample, constant in the mean).
 
-use crate::rng::open01;
+use pgrf_core::seed::open01;
 use rand::Rng;
 
 /// Mean at which we switch from inversion to PTRS.
-pub const PTRS_THRESHOLD: f64 = 10.0;
+pub(crate) const PTRS_THRESHOLD: f64 = 10.0;
 
 /// One Poisson(mean) variate. Non-positive or non-finite means give 0.
 #[inline]
-pub fn poisson<R: Rng + ?Sized>(rng: &mut R, mean: f64) -> f64 {
+pub(crate) fn poisson<R: Rng + ?Sized>(rng: &mut R, mean: f64) -> f64 {
     if mean.is_nan() || mean <= 0.0 || !mean.is_finite() {
         return 0.0;
     }
@@ -88,7 +88,7 @@ fn floor(x: f64) -> f64 {
 
 /// ln(k!) exactly for small k (table), by Stirling's series beyond (relative
 /// error below 1e-15 for k >= 32).
-pub fn ln_factorial(k: f64) -> f64 {
+pub(crate) fn ln_factorial(k: f64) -> f64 {
     const N: usize = 32;
     static TABLE: std::sync::OnceLock<[f64; N]> = std::sync::OnceLock::new();
     let t = TABLE.get_or_init(|| {
@@ -112,7 +112,7 @@ pub fn ln_factorial(k: f64) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::rng::{stream, Domain};
+    use pgrf_core::seed::{stream, Domain};
 
     #[test]
     fn ln_factorial_matches_direct_sums() {

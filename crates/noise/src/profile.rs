@@ -15,14 +15,14 @@ use std::path::Path;
 /// ln(sigma) = slope * ln(K) + bias, with residual standard deviation `sigma`.
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
-pub struct LogFit {
-    pub slope: f64,
-    pub bias: f64,
-    pub sigma: f64,
+pub(crate) struct LogFit {
+    pub(crate) slope: f64,
+    pub(crate) bias: f64,
+    pub(crate) sigma: f64,
 }
 
 impl LogFit {
-    pub fn mean_at(&self, k: f64) -> f64 {
+    pub(crate) fn mean_at(&self, k: f64) -> f64 {
         (self.slope * k.ln() + self.bias).exp()
     }
 }
@@ -30,35 +30,35 @@ impl LogFit {
 /// ELD's parameter distribution for one camera.
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
-pub struct EldFits {
+pub(crate) struct EldFits {
     /// Tukey-lambda shapes measured at the calibration settings; one is drawn.
-    pub tukey_shapes: Vec<f64>,
-    pub tukey_scale: LogFit,
-    pub gauss_scale: LogFit,
-    pub row_scale: LogFit,
+    pub(crate) tukey_shapes: Vec<f64>,
+    pub(crate) tukey_scale: LogFit,
+    pub(crate) gauss_scale: LogFit,
+    pub(crate) row_scale: LogFit,
     /// Per-plane (R, G1, B, G2) black-level offsets in DN, one row per
     /// calibration setting (drawn together with the Tukey shape of that row).
     #[serde(default)]
-    pub color_bias: Vec<[f64; 4]>,
+    pub(crate) color_bias: Vec<[f64; 4]>,
 }
 
 /// Point estimates at one ISO.
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
-pub struct IsoPoint {
-    pub iso: u32,
+pub(crate) struct IsoPoint {
+    pub(crate) iso: u32,
     /// System gain, DN per electron.
-    pub k: f64,
-    pub tukey_lambda: f64,
+    pub(crate) k: f64,
+    pub(crate) tukey_lambda: f64,
     /// Tukey-lambda read-noise scale, DN.
-    pub sigma_tukey: f64,
+    pub(crate) sigma_tukey: f64,
     /// Gaussian read-noise standard deviation, DN.
-    pub sigma_gauss: f64,
+    pub(crate) sigma_gauss: f64,
     /// Row-noise standard deviation, DN.
-    pub sigma_row: f64,
+    pub(crate) sigma_row: f64,
     /// Measured mean offset of the dark level from the nominal black, DN.
     #[serde(default)]
-    pub black_level_error: f64,
+    pub(crate) black_level_error: f64,
 }
 
 /// How dark signal grows with exposure time t (seconds).
@@ -72,6 +72,10 @@ pub enum DarkLaw {
 }
 
 impl DarkLaw {
+    /// The dark-current law: the dark signal after `t` seconds, in
+    /// electrons, for a pixel's `rate` (the paper's y = a sqrt(t), or
+    /// y = a t). Its mean times K is the dark level N_RS adds; calibration
+    /// fits `a` per pixel with `pgrf_calib::estimate::fit_origin`.
     pub fn electrons(self, rate: f64, t: f64) -> f64 {
         match self {
             DarkLaw::Sqrt => rate * t.max(0.0).sqrt(),
@@ -103,25 +107,25 @@ pub struct DarkCurrent {
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct CameraProfile {
-    pub schema: u32,
-    pub name: String,
-    pub make: String,
-    pub model: String,
-    pub source: String,
+    pub(crate) schema: u32,
+    pub(crate) name: String,
+    pub(crate) make: String,
+    pub(crate) model: String,
+    pub(crate) source: String,
     #[serde(default)]
-    pub units: String,
+    pub(crate) units: String,
     /// white - black in DN: the scale every DN value in this profile refers to.
-    pub dn_range: f64,
+    pub(crate) dn_range: f64,
     /// Nominal black level in DN, when known (used to clip at 0 DN).
-    pub black: Option<f64>,
+    pub(crate) black: Option<f64>,
     /// K = k_per_iso * ISO when the camera's gain is known to be linear in ISO.
-    pub k_per_iso: Option<f64>,
+    pub(crate) k_per_iso: Option<f64>,
     /// Range of system gain covered by the calibration (DN per electron).
-    pub k_min: f64,
-    pub k_max: f64,
-    pub eld: EldFits,
+    pub(crate) k_min: f64,
+    pub(crate) k_max: f64,
+    pub(crate) eld: EldFits,
     #[serde(default)]
-    pub per_iso: Vec<IsoPoint>,
+    pub(crate) per_iso: Vec<IsoPoint>,
     pub dark_current: Option<DarkCurrent>,
 }
 
@@ -143,7 +147,7 @@ const BUILT_IN: [(&str, &str); 5] = [
 ];
 
 /// Names of the built-in profiles.
-pub fn built_in_names() -> Vec<&'static str> {
+pub(crate) fn built_in_names() -> Vec<&'static str> {
     BUILT_IN.iter().map(|(n, _)| *n).collect()
 }
 
@@ -178,7 +182,7 @@ impl CameraProfile {
     }
 
     /// Parse and validate.
-    pub fn from_json(name: &str, text: &str) -> Result<CameraProfile> {
+    pub(crate) fn from_json(name: &str, text: &str) -> Result<CameraProfile> {
         let p: CameraProfile = serde_json::from_str(text).map_err(|e| NoiseError::Profile {
             name: name.to_string(),
             reason: e.to_string(),

@@ -4,7 +4,8 @@
 //! the map that generated the frames.
 //!
 //! Per pixel x (packed layout), a frame with `e` photo-electrons of light and
-//! exposure t is, in DN:
+//! exposure t is, in DN (each random term drawn by the noise model's own
+//! function: [`photon_shot`], [`dark_shot`], [`read_noise`], [`row_noise`]):
 //!
 //!   black + bias(x) + K prnu(x) Poisson(e) + K Poisson(d(x) g(t)) (1 + n_fp(x))
 //!         + N(0, sigma_r(x)) + row(frame, sensor row),   rounded and clipped to 0..white.
@@ -13,10 +14,10 @@
 //! above the rest.
 
 use crate::error::{NoiseError, Result};
-use crate::poisson::poisson;
+use crate::model::{dark_shot, photon_shot, read_noise, row_noise, ReadDist};
 use crate::profile::{CameraProfile, DarkLaw};
-use crate::rng::{open01, seeded_map, stream, Domain};
 use ndarray::{Array3, Axis};
+use pgrf_core::seed::{open01, seeded_map, stream, Domain};
 use pgrf_raw::{Cfa, RawFrame};
 use rand::Rng;
 use rand_distr::StandardNormal;
@@ -30,34 +31,34 @@ use rayon::prelude::*;
 /// similar CMOS sensors report.
 #[derive(Clone, Debug)]
 pub struct SensorSpec {
-    pub name: String,
+    pub(crate) name: String,
     pub width: usize,
     pub height: usize,
-    pub cfa: Cfa,
-    pub black: f32,
-    pub white: u32,
+    pub(crate) cfa: Cfa,
+    pub(crate) black: f32,
+    pub(crate) white: u32,
     pub iso: u32,
     /// Mean system gain, DN per electron.
     pub k: f32,
     /// PRNU: relative standard deviation of the per-pixel gain.
-    pub prnu: f32,
+    pub(crate) prnu: f32,
     /// DSNU: standard deviation of the per-pixel offset, DN.
-    pub dsnu: f32,
+    pub(crate) dsnu: f32,
     /// Median source-follower sigma, DN, and the log-normal spread around it.
-    pub read_sigma: f32,
-    pub read_spread: f32,
+    pub(crate) read_sigma: f32,
+    pub(crate) read_spread: f32,
     pub row_sigma: f32,
     /// Mean dark rate (electrons per sqrt(s) or per s) and its relative spread.
     pub dark_rate: f32,
-    pub dark_spread: f32,
+    pub(crate) dark_spread: f32,
     pub dark_law: DarkLaw,
     /// Standard deviation of N_FP.
-    pub n_fp: f32,
+    pub(crate) n_fp: f32,
     /// Share of hot pixels and their dark rate multiplier.
-    pub hot_fraction: f32,
-    pub hot_factor: f32,
+    pub(crate) hot_fraction: f32,
+    pub(crate) hot_factor: f32,
     /// Seed of the sensor itself (its maps); frames have their own seeds.
-    pub seed: u64,
+    pub(crate) seed: u64,
 }
 
 impl SensorSpec {
@@ -103,12 +104,12 @@ impl SensorSpec {
 pub struct VirtualSensor {
     pub spec: SensorSpec,
     /// Per-pixel gain K prnu(x), DN per electron.
-    pub gain: Array3<f32>,
+    pub(crate) gain: Array3<f32>,
     /// Fixed-pattern offset, DN.
     pub bias: Array3<f32>,
     pub sigma_read: Array3<f32>,
     pub dark_rate: Array3<f32>,
-    pub n_fp: Array3<f32>,
+    pub(crate) n_fp: Array3<f32>,
     /// 1 where the pixel is hot.
     pub hot: Array3<f32>,
 }
@@ -123,7 +124,7 @@ impl VirtualSensor {
         }
         let (ph, pw) = (spec.height / 2, spec.width / 2);
         let s = spec.seed;
-        let gn = |r: &mut crate::rng::BlockRng| r.sample::<f32, _>(StandardNormal);
+        let gn = |r: &mut pgrf_core::seed::BlockRng| r.sample::<f32, _>(StandardNormal);
         let (k, prnu, dsnu) = (spec.k, spec.prnu, spec.dsnu);
         let (rs, rsp) = (spec.read_sigma, spec.read_spread);
         let (dr, dsp) = (spec.dark_rate, spec.dark_spread);
@@ -158,12 +159,7 @@ impl VirtualSensor {
         let sp = &self.spec;
         let (ph, pw) = (sp.height / 2, sp.width / 2);
         let plane_rows = sp.cfa.offsets().map(|(r, _)| r);
-        let rows: Vec<f32> = (0..sp.height)
-            .map(|r| {
-                stream(seed, Domain::Row, r as u64, 1).sample::<f32, _>(StandardNormal)
-                    * sp.row_sigma
-            })
-            .collect();
+        let rows = row_noise(seed, sp.height, sp.row_sigma, 1);
         let g = sp.dark_law.electrons(1.0, t as f64);
         let white = sp.white as f32;
         let mut packed = Array3::<u16>::zeros((4, ph, pw));
@@ -186,13 +182,13 @@ impl VirtualSensor {
                     let x = block * pw + j;
                     let mut v = sp.black + bias[x] + row;
                     if electrons > 0.0 {
-                        v += gain[x] * poisson(&mut rng, electrons as f64) as f32;
+                        v += photon_shot(&mut rng, gain[x], electrons as f64);
                     }
                     let de = dark[x] as f64 * g;
                     if de > 0.0 {
-                        v += sp.k * poisson(&mut rng, de) as f32 * (1.0 + nfp[x]);
+                        v += dark_shot(&mut rng, sp.k, de, Some(nfp[x]));
                     }
-                    v += sig[x] * rng.sample::<f32, _>(StandardNormal);
+                    v += read_noise(&mut rng, sig[x], ReadDist::Gaussian);
                     *d = v.round().clamp(0.0, white) as u16;
                 }
             });
@@ -229,11 +225,7 @@ impl VirtualSensor {
     /// Scalar truth (what a global calibration should find), as JSON.
     pub fn truth_meta(&self) -> serde_json::Value {
         let sp = &self.spec;
-        let median = |a: &Array3<f32>| {
-            let mut v: Vec<f32> = a.iter().cloned().collect();
-            v.sort_by(|a, b| a.partial_cmp(b).unwrap());
-            v[v.len() / 2]
-        };
+        let median = |a: &Array3<f32>| pgrf_core::stats::median_finite(a) as f32;
         serde_json::json!({
             "kind": "virtual-sensor-truth",
             "preset": sp.name,
@@ -253,7 +245,7 @@ impl VirtualSensor {
 }
 
 /// Plane means, for quick checks.
-pub fn plane_means(a: &Array3<f32>) -> [f32; 4] {
+pub(crate) fn plane_means(a: &Array3<f32>) -> [f32; 4] {
     std::array::from_fn(|p| a.index_axis(Axis(0), p).mean().unwrap_or(0.0))
 }
 

@@ -7,7 +7,7 @@
 
 /// Quantile function Q(u; lambda), u in (0, 1).
 #[inline]
-pub fn quantile(u: f64, lambda: f64) -> f64 {
+pub(crate) fn quantile(u: f64, lambda: f64) -> f64 {
     let (a, b) = (u.ln(), (1.0 - u).ln());
     if lambda.abs() < 1e-12 {
         a - b
@@ -18,14 +18,14 @@ pub fn quantile(u: f64, lambda: f64) -> f64 {
 }
 
 /// dQ/du: the reciprocal of the density at Q(u), used for standard errors.
-pub fn quantile_slope(u: f64, lambda: f64) -> f64 {
+pub(crate) fn quantile_slope(u: f64, lambda: f64) -> f64 {
     u.powf(lambda - 1.0) + (1.0 - u).powf(lambda - 1.0)
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::rng::{open01, stream, Domain};
+    use pgrf_core::seed::{open01, stream, Domain};
 
     #[test]
     fn closed_form_reference_points() {

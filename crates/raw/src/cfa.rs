@@ -10,10 +10,10 @@ use std::fmt;
 use std::str::FromStr;
 
 /// Plane indices in packed order.
-pub const R: usize = 0;
-pub const G1: usize = 1;
-pub const B: usize = 2;
-pub const G2: usize = 3;
+pub(crate) const R: usize = 0;
+pub(crate) const G1: usize = 1;
+pub(crate) const B: usize = 2;
+pub(crate) const G2: usize = 3;
 /// Names of the packed planes, for reports.
 pub const PLANE_NAMES: [&str; 4] = ["R", "G1", "B", "G2"];
 
@@ -40,7 +40,7 @@ impl Cfa {
     }
 
     /// Packed plane (R=0, G1=1, B=2, G2=3) of the pixel at (row, col).
-    pub fn plane_at(self, row: usize, col: usize) -> usize {
+    pub(crate) fn plane_at(self, row: usize, col: usize) -> usize {
         let cell = (row & 1, col & 1);
         let off = self.offsets();
         (0..4)
@@ -59,7 +59,7 @@ impl Cfa {
 
     /// The phase seen by an image that starts `dy` rows and `dx` columns into
     /// this one (what a crop with odd offsets does to the pattern).
-    pub fn shifted(self, dy: usize, dx: usize) -> Cfa {
+    pub(crate) fn shifted(self, dy: usize, dx: usize) -> Cfa {
         let name: String = (0..2)
             .flat_map(|r| (0..2).map(move |c| (r, c)))
             .map(|(r, c)| ['R', 'G', 'B'][self.color_at(r + dy, c + dx)])

@@ -15,7 +15,7 @@ use crate::frame::{ColorMatrix, RawFrame};
 
 /// ColorChecker Classic patches as 8-bit sRGB (D65), row by row; the
 /// commonly published BabelColor averages.
-pub const COLORCHECKER_SRGB: [[u8; 3]; 24] = [
+pub(crate) const COLORCHECKER_SRGB: [[u8; 3]; 24] = [
     [115, 82, 68],
     [194, 150, 130],
     [98, 122, 157],
@@ -81,7 +81,7 @@ impl Default for ChartSpec {
 }
 
 /// sRGB 8-bit -> linear.
-pub fn srgb_decode_u8(v: u8) -> f64 {
+pub(crate) fn srgb_decode_u8(v: u8) -> f64 {
     let x = v as f64 / 255.0;
     if x <= 0.04045 {
         x / 12.92
@@ -92,7 +92,7 @@ pub fn srgb_decode_u8(v: u8) -> f64 {
 
 /// Patch geometry: the chart occupies the top 70% of the frame in a 6x4 grid;
 /// returns the (row, col) centre and half-size of patch `i` in pixels.
-pub fn patch_box(spec: &ChartSpec, i: usize) -> (usize, usize, usize) {
+pub(crate) fn patch_box(spec: &ChartSpec, i: usize) -> (usize, usize, usize) {
     let chart_h = spec.height * 7 / 10;
     let cell_w = spec.width / 6;
     let cell_h = chart_h / 4;

@@ -6,15 +6,15 @@
 //! equal in camera space), and invert it.
 
 /// Linear sRGB (D65) -> XYZ, IEC 61966-2-1.
-pub const SRGB_TO_XYZ: [[f64; 3]; 3] = [
+pub(crate) const SRGB_TO_XYZ: [[f64; 3]; 3] = [
     [0.4124564, 0.3575761, 0.1804375],
     [0.2126729, 0.7151522, 0.0721750],
     [0.0193339, 0.1191920, 0.9503041],
 ];
 
-pub type Mat3 = [[f64; 3]; 3];
+pub(crate) type Mat3 = [[f64; 3]; 3];
 
-pub const IDENTITY: Mat3 = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
+pub(crate) const IDENTITY: Mat3 = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
 
 fn mul(a: &Mat3, b: &Mat3) -> Mat3 {
     let mut m = [[0.0; 3]; 3];
@@ -27,7 +27,7 @@ fn mul(a: &Mat3, b: &Mat3) -> Mat3 {
 }
 
 /// Inverse of a 3x3 matrix, or None when it is (numerically) singular.
-pub fn invert(m: &Mat3) -> Option<Mat3> {
+pub(crate) fn invert(m: &Mat3) -> Option<Mat3> {
     let det = m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1])
         - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
         + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0]);
@@ -51,7 +51,7 @@ pub fn invert(m: &Mat3) -> Option<Mat3> {
 
 /// sRGB-from-camera matrix for a DNG-style XYZ->camera matrix, or None when
 /// the matrix cannot be used (singular, or a row that sums to zero).
-pub fn srgb_from_camera(xyz_to_cam: &[[f32; 3]; 3]) -> Option<Mat3> {
+pub(crate) fn srgb_from_camera(xyz_to_cam: &[[f32; 3]; 3]) -> Option<Mat3> {
     let x2c: Mat3 = std::array::from_fn(|i| std::array::from_fn(|j| xyz_to_cam[i][j] as f64));
     let mut cam_from_srgb = mul(&x2c, &SRGB_TO_XYZ);
     for row in cam_from_srgb.iter_mut() {
@@ -66,7 +66,7 @@ pub fn srgb_from_camera(xyz_to_cam: &[[f32; 3]; 3]) -> Option<Mat3> {
 
 /// sRGB opto-electronic transfer function (linear [0,1] -> encoded [0,1]).
 #[inline]
-pub fn srgb_encode(x: f32) -> f32 {
+pub(crate) fn srgb_encode(x: f32) -> f32 {
     let x = x.clamp(0.0, 1.0);
     if x <= 0.003_130_8 {
         12.92 * x

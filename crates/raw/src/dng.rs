@@ -5,10 +5,10 @@
 //! black and white levels, colour matrix, as-shot neutral, ISO, exposure and
 //! camera names. Pixels are LJPEG-92 lossless by default.
 
-use crate::atomic::write_atomic;
 use crate::error::{RawError, Result};
 use crate::frame::{ColorMatrix, RawFrame};
 use crate::panic_guard::quietly;
+use pgrf_core::atomic::write_atomic;
 use rawler::cfa::{PlaneColor, CFA};
 use rawler::decoders::{Camera, RawMetadata};
 use rawler::dng::writer::DngWriter;
@@ -95,7 +95,7 @@ pub fn encode_dng(frame: &RawFrame, opts: &DngOptions) -> Result<Vec<u8>> {
 /// Encode and write atomically.
 pub fn write_dng(frame: &RawFrame, path: &Path, opts: &DngOptions) -> Result<()> {
     let bytes = encode_dng(frame, opts)?;
-    write_atomic(path, &bytes)
+    Ok(write_atomic(path, &bytes)?)
 }
 
 fn rawler_image(frame: &RawFrame) -> RawImage {

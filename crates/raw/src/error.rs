@@ -21,8 +21,11 @@ pub enum RawError {
     Unsupported { path: PathBuf, reason: String },
     #[error("invalid input: {0}")]
     Invalid(String),
-    #[error("{path}: cannot write: {reason}")]
-    Write { path: PathBuf, reason: String },
+    #[error(transparent)]
+    Write(#[from] pgrf_core::WriteError),
+    /// An input folder that cannot be listed or holds no files.
+    #[error("{path}: {reason}")]
+    Folder { path: PathBuf, reason: String },
 }
 
 impl RawError {
@@ -40,15 +43,15 @@ impl RawError {
         }
     }
 
-    pub(crate) fn unsupported(path: &Path, reason: impl Into<String>) -> Self {
-        RawError::Unsupported {
+    pub(crate) fn folder(path: &Path, reason: impl Into<String>) -> Self {
+        RawError::Folder {
             path: path.to_path_buf(),
-            reason: one_line(reason.into()),
+            reason: reason.into(),
         }
     }
 
-    pub(crate) fn write(path: &Path, reason: impl Into<String>) -> Self {
-        RawError::Write {
+    pub(crate) fn unsupported(path: &Path, reason: impl Into<String>) -> Self {
+        RawError::Unsupported {
             path: path.to_path_buf(),
             reason: one_line(reason.into()),
         }

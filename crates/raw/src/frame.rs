@@ -67,7 +67,7 @@ pub struct LevelOverrides {
 }
 
 impl LevelOverrides {
-    pub fn is_empty(&self) -> bool {
+    pub(crate) fn is_empty(&self) -> bool {
         self.black.is_none() && self.white.is_none()
     }
 }
@@ -118,7 +118,7 @@ impl RawFrame {
     }
 
     /// Apply user overrides, then re-check that the levels make sense.
-    pub fn apply_overrides(&mut self, o: &LevelOverrides) -> Result<()> {
+    pub(crate) fn apply_overrides(&mut self, o: &LevelOverrides) -> Result<()> {
         if let Some(b) = &o.black {
             self.black = black_per_plane(b)?;
         }
@@ -130,7 +130,7 @@ impl RawFrame {
 
     /// Levels that would make normalisation divide by zero, go negative or
     /// produce NaN are rejected here rather than discovered as garbage later.
-    pub fn check_levels(&self) -> Result<()> {
+    pub(crate) fn check_levels(&self) -> Result<()> {
         for (c, &b) in self.black.iter().enumerate() {
             if !b.is_finite() || b < 0.0 {
                 return Err(RawError::Invalid(format!(
@@ -184,7 +184,7 @@ impl RawFrame {
 
     /// The same frame with new pixel data (levels and metadata kept): what a
     /// denoiser or a noise synthesiser produces.
-    pub fn with_mosaic(&self, mosaic: Vec<u16>) -> Result<Self> {
+    pub(crate) fn with_mosaic(&self, mosaic: Vec<u16>) -> Result<Self> {
         if mosaic.len() != self.mosaic.len() {
             return Err(RawError::Invalid(format!(
                 "new mosaic has {} samples, frame has {}",
@@ -200,7 +200,7 @@ impl RawFrame {
 
 /// Black levels as users give them: one value for all planes, or four for
 /// R, G1, B, G2.
-pub fn black_per_plane(values: &[f32]) -> Result<[f32; 4]> {
+pub(crate) fn black_per_plane(values: &[f32]) -> Result<[f32; 4]> {
     match values {
         [v] => Ok([*v; 4]),
         [r, g1, b, g2] => Ok([*r, *g1, *b, *g2]),

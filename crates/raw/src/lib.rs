@@ -5,7 +5,8 @@
 //! This crate is physics-side: plain arrays (ndarray) and rayon, no
 //! deep-learning framework.
 
-pub mod atomic;
+#![warn(missing_docs)]
+
 pub mod cfa;
 pub mod chart;
 pub mod color;
@@ -13,6 +14,7 @@ pub mod decode;
 pub mod demosaic;
 pub mod dng;
 pub mod error;
+pub mod files;
 pub mod frame;
 pub mod headerless;
 pub mod orientation;

@@ -5,7 +5,7 @@
 /// Apply EXIF orientation `code` (1..=8) to an interleaved image with `ch`
 /// channels; returns the new buffer and its (width, height). Unknown codes
 /// are treated as 1.
-pub fn apply_orientation<T: Copy + Default>(
+pub(crate) fn apply_orientation<T: Copy + Default>(
     data: &[T],
     width: usize,
     height: usize,

@@ -5,12 +5,12 @@
 //! highlight clipping at the sensor's saturation (so clipped highlights stay
 //! neutral instead of turning pink), demosaic, camera->sRGB matrix, sRGB curve.
 
-use crate::atomic::write_atomic;
 use crate::color::{srgb_encode, srgb_from_camera, Mat3, IDENTITY};
 use crate::demosaic::{demosaic, Demosaic};
 use crate::error::{RawError, Result};
 use crate::frame::RawFrame;
 use crate::orientation::apply_orientation;
+use pgrf_core::atomic::write_atomic;
 use rayon::prelude::*;
 use std::path::Path;
 
@@ -148,7 +148,7 @@ fn to_f32(m: &Mat3) -> [[f32; 3]; 3] {
 
 impl Preview {
     /// Encode as PNG, 8 or 16 bits per channel.
-    pub fn encode_png(&self, bits: u8) -> Result<Vec<u8>> {
+    pub(crate) fn encode_png(&self, bits: u8) -> Result<Vec<u8>> {
         use image::ImageEncoder;
         let mut out = Vec::new();
         let enc = image::codecs::png::PngEncoder::new(&mut out);
@@ -179,7 +179,7 @@ impl Preview {
 
     /// Encode and write atomically.
     pub fn write_png(&self, path: &Path, bits: u8) -> Result<()> {
-        write_atomic(path, &self.encode_png(bits)?)
+        Ok(write_atomic(path, &self.encode_png(bits)?)?)
     }
 }
 

@@ -8,10 +8,9 @@ use serde_json::Value;
 use sha2::{Digest, Sha256};
 
 #[test]
+#[cfg_attr(not(shared_data), ignore = "needs ../shared/data")]
 fn canon_550d_matches_libraw() {
-    let Some(data) = common::data_dir() else {
-        return;
-    };
+    let data = common::data_dir();
     let reference: Value = serde_json::from_str(
         &std::fs::read_to_string(data.join("raw/LIBRAW_REFERENCE.json")).unwrap(),
     )
@@ -122,10 +121,9 @@ fn canon_550d_matches_libraw() {
 }
 
 #[test]
+#[cfg_attr(not(shared_data), ignore = "needs ../shared/data")]
 fn level_overrides_replace_metadata() {
-    let Some(data) = common::data_dir() else {
-        return;
-    };
+    let data = common::data_dir();
     let o = LevelOverrides {
         black: Some(vec![2000.0, 2001.0, 2002.0, 2003.0]),
         white: Some(16383),
@@ -136,10 +134,9 @@ fn level_overrides_replace_metadata() {
 }
 
 #[test]
+#[cfg_attr(not(shared_data), ignore = "needs ../shared/data")]
 fn kodak_kdc_decodes_as_grbg() {
-    let Some(data) = common::data_dir() else {
-        return;
-    };
+    let data = common::data_dir();
     let f = decode_file(&data.join("raw/kodak_dc50.kdc"), &LevelOverrides::default()).unwrap();
     assert_eq!(f.cfa, Cfa::Grbg);
     assert_eq!((f.width, f.height), (768, 512));

@@ -1,12 +1,13 @@
 //! `pgrf calibrate`: bias, dark and flat stacks in, a per-pixel calibration
 //! file and a readable report out.
 
+use crate::progress::Bar;
 use anyhow::{Context, Result};
 use clap::Args;
-use indicatif::{ProgressBar, ProgressStyle};
-use pgrf_calib::report::{write_report, PtcPoint, ReportData};
-use pgrf_calib::stack::list_files;
 use pgrf_calib::{calibrate, CalibrateInput, CalibrationRun};
+use pgrf_core::Progress;
+use pgrf_raw::files::list_files;
+use pgrf_report::{write_report, PtcPoint, ReportData};
 use std::path::PathBuf;
 
 #[derive(Args, Debug)]
@@ -50,13 +51,7 @@ pub fn run(a: &CalibrateArgs) -> Result<()> {
         );
     }
     let total = bias.len() + flat.len() + dark.len();
-    let bar = ProgressBar::new(total as u64).with_style(
-        ProgressStyle::with_template(
-            "{spinner} calibrating {pos}/{len} frames [{bar:30}] {per_sec} eta {eta}",
-        )
-        .expect("valid template")
-        .progress_chars("=> "),
-    );
+    let bar = Bar::new("calibrating", total as u64, "frames", false);
     let run = calibrate(
         &CalibrateInput {
             bias,
@@ -65,9 +60,9 @@ pub fn run(a: &CalibrateArgs) -> Result<()> {
             iso: a.iso,
             tap_pixels: 4096,
         },
-        &|| bar.inc(1),
+        &bar,
     )?;
-    bar.finish_and_clear();
+    bar.finish();
     run.calibration.save(&a.output)?;
     let m = &run.calibration.meta;
     eprintln!(
@@ -78,7 +73,7 @@ pub fn run(a: &CalibrateArgs) -> Result<()> {
         m.read_sigma_median,
         m.row_sigma,
         m.dsnu,
-        m.dark_law,
+        pgrf_calib::calibrate::law_name(m.dark_law),
         m.hot_pixels,
         m.dead_pixels
     );
@@ -98,7 +93,7 @@ pub fn run(a: &CalibrateArgs) -> Result<()> {
                 "read_sigma_median": m.read_sigma_median,
                 "dsnu": m.dsnu,
                 "prnu": m.prnu,
-                "dark_law": m.dark_law,
+                "dark_law": pgrf_calib::calibrate::law_name(m.dark_law),
                 "dark_r2_sqrt": m.dark_r2_sqrt,
                 "dark_r2_linear": m.dark_r2_linear,
                 "dark_rate_mean": m.dark_rate_mean,
@@ -114,100 +109,6 @@ pub fn run(a: &CalibrateArgs) -> Result<()> {
 fn report_data(run: &CalibrationRun) -> ReportData<'_> {
     let m = &run.calibration.meta;
     let maps = &run.calibration.maps;
-    let row = |q: &str, v: String, u: &str| (q.to_string(), v, u.to_string());
-    let mut summary = vec![
-        row(
-            "System gain K",
-            format!("{:.4} ({})", m.k, m.k_method),
-            "DN/e-",
-        ),
-        row(
-            "Inverse system gain 1/K",
-            format!("{:.4}", 1.0 / m.k),
-            "e-/DN",
-        ),
-        row(
-            "System gain, eq. 3.15 at the brightest level",
-            format!("{:.4}", run.gain.k_var_mean),
-            "DN/e-",
-        ),
-        row(
-            "Temporal dark noise (median per-pixel read sigma)",
-            format!(
-                "{:.3} ({:.3} e-)",
-                m.read_sigma_median,
-                m.read_sigma_median / m.k
-            ),
-            "DN",
-        ),
-        row("Row noise sigma", format!("{:.3}", m.row_sigma), "DN"),
-        row(
-            "DSNU (spatial sd of the dark offset)",
-            format!("{:.3} ({:.3} e-)", m.dsnu, m.dsnu / m.k),
-            "DN",
-        ),
-        row(
-            "PRNU (spatial sd of the response / mean)",
-            m.prnu
-                .map(|p| format!("{:.3}", 100.0 * p))
-                .unwrap_or_else(|| "-".into()),
-            "%",
-        ),
-    ];
-    match (m.dark_rate_mean, m.dark_r2_sqrt, m.dark_r2_linear) {
-        (Some(rate), Some(rs), Some(rl)) => {
-            let unit = if m.dark_law == "linear" {
-                "e-/s"
-            } else {
-                "e-/sqrt(s)"
-            };
-            summary.push(row(
-                &format!("Dark current (mean, {} law)", m.dark_law),
-                format!("{rate:.4}"),
-                unit,
-            ));
-            summary.push(row(
-                "Dark signal fit R^2, a*sqrt(t) / a*t",
-                format!("{rs:.5} / {rl:.5}"),
-                "",
-            ));
-        }
-        _ => summary.push(row(
-            "Dark current",
-            "not measured (no dark frames)".into(),
-            "",
-        )),
-    }
-    summary.push(row(
-        "Hot / dead pixels",
-        format!("{} / {}", m.hot_pixels, m.dead_pixels),
-        "pixels",
-    ));
-    if let (Some(p), Some(g)) = (m.ppcc_pixel_median, m.ppcc_pooled) {
-        summary.push(row(
-            "Read-noise normality: PPCC per pixel (median) / pooled",
-            format!("{p:.4} / {g:.4}"),
-            "",
-        ));
-    }
-    summary.push(row(
-        "Frames: bias / dark / flat",
-        format!(
-            "{} / {} / {}",
-            m.bias_frames,
-            m.dark_frames
-                .iter()
-                .map(|n| n.to_string())
-                .collect::<Vec<_>>()
-                .join("+"),
-            m.flat_frames
-                .iter()
-                .map(|n| n.to_string())
-                .collect::<Vec<_>>()
-                .join("+")
-        ),
-        "",
-    ));
     ReportData {
         camera: format!("{} {}", m.make, m.model),
         iso: m.iso,
@@ -221,10 +122,10 @@ fn report_data(run: &CalibrationRun) -> ReportData<'_> {
             })
             .collect(),
         ptc_fit: run.gain.ptc_fit,
-        sigma_read: maps["sigma_read"].view(),
-        fixed_pattern: maps["fixed_pattern"].view(),
-        r2_sqrt: maps.get("r2_sqrt").map(|a| a.view()),
-        r2_linear: maps.get("r2_linear").map(|a| a.view()),
-        summary,
+        sigma_read: maps.sigma_read.view(),
+        fixed_pattern: maps.fixed_pattern.view(),
+        r2_sqrt: maps.r2_sqrt.as_ref().map(|a| a.view()),
+        r2_linear: maps.r2_linear.as_ref().map(|a| a.view()),
+        summary: run.summary(),
     }
 }

@@ -6,26 +6,24 @@
 //! everything side by side.
 
 use crate::output::require_parent_dir;
+use crate::progress::Bar;
 use crate::shipped;
 use anyhow::{bail, Context, Result};
 use clap::Args;
-use indicatif::{ProgressBar, ProgressStyle};
+use pgrf_core::NoProgress;
 use pgrf_eval::dataset::table::{summarise, Row};
-use pgrf_eval::montage::{write_montage, Panel};
 use pgrf_eval::{evaluate, Protocol, Scores};
 use pgrf_nn::backend::DeviceKind;
-use pgrf_nn::infer::memory::auto_tile;
 use pgrf_nn::infer::prepare::network_input;
 use pgrf_nn::infer::restorer::describe_sampler;
-use pgrf_nn::infer::{overlap_for, restore_image, ImageOptions, Restore, SamplerChoice};
+use pgrf_nn::infer::{restore_frame, Restore, SamplerChoice, Tiling};
 use pgrf_noise::capture::DarkCapture;
 use pgrf_noise::{CameraProfile, ModelKind};
-use pgrf_raw::ndarray::Array3;
 use pgrf_raw::scene::{render_demo, SceneLevels};
 use pgrf_raw::{
-    pack_normalized, render_preview, unpack_normalized, write_dng, Cfa, DngOptions, Preview,
-    PreviewOptions, RawFrame,
+    pack_normalized, render_preview, write_dng, Cfa, DngOptions, Preview, PreviewOptions, RawFrame,
 };
+use pgrf_report::{write_montage, Panel};
 use serde_json::json;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -76,7 +74,7 @@ fn model(file: Option<&Path>, builtin: &str, method: &str, flag: &str) -> Result
     let path = file.unwrap_or(Path::new(builtin));
     let r = shipped::load_model(path, SamplerChoice::default(), DeviceKind::Cpu)
         .with_context(|| format!("{flag} {}", path.display()))?;
-    if r.meta().arch.method() != method {
+    if r.meta().arch.method().name() != method {
         bail!(
             "{flag} {}: holds a {}, not the {} model",
             path.display(),
@@ -110,18 +108,8 @@ pub fn run(a: &DemoArgs) -> Result<()> {
     }
 
     // Steps: render, then per ratio capture + 2 models, then pictures.
-    let bar = if a.quiet {
-        ProgressBar::hidden()
-    } else {
-        ProgressBar::new(2 + 3 * RATIOS.len() as u64)
-    };
-    bar.set_style(
-        ProgressStyle::with_template(
-            "{spinner} demo [{bar:30}] {pos}/{len} {msg} ({elapsed}, ETA {eta})",
-        )
-        .expect("valid template")
-        .progress_chars("=> "),
-    );
+    let steps = Bar::new("demo", 2 + 3 * RATIOS.len() as u64, "steps", a.quiet);
+    let bar = steps.bar();
     bar.enable_steady_tick(std::time::Duration::from_millis(200));
 
     bar.set_message(format!("rendering a {w}x{h} scene"));
@@ -134,15 +122,11 @@ pub fn run(a: &DemoArgs) -> Result<()> {
     let protocol = Protocol::eld(false);
     // Tiles as `pgrf enhance` chooses them (memory, and the flow model's
     // cap at twice its training crop); the overlap shrinks with small tiles.
-    let opts = |r: &dyn Restore| {
-        let tile = a
-            .tile
-            .unwrap_or_else(|| auto_tile(DeviceKind::Cpu, r, h / 2, w / 2));
-        ImageOptions {
-            tile,
-            overlap: overlap_for(tile),
-            seed: a.seed,
-        }
+    let tiling = Tiling {
+        tile: a.tile,
+        overlap: None,
+        seed: a.seed,
+        device: DeviceKind::Cpu,
     };
     let mut captures = Vec::new();
     for (k, &ratio) in RATIOS.iter().enumerate() {
@@ -161,11 +145,10 @@ pub fn run(a: &DemoArgs) -> Result<()> {
         bar.inc(1);
         let run = |r: &dyn Restore, name: &str| -> Result<(Scores, RawFrame)> {
             bar.set_message(format!("x{ratio}: {name}"));
-            let out: Array3<f32> = restore_image(r, input.view(), &opts(r), &mut |_, _| {})?;
-            let s = evaluate(out.view(), reference.view(), &protocol)?;
-            let f = unpack_normalized(out.view(), &dark)?;
+            let out = restore_frame(r, &dark, ratio as f32, None, &tiling, &NoProgress)?;
+            let s = evaluate(out.packed.output.view(), reference.view(), &protocol)?;
             bar.inc(1);
-            Ok((s, f))
+            Ok((s, out.frame))
         };
         let (spc_s, spc_f) = run(spc.as_ref(), "SPC")?;
         let (pgrf_s, pgrf_f) = run(pgrf.as_ref(), "PGRF")?;

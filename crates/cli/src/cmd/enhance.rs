@@ -3,17 +3,16 @@
 
 use crate::input::InputArgs;
 use crate::output::require_parent_dir;
+use crate::progress::Bar;
 use anyhow::{bail, Context, Result};
 use clap::Args;
-use indicatif::{ProgressBar, ProgressStyle};
 use pgrf_calib::Calibration;
 use pgrf_nn::backend::DeviceKind;
-use pgrf_nn::infer::memory::{auto_tile, peak_rss};
-use pgrf_nn::infer::prepare::{network_input, ratio_from_exposure};
+use pgrf_nn::infer::prepare::ratio_from_exposure;
 use pgrf_nn::infer::restorer::describe_sampler;
-use pgrf_nn::infer::{overlap_for, restore_image, ImageOptions, Restore, SamplerChoice};
+use pgrf_nn::infer::{restore_frame, Restore, SamplerChoice, Tiling};
 use pgrf_nn::sample::SamplerKind;
-use pgrf_raw::{render_preview, unpack_normalized, write_dng, DngOptions, PreviewOptions};
+use pgrf_raw::{render_preview, write_dng, DngOptions, PreviewOptions};
 use serde::Serialize;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -216,7 +215,7 @@ fn plan_jobs(a: &EnhanceArgs) -> Result<Vec<Job>> {
     for p in &a.inputs {
         if p.is_dir() {
             had_dir = true;
-            inputs.extend(pgrf_calib::stack::list_files(p)?);
+            inputs.extend(pgrf_raw::files::list_files(p)?);
         } else if p.is_file() {
             inputs.push(p.clone());
         } else {
@@ -340,44 +339,29 @@ fn enhance_one(
         }
         _ => None,
     };
-    let input = network_input(&frame, ratio, dark.as_ref())?;
-    let (_, ph, pw) = input.dim();
-    let tile = match a.tile {
-        Some(t) => t,
-        None => auto_tile(a.device, restorer, ph, pw),
-    };
-    let opts = ImageOptions {
-        tile,
-        overlap: a.overlap.unwrap_or_else(|| overlap_for(tile)),
+    let tiling = Tiling {
+        tile: a.tile,
+        overlap: a.overlap,
         seed: a.seed,
+        device: a.device,
     };
-    let plan = pgrf_nn::infer::image::plan_for(ph, pw, &opts, restorer.side_multiple())?;
-    let tiles = plan.count();
     print_header();
-    let bar = if a.quiet {
-        ProgressBar::hidden()
-    } else {
-        ProgressBar::new(tiles as u64)
-    };
-    bar.set_style(
-        ProgressStyle::with_template("{prefix} [{bar:30}] {pos}/{len} tiles  {per_sec}  eta {eta}")
-            .expect("valid template")
-            .progress_chars("=> "),
-    );
     let name = job
         .input
         .file_name()
         .map(|s| s.to_string_lossy().into_owned())
         .unwrap_or_default();
-    bar.set_prefix(format!("[{}/{count}] {name}", index + 1));
-    let out = restore_image(restorer, input.view(), &opts, &mut |done, _| {
-        bar.set_position(done as u64)
-    })?;
-    bar.finish_and_clear();
-    let result = unpack_normalized(out.view(), &frame)?;
-    write_dng(&result, &job.output, &DngOptions::default())?;
+    let bar = Bar::new(
+        format!("[{}/{count}] {name}", index + 1),
+        0,
+        "tiles",
+        a.quiet,
+    );
+    let restored = restore_frame(restorer, &frame, ratio, dark.as_ref(), &tiling, &bar)?;
+    let (tiles, tile) = (restored.packed.plan.count(), restored.packed.tile_side());
+    write_dng(&restored.frame, &job.output, &DngOptions::default())?;
     if let Some(png) = &job.png {
-        render_preview(&result, &PreviewOptions::default())?.write_png(png, 8)?;
+        render_preview(&restored.frame, &PreviewOptions::default())?.write_png(png, 8)?;
     }
     let seconds = t0.elapsed().as_secs_f64();
     if !a.quiet {
@@ -391,7 +375,7 @@ fn enhance_one(
             frame.width,
             frame.height,
             if tiles == 1 { "" } else { "s" },
-            plan.rows.len.max(plan.cols.len),
+            tile,
         );
     }
     Ok(FileReport {
@@ -403,9 +387,9 @@ fn enhance_one(
         ratio,
         method: method.to_string(),
         nfe: restorer.nfe(),
-        tile: plan.rows.len.max(plan.cols.len),
+        tile,
         tiles,
         seconds,
-        peak_rss_mib: peak_rss().map(|b| b as f64 / (1 << 20) as f64),
+        peak_rss_mib: pgrf_core::mem::peak_rss_mib(),
     })
 }

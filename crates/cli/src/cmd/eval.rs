@@ -3,22 +3,21 @@
 //! paper's tables print them (one row per ratio, PSNR/SSIM per method), with
 //! per-image CSV, a Markdown table and a PNG of the worst images.
 
+use crate::progress::Bar;
 use anyhow::{bail, Context, Result};
 use clap::{Args, ValueEnum};
-use pgrf_eval::dataset::table::{csv, summarise, Row};
-use pgrf_eval::dataset::{centre_crop, eld, load_pair, pairs, sid, DatasetKind, Sample};
-use pgrf_eval::montage::{write_montage, Panel};
-use pgrf_eval::{evaluate, Protocol};
+use pgrf_core::NoProgress;
+use pgrf_eval::dataset::run::{MethodFn, Outcome, RunOptions, Worst, NOISY};
+use pgrf_eval::dataset::table::{csv, summarise};
+use pgrf_eval::dataset::{eld, pairs, sid, DatasetKind, Sample};
+use pgrf_eval::Protocol;
 use pgrf_nn::backend::DeviceKind;
-use pgrf_nn::infer::memory::auto_tile;
 use pgrf_nn::infer::restorer::describe_sampler;
-use pgrf_nn::infer::{overlap_for, restore_image, ImageOptions, Restore, SamplerChoice};
-use pgrf_raw::ndarray::{Array3, ArrayView3};
-use pgrf_raw::{render_preview, unpack_normalized, PreviewOptions, RawFrame};
+use pgrf_nn::infer::{restore_packed, Restore, SamplerChoice, Tiling};
+use pgrf_raw::ndarray::ArrayView3;
+use pgrf_raw::{render_preview, unpack_normalized, PreviewOptions};
+use pgrf_report::{write_montage, Panel};
 use std::path::{Path, PathBuf};
-
-/// Name of the amplified-input baseline in tables.
-pub const NOISY: &str = "noisy input";
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
 pub enum Baseline {
@@ -108,21 +107,6 @@ pub struct EvalArgs {
     pub quiet: bool,
 }
 
-/// Centre thumbnails kept for the worst-images PNG (packed pixels).
-const THUMB: usize = 128;
-
-struct Worst {
-    score: f64,
-    id: String,
-    template: RawFrame,
-    /// Noisy input (if any), each model, reference.
-    tiles: Vec<Array3<f32>>,
-}
-
-fn thumb(a: ArrayView3<f32>) -> Array3<f32> {
-    centre_crop(a, Some(THUMB)).to_owned()
-}
-
 fn parse_crop(a: &EvalArgs) -> Result<Option<usize>> {
     match a.crop.as_deref() {
         None => Ok(a.protocol.default_crop()),
@@ -206,8 +190,7 @@ fn walk(a: &EvalArgs) -> Result<Vec<Sample>> {
 }
 
 fn write_file(path: &Path, text: &str) -> Result<()> {
-    pgrf_raw::atomic::write_atomic(path, text.as_bytes())
-        .with_context(|| format!("{}", path.display()))
+    pgrf_core::write_atomic(path, text.as_bytes()).with_context(|| format!("{}", path.display()))
 }
 
 pub fn run(a: &EvalArgs) -> Result<()> {
@@ -244,105 +227,37 @@ pub fn run(a: &EvalArgs) -> Result<()> {
         }
         models.push((name, r));
     }
-    let protocol = Protocol::eld(correct);
-    let plain = Protocol::eld(false);
     let head = header(a, &samples, crop, correct, white);
-    let mut rows: Vec<Row> = Vec::new();
-    let mut worst: Vec<Worst> = Vec::new();
-    let n = samples.len();
-    let bar = if a.quiet {
-        indicatif::ProgressBar::hidden()
-    } else {
-        indicatif::ProgressBar::new(n as u64)
+    let bar = Bar::new("eval", samples.len() as u64, "images", a.quiet);
+    let tiling = Tiling {
+        tile: a.tile,
+        overlap: None,
+        seed: a.seed,
+        device: a.device,
     };
-    bar.set_style(
-        indicatif::ProgressStyle::with_template(
-            "eval [{bar:30}] {pos}/{len} images  {per_sec}  eta {eta}",
-        )
-        .expect("valid template")
-        .progress_chars("=> "),
-    );
-    for (i, smp) in samples.iter().enumerate() {
-        let pair = load_pair(smp, &levels)?;
-        // ELD crops input and reference before the network runs.
-        let input = centre_crop(pair.input.view(), crop).to_owned();
-        let reference = centre_crop(pair.reference.view(), crop);
-        let mut outputs: Vec<(String, Array3<f32>)> = Vec::new();
-        if baseline {
-            outputs.push((NOISY.into(), input.clone()));
-        }
-        for (name, r) in &models {
-            let (_, ph, pw) = input.dim();
-            let tile = a
-                .tile
-                .unwrap_or_else(|| auto_tile(a.device, r.as_ref(), ph, pw));
-            let opts = ImageOptions {
-                tile,
-                overlap: overlap_for(tile),
-                seed: a.seed,
-            };
-            let out = restore_image(r.as_ref(), input.view(), &opts, &mut |_, _| {})
-                .with_context(|| format!("{}: model {name}", smp.noisy.display()))?;
-            outputs.push((name.clone(), out));
-        }
-        // The worst-images ranking follows the first model (the noisy input
-        // when there is none).
-        let rank = outputs.iter().position(|(n, _)| n != NOISY).unwrap_or(0);
-        let mut first = None;
-        let mut line = format!("[{}/{n}] {} x{:.1}", i + 1, smp.id, pair.ratio);
-        for (k, (name, out)) in outputs.iter().enumerate() {
-            // The noisy input is measured as ELD's `res_in`: no correction.
-            let p = if name == NOISY { &plain } else { &protocol };
-            let sc = evaluate(out.view(), reference, p).with_context(|| smp.id.clone())?;
-            if k == rank {
-                first = Some(sc.psnr);
-            }
-            line.push_str(&format!("  {name} {:.2}/{:.4}", sc.psnr, sc.ssim));
-            rows.push(Row {
-                protocol: smp.kind.name().into(),
-                id: smp.id.clone(),
-                group: smp.group,
-                ratio: pair.ratio,
-                noisy: smp.noisy.display().to_string(),
-                reference: smp.reference.display().to_string(),
-                method: name.clone(),
-                psnr: sc.psnr,
-                ssim: sc.ssim,
-                gain: sc.gain,
-            });
-        }
-        if !a.quiet {
-            if bar.is_hidden() {
-                eprintln!("{line}");
-            } else {
-                bar.println(&line);
-            }
-        }
-        bar.inc(1);
-        if a.worst_count > 0 {
-            let score = first.unwrap_or(f64::INFINITY);
-            let mut tiles: Vec<Array3<f32>> =
-                outputs.iter().map(|(_, o)| thumb(o.view())).collect();
-            if !baseline {
-                tiles.insert(0, thumb(input.view()));
-            }
-            tiles.push(thumb(reference));
-            let (_, th, tw) = tiles[0].dim();
-            let mut template = pair.reference_frame.clone();
-            template.width = 2 * tw;
-            template.height = 2 * th;
-            template.mosaic = vec![0; 4 * tw * th];
-            worst.push(Worst {
-                score,
-                id: smp.id.clone(),
-                template,
-                tiles,
-            });
-            worst.sort_by(|x, y| x.score.total_cmp(&y.score));
-            worst.truncate(a.worst_count);
-        }
-    }
-    bar.finish_and_clear();
+    let closures: Vec<Box<MethodFn>> = models
+        .iter()
+        .map(|(_, r)| {
+            Box::new(move |x: ArrayView3<f32>| {
+                restore_packed(r.as_ref(), x, &tiling, &NoProgress)
+                    .map(|o| o.output)
+                    .map_err(|e| e.to_string())
+            }) as Box<MethodFn>
+        })
+        .collect();
+    let methods: Vec<(String, &MethodFn)> = models
+        .iter()
+        .zip(&closures)
+        .map(|((name, _), f)| (name.clone(), f.as_ref()))
+        .collect();
+    let opts = RunOptions {
+        crop,
+        levels,
+        correct,
+        baseline,
+        worst_count: a.worst_count,
+    };
+    let Outcome { rows, worst } = pgrf_eval::dataset::run::run(&samples, &methods, &opts, &bar)?;
     let summary = summarise(&rows);
     println!("{head}");
     print!("{}", summary.text());

@@ -195,7 +195,7 @@ pub fn run(a: &MakeDatasetArgs) -> Result<()> {
                 }
             }
             let list_path = a.output.join(sid::DEFAULT_LIST);
-            pgrf_raw::atomic::write_atomic(&list_path, list.as_bytes())
+            pgrf_core::write_atomic(&list_path, list.as_bytes())
                 .with_context(|| format!("{}", list_path.display()))?;
             eprintln!(
                 "wrote {files} DNGs in the SID layout under {} and {}",

@@ -1,10 +1,5 @@
 //! One module per subcommand: argument struct plus `run`.
 
-pub mod bench;
-pub mod bench_enhance;
-pub mod bench_ssim;
-pub mod bench_synth;
-pub mod bench_train;
 pub mod calibrate;
 pub mod chart;
 pub mod convert;

@@ -1,22 +1,23 @@
-//! `pgrf search`: the paper's sampling search. Scores the two-stage sampler
-//! at t = s, 2s, .., 1 on validation pairs made like the training pairs,
-//! prints the table, writes the best t into the weight file (atomically) and
-//! a plot of PSNR against t.
+//! `pgrf search`: the paper's sampling search (Algorithm 2). Makes
+//! validation pairs like the model's training pairs, runs
+//! `pgrf_nn::flow::search::run` (the two-stage sampler scored at
+//! t = s, 2s, .., 1), prints the table or JSON, writes a plot of PSNR
+//! against t and the best t into the weight file (`store_t2`, atomically).
 
+use crate::progress::Bar;
 use anyhow::{bail, Context, Result};
 use clap::Args;
-use indicatif::{ProgressBar, ProgressStyle};
 use pgrf_calib::Calibration;
-use pgrf_eval::search_plot::{write_search_plot, SearchCurve};
-use pgrf_eval::{evaluate, Protocol};
+use pgrf_eval::Protocol;
 use pgrf_nn::backend::DeviceKind;
 use pgrf_nn::data::source::{Folder, Source};
 use pgrf_nn::data::validation::ValSet;
-use pgrf_nn::search::{averaging, grid, reported_counts, search, Averaging, Candidate};
+use pgrf_nn::flow::search::{self, SearchOptions};
 use pgrf_nn::weights::{self, Architecture};
 use pgrf_noise::pair::{PairSpec, RatioSpec};
 use pgrf_noise::{CameraProfile, ModelKind};
 use pgrf_raw::LevelOverrides;
+use pgrf_report::{write_search_plot, SearchCurve};
 use serde::Serialize;
 use std::path::PathBuf;
 
@@ -89,7 +90,15 @@ struct Summary {
 }
 
 pub fn run(a: &SearchArgs) -> Result<()> {
-    let times = grid(a.step)?;
+    let opts = SearchOptions {
+        step: a.step,
+        samples: a.samples,
+        seed: a.seed,
+        device: a.device,
+        protocol: Protocol::eld(false),
+    };
+    // Bad --step or --samples are refused before any costly work.
+    opts.times()?;
     let meta =
         weights::read_meta(&a.model).with_context(|| format!("--model {}", a.model.display()))?;
     if !matches!(meta.arch, Architecture::Sr3(_)) {
@@ -112,7 +121,7 @@ pub fn run(a: &SearchArgs) -> Result<()> {
     // Pairs made as the model's training pairs were (its record's noise source).
     let noise = &meta.noise;
     let profile_name = noise.profile.clone().unwrap_or_else(|| "sony-a7s2".into());
-    let model: ModelKind = noise.model.parse().map_err(anyhow::Error::msg)?;
+    let model: ModelKind = noise.model;
     let mut spec = PairSpec::new(CameraProfile::load(&profile_name)?, model);
     spec.iso = a.iso.or(noise.iso);
     spec.ratio = match a.ratio {
@@ -145,100 +154,15 @@ pub fn run(a: &SearchArgs) -> Result<()> {
     if count == 0 {
         bail!("no validation pairs: --pairs/--procedural must be at least 1");
     }
-    if a.samples == 0 || a.samples > 64 {
-        bail!("--samples must be from 1 to 64, got {}", a.samples);
-    }
     let val = ValSet::build(&source, &spec, a.patch, count, a.seed)?;
 
-    let protocol = Protocol::eld(false);
-    let n_t = times.len();
-    let mut psnr = vec![0.0f64; n_t];
-    let mut ssim = vec![0.0f64; n_t];
-    let mut one = [0.0f64; 2];
-    let mut input = [0.0f64; 2];
-    let shape = (4, a.patch, a.patch);
-    for p in &val.pairs {
-        let noisy = pgrf_raw::ndarray::ArrayView3::from_shape(shape, &p.noisy)?;
-        let clean = pgrf_raw::ndarray::ArrayView3::from_shape(shape, &p.clean)?;
-        let s = evaluate(noisy, clean, &protocol)?;
-        input[0] += s.psnr / count as f64;
-        input[1] += s.ssim / count as f64;
-    }
-    let extra = if a.samples > 1 { a.samples } else { 0 };
-    let bar = ProgressBar::new((count * (n_t + 1 + extra)) as u64).with_style(
-        ProgressStyle::with_template(
-            "{spinner} search [{bar:30}] {pos}/{len} network evaluations  {per_sec}  eta {eta}",
-        )
-        .expect("valid template")
-        .progress_chars("=> "),
-    );
-    if a.json {
-        bar.set_draw_target(indicatif::ProgressDrawTarget::hidden());
-    }
-    let pairs = &val.pairs;
-    search(
-        &a.model,
-        a.device,
-        pairs,
-        a.patch,
-        &times,
-        &mut |i, cand| {
-            let clean = pgrf_raw::ndarray::ArrayView3::from_shape(shape, &pairs[i].clean)
-                .map_err(|e| pgrf_nn::NnError::Invalid(e.to_string()))?;
-            let (out, slot) = match cand {
-                Candidate::OneStep(o) => (o, None),
-                Candidate::TwoStage { index, out } => (out, Some(index)),
-            };
-            let s = evaluate(out.view(), clean, &protocol)
-                .map_err(|e| pgrf_nn::NnError::Invalid(e.to_string()))?;
-            let (p, q) = (s.psnr / count as f64, s.ssim / count as f64);
-            match slot {
-                None => {
-                    one[0] += p;
-                    one[1] += q;
-                }
-                Some(k) => {
-                    psnr[k] += p;
-                    ssim[k] += q;
-                }
-            }
-            Ok(())
-        },
-        &mut || bar.inc(1),
-    )?;
-    // Best mean PSNR; ties go to the smaller t.
-    let best = (0..n_t).fold(0, |b, k| if psnr[k] > psnr[b] { k } else { b });
-    let best_t = times[best];
-    let counts = reported_counts(a.samples);
-    let mut averaged: Vec<(usize, f64, f64)> = counts.iter().map(|&k| (k, 0.0, 0.0)).collect();
-    if a.samples > 1 {
-        averaging(
-            &a.model,
-            a.device,
-            pairs,
-            a.patch,
-            Averaging {
-                t2: best_t,
-                k_max: a.samples,
-                seed: a.seed,
-            },
-            &mut |i, k, out| {
-                let clean = pgrf_raw::ndarray::ArrayView3::from_shape(shape, &pairs[i].clean)
-                    .map_err(|e| pgrf_nn::NnError::Invalid(e.to_string()))?;
-                let s = evaluate(out.view(), clean, &protocol)
-                    .map_err(|e| pgrf_nn::NnError::Invalid(e.to_string()))?;
-                if let Some(slot) = averaged.iter_mut().find(|(kk, _, _)| *kk == k) {
-                    slot.1 += s.psnr / count as f64;
-                    slot.2 += s.ssim / count as f64;
-                }
-                Ok(())
-            },
-            &mut || bar.inc(1),
-        )?;
-    } else {
-        averaged = vec![(1, psnr[best], ssim[best])];
-    }
-    bar.finish_and_clear();
+    let bar = Bar::new("search", 0, "network evaluations", a.json);
+    let out = search::run(&a.model, &val, &opts, &bar)?;
+    let protocol = &opts.protocol;
+    let (best, best_t) = (out.best, out.best_t2);
+    let times: Vec<f64> = out.curve.iter().map(|c| c.0).collect();
+    let psnr: Vec<f64> = out.curve.iter().map(|c| c.1).collect();
+    let (one, input) = ([out.one_step.0, out.one_step.1], [out.input.0, out.input.1]);
     let title = format!(
         "Sampling search: {}",
         a.model
@@ -259,7 +183,7 @@ pub fn run(a: &SearchArgs) -> Result<()> {
     )
     .map_err(anyhow::Error::msg)?;
     if !a.dry_run {
-        weights::update_meta(&a.model, |m| m.t2 = Some(best_t as f32))?;
+        search::store_t2(&a.model, best_t)?;
     }
     let header = format!(
         "{} channels 4 (packed R,G1,B,G2), {}",
@@ -273,11 +197,11 @@ pub fn run(a: &SearchArgs) -> Result<()> {
             patch: a.patch,
             t: times.clone(),
             psnr,
-            ssim,
+            ssim: out.curve.iter().map(|c| c.2).collect(),
             one_step: one,
             input,
             best_t2: best_t,
-            averaged,
+            averaged: out.averaging.clone(),
             written: !a.dry_run,
             plot: plot.display().to_string(),
             protocol: header,
@@ -304,18 +228,18 @@ pub fn run(a: &SearchArgs) -> Result<()> {
         "noisy input", input[0], input[1]
     );
     println!("{:>14}  {:>9.3}  {:>7.4}", "one step", one[0], one[1]);
-    for k in 0..n_t {
+    for (k, (t, p, q)) in out.curve.iter().enumerate() {
         println!(
             "{:>14.3}  {:>9.3}  {:>7.4}{}",
-            times[k],
-            psnr[k],
-            ssim[k],
+            t,
+            p,
+            q,
             if k == best { "  <- best" } else { "" }
         );
     }
     if a.samples > 1 {
         println!("mean of K samples at t2 = {best_t:.3}:");
-        for (k, p, q) in &averaged {
+        for (k, p, q) in &out.averaging {
             println!("{:>14}  {:>9.3}  {:>7.4}", format!("K = {k}"), p, q);
         }
     }

@@ -4,35 +4,28 @@
 //! summary line for scripts.
 
 use anyhow::{bail, Context, Result};
-use clap::{Args, ValueEnum};
-use indicatif::{ProgressBar, ProgressStyle};
+use clap::Args;
+
 use pgrf_calib::Calibration;
 use pgrf_nn::backend::DeviceKind;
 use pgrf_nn::data::validation::ValSet;
 use pgrf_nn::data::{Folder, Source};
 use pgrf_nn::schedule::Schedule;
-use pgrf_nn::train::{Outcome, Progress, TrainSettings};
-use pgrf_nn::weights::{Architecture, NoiseSource};
-use pgrf_nn::{SidUnetConfig, Sr3Config};
+use pgrf_nn::train::{Outcome, TrainSettings};
+use pgrf_nn::weights::NoiseSource;
+use pgrf_nn::{Method, TrainConfig};
 use pgrf_noise::pair::{PairSpec, RatioSpec};
 use pgrf_noise::{CameraProfile, ModelKind};
 use pgrf_raw::LevelOverrides;
-use serde::Deserialize;
+use serde::Serialize;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 
-#[derive(Clone, Copy, Debug, ValueEnum, PartialEq, Eq)]
-pub enum Task {
-    /// SPC: the SID U-Net, L1(denoise(noisy x ratio), clean).
-    Denoiser,
-    /// PGRF: the SR3 velocity field of the rectified flow.
-    Flow,
-}
-
-/// Every setting; all optional so the file and the flags can be merged.
-#[derive(Args, Debug, Default, Clone, Deserialize)]
-#[serde(deny_unknown_fields)]
+/// The flags of every setting, all optional: the ones given override the
+/// `--config` file, which overrides `TrainConfig`'s defaults (serialised as a
+/// TOML table, unset flags are left out).
+#[derive(Args, Debug, Default, Clone, Serialize)]
 pub struct Settings {
     /// Clean training images: a folder of RAWs, or "procedural" (dead-leaves scenes).
     #[arg(long)]
@@ -48,7 +41,7 @@ pub struct Settings {
     pub calib: Option<PathBuf>,
     /// Noise model of the synthetic pairs: pg, eld or pgrf [default: pgrf].
     #[arg(long)]
-    pub noise: Option<String>,
+    pub noise: Option<ModelKind>,
     /// Fixed ISO (default: parameters drawn from the profile's ELD distribution).
     #[arg(long)]
     pub iso: Option<u32>,
@@ -78,7 +71,7 @@ pub struct Settings {
     pub lr: Option<f64>,
     /// Learning-rate schedule: eld (1/2 at 50%, 1/10 at 90%), constant or cosine [default: eld].
     #[arg(long)]
-    pub schedule: Option<String>,
+    pub schedule: Option<Schedule>,
     /// Clip each parameter's gradient to this norm.
     #[arg(long)]
     pub clip_grad: Option<f32>,
@@ -141,13 +134,14 @@ pub struct Settings {
     pub output: Option<PathBuf>,
     /// cpu or cuda [default: cpu].
     #[arg(long)]
-    pub device: Option<String>,
+    pub device: Option<DeviceKind>,
 }
 
 #[derive(Args, Debug)]
 pub struct TrainArgs {
-    /// Which network to train.
-    pub task: Task,
+    /// What to train: spc (the SID U-Net denoiser; also `denoiser`) or pgrf
+    /// (the flow model's SR3 velocity field; also `flow`).
+    pub method: Method,
     /// TOML file of settings (keys as the flags, with underscores); flags override it.
     #[arg(long)]
     pub config: Option<PathBuf>,
@@ -162,124 +156,29 @@ pub struct TrainArgs {
     /// No progress bar.
     #[arg(long)]
     pub quiet: bool,
+    /// Print the merged configuration as TOML (a `--config` file) and exit.
+    #[arg(long)]
+    pub print_config: bool,
 }
 
-macro_rules! merge {
-    ($flags:expr, $file:expr, $($f:ident),*) => {
-        Settings { $($f: $flags.$f.clone().or($file.$f.clone()),)* }
-    };
-}
-
-fn merged(a: &TrainArgs) -> Result<Settings> {
+/// The configuration: defaults, then the `--config` file, then the flags.
+fn merged(a: &TrainArgs) -> Result<TrainConfig> {
     let file = match &a.config {
-        None => Settings::default(),
+        None => TrainConfig::default(),
         Some(p) => {
             let text = std::fs::read_to_string(p).with_context(|| format!("{}", p.display()))?;
-            toml::from_str::<Settings>(&text)
-                .map_err(|e| anyhow::anyhow!("{}: {}", p.display(), e.message()))?
+            TrainConfig::from_toml(&text).with_context(|| format!("{}", p.display()))?
         }
     };
-    let f = &a.settings;
-    Ok(merge!(
-        f,
-        file,
-        data,
-        val_data,
-        profile,
-        calib,
-        noise,
-        iso,
-        ratio_min,
-        ratio_max,
-        patch,
-        batch,
-        workers,
-        cache_mib,
-        steps,
-        lr,
-        schedule,
-        clip_grad,
-        seed,
-        no_augment,
-        width,
-        residual,
-        inner_channels,
-        channel_mults,
-        res_blocks,
-        attn_levels,
-        norm_groups,
-        dropout,
-        val_every,
-        val_pairs,
-        val_patch,
-        val_t2,
-        checkpoint_every,
-        checkpoint,
-        log,
-        log_every,
-        output,
-        device
-    ))
-}
-
-/// The largest group count <= 32 that divides every level's channel count, so
-/// reduced configurations work without the user doing the arithmetic.
-fn default_groups(inner: usize, mults: &[usize]) -> usize {
-    (1..=32usize)
-        .rev()
-        .find(|&g| inner.is_multiple_of(g) && mults.iter().all(|m| (m * inner).is_multiple_of(g)))
-        .unwrap_or(1)
-}
-
-fn architecture(task: Task, s: &Settings) -> Result<Architecture> {
-    Ok(match task {
-        Task::Denoiser => {
-            let w = s.width.unwrap_or(32);
-            if w == 0 {
-                bail!("--width must be at least 1");
-            }
-            Architecture::SidUnet(
-                SidUnetConfig::new()
-                    .with_width(w)
-                    .with_residual(s.residual.unwrap_or(false)),
-            )
-        }
-        Task::Flow => {
-            let inner = s.inner_channels.or(s.width).unwrap_or(64);
-            let mults = s
-                .channel_mults
-                .clone()
-                .unwrap_or_else(|| vec![1, 2, 4, 8, 8]);
-            let attn = s.attn_levels.clone().unwrap_or_else(|| vec![3]);
-            if let Some(l) = attn.iter().find(|&&l| l >= mults.len()) {
-                bail!(
-                    "--attn-levels {l} does not exist: the network has {} levels (0..{})",
-                    mults.len(),
-                    mults.len().saturating_sub(1)
-                );
-            }
-            let cfg = Sr3Config::new()
-                .with_inner_channels(inner)
-                .with_channel_mults(mults.clone())
-                .with_res_blocks(s.res_blocks.unwrap_or(2))
-                .with_attn_levels(attn)
-                .with_norm_groups(
-                    s.norm_groups
-                        .unwrap_or_else(|| default_groups(inner, &mults)),
-                )
-                .with_dropout(s.dropout.unwrap_or(0.0))
-                .with_residual(s.residual.unwrap_or(false));
-            cfg.validate()
-                .map_err(|e| anyhow::anyhow!("flow network: {e}"))?;
-            Architecture::Sr3(cfg)
-        }
-    })
+    let c = file.overlay(&a.settings)?;
+    c.validate()?;
+    Ok(c)
 }
 
 /// Training and validation sources.
-fn sources(s: &Settings, patch: usize, val_patch: usize) -> Result<(Source, Source, String)> {
-    let data = s.data.clone().unwrap_or_else(|| "procedural".into());
-    let cache = s.cache_mib.unwrap_or(4096);
+fn sources(s: &TrainConfig, patch: usize, val_patch: usize) -> Result<(Source, Source, String)> {
+    let data = s.data.clone();
+    let cache = s.cache_mib;
     let folder = |dir: &Path| -> Result<Vec<PathBuf>> {
         Folder::list(dir).with_context(|| "--data".to_string())
     };
@@ -322,76 +221,28 @@ fn sources(s: &Settings, patch: usize, val_patch: usize) -> Result<(Source, Sour
     Ok((train, val, data))
 }
 
-struct Bar {
-    bar: ProgressBar,
-    quiet: bool,
-}
-
-impl Progress for Bar {
-    fn start(&mut self, from: u64, total: u64) {
-        self.bar.set_length(total);
-        self.bar.set_position(from);
-        self.bar.reset_eta();
-    }
-    fn step(&mut self, step: u64, loss: f32, lr: f64, ips: f64) {
-        self.bar.set_position(step);
-        self.bar
-            .set_message(format!("loss {loss:.4}  lr {lr:.1e}  {ips:.2} img/s"));
-    }
-    fn note(&mut self, msg: &str) {
-        if !self.quiet {
-            if self.bar.is_hidden() {
-                eprintln!("{msg}");
-            } else {
-                self.bar.println(msg);
-            }
-        }
-    }
-    fn finish(&mut self) {
-        self.bar.finish_and_clear();
-    }
-}
-
 pub fn run(a: &TrainArgs) -> Result<()> {
     let s = merged(a)?;
+    if a.print_config {
+        print!("{}", s.to_toml());
+        return Ok(());
+    }
     let Some(out) = s.output.clone() else {
         bail!("no output: give -o FILE.safetensors (or `output = ...` in the config)");
     };
-    let device: DeviceKind = s
-        .device
-        .as_deref()
-        .unwrap_or("cpu")
-        .parse()
-        .map_err(anyhow::Error::msg)?;
+    let device = s.device;
     device.check_available().map_err(anyhow::Error::msg)?;
-    let arch = architecture(a.task, &s)?;
-    let patch = s.patch.unwrap_or(512);
-    let batch = s.batch.unwrap_or(1);
-    if patch < 8 || batch == 0 {
-        bail!("--patch must be at least 8 and --batch at least 1 (got {patch}, {batch})");
-    }
-    let val_patch = s.val_patch.unwrap_or(patch.min(256));
-    let steps = s.steps.unwrap_or(30_000);
-    let schedule: Schedule = s
-        .schedule
-        .as_deref()
-        .unwrap_or("eld")
-        .parse()
-        .map_err(anyhow::Error::msg)?;
-    let model: ModelKind = s
-        .noise
-        .as_deref()
-        .unwrap_or("pgrf")
-        .parse()
-        .map_err(anyhow::Error::msg)?;
-    let profile_name = s.profile.clone().unwrap_or_else(|| "sony-a7s2".into());
+    let arch = s.architecture(a.method)?;
+    let (patch, batch) = (s.patch, s.batch);
+    let val_patch = s.val_patch();
+    let steps = s.steps;
+    let schedule = s.schedule;
+    let model = s.noise;
+    let profile_name = s.profile.clone();
     let profile = CameraProfile::load(&profile_name)?;
     let mut spec = PairSpec::new(profile, model);
     spec.iso = s.iso;
-    let (lo, hi) = (s.ratio_min.unwrap_or(100.0), s.ratio_max.unwrap_or(300.0));
-    if !(lo > 0.0 && hi >= lo && hi.is_finite()) {
-        bail!("ratio range {lo}..{hi} must be positive and ordered");
-    }
+    let (lo, hi) = (s.ratio_min, s.ratio_max);
     spec.ratio = RatioSpec::Uniform { lo, hi };
     let mut calibration = None;
     if let Some(path) = &s.calib {
@@ -401,8 +252,8 @@ pub fn run(a: &TrainArgs) -> Result<()> {
         calibration = Some(cal.identity(path));
     }
     let (train_src, val_src, data) = sources(&s, patch, val_patch)?;
-    let val_pairs = s.val_pairs.unwrap_or(4);
-    let seed = s.seed.unwrap_or(0);
+    let val_pairs = s.val_pairs;
+    let seed = s.seed;
     let spec = Arc::new(spec);
     let val = if val_pairs > 0 {
         Some(ValSet::build(&val_src, &spec, val_patch, val_pairs, seed)?)
@@ -415,14 +266,14 @@ pub fn run(a: &TrainArgs) -> Result<()> {
         batch,
         patch,
         seed,
-        lr: s.lr.unwrap_or(1e-4),
+        lr: s.lr,
         schedule,
         clip_grad: s.clip_grad,
-        augment: !s.no_augment.unwrap_or(false),
-        workers: s.workers.unwrap_or(2),
-        val_every: s.val_every.unwrap_or(1000),
-        val_t2: s.val_t2.unwrap_or(0.5),
-        checkpoint_every: s.checkpoint_every.unwrap_or(1000),
+        augment: !s.no_augment,
+        workers: s.workers,
+        val_every: s.val_every,
+        val_t2: s.val_t2,
+        checkpoint_every: s.checkpoint_every,
         out: out.clone(),
         checkpoint: s
             .checkpoint
@@ -433,17 +284,18 @@ pub fn run(a: &TrainArgs) -> Result<()> {
                 .clone()
                 .unwrap_or_else(|| out.with_extension("log.csv")),
         ),
-        log_every: s.log_every.unwrap_or(10),
+        log_every: s.log_every,
         resume: a.resume,
         noise: NoiseSource {
             profile: Some(profile_name.clone()),
             calibration,
-            model: format!("{model:?}").to_lowercase(),
+            model,
             iso: spec.iso,
             ratio: [lo, hi],
         },
         data: data.clone(),
         device: device.to_string(),
+        config: Some(s.clone()),
     };
     for p in [&out, &settings.checkpoint] {
         crate::output::require_parent_dir(p)?;
@@ -482,29 +334,14 @@ pub fn run(a: &TrainArgs) -> Result<()> {
             }
         });
     }
-    let bar = if a.quiet {
-        ProgressBar::hidden()
-    } else {
-        ProgressBar::new(steps)
-    };
-    bar.set_style(
-        ProgressStyle::with_template(
-            "{elapsed_precise} [{bar:30}] {pos}/{len} steps  {msg}  ETA {eta}",
-        )
-        .expect("static template")
-        .progress_chars("=> "),
-    );
-    let mut progress = Bar {
-        bar,
-        quiet: a.quiet,
-    };
+    let progress = crate::progress::Bar::new("train", steps, "steps", a.quiet);
     let outcome = pgrf_nn::backend::train(
         device,
         &settings,
         Arc::new(train_src),
         spec,
         val.as_ref(),
-        &mut progress,
+        &progress,
         &stop,
     )?;
     report(a, &settings, &outcome)?;
@@ -544,7 +381,7 @@ fn report(a: &TrainArgs, s: &TrainSettings, o: &Outcome) -> Result<()> {
         println!(
             "{}",
             serde_json::json!({
-                "task": s.task(),
+                "method": s.arch.method(),
                 "steps": o.end_step,
                 "steps_this_run": o.end_step - o.start_step,
                 "final_loss": o.final_loss,

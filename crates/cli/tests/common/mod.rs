@@ -62,7 +62,7 @@ pub fn tiny_model(dir: &Path, flow: bool, t2: Option<f32>, seed: u64) -> PathBuf
         NoiseSource {
             profile: Some("sony-a7s2".into()),
             calibration: None,
-            model: "pgrf".into(),
+            model: pgrf_noise::ModelKind::Pgrf,
             iso: Some(1600),
             ratio: [100.0, 300.0],
         },

@@ -32,7 +32,7 @@ pub const X200: [u32; 3] = [5, 10, 15];
 /// Long-exposure reference frames.
 pub const REFERENCES: [u32; 4] = [1, 6, 11, 16];
 /// Scenes of the benchmark.
-pub const SCENES: std::ops::RangeInclusive<u32> = 1..=10;
+pub(crate) const SCENES: std::ops::RangeInclusive<u32> = 1..=10;
 
 /// The ISO and exposure time of each frame 1..=16 in the ELD table (scene 1;
 /// other scenes scale all exposures alike, so ratios are the same). Used by
@@ -69,12 +69,12 @@ pub fn reference_for(frame: u32) -> u32 {
 }
 
 /// The frame file name ELD builds (`IMG_{:04d}.ARW`).
-pub fn frame_name(frame: u32) -> String {
+pub(crate) fn frame_name(frame: u32) -> String {
     format!("IMG_{frame:04}.ARW")
 }
 
 /// The folder holding `scene-K`: ROOT/SonyA7S2 when it exists, else ROOT.
-pub fn camera_dir(root: &Path) -> Result<PathBuf> {
+pub(crate) fn camera_dir(root: &Path) -> Result<PathBuf> {
     if !root.is_dir() {
         return err(format!("--root {}: no such folder", root.display()));
     }

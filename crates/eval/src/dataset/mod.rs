@@ -17,6 +17,7 @@
 
 pub mod eld;
 pub mod pairs;
+pub mod run;
 pub mod sid;
 pub mod table;
 
@@ -30,7 +31,7 @@ use std::path::{Path, PathBuf};
 #[error("{0}")]
 pub struct DatasetError(pub String);
 
-pub type Result<T> = std::result::Result<T, DatasetError>;
+pub(crate) type Result<T> = std::result::Result<T, DatasetError>;
 
 fn err<T>(msg: impl Into<String>) -> Result<T> {
     Err(DatasetError(msg.into()))
@@ -45,7 +46,7 @@ pub enum DatasetKind {
 }
 
 impl DatasetKind {
-    pub fn name(self) -> &'static str {
+    pub(crate) fn name(self) -> &'static str {
         match self {
             DatasetKind::Eld => "eld",
             DatasetKind::Sid => "sid",
@@ -104,7 +105,7 @@ impl std::str::FromStr for DatasetKind {
 
 /// How a sample's amplification is found.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub enum RatioRule {
+pub(crate) enum RatioRule {
     /// (ISO x exposure time) of the reference over that of the noisy frame,
     /// both from the files' EXIF (ELD's `metainfo`).
     IsoExposure,
@@ -116,27 +117,27 @@ pub enum RatioRule {
 /// One noisy/reference pair of a benchmark.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Sample {
-    pub kind: DatasetKind,
+    pub(crate) kind: DatasetKind,
     /// Scene/pair identifier for tables and CSV ("scene-3/IMG_0009", "10003_00_0.1s").
-    pub id: String,
+    pub(crate) id: String,
     /// The table row the pair is averaged into (100, 200, 250, 300, ...).
-    pub group: u32,
-    pub ratio: RatioRule,
-    pub noisy: PathBuf,
-    pub reference: PathBuf,
+    pub(crate) group: u32,
+    pub(crate) ratio: RatioRule,
+    pub(crate) noisy: PathBuf,
+    pub(crate) reference: PathBuf,
 }
 
 /// A loaded pair, ready for a network and the metrics.
-pub struct LoadedPair {
+pub(crate) struct LoadedPair {
     /// The noisy frame as decoded (geometry and metadata for previews).
-    pub noisy_frame: RawFrame,
-    pub reference_frame: RawFrame,
+    pub(crate) noisy_frame: RawFrame,
+    pub(crate) reference_frame: RawFrame,
     /// Packed noisy x ratio, clamped to [0, 1]: the network input, and the
     /// "noisy input" baseline.
-    pub input: Array3<f32>,
+    pub(crate) input: Array3<f32>,
     /// Packed reference clamped to [0, 1].
-    pub reference: Array3<f32>,
-    pub ratio: f32,
+    pub(crate) reference: Array3<f32>,
+    pub(crate) ratio: f32,
 }
 
 /// (ISO x exposure) of a frame, for ELD's ratio.
@@ -152,7 +153,7 @@ fn iso_exposure(f: &RawFrame, path: &Path) -> Result<f64> {
 
 /// Decode both files of `s` (with `levels` overriding the files' black or
 /// white levels), compute the ratio, and pack them.
-pub fn load_pair(s: &Sample, levels: &LevelOverrides) -> Result<LoadedPair> {
+pub(crate) fn load_pair(s: &Sample, levels: &LevelOverrides) -> Result<LoadedPair> {
     let (n, r) = rayon::join(
         || decode_file(&s.noisy, levels),
         || decode_file(&s.reference, levels),
@@ -196,7 +197,7 @@ pub fn load_pair(s: &Sample, levels: &LevelOverrides) -> Result<LoadedPair> {
 /// ELD's `crop_center` (`util.crop_center`) on packed planes: the centre `side` x `side` window
 /// starting at (h/2 - side/2, w/2 - side/2); a plane smaller than `side` is
 /// kept whole along that axis.
-pub fn centre_crop(a: ArrayView3<'_, f32>, side: Option<usize>) -> ArrayView3<'_, f32> {
+pub(crate) fn centre_crop(a: ArrayView3<'_, f32>, side: Option<usize>) -> ArrayView3<'_, f32> {
     let Some(side) = side else { return a };
     let (_, h, w) = a.dim();
     let (ch, cw) = (side.min(h), side.min(w));

@@ -9,7 +9,7 @@ use super::{err, existing, DatasetKind, RatioRule, Result, Sample};
 use std::path::{Path, PathBuf};
 
 /// CSV looked for when `--root` is a folder.
-pub const DEFAULT_CSV: &str = "pairs.csv";
+pub(crate) const DEFAULT_CSV: &str = "pairs.csv";
 
 pub fn walk(root: &Path) -> Result<Vec<Sample>> {
     let csv = if root.is_dir() {

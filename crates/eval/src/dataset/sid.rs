@@ -26,10 +26,10 @@ pub const MISALIGNED: [&str; 3] = ["10034", "10045", "10172"];
 /// List file looked for in ROOT when none is given.
 pub const DEFAULT_LIST: &str = "Sony_test_list.txt";
 /// Cap on the ratio (ELD's `min(..., 300)`).
-pub const MAX_RATIO: f64 = 300.0;
+pub(crate) const MAX_RATIO: f64 = 300.0;
 
 /// Exposure time in seconds from a SID file name (`10003_00_0.1s.ARW`).
-pub fn exposure_from_name(name: &str) -> Option<f64> {
+pub(crate) fn exposure_from_name(name: &str) -> Option<f64> {
     let stem = Path::new(name).file_stem()?.to_str()?;
     let last = stem.rsplit('_').next()?;
     let t: f64 = last.strip_suffix('s')?.parse().ok()?;
@@ -220,13 +220,12 @@ mod tests {
     }
 
     #[test]
+    #[cfg_attr(not(shared_data), ignore = "needs ../shared/data")]
     fn the_shared_test_list_has_three_ratios() {
-        let list = Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("../../../shared/data/protocols/Sony_test_list.txt");
-        let Ok(text) = std::fs::read_to_string(&list) else {
-            eprintln!("skipped: {} not found", list.display());
-            return;
-        };
+        let list = pgrf_core::shared_data_dir()
+            .expect("../shared/data")
+            .join("protocols/Sony_test_list.txt");
+        let text = std::fs::read_to_string(&list).unwrap();
         let mut groups = std::collections::BTreeMap::new();
         for l in text.lines().filter(|l| !l.trim().is_empty()) {
             let f: Vec<&str> = l.split_whitespace().collect();

@@ -24,14 +24,14 @@ pub struct Row {
 
 /// (mean PSNR, mean SSIM, images) of one method at one ratio; None when the
 /// method has no image there.
-pub type Cell = Option<(f64, f64, usize)>;
+pub(crate) type Cell = Option<(f64, f64, usize)>;
 
 /// Mean PSNR/SSIM per (group, method), methods in first-seen order.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Summary {
     pub methods: Vec<String>,
     /// group -> per method (mean PSNR, mean SSIM, images).
-    pub rows: BTreeMap<u32, Vec<Cell>>,
+    pub(crate) rows: BTreeMap<u32, Vec<Cell>>,
 }
 
 pub fn summarise(rows: &[Row]) -> Summary {

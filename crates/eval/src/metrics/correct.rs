@@ -41,12 +41,12 @@ pub struct IlluminanceGain {
     pub pixels: usize,
     /// `sum(o o)` over those pixels; zero means the output was black there and
     /// the gain fell back to 1.
-    pub den: f64,
+    pub(crate) den: f64,
 }
 
 impl IlluminanceGain {
     /// Whether a gain could be fitted (some unsaturated pixel, non-black output).
-    pub fn fitted(&self) -> bool {
+    pub(crate) fn fitted(&self) -> bool {
         self.pixels > 0 && self.den > 0.0
     }
 }

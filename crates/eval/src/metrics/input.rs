@@ -14,10 +14,10 @@ pub(crate) const CHUNK: usize = 1 << 15;
 /// as one row-major slice (borrowed when the view is already in standard
 /// layout, copied otherwise).
 pub(crate) struct Pair<'a> {
-    pub output: Cow<'a, [f32]>,
-    pub reference: Cow<'a, [f32]>,
+    pub(crate) output: Cow<'a, [f32]>,
+    pub(crate) reference: Cow<'a, [f32]>,
     /// `(C, H, W)`.
-    pub dims: (usize, usize, usize),
+    pub(crate) dims: (usize, usize, usize),
 }
 
 pub(crate) fn pair<'a>(

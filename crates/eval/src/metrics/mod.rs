@@ -26,4 +26,4 @@ pub use psnr::{mse, psnr};
 pub use ssim::{ssim, ssim_channels, SsimOptions};
 
 /// Result type of the metric functions.
-pub type Result<T> = std::result::Result<T, MetricError>;
+pub(crate) type Result<T> = std::result::Result<T, MetricError>;

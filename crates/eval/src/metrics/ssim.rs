@@ -41,14 +41,14 @@ const BAND: usize = 128;
 #[derive(Clone, Debug, PartialEq)]
 pub struct SsimOptions {
     /// Side of the square uniform window; odd.
-    pub win_size: usize,
-    pub k1: f64,
-    pub k2: f64,
+    pub(crate) win_size: usize,
+    pub(crate) k1: f64,
+    pub(crate) k2: f64,
     /// Dynamic range of the values (255 for x255 images). scikit-image
     /// requires it for float images, so there is no default.
-    pub data_range: f64,
+    pub(crate) data_range: f64,
     /// Normalise (co)variances by `NP - 1` instead of `NP`.
-    pub use_sample_covariance: bool,
+    pub(crate) use_sample_covariance: bool,
 }
 
 impl SsimOptions {

@@ -14,10 +14,9 @@
 use crate::data::augment::Augment;
 use crate::data::source::Source;
 use crate::error::{NnError, Result};
+use pgrf_core::seed::mix64;
 use pgrf_noise::pair::PairSpec;
-use pgrf_noise::rng::mix64;
 use rand::{Rng, SeedableRng};
-use rand_distr::{Distribution, StandardNormal};
 use rand_xoshiro::Xoshiro256PlusPlus;
 use std::sync::mpsc::{sync_channel, Receiver};
 use std::sync::Arc;
@@ -113,12 +112,7 @@ pub fn make_sample(source: &Source, spec: &PairSpec, s: &SampleSpec, index: u64)
     let clean: Vec<f32> = pair.clean.iter().copied().collect();
     let (x0, t) = match s.extras {
         Extras::None => (Vec::new(), 0.0),
-        Extras::Flow => {
-            let x0: Vec<f32> = (0..noisy.len())
-                .map(|_| StandardNormal.sample(&mut rng))
-                .collect();
-            (x0, rng.random::<f32>())
-        }
+        Extras::Flow => crate::flow::draw::training_start_and_time(&mut rng, noisy.len()),
     };
     Ok(Sample {
         noisy,

@@ -88,7 +88,7 @@ impl Folder {
 
     /// The RAW files in `dir`, sorted by name.
     pub fn list(dir: &Path) -> Result<Vec<PathBuf>> {
-        pgrf_calib::stack::list_files(dir).map_err(|e| NnError::Invalid(e.to_string()))
+        Ok(pgrf_raw::files::list_files(dir)?)
     }
 
     pub fn files(&self) -> &[PathBuf] {
@@ -212,13 +212,11 @@ mod tests {
     }
 
     #[test]
+    #[cfg_attr(not(shared_data), ignore = "needs ../shared/data")]
     fn folder_crops_normalise_with_each_files_levels() {
-        let data = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data/raw");
-        let file = data.join("canon550d_colorchart.dng");
-        if !file.exists() {
-            eprintln!("skipping: {} not found", file.display());
-            return;
-        }
+        let file = pgrf_core::shared_data_dir()
+            .expect("../shared/data")
+            .join("raw/canon550d_colorchart.dng");
         let frame = decode_file(&file, &LevelOverrides::default()).unwrap();
         let reference = pgrf_raw::pack_normalized(&frame, false).unwrap();
         let src = Source::Folder(Folder::new(vec![file], LevelOverrides::default(), 64).unwrap());

@@ -5,8 +5,8 @@
 use crate::data::loader::{make_sample, Extras, SampleSpec};
 use crate::data::source::Source;
 use crate::error::Result;
+use pgrf_core::seed::mix64;
 use pgrf_noise::pair::PairSpec;
-use pgrf_noise::rng::mix64;
 
 const VAL_DOMAIN: u64 = 0x7661_6c69; // "vali"
 

@@ -6,6 +6,7 @@ use super::start::start_noise;
 use super::tiles::{run_tiled, AxisPlan, TilePlan};
 use crate::error::{NnError, Result};
 use ndarray::{Array3, ArrayView3};
+use pgrf_core::Progress;
 
 /// How a frame is cut into tiles and which start noise the flow draws.
 #[derive(Clone, Copy, Debug)]
@@ -35,7 +36,7 @@ pub fn restore_image(
     r: &dyn Restore,
     input: ArrayView3<f32>,
     opts: &ImageOptions,
-    progress: &mut dyn FnMut(usize, usize),
+    progress: &dyn Progress,
 ) -> Result<Array3<f32>> {
     let (c, h, w) = input.dim();
     if let Some(pos) = input.iter().position(|v| !v.is_finite()) {
@@ -49,10 +50,9 @@ pub fn restore_image(
         .collect();
     let mut inputs = vec![input];
     inputs.extend(x0s.iter().map(|a| a.view()));
-    let total = plan.count();
-    let mut out = run_tiled(&inputs, c, &plan, |tile, views| {
+    let mut out = run_tiled(&inputs, c, &plan, |_, views| {
         let y = r.restore(views[0], &views[1..])?;
-        progress(tile.index + 1, total);
+        progress.advance(1);
         Ok(y)
     })?;
     if let Some(pos) = out.iter().position(|v| v.is_nan()) {

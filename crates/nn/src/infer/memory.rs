@@ -27,26 +27,6 @@ pub fn bytes_per_pixel(arch: &Architecture) -> f64 {
     floats * 4.0
 }
 
-/// Memory the OS says is available for new allocations (Linux), in bytes.
-pub fn available_memory() -> Option<u64> {
-    let text = std::fs::read_to_string("/proc/meminfo").ok()?;
-    text.lines()
-        .find(|l| l.starts_with("MemAvailable:"))
-        .and_then(|l| l.split_whitespace().nth(1))
-        .and_then(|kb| kb.parse::<u64>().ok())
-        .map(|kb| kb * 1024)
-}
-
-/// Peak resident memory of this process so far (Linux), in bytes.
-pub fn peak_rss() -> Option<u64> {
-    let text = std::fs::read_to_string("/proc/self/status").ok()?;
-    text.lines()
-        .find(|l| l.starts_with("VmHWM:"))
-        .and_then(|l| l.split_whitespace().nth(1))
-        .and_then(|kb| kb.parse::<u64>().ok())
-        .map(|kb| kb * 1024)
-}
-
 /// Tokens of the largest self-attention in an `h` x `w` tile: SR3 attends
 /// at its `attn_levels` and in the first middle block (the last level); each
 /// level halves the side, rounding up. Zero for the SID U-Net.
@@ -128,8 +108,8 @@ pub fn auto_tile(
     match device {
         crate::backend::DeviceKind::Cuda => 1024.min(cap),
         crate::backend::DeviceKind::Cpu => {
-            let budget =
-                (available_memory().unwrap_or(2 << 30) / 2).saturating_sub(fixed_bytes(r, ph, pw));
+            let budget = (pgrf_core::mem::available_memory().unwrap_or(2 << 30) / 2)
+                .saturating_sub(fixed_bytes(r, ph, pw));
             let arch = &r.meta().arch;
             if side <= cap && tile_bytes(arch, ph, pw) <= budget as f64 {
                 side
@@ -159,7 +139,7 @@ mod tests {
         assert_eq!(tile_for_budget(&a, 16, 8 << 30, 512), 512);
         let f = Architecture::Sr3(Sr3Config::new());
         assert!(tile_for_budget(&f, 16, 1 << 30, 2048) < tile_for_budget(&a, 16, 1 << 30, 2048));
-        assert!(available_memory().unwrap_or(1) > 0);
+        assert!(pgrf_core::mem::available_memory().unwrap_or(1) > 0);
     }
 
     #[test]

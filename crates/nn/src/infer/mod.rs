@@ -2,6 +2,7 @@
 //! tiles and their blend, and the restorer that runs either network on any
 //! device.
 
+pub mod frame;
 pub mod image;
 pub mod memory;
 pub mod prepare;
@@ -9,5 +10,6 @@ pub mod restorer;
 pub mod start;
 pub mod tiles;
 
+pub use frame::{restore_frame, restore_packed, RestoredFrame, RestoredPacked, Tiling};
 pub use image::{overlap_for, restore_image, ImageOptions, DEFAULT_OVERLAP};
 pub use restorer::{load, Restore, Restorer, SamplerChoice};

@@ -7,8 +7,7 @@
 //! the same image whatever the tiling and the thread count.
 
 use ndarray::Array3;
-use pgrf_noise::rng::{stream, Domain};
-use rand_distr::{Distribution, StandardNormal};
+use pgrf_core::seed::{stream, Domain};
 use rayon::prelude::*;
 
 /// Keeps start-noise streams apart from the noise model's.
@@ -31,9 +30,7 @@ pub fn start_noise(seed: u64, k: u64, c: usize, h: usize, w: usize) -> Array3<f3
                 k,
                 r as u64,
             );
-            for v in row {
-                *v = StandardNormal.sample(&mut rng);
-            }
+            crate::flow::draw::fill_start(&mut rng, row);
         });
     a
 }

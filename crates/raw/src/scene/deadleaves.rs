@@ -47,15 +47,6 @@ const GAP_REACH: usize = 4;
 /// e^-24 of the area would be left to gap filling on average.
 const COVER_UNITS: f64 = 24.0;
 
-/// SplitMix64 finaliser, for deriving stream seeds from the user's seed.
-#[inline]
-fn mix64(mut z: u64) -> u64 {
-    z = z.wrapping_add(0x9E37_79B9_7F4A_7C15);
-    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-    z ^ (z >> 31)
-}
-
 /// What the painting pass leaves besides the pixels it visited.
 pub(super) struct Painted {
     /// Visible regions in id order.
@@ -81,8 +72,8 @@ pub(super) fn paint(
     // Geometry and appearance draw from separate streams, and appearance
     // only for discs that turn out visible, so hidden discs cost three
     // numbers each.
-    let mut geo = Xoshiro256PlusPlus::seed_from_u64(mix64(seed ^ 0x6765_6f6d));
-    let mut app = Xoshiro256PlusPlus::seed_from_u64(mix64(seed ^ 0x636f_6c72));
+    let mut geo = Xoshiro256PlusPlus::seed_from_u64(pgrf_core::seed::mix64(seed ^ 0x6765_6f6d));
+    let mut app = Xoshiro256PlusPlus::seed_from_u64(pgrf_core::seed::mix64(seed ^ 0x636f_6c72));
     let palette = Palette::new(&mut app, width, height);
     let table = lattice_table(&mut app);
     let mut discs = Vec::new();

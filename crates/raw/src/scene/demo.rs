@@ -24,8 +24,8 @@ const SURROUND: f32 = 0.03;
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct DemoLayout {
     /// Chart card: rows and columns `[start, end)`.
-    pub chart_rows: (usize, usize),
-    pub chart_cols: (usize, usize),
+    pub(crate) chart_rows: (usize, usize),
+    pub(crate) chart_cols: (usize, usize),
     /// Ramp strip.
     pub ramp_rows: (usize, usize),
     pub ramp_cols: (usize, usize),

@@ -81,11 +81,11 @@ impl FromStr for SceneKind {
 /// `(height / 2, width / 2)` like packing a frame of that size.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub struct SceneSpec {
-    pub kind: SceneKind,
-    pub width: usize,
-    pub height: usize,
+    pub(crate) kind: SceneKind,
+    pub(crate) width: usize,
+    pub(crate) height: usize,
     /// The gradient ignores it: it is a fixed target whose values are known.
-    pub seed: u64,
+    pub(crate) seed: u64,
 }
 
 impl SceneSpec {
@@ -165,7 +165,7 @@ impl Scene {
         Scene { spec: *spec, inner }
     }
 
-    pub fn spec(&self) -> &SceneSpec {
+    pub(crate) fn spec(&self) -> &SceneSpec {
         &self.spec
     }
 
@@ -197,7 +197,7 @@ impl Scene {
 
     /// Channel `c` (0 R, 1 G, 2 B) at mosaic pixel (row, col), in [0, 1].
     #[inline]
-    pub fn sample(&self, row: usize, col: usize, c: usize) -> f32 {
+    pub(crate) fn sample(&self, row: usize, col: usize, c: usize) -> f32 {
         match &self.inner {
             Inner::DeadLeaves(d) => d.sample(row, col, c),
             &Inner::Gradient { sx, sy, sd } => gradient(sx, sy, sd, row, col)[c],

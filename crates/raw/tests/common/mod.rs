@@ -3,17 +3,11 @@
 
 use std::path::PathBuf;
 
-/// `../shared/data` next to the repository root, or None (tests then skip
-/// with a message rather than fail: the folder is not part of the repository).
-pub fn data_dir() -> Option<PathBuf> {
-    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..");
-    let d = root.join("../shared/data");
-    if d.is_dir() {
-        Some(d)
-    } else {
-        eprintln!("skipping: {} not found", d.display());
-        None
-    }
+/// `../shared/data` next to the repository root. Tests that call this are
+/// marked `#[cfg_attr(not(shared_data), ignore = ...)]`, so they only run
+/// where the folder is.
+pub fn data_dir() -> PathBuf {
+    pgrf_core::shared_data_dir().expect("../shared/data (the test should be ignored without it)")
 }
 
 /// A fresh scratch folder for one test.

@@ -1,11 +1,32 @@
 //! Atomic file writes: write a sibling temporary file, flush it to disk, then
 //! rename it over the target. An interrupted run leaves either the old file or
 //! the new one, never half of one. Shared by every crate that writes outputs
-//! (DNGs, PNGs, calibration files, checkpoints).
+//! (DNGs, PNGs, calibration files, weights, checkpoints, reports).
 
-use crate::error::{RawError, Result};
 use std::io::Write;
 use std::path::{Path, PathBuf};
+
+/// A file that could not be written; renders as one line naming it.
+#[derive(Debug, thiserror::Error)]
+#[error("{}: cannot write: {reason}", path.display())]
+pub struct WriteError {
+    /// The file that was to be written.
+    pub(crate) path: PathBuf,
+    /// Why not, on one line.
+    pub(crate) reason: String,
+}
+
+impl WriteError {
+    fn new(path: &Path, reason: impl Into<String>) -> Self {
+        let reason: String = reason.into();
+        WriteError {
+            path: path.to_path_buf(),
+            reason: reason.lines().next().unwrap_or_default().to_string(),
+        }
+    }
+}
+
+type Result<T> = std::result::Result<T, WriteError>;
 
 /// Write `bytes` to `path` atomically.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
@@ -19,13 +40,13 @@ pub fn write_atomic_with(
 ) -> Result<()> {
     let dir = parent_dir(path);
     if !dir.is_dir() {
-        return Err(RawError::write(
+        return Err(WriteError::new(
             path,
             format!("folder '{}' does not exist", dir.display()),
         ));
     }
     if path.is_dir() {
-        return Err(RawError::write(path, "is a directory"));
+        return Err(WriteError::new(path, "is a directory"));
     }
     let tmp = temp_sibling(path);
     let result = (|| -> std::io::Result<()> {
@@ -38,7 +59,7 @@ pub fn write_atomic_with(
     })();
     if let Err(e) = result {
         let _ = std::fs::remove_file(&tmp);
-        return Err(RawError::write(path, e.to_string()));
+        return Err(WriteError::new(path, e.to_string()));
     }
     Ok(())
 }

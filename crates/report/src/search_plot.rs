@@ -3,7 +3,7 @@
 //! reference lines and the chosen t2 marked, so a user sees how sharp the
 //! optimum is before trusting it.
 
-use pgrf_calib::report::{ensure_font, render_png, FONT_FAMILY};
+use crate::png::{ensure_font, render_png, FONT_FAMILY};
 use plotters::prelude::*;
 use std::path::Path;
 

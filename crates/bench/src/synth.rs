@@ -1,4 +1,4 @@
-//! `pgrf bench synth`: the PGRF composite at full size, and the memory
+//! `pgrf-bench synth`: the PGRF composite at full size, and the memory
 //! bandwidth floor it is judged against.
 //!
 //! The frame is the A7S2's 4256 x 2848 mosaic packed to 4 x 1424 x 2128, a
@@ -7,9 +7,10 @@
 //! and N_FP, uniform dark rate) so every component does real per-pixel work.
 //! bench/pgrf_noise_numpy.py builds the same inputs and runs the same model.
 
-use crate::cmd::bench::median;
 use anyhow::Result;
-use pgrf_noise::rng::{open01, seeded_map};
+use clap::Args;
+use pgrf_core::seed::{open01, seeded_map};
+use pgrf_core::stats::median;
 use pgrf_noise::{CameraProfile, Capture, Components, Map, NoiseModel, PixelMaps};
 use pgrf_raw::ndarray::Array3;
 use rand::Rng;
@@ -19,9 +20,23 @@ use serde::Serialize;
 use std::sync::Arc;
 use std::time::Instant;
 
+/// Packed height of the benchmark frame (the A7S2's 2848 mosaic rows).
 pub const PH: usize = 1424;
+/// Packed width of the benchmark frame (the A7S2's 4256 mosaic columns).
 pub const PW: usize = 2128;
 
+/// Flags of `pgrf-bench synth`.
+#[derive(Args, Debug)]
+pub struct SynthArgs {
+    /// Timed frames (after one warm-up).
+    #[arg(long, default_value_t = 10)]
+    pub frames: usize,
+    /// Print one JSON line instead of text.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// The JSON line bench/synth.sh reads.
 #[derive(Serialize)]
 struct SynthResult {
     shape: [usize; 3],
@@ -85,7 +100,10 @@ fn bandwidth_gb_s() -> f64 {
     (2 * n * 4) as f64 / best / 1e9
 }
 
-pub fn run(frames: usize, json: bool) -> Result<()> {
+/// Time `frames` noisy frames (one seed each) after one warm-up, then
+/// measure the bandwidth floor.
+pub fn run(a: &SynthArgs) -> Result<()> {
+    let (frames, json) = (a.frames, a.json);
     anyhow::ensure!(frames > 0, "--frames must be at least 1");
     let (model, clean) = setup()?;
     let capture = |seed| Capture {
@@ -102,7 +120,7 @@ pub fn run(frames: usize, json: bool) -> Result<()> {
         times.push(t.elapsed().as_secs_f64() * 1e3);
         std::hint::black_box(out);
     }
-    let min = times.iter().cloned().fold(f64::MAX, f64::min);
+    let min = times.iter().copied().fold(f64::MAX, f64::min);
     let ms = median(&mut times);
     let bw = bandwidth_gb_s();
     // Per sample: clean in, four f32 maps in, result out.

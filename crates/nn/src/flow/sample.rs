@@ -1,16 +1,34 @@
-//! Samplers of the rectified flow. The paper's point is two network
-//! evaluations instead of hundreds: XZ = v(X0, T, 0) + X0 jumps straight to
-//! a first estimate, Xt2 = t2 XZ + (1 - t2) X0 re-enters the path at the
-//! searched time t2, and XM = v(Xt2, T, t2) + X0 is the result (eq. 4.10-4.12).
-//! Euler integration is kept for comparison.
+//! Samplers of the rectified flow: how a trained velocity field v turns a
+//! start X0 ~ N(0, I) into an image, given the condition T (the noisy
+//! capture).
+//!
+//! The paper's point is two network evaluations instead of hundreds
+//! (eq. 4.10-4.12):
+//!
+//! - eq. 4.10, [`first_stage`]: XZ = v(X0, T, 0) + X0 jumps straight from the
+//!   start to a first estimate of X1 (a single Euler step over the whole
+//!   path); on its own it is the one-step sampler;
+//! - eq. 4.11, inside [`second_stage`]: Xt2 = t2 XZ + (1 - t2) X0 re-enters
+//!   the straight path (eq. 4.9, [`super::path::interpolate`]) at the
+//!   searched time t2;
+//! - eq. 4.12, [`second_stage`]: XM = v(Xt2, T, t2) + X0 is the result.
+//!
+//! [`two_stage`] chains the two; the sampling search (Algorithm 2,
+//! [`super::search`]) calls [`first_stage`] once per pair and
+//! [`second_stage`] once per candidate t, so it evaluates exactly what the
+//! sampler does at t2 = t. Euler integration of dX/dt = v(X, T, t) is kept
+//! for comparison.
 
+use super::path::interpolate;
 use crate::sr3::Sr3Unet;
 use burn::tensor::backend::Backend;
 use burn::tensor::Tensor;
 
-/// A velocity field v(X, T, t). The samplers are written against this so
-/// that their arithmetic can be checked on fields with closed forms.
+/// A velocity field v(X, T, t) (the paper's v, an SR3-style U-Net with the
+/// condition T concatenated to its input). The samplers are written against
+/// this so that their arithmetic can be checked on fields with closed forms.
 pub trait Velocity<B: Backend> {
+    /// v(X, T, t) for a batch: `x` and `cond` `(n, c, h, w)`, `t` `(n)`.
     fn velocity(&self, x: Tensor<B, 4>, cond: Tensor<B, 4>, t: Tensor<B, 1>) -> Tensor<B, 4>;
 }
 
@@ -20,26 +38,14 @@ impl<B: Backend> Velocity<B> for Sr3Unet<B> {
     }
 }
 
+/// The time `t` for each of `n` batch items.
 fn times<B: Backend>(n: usize, t: f32, device: &B::Device) -> Tensor<B, 1> {
     Tensor::<B, 1>::full([n], t, device)
 }
 
-/// The two-stage sampler with second time `t2`.
-pub fn two_stage<B: Backend>(
-    net: &impl Velocity<B>,
-    cond: Tensor<B, 4>,
-    x0: Tensor<B, 4>,
-    t2: f32,
-) -> Tensor<B, 4> {
-    let n = x0.dims()[0];
-    let device = x0.device();
-    let xz = net.velocity(x0.clone(), cond.clone(), times::<B>(n, 0.0, &device)) + x0.clone();
-    let xt2 = xz * t2 + x0.clone() * (1.0 - t2);
-    net.velocity(xt2, cond, times::<B>(n, t2, &device)) + x0
-}
-
-/// One network evaluation: X0 + v(X0, T, 0).
-pub fn one_step<B: Backend>(
+/// First stage, eq. 4.10: XZ = v(X0, T, 0) + X0 (`cond` is T, `x0` is X0).
+/// Also the whole one-step sampler.
+pub fn first_stage<B: Backend>(
     net: &impl Velocity<B>,
     cond: Tensor<B, 4>,
     x0: Tensor<B, 4>,
@@ -49,7 +55,44 @@ pub fn one_step<B: Backend>(
     net.velocity(x0.clone(), cond, times::<B>(n, 0.0, &device)) + x0
 }
 
-/// Euler integration of dX/dt = v(X, T, t) from t = 0 to 1 in `steps` steps.
+/// Second stage, eq. 4.11-4.12: Xt2 = t2 XZ + (1 - t2) X0 (eq. 4.9 at t2),
+/// then XM = v(Xt2, T, t2) + X0. `xz` is the first stage's XZ.
+pub fn second_stage<B: Backend>(
+    net: &impl Velocity<B>,
+    cond: Tensor<B, 4>,
+    x0: Tensor<B, 4>,
+    xz: Tensor<B, 4>,
+    t2: f32,
+) -> Tensor<B, 4> {
+    let n = x0.dims()[0];
+    let t = times::<B>(n, t2, &x0.device());
+    let xt2 = interpolate(xz, x0.clone(), t.clone());
+    net.velocity(xt2, cond, t) + x0
+}
+
+/// The paper's two-stage sampler (eq. 4.10-4.12) with second time `t2`:
+/// XM = v(t2 XZ + (1 - t2) X0, T, t2) + X0, XZ = v(X0, T, 0) + X0.
+pub fn two_stage<B: Backend>(
+    net: &impl Velocity<B>,
+    cond: Tensor<B, 4>,
+    x0: Tensor<B, 4>,
+    t2: f32,
+) -> Tensor<B, 4> {
+    let xz = first_stage(net, cond.clone(), x0.clone());
+    second_stage(net, cond, x0, xz, t2)
+}
+
+/// One network evaluation: XZ = X0 + v(X0, T, 0) (the first stage alone).
+pub fn one_step<B: Backend>(
+    net: &impl Velocity<B>,
+    cond: Tensor<B, 4>,
+    x0: Tensor<B, 4>,
+) -> Tensor<B, 4> {
+    first_stage(net, cond, x0)
+}
+
+/// Euler integration of dX/dt = v(X, T, t) from X0 at t = 0 to t = 1 in
+/// `steps` steps (the many-step baseline the two-stage sampler replaces).
 pub fn euler<B: Backend>(
     net: &impl Velocity<B>,
     cond: Tensor<B, 4>,

@@ -12,13 +12,14 @@
 //! embedded DejaVu Sans and the bitmaps are encoded by the `image` crate rather
 //! than by plotters.
 
+use crate::error::ReportError;
+use crate::png::{encode_png, ensure_font, render_png, PlotResult, FONT_FAMILY};
 use ndarray::{s, ArrayView3};
 use plotters::coord::ranged1d::{Ranged, ValueFormatter};
 use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
-use std::sync::OnceLock;
 
 /// One flat-field level of the photon-transfer curve: bias-corrected mean signal
 /// and temporal variance (from frame pairs), both in DN / DN^2.
@@ -50,28 +51,6 @@ pub struct ReportData<'a> {
     pub summary: Vec<(String, String, String)>,
 }
 
-/// Why a report could not be written. Every message is a single line because
-/// the CLI prints errors verbatim, one per line.
-#[derive(Debug, thiserror::Error)]
-pub enum ReportError {
-    /// Creating the folder is the caller's decision (it usually also holds
-    /// the calibration file), so a missing one is refused, not created.
-    #[error("report folder '{0}' does not exist")]
-    MissingDir(PathBuf),
-    #[error("report path '{0}' is not a folder")]
-    NotADir(PathBuf),
-    #[error("invalid report input: {0}")]
-    Invalid(String),
-    #[error("cannot load the embedded plot font: {0}")]
-    Font(String),
-    #[error("{file}: cannot draw: {reason}")]
-    Plot { file: String, reason: String },
-    #[error("{file}: cannot encode PNG: {reason}")]
-    Encode { file: String, reason: String },
-    #[error(transparent)]
-    Raw(#[from] pgrf_raw::RawError),
-}
-
 /// File names are fixed so scripts and the Markdown links can rely on them.
 const PTC_PNG: &str = "ptc.png";
 const SIGMA_HIST_PNG: &str = "sigma_hist.png";
@@ -89,11 +68,6 @@ const PLOT_H: u32 = 700;
 /// to spot structure (banding, amp glow, clusters), which survives striding,
 /// and a full-resolution mosaic of a 24 MP sensor is tens of MB of noisy PNG.
 const MAP_MAX_SIDE: usize = 1600;
-
-/// plotters' default family; registering the embedded font under it means
-/// every text element (captions, tick labels, legends) finds a font without
-/// each call site naming one.
-pub const FONT_FAMILY: &str = "sans-serif";
 
 /// Write the report into `dir`: ptc.png, sigma_hist.png, dark_r2_hist.png
 /// (only with dark-current fits), fixed_pattern.png, sigma_map.png and
@@ -149,7 +123,7 @@ pub fn write_report(dir: &Path, data: &ReportData) -> Result<Vec<PathBuf>, Repor
 
     let md = summary_markdown(&title, data, &sections);
     let md_path = dir.join(SUMMARY_MD);
-    pgrf_raw::atomic::write_atomic(&md_path, md.as_bytes())?;
+    pgrf_core::write_atomic(&md_path, md.as_bytes())?;
     written.push(md_path);
     Ok(written)
 }
@@ -197,21 +171,6 @@ fn check_planes(name: &str, a: &ArrayView3<f32>) -> Result<(), ReportError> {
     Ok(())
 }
 
-/// Register the embedded font once per process: the `ab_glyph` backend has
-/// no system-font fallback, and without a registered family every text draw
-/// fails.
-pub fn ensure_font() -> Result<(), ReportError> {
-    static FONT: OnceLock<Result<(), String>> = OnceLock::new();
-    FONT.get_or_init(|| {
-        plotters::style::register_font(FONT_FAMILY, FontStyle::Normal, dejavu::sans::regular())
-            .map_err(|_| "DejaVu Sans regular is not a valid font".to_string())?;
-        plotters::style::register_font(FONT_FAMILY, FontStyle::Bold, dejavu::sans::bold())
-            .map_err(|_| "DejaVu Sans bold is not a valid font".to_string())
-    })
-    .clone()
-    .map_err(ReportError::Font)
-}
-
 fn report_title(data: &ReportData) -> String {
     let camera = data.camera.trim();
     let camera = if camera.is_empty() {
@@ -222,76 +181,6 @@ fn report_title(data: &ReportData) -> String {
     match data.iso {
         Some(iso) => format!("{camera}, ISO {iso}"),
         None => format!("{camera}, ISO unknown"),
-    }
-}
-
-// ---------------------------------------------------------------- rendering
-
-pub type PlotResult = Result<(), Box<dyn std::error::Error>>;
-
-/// Render with plotters into an in-memory RGB buffer, encode and write
-/// atomically: the crate has no `bitmap_encoder` feature (it would pull in a
-/// second image stack), and writing through a temp file keeps a crashed run
-/// from leaving half a PNG behind.
-pub fn render_png(
-    path: &Path,
-    (w, h): (u32, u32),
-    draw: impl FnOnce(&DrawingArea<BitMapBackend, plotters::coord::Shift>) -> PlotResult,
-) -> Result<(), ReportError> {
-    let file = file_label(path);
-    let mut rgb = vec![0u8; w as usize * h as usize * 3];
-    {
-        let root = BitMapBackend::with_buffer(&mut rgb, (w, h)).into_drawing_area();
-        let result = root
-            .fill(&WHITE)
-            .map_err(|e| Box::new(e) as Box<dyn std::error::Error>)
-            .and_then(|_| draw(&root))
-            .and_then(|_| root.present().map_err(|e| e.into()));
-        result.map_err(|e| ReportError::Plot {
-            file: file.clone(),
-            reason: one_line(&e.to_string()),
-        })?;
-    }
-    let png = encode_png(&rgb, w, h, image::ExtendedColorType::Rgb8).map_err(|reason| {
-        ReportError::Encode {
-            file: file.clone(),
-            reason,
-        }
-    })?;
-    pgrf_raw::atomic::write_atomic(path, &png)?;
-    Ok(())
-}
-
-fn encode_png(
-    pixels: &[u8],
-    w: u32,
-    h: u32,
-    color: image::ExtendedColorType,
-) -> Result<Vec<u8>, String> {
-    use image::ImageEncoder as _;
-    let mut out = Vec::new();
-    image::codecs::png::PngEncoder::new(&mut out)
-        .write_image(pixels, w, h, color)
-        .map_err(|e| one_line(&e.to_string()))?;
-    Ok(out)
-}
-
-fn file_label(path: &Path) -> String {
-    path.display().to_string()
-}
-
-/// Backend and font errors can carry newlines; the error type promises one.
-fn one_line(s: &str) -> String {
-    let line = s
-        .lines()
-        .map(str::trim)
-        .filter(|l| !l.is_empty())
-        .collect::<Vec<_>>()
-        .join("; ");
-    if line.is_empty() {
-        "unknown error".to_string()
-    } else {
-        line
     }
 }
 
@@ -927,10 +816,10 @@ fn map_section(
         image::ExtendedColorType::L8,
     )
     .map_err(|reason| ReportError::Encode {
-        file: file_label(&path),
+        file: path.display().to_string(),
         reason,
     })?;
-    pgrf_raw::atomic::write_atomic(&path, &png)?;
+    pgrf_core::write_atomic(&path, &png)?;
 
     let mut text = format!(
         "{} ({unit}) as grayscale, the four CFA planes tiled 2x2: R top-left, G1 top-right, \

@@ -1,4 +1,4 @@
-//! Random streams that do not depend on the number of threads.
+//! Seeding: random streams that do not depend on the number of threads.
 //!
 //! Every block of work (one packed row of one plane, one sensor row of row
 //! noise, ...) gets its own generator, seeded by hashing (user seed, domain,
@@ -10,19 +10,26 @@
 use rand::{Rng, SeedableRng};
 use rand_xoshiro::Xoshiro256PlusPlus;
 
+/// The generator of one block of work.
 pub type BlockRng = Xoshiro256PlusPlus;
 
 /// Domains keep streams for different purposes apart.
 #[derive(Clone, Copy, Debug)]
 #[repr(u64)]
 pub enum Domain {
+    /// Per-pixel draws (shot, read, quantisation noise).
     Pixel = 1,
+    /// Per-row draws (row noise).
     Row = 2,
+    /// Per-capture parameter draws.
     Params = 3,
+    /// Per-pixel truth and benchmark maps.
     Maps = 4,
 }
 
-/// SplitMix64 finaliser: a bijective mix of 64 bits.
+/// SplitMix64 (Steele et al.): one step of its sequence from state `z`, a
+/// bijective mix of 64 bits, used to derive stream seeds from a user's seed
+/// and to make reproducible benchmark inputs.
 #[inline]
 pub fn mix64(mut z: u64) -> u64 {
     z = z.wrapping_add(0x9E37_79B9_7F4A_7C15);

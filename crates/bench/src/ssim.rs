@@ -1,4 +1,4 @@
-//! `pgrf bench ssim`: PSNR + SSIM under the ELD protocol on an A7S2-sized
+//! `pgrf-bench ssim`: PSNR + SSIM under the ELD protocol on an A7S2-sized
 //! packed pair (4 x 1424 x 2128), the cost of scoring one test image.
 //!
 //! The pair is deterministic and cheap to rebuild in numpy, so
@@ -10,23 +10,33 @@
 //! u[k]   = (splitmix64(SEED + k) >> 40) / 2^24          k = flat C-order index
 //! output = 0.9 * reference + (u - 0.5) * 0.05           (f32 operations)
 //! ```
+//!
+//! `splitmix64` is one step of SplitMix64, `pgrf_core::seed::mix64`.
 
-use crate::cmd::bench::median;
-use anyhow::{bail, Result};
+use anyhow::{ensure, Result};
+use clap::Args;
+use pgrf_core::seed::mix64;
+use pgrf_core::stats::median;
 use pgrf_eval::{evaluate, Protocol};
 use pgrf_raw::ndarray::Array3;
 use rayon::prelude::*;
 use serde::Serialize;
 use std::time::Instant;
 
+/// The packed pair's shape: an A7S2 frame, `(planes, height, width)`.
 pub const SHAPE: (usize, usize, usize) = (4, 1424, 2128);
+/// Seed of the output's noise (see the module docs).
 const SEED: u64 = 7;
 
-fn splitmix64(x: u64) -> u64 {
-    let mut z = x.wrapping_add(0x9e3779b97f4a7c15);
-    z = (z ^ (z >> 30)).wrapping_mul(0xbf58476d1ce4e5b9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94d049bb133111eb);
-    z ^ (z >> 31)
+/// Flags of `pgrf-bench ssim`.
+#[derive(Args, Debug)]
+pub struct SsimArgs {
+    /// Timed repetitions (after one warm-up).
+    #[arg(long, default_value_t = 10)]
+    pub iters: usize,
+    /// Print one JSON line instead of text.
+    #[arg(long)]
+    pub json: bool,
 }
 
 /// The benchmark pair `(output, reference)`; see the module docs.
@@ -45,7 +55,7 @@ pub fn pair() -> (Array3<f32>, Array3<f32>) {
         .par_iter()
         .enumerate()
         .map(|(k, &r)| {
-            let u = (splitmix64(SEED.wrapping_add(k as u64)) >> 40) as f32 / 16_777_216.0;
+            let u = (mix64(SEED.wrapping_add(k as u64)) >> 40) as f32 / 16_777_216.0;
             0.9 * r + (u - 0.5) * 0.05
         })
         .collect();
@@ -55,6 +65,7 @@ pub fn pair() -> (Array3<f32>, Array3<f32>) {
     )
 }
 
+/// The JSON line bench/ssim.sh reads.
 #[derive(Serialize)]
 struct SsimBench {
     shape: [usize; 3],
@@ -72,10 +83,11 @@ struct SsimBench {
     threads: usize,
 }
 
-pub fn run(iters: usize, json: bool) -> Result<()> {
-    if iters == 0 {
-        bail!("--iters must be at least 1");
-    }
+/// Time the protocol with and without the illuminance correction, `iters`
+/// runs each after one warm-up, and print the scores with the timings.
+pub fn run(a: &SsimArgs) -> Result<()> {
+    let (iters, json) = (a.iters, a.json);
+    ensure!(iters > 0, "--iters must be at least 1");
     let (out, reference) = pair();
     let time = |p: &Protocol| -> Result<(Vec<f64>, pgrf_eval::Scores)> {
         // Warm-up: rayon pool, page faults of the inputs.
@@ -93,7 +105,7 @@ pub fn run(iters: usize, json: bool) -> Result<()> {
     let r = SsimBench {
         shape: [SHAPE.0, SHAPE.1, SHAPE.2],
         iters,
-        ms_min: ms.iter().cloned().fold(f64::MAX, f64::min),
+        ms_min: ms.iter().copied().fold(f64::MAX, f64::min),
         ms_median: median(&mut ms),
         ms_median_uncorrected: median(&mut ms_plain),
         psnr: corrected.psnr,
@@ -116,4 +128,22 @@ pub fn run(iters: usize, json: bool) -> Result<()> {
         );
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_noise_is_splitmix64_as_the_numpy_script_draws_it() {
+        // SplitMix64's first output from state 0 (Vigna's reference code).
+        assert_eq!(mix64(0), 0xe220_a839_7b1d_cdaf);
+        // The first output value of the pair, from the module docs' formula:
+        // reference[0, 0, 0] = 4 * 256 / 1100.
+        let u = (mix64(SEED) >> 40) as f32 / 16_777_216.0;
+        let r = (4 * 256) as f32 / 1100.0;
+        let (out, reference) = pair();
+        assert_eq!(reference[[0, 0, 0]], r);
+        assert_eq!(out[[0, 0, 0]], 0.9 * r + (u - 0.5) * 0.05);
+    }
 }

@@ -1,4 +1,4 @@
-//! `pgrf bench enhance`: what `pgrf enhance` costs on a whole frame, the
+//! `pgrf-bench enhance`: what `pgrf enhance` costs on a whole frame, the
 //! network part of it (`pgrf_nn::infer::restore_image`: start noise, tiles,
 //! network evaluations, blend, clamp), with either network, fresh weights of
 //! any configuration or a trained weight file.
@@ -13,24 +13,25 @@
 //! input          = clamp(0.8 * clean + (u - 0.5) * 0.3, 0, 1)      (f32 operations)
 //! ```
 //!
+//! `splitmix64` is one step of SplitMix64, `pgrf_core::seed::mix64`.
+//!
 //! The default frame is a Sony A7S2 raw (4256 x 2848 mosaic, 12.1 MP) packed:
 //! 4 x 1424 x 2128. The default tile is the one `pgrf enhance` would choose
 //! on this machine (`pgrf_nn::infer::memory::auto_tile`).
 
-use crate::cmd::bench::median;
 use anyhow::{ensure, Context, Result};
 use burn::module::Module;
 use burn::tensor::backend::Backend;
 use clap::{Args, ValueEnum};
+use pgrf_core::seed::mix64;
+use pgrf_core::stats::median;
 use pgrf_nn::backend::DeviceKind;
+use pgrf_nn::flow::SamplerKind;
 use pgrf_nn::infer::image::plan_for;
-use pgrf_nn::infer::memory::{
-    attention_tokens, auto_tile, available_memory, fixed_bytes, peak_rss, tile_bytes,
-};
+use pgrf_nn::infer::memory::{attention_tokens, auto_tile, fixed_bytes, tile_bytes};
 use pgrf_nn::infer::restorer::UNSEARCHED_T2;
 use pgrf_nn::infer::DEFAULT_OVERLAP;
 use pgrf_nn::infer::{restore_image, ImageOptions, Restore, Restorer, SamplerChoice};
-use pgrf_nn::sample::SamplerKind;
 use pgrf_nn::weights::{Architecture, NoiseSource, WeightMeta};
 use pgrf_nn::{SidUnetConfig, Sr3Config};
 use pgrf_raw::ndarray::Array3;
@@ -42,6 +43,7 @@ use std::time::Instant;
 /// Seed of the benchmark frame's noise (see the module docs).
 pub const SEED: u64 = 11;
 
+/// The network `--net` picks when no weight file is given.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
 pub enum NetKind {
     /// SPC: the SID U-Net, one network evaluation.
@@ -53,7 +55,9 @@ pub enum NetKind {
 /// A packed frame size, `HxW` or `N` (square).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct FrameSize {
+    /// Packed rows.
     pub h: usize,
+    /// Packed columns.
     pub w: usize,
 }
 
@@ -80,6 +84,7 @@ impl std::str::FromStr for FrameSize {
     }
 }
 
+/// Flags of `pgrf-bench enhance`.
 #[derive(Args, Debug)]
 pub struct EnhanceArgs {
     /// Which network: the SPC denoiser (SID U-Net) or the PGRF flow model (SR3).
@@ -137,6 +142,7 @@ pub struct EnhanceArgs {
     pub dry_run: bool,
 }
 
+/// The JSON line bench/enhance.sh reads.
 #[derive(Serialize)]
 struct Report {
     burn: &'static str,
@@ -185,13 +191,6 @@ struct Report {
     output_mean: f64,
 }
 
-fn splitmix64(x: u64) -> u64 {
-    let mut z = x.wrapping_add(0x9e3779b97f4a7c15);
-    z = (z ^ (z >> 30)).wrapping_mul(0xbf58476d1ce4e5b9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94d049bb133111eb);
-    z ^ (z >> 31)
-}
-
 /// The benchmark's amplified noisy packed frame `(4, h, w)`; see the module docs.
 pub fn frame(h: usize, w: usize) -> Array3<f32> {
     let mut a = Array3::<f32>::zeros((4, h, w));
@@ -205,7 +204,7 @@ pub fn frame(h: usize, w: usize) -> Array3<f32> {
                 let tri = ((i + 2 * j + 16 * c) % 512).abs_diff(256);
                 let clean = (4 * tri + (7 * i + 3 * j) % 41) as f32 / 1100.0;
                 let key = ((c as u64) << 42) + ((i as u64) << 21) + j as u64;
-                let u = (splitmix64(SEED.wrapping_add(key)) >> 40) as f32 / 16_777_216.0;
+                let u = (mix64(SEED.wrapping_add(key)) >> 40) as f32 / 16_777_216.0;
                 *v = (0.8 * clean + (u - 0.5) * 0.3).clamp(0.0, 1.0);
             }
         });
@@ -253,13 +252,8 @@ fn build<B: Backend>(
                 ),
             };
             let net = arch.init::<B>(&device)?;
-            let meta = WeightMeta::new(
-                arch,
-                NoiseSource {
-                    model: "none (fresh weights)".into(),
-                    ..Default::default()
-                },
-            );
+            // Fresh weights learned no noise: the record's default source.
+            let meta = WeightMeta::new(arch, NoiseSource::default());
             (net, meta, "fresh (random initialisation)".to_string())
         }
     };
@@ -269,6 +263,8 @@ fn build<B: Backend>(
     Ok((Box::new(r), params, weights))
 }
 
+/// Build the network, the frame and the tiling; print the plan (`--dry-run`)
+/// or time `restore_image` on the frame.
 pub fn run(a: &EnhanceArgs) -> Result<()> {
     ensure!(a.iters > 0, "--iters must be at least 1");
     if let Some(t) = a.t2 {
@@ -317,7 +313,7 @@ pub fn run(a: &EnhanceArgs) -> Result<()> {
             "tiles": tiles,
             "nfe": nfe,
             "estimated_peak_mib": estimated_peak_mib,
-            "available_mib": available_memory().map(|b| mib(b as f64)),
+            "available_mib": pgrf_core::mem::available_memory().map(|b| mib(b as f64)),
             "attention_tokens": attention_tokens,
             "attention_scores_mib": attention_scores_mib,
         });
@@ -338,7 +334,7 @@ pub fn run(a: &EnhanceArgs) -> Result<()> {
     let mut output_mean = f64::NAN;
     for i in 0..a.warmup + a.iters {
         let t = Instant::now();
-        let out = restore_image(r, input.view(), &opts, &mut |_, _| {})?;
+        let out = restore_image(r, input.view(), &opts, &pgrf_core::NoProgress)?;
         let s = t.elapsed().as_secs_f64();
         output_mean = out.iter().map(|&v| v as f64).sum::<f64>() / out.len() as f64;
         let timed = i >= a.warmup;
@@ -354,7 +350,7 @@ pub fn run(a: &EnhanceArgs) -> Result<()> {
             );
         }
     }
-    let seconds_min = times.iter().cloned().fold(f64::MAX, f64::min);
+    let seconds_min = times.iter().copied().fold(f64::MAX, f64::min);
     let seconds = median(&mut times);
     let report = Report {
         burn: "0.21.0",
@@ -391,7 +387,7 @@ pub fn run(a: &EnhanceArgs) -> Result<()> {
         estimated_peak_mib,
         attention_tokens,
         attention_scores_mib,
-        peak_rss_mib: peak_rss().map(|b| b as f64 / (1 << 20) as f64),
+        peak_rss_mib: pgrf_core::mem::peak_rss_mib(),
         output_mean,
     };
     if a.json {

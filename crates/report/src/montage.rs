@@ -2,7 +2,7 @@
 //! written as one PNG. Comparisons (noisy input, each method, reference) are
 //! judged by eye as much as by PSNR, and only side by side at the same scale.
 
-use pgrf_calib::report::{ensure_font, render_png, FONT_FAMILY};
+use crate::png::{ensure_font, render_png, FONT_FAMILY};
 use pgrf_raw::Preview;
 use plotters::prelude::*;
 use std::path::Path;

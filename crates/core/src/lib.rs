@@ -1,0 +1,30 @@
+//! Framework-free basics that every pgrf crate shares, so that each exists
+//! once: atomic file writes, the robust statistics helper, seeding of
+//! thread-count-independent random streams, the progress interface the
+//! libraries report through, the safetensors + JSON record format used by
+//! calibration files and weight files, and the process's memory figures.
+//!
+//! It depends on no other pgrf crate and on no deep-learning framework.
+
+#![warn(missing_docs)]
+
+pub mod atomic;
+pub mod mem;
+pub mod progress;
+pub mod record;
+pub mod seed;
+pub mod stats;
+
+pub use atomic::{write_atomic, write_atomic_with, WriteError};
+pub use progress::{NoProgress, Progress};
+pub use record::{Record, RecordError, Tensor};
+
+/// `../shared/data` beside the repository (real captures and published
+/// tables the tests compare against), or None where it is absent. Tests that
+/// need it are marked `#[cfg_attr(not(shared_data), ignore = ...)]` through
+/// the build script `crates/core/shared_data_cfg.rs`, so they report as
+/// ignored rather than passed without it.
+pub fn shared_data_dir() -> Option<std::path::PathBuf> {
+    let d = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data");
+    d.is_dir().then_some(d)
+}

@@ -1,0 +1,34 @@
+//! The rectified flow of PGRF, in one place: the straight path, the
+//! training loss and draws, the samplers and the sampling search.
+//!
+//! Symbols as in the paper: X1 the clean image, X0 ~ N(0, I) the start,
+//! T the condition (the synthetic or real noisy capture, amplified by its
+//! exposure ratio), t in [0, 1] the time along the path, v(Xt, T, t) the
+//! velocity field (an SR3-style U-Net, [`crate::sr3`]), t2 the searched
+//! second time of the two-stage sampler.
+//!
+//! | paper | here |
+//! |---|---|
+//! | eq. 4.9 path Xt = t X1 + (1 - t) X0 | [`path::interpolate`] |
+//! | loss \|X1 - X0 - v(Xt, T, t)\|_1 | [`loss::flow_loss`] |
+//! | X0 ~ N(0, I), t ~ U(0, 1) (Algorithm 1) | [`draw::fill_start`], [`draw::draw_time`] |
+//! | eq. 4.10 XZ = v(X0, T, 0) + X0 | [`sample::first_stage`] |
+//! | eq. 4.11-4.12 XM = v(t2 XZ + (1 - t2) X0, T, t2) + X0 | [`sample::second_stage`] |
+//! | two-stage sampler (Algorithm 3's core) | [`sample::two_stage`] |
+//! | sampling search (Algorithm 2) | [`search::run`], [`search::store_t2`] |
+//!
+//! The training step that applies the loss with an optimiser is
+//! [`crate::step::flow_step`]; the training loop is [`crate::train`];
+//! inference over whole images (tiles, seeded per-row start fields) is
+//! [`crate::infer`], which runs [`sample::Sampler`].
+
+pub mod draw;
+pub mod loss;
+pub mod path;
+pub mod sample;
+pub mod search;
+
+pub use loss::flow_loss;
+pub use path::interpolate;
+pub use sample::{two_stage, Sampler, SamplerKind, Velocity};
+pub use search::{SearchOptions, SearchOutcome};

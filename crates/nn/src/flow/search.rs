@@ -1,0 +1,518 @@
+//! The paper's sampling search (Algorithm 2), whole: on validation pairs,
+//! the two-stage sampler's PSNR/SSIM for every candidate second time
+//! t in {s, 2s, .., ns <= 1}, the best mean PSNR kept as the model's t2.
+//!
+//! For each pair, [`super::sample::first_stage`] gives XZ = v(X0, T, 0) + X0
+//! once (it does not depend on t) and [`super::sample::second_stage`] gives
+//! XM = v(t XZ + (1 - t) X0, T, t) + X0 per candidate: the very functions
+//! [`super::sample::two_stage`] chains, so a grid of n times costs n + 1
+//! network evaluations per pair (not 2n) and scores exactly what inference
+//! will run at t2 = t. Scores are pgrf-eval's (ELD protocol by default).
+//!
+//! [`run`] measures ([`SearchOutcome`]); [`store_t2`] writes the chosen t2
+//! into the weight file. `pgrf search` is those two calls plus printing.
+
+use super::sample::{first_stage, second_stage, two_stage, Velocity};
+use crate::backend::{Cpu, DeviceKind};
+use crate::data::validation::ValSet;
+use crate::error::{NnError, Result};
+use crate::weights::{self, WeightMeta};
+use burn::tensor::backend::Backend;
+use burn::tensor::{Tensor, TensorData};
+use ndarray::{Array3, ArrayView3};
+use pgrf_core::Progress;
+use pgrf_eval::{evaluate, Protocol};
+use std::path::Path;
+
+/// The candidate times {s, 2s, .., ns} with ns <= 1 (1 included when s divides it).
+pub fn grid(step: f64) -> Result<Vec<f64>> {
+    if !(step.is_finite() && step > 0.0 && step <= 1.0) {
+        return Err(NnError::Invalid(format!(
+            "--step must be in (0, 1], got {step}"
+        )));
+    }
+    let n = (1.0 / step + 1e-9).floor() as usize;
+    if n > 1000 {
+        return Err(NnError::Invalid(format!(
+            "--step {step} gives {n} candidates; use at least 0.001"
+        )));
+    }
+    Ok((1..=n).map(|i| i as f64 * step).collect())
+}
+
+/// Sample counts reported by the averaging study: powers of two and `k_max`.
+pub fn reported_counts(k_max: usize) -> Vec<usize> {
+    let mut v: Vec<usize> = std::iter::successors(Some(1usize), |k| Some(k * 2))
+        .take_while(|k| *k < k_max)
+        .collect();
+    v.push(k_max.max(1));
+    v
+}
+
+/// The most samples the averaging study takes.
+pub const MAX_SAMPLES: usize = 64;
+
+/// How to search.
+#[derive(Clone, Debug)]
+pub struct SearchOptions {
+    /// Grid step s: candidates t in {s, 2s, .., ns <= 1}.
+    pub step: f64,
+    /// Also measure the mean of up to this many two-stage samples (different
+    /// X0) at the best t, reported for K = 1, 2, 4, .., `samples`; 1: no
+    /// averaging study (1 to [`MAX_SAMPLES`]).
+    pub samples: usize,
+    /// Seed of the extra start fields of the averaging study (sample 1 uses
+    /// each pair's own X0).
+    pub seed: u64,
+    /// Where the network runs.
+    pub device: DeviceKind,
+    /// How outputs are scored against the clean images.
+    pub protocol: Protocol,
+}
+
+impl Default for SearchOptions {
+    /// Step 0.1, no averaging, seed 0, CPU, ELD protocol without
+    /// illuminance correction.
+    fn default() -> Self {
+        SearchOptions {
+            step: 0.1,
+            samples: 1,
+            seed: 0,
+            device: DeviceKind::Cpu,
+            protocol: Protocol::eld(false),
+        }
+    }
+}
+
+impl SearchOptions {
+    /// The candidate times, after checking the step and the sample count
+    /// (callers may call it early to refuse bad options before costly work).
+    pub fn times(&self) -> Result<Vec<f64>> {
+        let times = grid(self.step)?;
+        if self.samples == 0 || self.samples > MAX_SAMPLES {
+            return Err(NnError::Invalid(format!(
+                "--samples must be from 1 to {MAX_SAMPLES}, got {}",
+                self.samples
+            )));
+        }
+        Ok(times)
+    }
+}
+
+/// What the search measured; every score is a mean over the pairs.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SearchOutcome {
+    /// (t, PSNR dB, SSIM) of the two-stage sampler at each candidate t.
+    pub curve: Vec<(f64, f64, f64)>,
+    /// Index into `curve` of the best mean PSNR (ties go to the smaller t).
+    pub best: usize,
+    /// The best t: the model's t2.
+    pub best_t2: f64,
+    /// (PSNR, SSIM) of the first stage alone (one-step sampler).
+    pub one_step: (f64, f64),
+    /// (PSNR, SSIM) of the noisy input itself.
+    pub input: (f64, f64),
+    /// (K, PSNR, SSIM) of the mean of K samples at the best t, for
+    /// K = 1, 2, 4, .., `samples`; just K = 1 (the curve's best point)
+    /// without an averaging study.
+    pub averaging: Vec<(usize, f64, f64)>,
+}
+
+/// Algorithm 2 with the flow model in the weight file `model`: scores the
+/// two-stage sampler at every candidate t on `pairs` (their own X0), the
+/// one-step sampler and the input, keeps the best t, and runs the
+/// averaging study when `opts.samples > 1`. Reports network evaluations to
+/// `progress` (one stage of `pairs x (n + 1 [+ samples])` units).
+/// Leaves the weight file as it is: see [`store_t2`].
+pub fn run(
+    model: &Path,
+    pairs: &ValSet,
+    opts: &SearchOptions,
+    progress: &dyn Progress,
+) -> Result<SearchOutcome> {
+    opts.times()?;
+    opts.device.check_available().map_err(NnError::Invalid)?;
+    match opts.device {
+        DeviceKind::Cpu => run_on::<Cpu>(model, &Default::default(), pairs, opts, progress),
+        #[cfg(feature = "cuda")]
+        DeviceKind::Cuda => {
+            run_on::<crate::backend::Gpu>(model, &Default::default(), pairs, opts, progress)
+        }
+        #[cfg(not(feature = "cuda"))]
+        DeviceKind::Cuda => unreachable!("checked above"),
+    }
+}
+
+fn run_on<B: Backend>(
+    model: &Path,
+    device: &B::Device,
+    pairs: &ValSet,
+    opts: &SearchOptions,
+    progress: &dyn Progress,
+) -> Result<SearchOutcome> {
+    let (net, _) = weights::load_flow::<B>(model, device)?;
+    search_with(&net, device, pairs, opts, progress)
+}
+
+/// [`run`] with a network already in memory (any velocity field `net` on
+/// `device`): the same measurement, for callers that hold the model and
+/// for tests.
+pub fn search_with<B: Backend>(
+    net: &impl Velocity<B>,
+    device: &B::Device,
+    pairs: &ValSet,
+    opts: &SearchOptions,
+    progress: &dyn Progress,
+) -> Result<SearchOutcome> {
+    let times = opts.times()?;
+    let (patch, list) = (pairs.patch, pairs.pairs.as_slice());
+    let count = list.len();
+    if count == 0 {
+        return Err(NnError::Invalid(
+            "no validation pairs: --pairs/--procedural must be at least 1".into(),
+        ));
+    }
+    let protocol = &opts.protocol;
+    let n_t = times.len();
+    let mut input = (0.0f64, 0.0f64);
+    for p in list {
+        let s =
+            evaluate(view(&p.noisy, patch)?, view(&p.clean, patch)?, protocol).map_err(metric)?;
+        input.0 += s.psnr / count as f64;
+        input.1 += s.ssim / count as f64;
+    }
+    let extra = if opts.samples > 1 { opts.samples } else { 0 };
+    progress.start((count * (n_t + 1 + extra)) as u64, "network evaluations");
+
+    let mut psnr = vec![0.0f64; n_t];
+    let mut ssim = vec![0.0f64; n_t];
+    let mut one = (0.0f64, 0.0f64);
+    let tensor = |v: &[f32]| to_tensor::<B>(v, patch, device);
+    for pair in list {
+        let clean = view(&pair.clean, patch)?;
+        let score = |out: Tensor<B, 4>, acc: (&mut f64, &mut f64)| -> Result<()> {
+            let s = evaluate(to_array(out, patch)?.view(), clean, protocol).map_err(metric)?;
+            *acc.0 += s.psnr / count as f64;
+            *acc.1 += s.ssim / count as f64;
+            Ok(())
+        };
+        let cond = tensor(&pair.noisy)?;
+        let x0 = tensor(&pair.x0)?;
+        let xz = first_stage(net, cond.clone(), x0.clone());
+        score(xz.clone(), (&mut one.0, &mut one.1))?;
+        progress.advance(1);
+        for (k, &t) in times.iter().enumerate() {
+            let xm = second_stage(net, cond.clone(), x0.clone(), xz.clone(), t as f32);
+            score(xm, (&mut psnr[k], &mut ssim[k]))?;
+            progress.advance(1);
+        }
+    }
+    let best = best_index(&psnr);
+    let best_t2 = times[best];
+    let averaging = if opts.samples > 1 {
+        average(net, device, pairs, opts, best_t2, progress)?
+    } else {
+        vec![(1, psnr[best], ssim[best])]
+    };
+    progress.finish();
+    Ok(SearchOutcome {
+        curve: (0..n_t).map(|k| (times[k], psnr[k], ssim[k])).collect(),
+        best,
+        best_t2,
+        one_step: one,
+        input,
+        averaging,
+    })
+}
+
+/// The index of the largest value; ties go to the first (the smaller t).
+fn best_index(psnr: &[f64]) -> usize {
+    (0..psnr.len()).fold(0, |b, k| if psnr[k] > psnr[b] { k } else { b })
+}
+
+/// Writes `t2` into the weight file `model` (its JSON record only, an
+/// atomic rewrite; the tensors stay byte for byte), so that inference's
+/// two-stage sampler uses it. Returns the updated record.
+pub fn store_t2(model: &Path, t2: f64) -> Result<WeightMeta> {
+    weights::update_meta(model, |m| m.t2 = Some(t2 as f32))
+}
+
+/// What averaging K two-stage samples (different X0) at `t2` buys: for each
+/// pair the running mean of samples 1..=K, scored at K = 1, 2, 4, .. and
+/// `opts.samples`. Sample 1 uses the pair's own X0; the others draw fresh
+/// start noise from `opts.seed`.
+fn average<B: Backend>(
+    net: &impl Velocity<B>,
+    device: &B::Device,
+    pairs: &ValSet,
+    opts: &SearchOptions,
+    t2: f64,
+    progress: &dyn Progress,
+) -> Result<Vec<(usize, f64, f64)>> {
+    let (patch, list) = (pairs.patch, pairs.pairs.as_slice());
+    let count = list.len();
+    let k_max = opts.samples;
+    let report = reported_counts(k_max);
+    let mut out: Vec<(usize, f64, f64)> = report.iter().map(|&k| (k, 0.0, 0.0)).collect();
+    for (i, pair) in list.iter().enumerate() {
+        let clean = view(&pair.clean, patch)?;
+        let cond = to_tensor::<B>(&pair.noisy, patch, device)?;
+        let mut sum: Option<Tensor<B, 4>> = None;
+        for k in 1..=k_max.max(1) {
+            let x0 = if k == 1 {
+                to_tensor::<B>(&pair.x0, patch, device)?
+            } else {
+                let field = crate::infer::start::start_noise(
+                    opts.seed ^ ((i as u64) << 20),
+                    k as u64,
+                    4,
+                    patch,
+                    patch,
+                );
+                to_tensor::<B>(field.as_slice().expect("standard layout"), patch, device)?
+            };
+            let y = two_stage(net, cond.clone(), x0, t2 as f32);
+            sum = Some(match sum {
+                None => y,
+                Some(s) => s + y,
+            });
+            progress.advance(1);
+            if let Some(slot) = out.iter_mut().find(|(kk, _, _)| *kk == k) {
+                let mean = sum.clone().expect("k >= 1") / k as f32;
+                let s = evaluate(to_array(mean, patch)?.view(), clean, &opts.protocol)
+                    .map_err(metric)?;
+                slot.1 += s.psnr / count as f64;
+                slot.2 += s.ssim / count as f64;
+            }
+        }
+    }
+    Ok(out)
+}
+
+fn metric(e: pgrf_eval::MetricError) -> NnError {
+    NnError::Invalid(e.to_string())
+}
+
+fn view(v: &[f32], patch: usize) -> Result<ArrayView3<'_, f32>> {
+    ArrayView3::from_shape((4, patch, patch), v)
+        .map_err(|_| NnError::Invalid("validation pair of the wrong size".into()))
+}
+
+fn to_tensor<B: Backend>(v: &[f32], patch: usize, device: &B::Device) -> Result<Tensor<B, 4>> {
+    if v.len() != 4 * patch * patch {
+        return Err(NnError::Invalid("validation pair of the wrong size".into()));
+    }
+    Ok(Tensor::from_data(
+        TensorData::new(v.to_vec(), [1, 4, patch, patch]),
+        device,
+    ))
+}
+
+fn to_array<B: Backend>(t: Tensor<B, 4>, patch: usize) -> Result<Array3<f32>> {
+    let v: Vec<f32> = t
+        .into_data()
+        .to_vec()
+        .map_err(|e| NnError::Invalid(format!("reading the network output: {e:?}")))?;
+    Array3::from_shape_vec((4, patch, patch), v)
+        .map_err(|e| NnError::Invalid(format!("network output shape: {e}")))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn averaging_reports_powers_of_two_and_the_maximum() {
+        assert_eq!(reported_counts(1), vec![1]);
+        assert_eq!(reported_counts(4), vec![1, 2, 4]);
+        assert_eq!(reported_counts(6), vec![1, 2, 4, 6]);
+    }
+
+    #[test]
+    fn the_grid_is_s_to_ns() {
+        let g = grid(0.1).unwrap();
+        assert_eq!(g.len(), 10);
+        assert!((g[0] - 0.1).abs() < 1e-12 && (g[9] - 1.0).abs() < 1e-12);
+        assert_eq!(grid(0.3).unwrap().len(), 3);
+        assert_eq!(grid(1.0).unwrap(), vec![1.0]);
+        assert!(grid(0.0).is_err());
+        assert!(grid(1.5).is_err());
+        assert!(grid(f64::NAN).is_err());
+    }
+
+    #[test]
+    fn ties_go_to_the_smaller_t() {
+        assert_eq!(best_index(&[1.0, 3.0, 3.0, 2.0]), 1);
+        assert_eq!(best_index(&[5.0]), 0);
+    }
+
+    /// A small SR3 field with seeded (random, not trained) weights and two
+    /// procedural validation pairs: the second stage depends on t.
+    fn fixture() -> (crate::sr3::Sr3Unet<Cpu>, ValSet) {
+        use crate::data::source::Source;
+        use crate::sr3::Sr3Config;
+        use pgrf_noise::pair::PairSpec;
+        use pgrf_noise::{CameraProfile, ModelKind};
+        let dev = Default::default();
+        let net = crate::seeded::seeded::<Cpu, _>(&dev, 5, || {
+            Sr3Config::new()
+                .with_inner_channels(8)
+                .with_channel_mults(vec![1, 2])
+                .with_res_blocks(1)
+                .with_attn_levels(vec![])
+                .with_norm_groups(4)
+                .init::<Cpu>(&dev)
+                .map(crate::seeded::materialise)
+        })
+        .unwrap();
+        let mut spec = PairSpec::new(
+            CameraProfile::built_in("sony-a7s2").unwrap(),
+            ModelKind::Pgrf,
+        );
+        spec.iso = Some(1600);
+        let val = ValSet::build(&Source::Procedural, &spec, 16, 2, 4).unwrap();
+        (net, val)
+    }
+
+    /// Mean (PSNR, SSIM) over the pairs of `f(cond, x0)`.
+    fn mean_scores(
+        val: &ValSet,
+        f: impl Fn(Tensor<Cpu, 4>, Tensor<Cpu, 4>) -> Tensor<Cpu, 4>,
+    ) -> (f64, f64) {
+        let dev = Default::default();
+        let p = val.patch;
+        let n = val.pairs.len() as f64;
+        let mut acc = (0.0, 0.0);
+        for pair in &val.pairs {
+            let out = f(
+                to_tensor::<Cpu>(&pair.noisy, p, &dev).unwrap(),
+                to_tensor::<Cpu>(&pair.x0, p, &dev).unwrap(),
+            );
+            let s = evaluate(
+                to_array(out, p).unwrap().view(),
+                view(&pair.clean, p).unwrap(),
+                &Protocol::eld(false),
+            )
+            .unwrap();
+            acc.0 += s.psnr / n;
+            acc.1 += s.ssim / n;
+        }
+        acc
+    }
+
+    /// The search's score at each t is the two-stage sampler's at t2 = t
+    /// (the same pairs, the same X0), its one-step score the one-step
+    /// sampler's, and the best t the argmax of the curve.
+    #[test]
+    fn the_search_scores_the_two_stage_sampler_at_each_t() {
+        use crate::flow::sample::one_step;
+        let (net, val) = fixture();
+        let opts = SearchOptions {
+            step: 0.25,
+            ..Default::default()
+        };
+        let got = search_with(
+            &net,
+            &Default::default(),
+            &val,
+            &opts,
+            &pgrf_core::NoProgress,
+        )
+        .unwrap();
+        assert_eq!(got.curve.len(), 4);
+        for &(t, psnr, ssim) in &got.curve {
+            let (p, s) = mean_scores(&val, |c, x0| two_stage(&net, c, x0, t as f32));
+            assert!(
+                (p - psnr).abs() < 1e-6,
+                "t {t}: sampler {p} vs search {psnr}"
+            );
+            assert!(
+                (s - ssim).abs() < 1e-6,
+                "t {t}: sampler {s} vs search {ssim}"
+            );
+        }
+        let (p, s) = mean_scores(&val, |c, x0| one_step(&net, c, x0));
+        assert!((p - got.one_step.0).abs() < 1e-6 && (s - got.one_step.1).abs() < 1e-6);
+        // The curve is not flat (t matters), and the best is its argmax.
+        let psnr: Vec<f64> = got.curve.iter().map(|c| c.1).collect();
+        assert!(psnr.iter().any(|&p| p != psnr[0]), "{psnr:?}");
+        assert_eq!(got.best, best_index(&psnr));
+        assert_eq!(got.best_t2, got.curve[got.best].0);
+        assert_eq!(
+            got.averaging,
+            vec![(1, psnr[got.best], got.curve[got.best].2)]
+        );
+        // The input's score is the noisy condition's own.
+        let (p, _) = mean_scores(&val, |c, _| c);
+        assert!((p - got.input.0).abs() < 1e-6);
+    }
+
+    /// The averaging study's K = 1 is the curve's best point (each pair's
+    /// own X0); K = 2 averages in a second start field and differs.
+    #[test]
+    fn averaging_starts_from_the_best_point() {
+        let (net, val) = fixture();
+        let opts = SearchOptions {
+            step: 0.5,
+            samples: 2,
+            ..Default::default()
+        };
+        struct Count(std::sync::atomic::AtomicU64);
+        impl Progress for Count {
+            fn advance(&self, n: u64) {
+                self.0.fetch_add(n, std::sync::atomic::Ordering::Relaxed);
+            }
+        }
+        let count = Count(Default::default());
+        let got = search_with(&net, &Default::default(), &val, &opts, &count).unwrap();
+        // 2 pairs x (1 one-step + 2 times + 2 samples).
+        assert_eq!(count.0.into_inner(), 10);
+        let best = got.curve[got.best];
+        assert_eq!(got.averaging.len(), 2);
+        assert_eq!(got.averaging[0].0, 1);
+        assert!((got.averaging[0].1 - best.1).abs() < 1e-9, "{got:?}");
+        assert_eq!(got.averaging[1].0, 2);
+        assert_ne!(got.averaging[1].1, got.averaging[0].1);
+    }
+
+    #[test]
+    fn bad_options_are_refused() {
+        let (net, val) = fixture();
+        for opts in [
+            SearchOptions {
+                step: 0.0,
+                ..Default::default()
+            },
+            SearchOptions {
+                samples: 0,
+                ..Default::default()
+            },
+            SearchOptions {
+                samples: MAX_SAMPLES + 1,
+                ..Default::default()
+            },
+        ] {
+            assert!(search_with(
+                &net,
+                &Default::default(),
+                &val,
+                &opts,
+                &pgrf_core::NoProgress
+            )
+            .is_err());
+        }
+        let empty = ValSet {
+            patch: 16,
+            pairs: vec![],
+        };
+        let err = search_with(
+            &net,
+            &Default::default(),
+            &empty,
+            &SearchOptions::default(),
+            &pgrf_core::NoProgress,
+        )
+        .unwrap_err();
+        assert!(err.to_string().contains("at least 1"), "{err}");
+    }
+}

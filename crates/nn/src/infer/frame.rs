@@ -1,0 +1,106 @@
+//! Restoring one dark RAW frame: the one path that `pgrf enhance`, `pgrf
+//! demo` and `pgrf eval` share, from the decoded capture (or an already
+//! packed input) through the tiled network to the result in the input's own
+//! mosaic and levels.
+
+use super::image::{overlap_for, plan_for, restore_image, ImageOptions};
+use super::memory::auto_tile;
+use super::prepare::network_input;
+use super::restorer::Restore;
+use super::tiles::TilePlan;
+use crate::backend::DeviceKind;
+use crate::error::Result;
+use ndarray::{Array3, ArrayView3};
+use pgrf_core::Progress;
+use pgrf_raw::{unpack_normalized, RawFrame};
+
+/// How a frame is cut into tiles; `None` lets pgrf decide (tile from the
+/// device's free memory and the model's cap, overlap from the tile).
+#[derive(Clone, Copy, Debug)]
+pub struct Tiling {
+    /// Tile side in packed pixels.
+    pub tile: Option<usize>,
+    /// Minimum overlap between tiles in packed pixels.
+    pub overlap: Option<usize>,
+    /// Seed of the flow model's start noise X0.
+    pub seed: u64,
+    /// Where the network runs (the automatic tile depends on it).
+    pub device: DeviceKind,
+}
+
+impl Tiling {
+    /// The concrete tiling of a `(4, ph, pw)` input for `r`.
+    pub fn options(&self, r: &dyn Restore, ph: usize, pw: usize) -> ImageOptions {
+        let tile = self
+            .tile
+            .unwrap_or_else(|| auto_tile(self.device, r, ph, pw));
+        ImageOptions {
+            tile,
+            overlap: self.overlap.unwrap_or_else(|| overlap_for(tile)),
+            seed: self.seed,
+        }
+    }
+}
+
+/// A restored packed input and the tiles it took.
+pub struct RestoredPacked {
+    /// The restored planes in [0, 1], shaped like the input.
+    pub output: Array3<f32>,
+    /// The tiles that were run.
+    pub plan: TilePlan,
+}
+
+impl RestoredPacked {
+    /// The side of the largest tile, for reports.
+    pub fn tile_side(&self) -> usize {
+        self.plan.rows.len.max(self.plan.cols.len)
+    }
+}
+
+/// Restore a packed, amplified network input `(4, h, w)` in [0, 1].
+/// `progress` hears one `start(tiles, "tiles")` and one `advance` per tile.
+pub fn restore_packed(
+    r: &dyn Restore,
+    input: ArrayView3<f32>,
+    tiling: &Tiling,
+    progress: &dyn Progress,
+) -> Result<RestoredPacked> {
+    let (_, ph, pw) = input.dim();
+    let opts = tiling.options(r, ph, pw);
+    let plan = plan_for(ph, pw, &opts, r.side_multiple())?;
+    progress.start(plan.count() as u64, "tiles");
+    let output = restore_image(r, input, &opts, progress)?;
+    progress.finish();
+    Ok(RestoredPacked { output, plan })
+}
+
+/// A restored frame: the result in the input's mosaic, with what was fed to
+/// the network and what came out (both packed), for scoring.
+pub struct RestoredFrame {
+    /// The packed, amplified network input.
+    pub input: Array3<f32>,
+    /// The packed network output and its tiles.
+    pub packed: RestoredPacked,
+    /// The result unpacked to the input frame's size, CFA and levels.
+    pub frame: RawFrame,
+}
+
+/// Restore a dark capture `frame` brightened by `ratio`, after subtracting
+/// `dark_dn` (a calibration's dark shading in DN, packed like the frame).
+pub fn restore_frame(
+    r: &dyn Restore,
+    frame: &RawFrame,
+    ratio: f32,
+    dark_dn: Option<&Array3<f32>>,
+    tiling: &Tiling,
+    progress: &dyn Progress,
+) -> Result<RestoredFrame> {
+    let input = network_input(frame, ratio, dark_dn)?;
+    let packed = restore_packed(r, input.view(), tiling, progress)?;
+    let frame = unpack_normalized(packed.output.view(), frame)?;
+    Ok(RestoredFrame {
+        input,
+        packed,
+        frame,
+    })
+}
