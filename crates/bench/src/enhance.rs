@@ -226,10 +226,10 @@ fn parse_levels(s: &str) -> Result<Vec<usize>> {
 }
 
 /// The network to time and its parameter count, on backend `B`.
-fn build<B: Backend>(
-    a: &EnhanceArgs,
-    device: B::Device,
-) -> Result<(Box<dyn Restore>, usize, String)> {
+/// A restorer, its parameter count and where its weights came from.
+type Built = (Box<dyn Restore>, usize, String);
+
+fn build<B: Backend>(a: &EnhanceArgs, device: B::Device) -> Result<Built> {
     let choice = SamplerChoice {
         kind: a.sampler,
         t2: a.t2,
@@ -270,14 +270,17 @@ pub fn run(a: &EnhanceArgs) -> Result<()> {
     if let Some(t) = a.t2 {
         ensure!((0.0..=1.0).contains(&t), "--t2 must be in [0, 1], got {t}");
     }
-    a.device.check_available().map_err(anyhow::Error::msg)?;
-    let (r, params, weights) = match a.device {
-        DeviceKind::Cpu => build::<pgrf_nn::backend::Cpu>(a, Default::default())?,
-        #[cfg(feature = "cuda")]
-        DeviceKind::Cuda => build::<pgrf_nn::backend::Gpu>(a, Default::default())?,
-        #[cfg(not(feature = "cuda"))]
-        DeviceKind::Cuda => unreachable!("checked above"),
-    };
+    struct Build<'a>(&'a EnhanceArgs);
+    impl pgrf_nn::backend::OnBackend for Build<'_> {
+        type Output = Built;
+        fn run<B: burn::tensor::backend::Backend>(
+            self,
+            device: B::Device,
+        ) -> pgrf_nn::Result<Built> {
+            build::<B>(self.0, device).map_err(|e| pgrf_nn::NnError::Invalid(format!("{e:#}")))
+        }
+    }
+    let (r, params, weights) = pgrf_nn::backend::on_device(a.device, Build(a))?;
     let r = r.as_ref();
     let (ph, pw) = (a.frame.h, a.frame.w);
     let t0 = Instant::now();

@@ -48,24 +48,7 @@ enum Bench {
 }
 
 fn main() -> ExitCode {
-    // A panic is a bug, but the output stays one line, as pgrf's does.
-    std::panic::set_hook(Box::new(|info| {
-        let msg = info
-            .payload()
-            .downcast_ref::<&str>()
-            .map(|s| s.to_string())
-            .or_else(|| info.payload().downcast_ref::<String>().cloned())
-            .unwrap_or_else(|| "unknown panic".into());
-        // `pgrf-bench decode ... | head -1`: the reader went away.
-        if msg.contains("Broken pipe") {
-            std::process::exit(0);
-        }
-        let at = info
-            .location()
-            .map(|l| format!(" at {}:{}", l.file(), l.line()))
-            .unwrap_or_default();
-        eprintln!("pgrf-bench: internal error (please report): {msg}{at}");
-    }));
+    pgrf_core::exit::one_line_panics("pgrf-bench");
     let cli = Cli::parse();
     let result = match &cli.what {
         Bench::Synth(a) => synth::run(a),
@@ -75,12 +58,5 @@ fn main() -> ExitCode {
         Bench::Enhance(a) => enhance::run(a),
         Bench::Ssim(a) => ssim::run(a),
     };
-    match result {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(e) => {
-            let msg = format!("{e:#}").replace('\n', " ");
-            eprintln!("pgrf-bench: error: {msg}");
-            ExitCode::FAILURE
-        }
-    }
+    pgrf_core::exit::finish("pgrf-bench", result)
 }

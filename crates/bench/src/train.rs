@@ -192,6 +192,37 @@ fn split_steps(a: &TrainArgs) -> usize {
 }
 
 /// Milliseconds between consecutive instants: `[t1 - t0, t2 - t1, t3 - t2]`.
+/// The real training step of `net` split into forward (loss), backward and
+/// optimiser, timed `split_steps(a)` times after one untimed step.
+fn split_step<M, O>(
+    a: &TrainArgs,
+    mut net: M,
+    optim: &mut O,
+    loss_of: impl Fn(&M) -> Tensor<CpuTrain, 1>,
+) -> (M, Vec<[f64; 3]>)
+where
+    M: burn::module::AutodiffModule<CpuTrain>,
+    O: Optimizer<M, CpuTrain>,
+{
+    let device = Default::default();
+    let mut split = Vec::new();
+    for i in 0..split_steps(a) + 1 {
+        let t0 = Instant::now();
+        let loss = loss_of(&net);
+        let _: f32 = loss.clone().into_scalar().elem();
+        let t1 = Instant::now();
+        let grads = loss.backward();
+        let t2 = Instant::now();
+        let grads = GradientsParams::from_grads(grads, &net);
+        net = optim.step(LR, net, grads);
+        sync::<CpuTrain>(&device);
+        if i > 0 {
+            split.push(split_ms([t0, t1, t2, Instant::now()]));
+        }
+    }
+    (net, split)
+}
+
 fn split_ms(t: [Instant; 4]) -> [f64; 3] {
     [0, 1, 2].map(|i| (t[i + 1] - t[i]).as_secs_f64() * 1e3)
 }
@@ -228,22 +259,9 @@ fn bench_unet(a: &TrainArgs) -> Result<NetResult> {
     });
 
     let breakdown = if a.breakdown {
-        let mut net = net.take().expect("net");
-        let mut split = Vec::new();
-        for i in 0..split_steps(a) + 1 {
-            let t0 = Instant::now();
-            let loss = denoiser_loss(&net, noisy.clone(), clean.clone());
-            let _: f32 = loss.clone().into_scalar().elem();
-            let t1 = Instant::now();
-            let grads = loss.backward();
-            let t2 = Instant::now();
-            let grads = GradientsParams::from_grads(grads, &net);
-            net = optim.step(LR, net, grads);
-            sync::<CpuTrain>(&device);
-            if i > 0 {
-                split.push(split_ms([t0, t1, t2, Instant::now()]));
-            }
-        }
+        let (net, split) = split_step(a, net.take().expect("net"), &mut optim, |n| {
+            denoiser_loss(n, noisy.clone(), clean.clone())
+        });
         let layers = net.layers(a.size, a.size);
         Some(breakdown::breakdown(
             a.batch,
@@ -310,22 +328,9 @@ fn bench_sr3(a: &TrainArgs) -> Result<NetResult> {
     });
 
     let breakdown = if a.breakdown {
-        let mut net = net.take().expect("net");
-        let mut split = Vec::new();
-        for i in 0..split_steps(a) + 1 {
-            let t0 = Instant::now();
-            let loss = flow_loss(&net, cond.clone(), x1.clone(), x0.clone(), t.clone());
-            let _: f32 = loss.clone().into_scalar().elem();
-            let t1 = Instant::now();
-            let grads = loss.backward();
-            let t2 = Instant::now();
-            let grads = GradientsParams::from_grads(grads, &net);
-            net = optim.step(LR, net, grads);
-            sync::<CpuTrain>(&device);
-            if i > 0 {
-                split.push(split_ms([t0, t1, t2, Instant::now()]));
-            }
-        }
+        let (net, split) = split_step(a, net.take().expect("net"), &mut optim, |n| {
+            flow_loss(n, cond.clone(), x1.clone(), x0.clone(), t.clone())
+        });
         let layers = net.layers(a.size, a.size);
         Some(breakdown::breakdown(
             a.batch,

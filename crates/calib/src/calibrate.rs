@@ -10,9 +10,15 @@ use pgrf_core::Progress;
 use pgrf_noise::DarkLaw;
 use std::path::PathBuf;
 
+/// The frames of one calibration run, all of one camera at one ISO.
 pub struct CalibrateInput {
+    /// Bias frames: shortest exposure, lens capped (one exposure time).
     pub bias: Vec<PathBuf>,
+    /// Dark frames: lens capped, two or more exposure times; empty to skip
+    /// dark current.
     pub dark: Vec<PathBuf>,
+    /// Flat fields: evenly lit, unsaturated, one or more brightness levels
+    /// set by exposure time (two or more for a photon-transfer fit).
     pub flat: Vec<PathBuf>,
     /// Expected ISO; frames of another ISO are refused. Used when files carry none.
     pub iso: Option<u32>,
@@ -20,10 +26,16 @@ pub struct CalibrateInput {
     pub tap_pixels: usize,
 }
 
+/// What [`calibrate()`] returns: the calibration to save, and the estimates it
+/// was assembled from (for reports and checks).
 pub struct CalibrationRun {
+    /// The calibration file's content.
     pub calibration: Calibration,
-    pub(crate) bias: BiasEstimate,
+    /// The bias-frame estimates (fixed pattern, read noise, row noise, DSNU).
+    pub bias: BiasEstimate,
+    /// The flat-field estimates (K, photon-transfer curve, response).
     pub gain: GainEstimate,
+    /// The dark-frame estimates, None without dark frames.
     pub dark: Option<DarkEstimate>,
 }
 
@@ -140,6 +152,11 @@ impl CalibrationRun {
     }
 }
 
+/// Calibrate a sensor from its bias, flat and (optional) dark stacks: read
+/// each stack with streaming statistics (frames must match the first bias
+/// frame), estimate bias, gain and dark current, flag defects, and assemble
+/// the per-pixel maps (packed `(4, H/2, W/2)`, R, G1, B, G2) and the record.
+/// Reports frames read to `progress`.
 pub fn calibrate(input: &CalibrateInput, progress: &dyn Progress) -> Result<CalibrationRun> {
     let bias_stack = read_stack(
         &input.bias,

@@ -16,10 +16,15 @@ pub struct CalibMeta {
     pub(crate) kind: String,
     pub(crate) schema: u32,
     pub(crate) pgrf_version: String,
+    /// Camera maker from the frames' metadata.
     pub make: String,
+    /// Camera model from the frames' metadata.
     pub model: String,
+    /// ISO of the frames (or the one given when files carry none).
     pub iso: Option<u32>,
+    /// Frame width in pixels (the maps are packed to half of it).
     pub width: usize,
+    /// Frame height in pixels (the maps are packed to half of it).
     pub height: usize,
     pub(crate) cfa: String,
     pub(crate) black: [f32; 4],
@@ -30,24 +35,40 @@ pub struct CalibMeta {
     pub(crate) dark_frames: Vec<usize>,
     pub(crate) flat_exposures_s: Vec<f64>,
     pub(crate) flat_frames: Vec<usize>,
-    /// System gain, DN per electron, and how it was estimated.
+    /// System gain K, DN per electron.
     #[serde(rename = "K")]
     pub k: f64,
+    /// How `k` was estimated.
     pub k_method: GainMethod,
+    /// Row-noise standard deviation sigma_H, DN.
     pub row_sigma: f64,
+    /// Median over pixels of the read-noise sigma (row noise removed), DN.
     pub read_sigma_median: f64,
+    /// DSNU: spatial standard deviation of the bias offset, DN.
     pub dsnu: f64,
+    /// PRNU: spatial standard deviation of the response divided by its mean
+    /// (a fraction, not %); None when not measured.
     pub prnu: Option<f64>,
     /// The dark-signal law chosen by the better R^2 of the pixel-averaged
     /// dark signal; "none" in the record without dark frames.
     #[serde(with = "law_or_none")]
     pub dark_law: Option<DarkLaw>,
+    /// R^2 of the fit a sqrt(t) to the pixel-averaged dark signal; None
+    /// without dark frames.
     pub dark_r2_sqrt: Option<f64>,
+    /// R^2 of the fit a t to the pixel-averaged dark signal; None without
+    /// dark frames.
     pub dark_r2_linear: Option<f64>,
+    /// Mean dark rate, electrons per sqrt(s) (sqrt law) or per s (linear
+    /// law); None without dark frames.
     pub dark_rate_mean: Option<f64>,
+    /// Median over the tapped pixels of the read noise's probability-plot
+    /// correlation coefficient with a normal (1 is perfectly Gaussian).
     pub ppcc_pixel_median: Option<f64>,
     pub(crate) ppcc_pooled: Option<f64>,
+    /// Number of pixels flagged hot (1 in the `defects` map).
     pub hot_pixels: usize,
+    /// Number of pixels flagged dead (2 in the `defects` map).
     pub dead_pixels: usize,
     pub(crate) units: String,
 }
@@ -86,7 +107,9 @@ mod law_or_none {
         }
     }
 
-    pub(crate) fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<Option<DarkLaw>, D::Error> {
+    pub(crate) fn deserialize<'de, D: Deserializer<'de>>(
+        d: D,
+    ) -> Result<Option<DarkLaw>, D::Error> {
         let name = String::deserialize(d)?;
         match name.as_str() {
             "none" => Ok(None),
@@ -99,10 +122,13 @@ mod law_or_none {
     }
 }
 
-/// A loaded calibration.
+/// A calibration: the per-pixel maps and the record of how they were made,
+/// as [`calibrate`](crate::calibrate()) produces them and the file stores them.
 #[derive(Clone, Debug)]
 pub struct Calibration {
+    /// How the calibration was made (camera, ISO, levels, frames, global figures).
     pub meta: CalibMeta,
+    /// The per-pixel maps.
     pub maps: CalibMaps,
 }
 
@@ -154,7 +180,9 @@ impl CalibMaps {
 
     /// The maps of a file, by name: the four required ones must be there,
     /// and a name pgrf does not know is refused.
-    fn from_named(mut maps: BTreeMap<String, Array3<f32>>) -> std::result::Result<CalibMaps, String> {
+    fn from_named(
+        mut maps: BTreeMap<String, Array3<f32>>,
+    ) -> std::result::Result<CalibMaps, String> {
         let mut need = |n: &str| {
             maps.remove(n)
                 .ok_or_else(|| format!("calibration has no '{n}' map"))
@@ -177,6 +205,9 @@ impl CalibMaps {
 }
 
 impl Calibration {
+    /// Write the calibration file at `path` atomically: one safetensors
+    /// tensor per map (named as [`CalibMaps::named`]) and the record as JSON
+    /// metadata.
     pub fn save(&self, path: &Path) -> Result<()> {
         let meta = serde_json::to_value(&self.meta).map_err(|e| invalid(e.to_string()))?;
         let views: Vec<(&str, ndarray::ArrayView3<f32>)> = self
@@ -189,6 +220,9 @@ impl Calibration {
         Ok(())
     }
 
+    /// Read a calibration file, refusing files that are not pgrf
+    /// calibrations, maps whose shape disagrees with the record, unknown maps
+    /// and invalid values.
     pub fn load(path: &Path) -> Result<Calibration> {
         let (meta, maps) = read_maps(path)?;
         if meta.get("kind").and_then(|k| k.as_str()) != Some("pgrf-calibration") {
@@ -210,8 +244,8 @@ impl Calibration {
                 )));
             }
         }
-        let maps = CalibMaps::from_named(maps)
-            .map_err(|e| invalid(format!("{}: {e}", path.display())))?;
+        let maps =
+            CalibMaps::from_named(maps).map_err(|e| invalid(format!("{}: {e}", path.display())))?;
         let c = Calibration { meta, maps };
         c.to_pixel_maps()?.check_values()?;
         Ok(c)

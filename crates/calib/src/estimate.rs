@@ -4,14 +4,14 @@
 //! to the paper and EMVA 1288; one function per estimator of the paper
 //! (PAPER.md at the repository root lists them):
 //!
-//! - fixed pattern, per-pixel bias mean minus black: [`fixed_pattern`];
-//! - source-follower (read) sigma, sqrt(var - sigma_H^2): [`read_sigma`];
+//! - fixed pattern, per-pixel bias mean minus black: `fixed_pattern`;
+//! - source-follower (read) sigma, sqrt(var - sigma_H^2): `read_sigma`;
 //! - row noise sigma_H: `PixelStats::row_variance` (`crate::stats`);
-//! - system gain K = Var / mean (eq. 3.15): [`gain_var_mean`], and its
-//!   regression over light levels (photon transfer): [`photon_transfer`];
-//! - dark signal, dark mean minus bias mean: [`dark_signal`]; its fit
-//!   y = a g(t), g(t) = sqrt(t) or t: [`fit_origin`]; E(N) = K2 E(N_RS),
-//!   K2 = 1 + N_FP, as a rate in electrons: [`dark_rate`].
+//! - system gain K = Var / mean (eq. 3.15): `gain_var_mean`, and its
+//!   regression over light levels (photon transfer): `photon_transfer`;
+//! - dark signal, dark mean minus bias mean: `dark_signal`; its fit
+//!   y = a g(t), g(t) = sqrt(t) or t: `fit_origin`; E(N) = K2 E(N_RS),
+//!   K2 = 1 + N_FP, as a rate in electrons: `dark_rate`.
 
 use crate::calibration::GainMethod;
 use crate::error::{invalid, Result};
@@ -64,8 +64,8 @@ pub(crate) fn read_sigma(var: &Array3<f64>, row_var: f64) -> Array3<f32> {
     var.mapv(|v| (v - row_var).max(0.0).sqrt() as f32)
 }
 
-/// Bias-frame estimates: fixed pattern ([`fixed_pattern`]), read sigma
-/// ([`read_sigma`]), row noise (`PixelStats::row_variance`), DSNU, PPCC.
+/// Bias-frame estimates: fixed pattern (`fixed_pattern`), read sigma
+/// (`read_sigma`), row noise (`PixelStats::row_variance`), DSNU, PPCC.
 pub fn estimate_bias(stack: &Stack, black: [f32; 4]) -> Result<BiasEstimate> {
     let g = stack
         .groups
@@ -115,6 +115,8 @@ pub struct PtcLevel {
     pub(crate) frames: usize,
 }
 
+/// From flat fields (several brightness levels): the system gain K, the
+/// photon-transfer curve and per-pixel response.
 #[derive(Clone, Debug)]
 pub struct GainEstimate {
     /// Global system gain, DN per electron.
@@ -127,6 +129,7 @@ pub struct GainEstimate {
     pub(crate) k_var_mean: f64,
     /// Per-pixel signal at the brightest level (flat mean - bias mean), DN.
     pub(crate) response: Array3<f32>,
+    /// The photon-transfer curve's points, one per flat level, by exposure.
     pub levels: Vec<PtcLevel>,
     /// var = slope mean + intercept over the levels, when there are two or more.
     pub ptc_fit: Option<(f64, f64)>,
@@ -255,13 +258,16 @@ pub(crate) fn estimate_gain(flat: &Stack, bias: &BiasEstimate) -> Result<GainEst
     })
 }
 
+/// From dark frames (two or more exposure times): the dark-current law and
+/// per-pixel dark rate.
 #[derive(Clone, Debug)]
 pub struct DarkEstimate {
     pub(crate) exposures: Vec<f64>,
     /// The law with the better fit of the pixel-averaged dark signal.
     pub(crate) law: DarkLaw,
-    /// R^2 of the pixel-averaged dark signal under each law.
+    /// R^2 of the pixel-averaged dark signal under the law a sqrt(t).
     pub r2_sqrt_global: f64,
+    /// R^2 of the pixel-averaged dark signal under the law a t.
     pub r2_linear_global: f64,
     /// Per-pixel R^2 of each law (NaN where the pixel has no dark signal variation).
     pub(crate) r2_sqrt: Array3<f32>,
@@ -269,7 +275,7 @@ pub struct DarkEstimate {
     /// Per-pixel dark rate in electrons per sqrt(s) or per s (chosen law),
     /// N_FP absorbed (mean dark DN = K rate g(t)).
     pub(crate) rate: Array3<f32>,
-    /// Mean dark rate, electrons per unit of g(t).
+    /// Mean dark rate, electrons per unit of g(t) (sqrt(s) or s, after the chosen law).
     pub rate_mean: f64,
 }
 

@@ -6,12 +6,12 @@
 #![warn(missing_docs)]
 
 pub mod calibrate;
-pub mod calibration;
-pub mod error;
+mod calibration;
+mod error;
 pub mod estimate;
-pub mod ppcc;
+mod ppcc;
 pub mod stack;
-pub mod stats;
+mod stats;
 
 pub use calibrate::{calibrate, CalibrateInput, CalibrationRun};
 pub use calibration::{CalibMaps, CalibMeta, Calibration, GainMethod};

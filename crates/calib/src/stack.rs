@@ -14,10 +14,13 @@ use std::path::PathBuf;
 /// What every frame of a calibration must share.
 #[derive(Clone, Debug, PartialEq)]
 pub struct FrameKey {
+    /// Frame width in pixels.
     pub width: usize,
+    /// Frame height in pixels.
     pub height: usize,
     pub(crate) cfa: Cfa,
     pub(crate) iso: Option<u32>,
+    /// Black level in DN of the planes R, G1, B, G2.
     pub black: [f32; 4],
     pub(crate) white: u32,
     pub(crate) make: String,
@@ -85,11 +88,11 @@ pub(crate) struct Group {
 /// A decoded stack: groups by exposure, sorted by exposure time.
 #[derive(Clone, Debug)]
 pub struct Stack {
+    /// What all its frames share (size, CFA, ISO, levels, camera).
     pub key: FrameKey,
     pub(crate) groups: Vec<Group>,
-    /// Temporal samples of a sparse grid of pixels (packed flat indices),
-    /// kept for the per-pixel normality check.
-    pub(crate) tap_index: Vec<usize>,
+    /// Temporal samples of a sparse grid of pixels (one series per tapped
+    /// pixel, first exposure group only), kept for the per-pixel normality check.
     pub(crate) tap: Vec<Vec<f32>>,
 }
 
@@ -253,7 +256,6 @@ pub fn read_stack(files: &[PathBuf], opt: &ReadOptions) -> Result<Stack> {
         Ok(Stack {
             key: key.expect("at least two frames were read"),
             groups,
-            tap_index,
             tap,
         })
     })

@@ -34,10 +34,6 @@ impl PixelStats {
         }
     }
 
-    pub(crate) fn count(&self) -> u32 {
-        self.n
-    }
-
     /// Add one packed frame `(4, ph, pw)` of DN.
     pub(crate) fn push(&mut self, frame: &[u16]) {
         assert_eq!(

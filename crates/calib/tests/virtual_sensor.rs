@@ -96,7 +96,7 @@ fn calibration_recovers_the_virtual_sensor() {
     // K within 2%.
     let k_true = v.spec.k as f64;
     assert!((m.k / k_true - 1.0).abs() < 0.02, "K {} vs {}", m.k, k_true);
-    assert_eq!(m.k_method, pgrf_calib::calibration::GainMethod::PhotonTransfer);
+    assert_eq!(m.k_method, pgrf_calib::GainMethod::PhotonTransfer);
     // Fixed pattern: RMSE against truth below the standard error of a mean of
     // 64 frames (temporal variance: read + row + quantisation), 5% slack for
     // the RMS itself being estimated from 12288 pixels.
@@ -175,10 +175,7 @@ fn calibration_recovers_the_virtual_sensor() {
         .and(&expect)
         .fold(0.0f32, |w, &a, &b| w.max((a - b).abs()));
     assert!(worst < 1e-4, "dark shading differs by {worst} DN");
-    assert_eq!(
-        back.dark_shading_dn(0.0).unwrap(),
-        back.maps.fixed_pattern
-    );
+    assert_eq!(back.dark_shading_dn(0.0).unwrap(), back.maps.fixed_pattern);
     assert!(back.dark_shading_dn(-1.0).is_err());
 
     // Per-pixel calibration reproduces the sensor's per-pixel variance better

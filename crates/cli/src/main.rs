@@ -51,24 +51,7 @@ enum Command {
 }
 
 fn main() -> ExitCode {
-    // Our own panics are bugs, but the promise to users is still one line.
-    std::panic::set_hook(Box::new(|info| {
-        let msg = info
-            .payload()
-            .downcast_ref::<&str>()
-            .map(|s| s.to_string())
-            .or_else(|| info.payload().downcast_ref::<String>().cloned())
-            .unwrap_or_else(|| "unknown panic".into());
-        // `pgrf info x | head -1`: the reader went away; not an error of ours.
-        if msg.contains("Broken pipe") {
-            std::process::exit(0);
-        }
-        let at = info
-            .location()
-            .map(|l| format!(" at {}:{}", l.file(), l.line()))
-            .unwrap_or_default();
-        eprintln!("pgrf: internal error (please report): {msg}{at}");
-    }));
+    pgrf_core::exit::one_line_panics("pgrf");
     let cli = Cli::parse();
     let result = match &cli.command {
         Command::Demo(a) => cmd::demo::run(a),
@@ -86,12 +69,5 @@ fn main() -> ExitCode {
         Command::Eval(a) => cmd::eval::run(a),
         Command::MakeDataset(a) => cmd::make_dataset::run(a),
     };
-    match result {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(e) => {
-            let msg = format!("{e:#}").replace('\n', " ");
-            eprintln!("pgrf: error: {msg}");
-            ExitCode::FAILURE
-        }
-    }
+    pgrf_core::exit::finish("pgrf", result)
 }

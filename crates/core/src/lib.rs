@@ -8,16 +8,16 @@
 
 #![warn(missing_docs)]
 
-pub mod atomic;
+mod atomic;
+pub mod exit;
 pub mod mem;
-pub mod progress;
+mod progress;
 pub mod record;
 pub mod seed;
 pub mod stats;
 
-pub use atomic::{write_atomic, write_atomic_with, WriteError};
+pub use atomic::{write_atomic, WriteError};
 pub use progress::{NoProgress, Progress};
-pub use record::{Record, RecordError, Tensor};
 
 /// `../shared/data` beside the repository (real captures and published
 /// tables the tests compare against), or None where it is absent. Tests that

@@ -23,7 +23,8 @@ pub(crate) fn peak_rss() -> Option<u64> {
     kib_field("/proc/self/status", "VmHWM:")
 }
 
-/// [`peak_rss`] in MiB (for tables and JSON lines).
+/// Peak resident memory of this process so far, in MiB (Linux's `VmHWM`;
+/// for tables and JSON lines); None where it cannot be read.
 pub fn peak_rss_mib() -> Option<f64> {
     peak_rss().map(|b| b as f64 / (1024.0 * 1024.0))
 }

@@ -22,7 +22,7 @@ pub struct Tensor {
 /// A decoded file: the JSON record's text and the tensors by name.
 #[derive(Clone, Debug)]
 pub struct Record {
-    /// The record under [`META_KEY`], as written.
+    /// The JSON record under the metadata key `"pgrf"`, as written.
     pub meta: String,
     /// Every tensor of the file.
     pub tensors: BTreeMap<String, Tensor>,

@@ -10,9 +10,9 @@
 #![warn(missing_docs)]
 
 pub mod dataset;
-pub mod metrics;
+mod metrics;
 
 pub use metrics::{
-    evaluate, illuminance_correct, illuminance_gain, mse, psnr, ssim, ssim_channels,
-    IlluminanceGain, MetricError, Protocol, Scores, SsimOptions,
+    evaluate, illuminance_correct, illuminance_gain, psnr, ssim, IlluminanceGain, MetricError,
+    Protocol, Scores, SsimOptions,
 };

@@ -14,16 +14,21 @@ pub type CpuTrain = Autodiff<Cpu>;
 
 /// Inference on an NVIDIA GPU (with kernel fusion and autotuning).
 #[cfg(feature = "cuda")]
-pub type Gpu = burn::backend::Cuda;
+pub(crate) type Gpu = burn::backend::Cuda;
 /// Training on an NVIDIA GPU.
 #[cfg(feature = "cuda")]
-pub type GpuTrain = Autodiff<Gpu>;
+pub(crate) type GpuTrain = Autodiff<Gpu>;
 
-/// Where a command runs its network.
+/// Where a command runs its network: parsed from `--device cpu|cuda`
+/// (`gpu` also names CUDA), written as `cpu` / `cuda` in TOML and JSON.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum DeviceKind {
+    /// The CPU, through burn's Flex backend ([`Cpu`], [`CpuTrain`]); uses
+    /// rayon's thread pool.
     Cpu,
+    /// NVIDIA GPU 0 through burn's CUDA backend; only in builds with the
+    /// `cuda` feature ([`DeviceKind::check_available`] refuses it otherwise).
     Cuda,
 }
 
@@ -57,6 +62,58 @@ impl DeviceKind {
     }
 }
 
+/// Work generic over an inference backend: [`on_device`] runs it on the
+/// backend of the device a user chose. The one place that maps a
+/// [`DeviceKind`] to a backend type, with the CUDA arm compiled only in
+/// `cuda` builds.
+pub trait OnBackend {
+    /// What the work returns.
+    type Output;
+    /// Run on backend `B` and its default device.
+    fn run<B: burn::tensor::backend::Backend>(
+        self,
+        device: B::Device,
+    ) -> crate::Result<Self::Output>;
+}
+
+/// Work generic over a training (autodiff) backend, run by [`on_train_device`].
+pub(crate) trait OnTrainBackend {
+    /// What the work returns.
+    type Output;
+    /// Run on backend `B` and its default device.
+    fn run<B: burn::tensor::backend::AutodiffBackend>(
+        self,
+        device: B::Device,
+    ) -> crate::Result<Self::Output>;
+}
+
+/// Run `job` on the inference backend of `kind` (refused without CUDA).
+pub fn on_device<J: OnBackend>(kind: DeviceKind, job: J) -> crate::Result<J::Output> {
+    kind.check_available().map_err(crate::NnError::Invalid)?;
+    match kind {
+        DeviceKind::Cpu => job.run::<Cpu>(Default::default()),
+        #[cfg(feature = "cuda")]
+        DeviceKind::Cuda => job.run::<Gpu>(Default::default()),
+        #[cfg(not(feature = "cuda"))]
+        DeviceKind::Cuda => unreachable!("checked above"),
+    }
+}
+
+/// Run `job` on the training backend of `kind` (refused without CUDA).
+pub(crate) fn on_train_device<J: OnTrainBackend>(
+    kind: DeviceKind,
+    job: J,
+) -> crate::Result<J::Output> {
+    kind.check_available().map_err(crate::NnError::Invalid)?;
+    match kind {
+        DeviceKind::Cpu => job.run::<CpuTrain>(Default::default()),
+        #[cfg(feature = "cuda")]
+        DeviceKind::Cuda => job.run::<GpuTrain>(Default::default()),
+        #[cfg(not(feature = "cuda"))]
+        DeviceKind::Cuda => unreachable!("checked above"),
+    }
+}
+
 /// One line about the compute device, for headers and summaries.
 pub fn describe(kind: DeviceKind) -> String {
     match kind {
@@ -65,7 +122,12 @@ pub fn describe(kind: DeviceKind) -> String {
     }
 }
 
-/// Run the training loop on the chosen device.
+/// Run the training loop ([`crate::train`]) on the training backend of
+/// `kind`: `settings` says what to train, `source` gives the clean images,
+/// `spec` synthesises the noisy half of each pair, `val` (if any) is scored
+/// every `settings.val_every` steps and at the end, `progress` hears one unit
+/// per step, and setting `stop` ends the run cleanly after the current step
+/// (checkpoint and weight file written). Refuses `cuda` in a build without it.
 pub fn train(
     kind: DeviceKind,
     settings: &crate::train::TrainSettings,
@@ -75,28 +137,40 @@ pub fn train(
     progress: &dyn pgrf_core::Progress,
     stop: &std::sync::atomic::AtomicBool,
 ) -> crate::Result<crate::train::Outcome> {
-    kind.check_available().map_err(crate::NnError::Invalid)?;
-    match kind {
-        DeviceKind::Cpu => crate::train::train::<CpuTrain>(
-            settings,
-            source,
-            spec,
-            val,
-            &Default::default(),
-            progress,
-            stop,
-        ),
-        #[cfg(feature = "cuda")]
-        DeviceKind::Cuda => crate::train::train::<GpuTrain>(
-            settings,
-            source,
-            spec,
-            val,
-            &Default::default(),
-            progress,
-            stop,
-        ),
-        #[cfg(not(feature = "cuda"))]
-        DeviceKind::Cuda => unreachable!("checked above"),
+    struct Job<'a> {
+        settings: &'a crate::train::TrainSettings,
+        source: std::sync::Arc<crate::data::Source>,
+        spec: std::sync::Arc<pgrf_noise::pair::PairSpec>,
+        val: Option<&'a crate::data::validation::ValSet>,
+        progress: &'a dyn pgrf_core::Progress,
+        stop: &'a std::sync::atomic::AtomicBool,
     }
+    impl OnTrainBackend for Job<'_> {
+        type Output = crate::train::Outcome;
+        fn run<B: burn::tensor::backend::AutodiffBackend>(
+            self,
+            device: B::Device,
+        ) -> crate::Result<Self::Output> {
+            crate::train::train::<B>(
+                self.settings,
+                self.source,
+                self.spec,
+                self.val,
+                &device,
+                self.progress,
+                self.stop,
+            )
+        }
+    }
+    on_train_device(
+        kind,
+        Job {
+            settings,
+            source,
+            spec,
+            val,
+            progress,
+            stop,
+        },
+    )
 }

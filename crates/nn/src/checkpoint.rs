@@ -16,36 +16,48 @@ const VERSION: u32 = 1;
 
 /// The JSON part of a checkpoint.
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
-pub struct CheckpointState {
+pub(crate) struct CheckpointState {
     /// The method being trained.
-    pub task: crate::Method,
+    pub(crate) task: crate::Method,
     /// The architecture record (same JSON as in weight files).
-    pub arch: serde_json::Value,
+    pub(crate) arch: serde_json::Value,
     /// Steps completed.
-    pub step: u64,
+    pub(crate) step: u64,
     /// Total steps the run was configured for.
-    pub steps: u64,
-    pub seed: u64,
-    pub batch: usize,
-    pub patch: usize,
+    pub(crate) steps: u64,
+    /// The run's seed (a resume must use the same).
+    pub(crate) seed: u64,
+    /// Crops per step (a resume must use the same).
+    pub(crate) batch: usize,
+    /// Side of the packed training crops (a resume must use the same).
+    pub(crate) patch: usize,
     /// Training seconds so far (excluding time between runs).
-    pub elapsed_s: f64,
-    pub last_loss: Option<f32>,
-    pub last_val_psnr: Option<f32>,
+    pub(crate) elapsed_s: f64,
+    /// Loss of the last step before the checkpoint.
+    pub(crate) last_loss: Option<f32>,
+    /// Latest validation PSNR in dB, if validated.
+    pub(crate) last_val_psnr: Option<f32>,
 }
 
 /// A checkpoint read back: state plus the two burn records as bytes.
-pub struct Checkpoint {
-    pub state: CheckpointState,
-    pub model: Vec<u8>,
-    pub optim: Vec<u8>,
+pub(crate) struct Checkpoint {
+    /// The JSON part.
+    pub(crate) state: CheckpointState,
+    /// The network's burn record (full precision).
+    pub(crate) model: Vec<u8>,
+    /// The optimiser's burn record (Adam moments).
+    pub(crate) optim: Vec<u8>,
 }
 
 fn err(path: &Path, reason: impl std::fmt::Display) -> NnError {
-    NnError::Invalid(format!("{}: {reason}", path.display()))
+    NnError::BadFile {
+        path: path.to_path_buf(),
+        reason: reason.to_string(),
+    }
 }
 
-pub fn encode(state: &CheckpointState, model: &[u8], optim: &[u8]) -> Result<Vec<u8>> {
+/// The checkpoint file's bytes (layout in the module documentation).
+fn encode(state: &CheckpointState, model: &[u8], optim: &[u8]) -> Result<Vec<u8>> {
     let json = serde_json::to_vec(state).map_err(|e| NnError::Invalid(e.to_string()))?;
     let mut out = Vec::with_capacity(12 + 24 + json.len() + model.len() + optim.len());
     out.extend_from_slice(MAGIC);
@@ -57,12 +69,15 @@ pub fn encode(state: &CheckpointState, model: &[u8], optim: &[u8]) -> Result<Vec
     Ok(out)
 }
 
-pub fn save(path: &Path, state: &CheckpointState, model: &[u8], optim: &[u8]) -> Result<()> {
+/// Write a checkpoint atomically.
+pub(crate) fn save(path: &Path, state: &CheckpointState, model: &[u8], optim: &[u8]) -> Result<()> {
     let bytes = encode(state, model, optim)?;
     Ok(pgrf_core::write_atomic(path, &bytes)?)
 }
 
-pub fn decode(path: &Path, bytes: &[u8]) -> Result<Checkpoint> {
+/// Parse checkpoint bytes; `path` names them in errors. Any truncation,
+/// trailing bytes or another version is refused.
+fn decode(path: &Path, bytes: &[u8]) -> Result<Checkpoint> {
     if bytes.len() < 12 || &bytes[..8] != MAGIC {
         return Err(err(path, "not a pgrf training checkpoint"));
     }
@@ -102,7 +117,8 @@ pub fn decode(path: &Path, bytes: &[u8]) -> Result<Checkpoint> {
     })
 }
 
-pub fn load(path: &Path) -> Result<Checkpoint> {
+/// Read and parse the checkpoint at `path`.
+pub(crate) fn load(path: &Path) -> Result<Checkpoint> {
     let bytes = std::fs::read(path).map_err(|e| err(path, e))?;
     decode(path, &bytes)
 }

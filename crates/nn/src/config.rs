@@ -185,7 +185,7 @@ impl Default for TrainConfig {
 }
 
 fn invalid(what: impl std::fmt::Display) -> NnError {
-    NnError::Invalid(what.to_string())
+    NnError::Config(what.to_string())
 }
 
 impl TrainConfig {

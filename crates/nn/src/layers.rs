@@ -20,56 +20,102 @@ use burn::nn::{GroupNorm, Linear, PaddingConfig2d};
 use burn::tensor::backend::Backend;
 
 /// One layer at the shape it runs at, for one batch item: `h` x `w` is the
-/// spatial size of the layer's input.
+/// spatial size of the layer's input, in pixels of the packed image (or of
+/// the level the layer runs at); channel counts are per batch item.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub enum Layer {
     /// 2-D convolution from `cin` to `cout` channels, `kernel` x `kernel`,
     /// `stride`, `padding` zeros on every side; with a bias.
     Conv {
+        /// Input channels.
         cin: usize,
+        /// Output channels.
         cout: usize,
+        /// Side of the square kernel.
         kernel: usize,
+        /// Stride along both axes.
         stride: usize,
+        /// Zeros added on each of the four sides.
         padding: usize,
+        /// Input height.
         h: usize,
+        /// Input width.
         w: usize,
     },
     /// Transposed convolution from `cin` to `cout` channels, `kernel` x
     /// `kernel`, `stride`, no padding; with a bias.
     ConvTranspose {
+        /// Input channels.
         cin: usize,
+        /// Output channels.
         cout: usize,
+        /// Side of the square kernel.
         kernel: usize,
+        /// Stride along both axes (the upsampling factor).
         stride: usize,
+        /// Input height.
         h: usize,
+        /// Input width.
         w: usize,
     },
     /// GroupNorm of `channels` channels in `groups` groups, with its affine.
     GroupNorm {
+        /// Channels normalised.
         channels: usize,
+        /// Groups the channels are split into.
         groups: usize,
+        /// Input height.
         h: usize,
+        /// Input width.
         w: usize,
     },
     /// LeakyReLU (the SID U-Net's activation).
-    LeakyRelu { channels: usize, h: usize, w: usize },
+    LeakyRelu {
+        /// Channels of the feature map.
+        channels: usize,
+        /// Height of the feature map.
+        h: usize,
+        /// Width of the feature map.
+        w: usize,
+    },
     /// SiLU (SR3's activation; `h` = `w` = 1 for the time MLP's vector).
-    Silu { channels: usize, h: usize, w: usize },
+    Silu {
+        /// Channels of the feature map (features of the time MLP's vector).
+        channels: usize,
+        /// Height of the feature map.
+        h: usize,
+        /// Width of the feature map.
+        w: usize,
+    },
     /// The single-head self-attention core [`crate::sr3::attention_core`]:
     /// from the query/key/value projection `(3 channels, h * w)` to the
     /// attended values `(channels, h * w)`. The 1x1 convolutions around it
     /// and its GroupNorm are listed as layers of their own.
-    Attention { channels: usize, h: usize, w: usize },
+    Attention {
+        /// Channels of the attended feature map (queries, keys and values
+        /// have as many each).
+        channels: usize,
+        /// Height of the feature map (`h * w` tokens).
+        h: usize,
+        /// Width of the feature map.
+        w: usize,
+    },
     /// Fully connected layer from `d_in` to `d_out` features on one vector
     /// per batch item (SR3's time MLP and per-block embedding projections);
     /// with a bias.
-    Linear { d_in: usize, d_out: usize },
+    Linear {
+        /// Input features.
+        d_in: usize,
+        /// Output features.
+        d_out: usize,
+    },
 }
 
 impl Layer {
     /// Learnable parameters of the layer (weights, biases, GroupNorm's
-    /// scale and shift).
-    pub fn params(&self) -> usize {
+    /// scale and shift). Only the unit tests count them.
+    #[cfg(test)]
+    pub(crate) fn params(&self) -> usize {
         match *self {
             Layer::Conv {
                 cin, cout, kernel, ..

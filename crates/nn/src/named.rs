@@ -9,7 +9,7 @@ use burn::tensor::{Tensor, TensorData};
 use std::collections::BTreeMap;
 
 /// A named parameter: pgrf's one tensor record type (shape + row-major f32).
-pub use pgrf_core::record::Tensor as NamedTensor;
+pub(crate) use pgrf_core::record::Tensor as NamedTensor;
 
 struct Collector {
     path: Vec<String>,

@@ -9,13 +9,19 @@ use burn::module::Module;
 use burn::tensor::backend::Backend;
 use burn::tensor::Tensor;
 
-/// Either network, as one module so one optimiser type serves both.
+/// Either network, as one module so one optimiser type serves both. Made by
+/// [`Architecture::init`] / [`Architecture::init_seeded`] or read from a
+/// weight file by [`crate::weights::load`]; inference wraps it in an
+/// [`crate::infer::Restorer`].
 // Moved rarely (once per optimiser step, by value as burn requires); boxing
 // would buy nothing and complicate the derived module.
 #[allow(clippy::large_enum_variant)]
 #[derive(Module, Debug)]
 pub enum Net<B: Backend> {
+    /// The SPC denoiser: one pass from the amplified noisy input to the clean
+    /// image.
     Spc(SidUnet<B>),
+    /// The PGRF velocity field v(Xt, T, t), sampled by [`crate::flow::sample`].
     Pgrf(Sr3Unet<B>),
 }
 
@@ -25,14 +31,14 @@ impl Architecture {
         Ok(match self {
             Architecture::SidUnet(c) => {
                 if c.residual && c.in_channels != c.out_channels {
-                    return Err(NnError::Invalid(format!(
+                    return Err(NnError::Config(format!(
                         "a residual SID U-Net needs as many output channels as input ({} vs {})",
                         c.out_channels, c.in_channels
                     )));
                 }
                 Net::Spc(c.init(device))
             }
-            Architecture::Sr3(c) => Net::Pgrf(c.init(device).map_err(NnError::Invalid)?),
+            Architecture::Sr3(c) => Net::Pgrf(c.init(device).map_err(NnError::Config)?),
         })
     }
 }
@@ -49,14 +55,17 @@ impl Architecture {
 
 impl<B: Backend> Net<B> {
     /// The denoised batch: one pass for SPC, the two-stage sampler at `t2`
-    /// for the flow model.
-    pub fn restore(&self, noisy: Tensor<B, 4>, x0: Tensor<B, 4>, t2: f32) -> Tensor<B, 4> {
+    /// for the flow model. `noisy` is T, `(n, 4, h, w)`; `x0` is X0, same
+    /// shape (ignored by SPC).
+    pub(crate) fn restore(&self, noisy: Tensor<B, 4>, x0: Tensor<B, 4>, t2: f32) -> Tensor<B, 4> {
         match self {
             Net::Spc(n) => n.forward(noisy),
             Net::Pgrf(n) => crate::flow::sample::two_stage(n, noisy, x0, t2),
         }
     }
 
+    /// Write the parameters and `meta` as a weight file at `path`, atomically
+    /// ([`crate::weights`]).
     pub fn save(&self, path: &std::path::Path, meta: &WeightMeta) -> Result<()> {
         match self {
             Net::Spc(n) => weights::save::<B, _>(path, n, meta),

@@ -5,11 +5,14 @@
 
 use serde::{Deserialize, Serialize};
 
+/// How the learning rate changes over a run of `total` steps (`--schedule
+/// eld|constant|cosine`, the same names in TOML).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Schedule {
     /// lr, lr/2 after 50 % of the steps, lr/10 after 90 %.
     Eld,
+    /// lr throughout.
     Constant,
     /// Half-cosine from lr to 0.
     Cosine,
@@ -31,7 +34,7 @@ impl std::str::FromStr for Schedule {
 
 impl Schedule {
     /// Learning rate at `step` (0-based) of `total`, for base rate `lr`.
-    pub fn lr(self, lr: f64, step: u64, total: u64) -> f64 {
+    pub(crate) fn lr(self, lr: f64, step: u64, total: u64) -> f64 {
         let f = step as f64 / total.max(1) as f64;
         match self {
             Schedule::Constant => lr,

@@ -24,26 +24,40 @@ use burn::tensor::ops::{InterpolateMode, InterpolateOptions, PadMode};
 use burn::tensor::Tensor;
 
 /// Smallest 1 - t a residual velocity field divides by.
-pub const RESIDUAL_FLOOR: f32 = 0.1;
+const RESIDUAL_FLOOR: f32 = 0.1;
 
+/// The architecture of PGRF's velocity field (burn `Config`:
+/// `Sr3Config::new()` gives the defaults, `with_inner_channels(..)` etc.
+/// change one field). Stored in weight files (`arch = "sr3"`) and built by
+/// [`Sr3Config::init`], which refuses configurations GroupNorm cannot run.
 #[derive(Config, Debug)]
 pub struct Sr3Config {
-    /// Condition (4) + Xt (4).
+    /// Input planes: the condition T (4 packed planes R, G1, B, G2) followed
+    /// by Xt (4), concatenated.
     #[config(default = 8)]
     pub in_channels: usize,
+    /// Output planes: the velocity v(Xt, T, t), 4 packed planes.
     #[config(default = 4)]
     pub out_channels: usize,
+    /// Channels of the first level; also the width of the time embedding.
     #[config(default = 64)]
     pub inner_channels: usize,
+    /// Channel multiplier of each level (level k has `inner_channels *
+    /// channel_mults[k]` channels); one level per entry, each below the
+    /// first at half the side of the one above.
     #[config(default = "vec![1, 2, 4, 8, 8]")]
     pub channel_mults: Vec<usize>,
+    /// Residual blocks per level on the way down (one more on the way up).
     #[config(default = 2)]
     pub res_blocks: usize,
     /// Levels (0 = full resolution) whose residual blocks carry self-attention.
     #[config(default = "vec![3]")]
     pub attn_levels: Vec<usize>,
+    /// GroupNorm groups; must divide every level's channel count.
     #[config(default = 32)]
     pub norm_groups: usize,
+    /// Dropout probability inside the residual blocks, in [0, 1) (training
+    /// only).
     #[config(default = 0.0)]
     pub dropout: f64,
     /// Predict the clean image as a correction to the condition and turn it
@@ -63,7 +77,7 @@ pub struct Sr3Config {
 impl Sr3Config {
     /// Configurations GroupNorm cannot run are refused here, with the reason,
     /// rather than by an assertion deep in initialisation.
-    pub fn validate(&self) -> Result<(), String> {
+    pub(crate) fn validate(&self) -> Result<(), String> {
         if self.channel_mults.is_empty() || self.res_blocks == 0 || self.inner_channels == 0 {
             return Err(
                 "SR3 needs at least one level, one residual block and some channels".into(),
@@ -89,10 +103,16 @@ impl Sr3Config {
     }
 
     /// Sides must be multiples of this (one halving per level but the last).
-    pub fn side_multiple(&self) -> usize {
+    pub(crate) fn side_multiple(&self) -> usize {
         1 << (self.channel_mults.len().saturating_sub(1))
     }
 
+    /// A network of this architecture on `device`, with burn's default
+    /// initialisation (drawn lazily from burn's generator: see
+    /// [`crate::seeded`] for reproducible weights); a residual network's
+    /// output layer starts at zero. Errors name what is wrong with the
+    /// configuration (no levels, a group count that does not divide a
+    /// level, dropout outside [0, 1)).
     pub fn init<B: Backend>(&self, device: &B::Device) -> Result<Sr3Unet<B>, String> {
         self.validate()?;
         let inner = self.inner_channels;
@@ -305,6 +325,11 @@ impl<B: Backend> ResBlock<B> {
     }
 }
 
+/// PGRF's velocity field v(Xt, T, t) on backend `B`: an SR3-style U-Net
+/// ([`Sr3Unet::forward`]). Built by [`Sr3Config::init`] or loaded from a
+/// weight file; its parameters are private, named by their field path in
+/// weight files ([`crate::named`]). The samplers of [`crate::flow::sample`]
+/// turn it into images.
 #[derive(Module, Debug)]
 pub struct Sr3Unet<B: Backend> {
     first: Conv2d<B>,
@@ -326,7 +351,7 @@ pub struct Sr3Unet<B: Backend> {
 /// Sinusoidal embedding of t (one value per batch item) into `dim` features:
 /// [sin(t f_k), cos(t f_k)], f_k = 10000^(-k / (dim/2)), as SR3 embeds its
 /// continuous noise level.
-pub fn time_embedding<B: Backend>(t: Tensor<B, 1>, dim: usize) -> Tensor<B, 2> {
+fn time_embedding<B: Backend>(t: Tensor<B, 1>, dim: usize) -> Tensor<B, 2> {
     let half = dim / 2;
     let device = t.device();
     let freqs: Vec<f32> = (0..half)

@@ -6,18 +6,24 @@
 //!   t ~ U(0, 1), Xt = t X1 + (1 - t) X0, loss |X1 - X0 - v(Xt, T, t)|_1;
 //!   the path and the loss are [`crate::flow`]'s.
 
+use crate::flow::flow_loss;
 use crate::sr3::Sr3Unet;
 use crate::unet::SidUnet;
 use burn::optim::{GradientsParams, Optimizer};
 use burn::tensor::backend::AutodiffBackend;
 use burn::tensor::{ElementConversion, Tensor};
 
-/// Mean absolute error.
-pub fn l1<B: burn::tensor::backend::Backend>(a: Tensor<B, 4>, b: Tensor<B, 4>) -> Tensor<B, 1> {
+/// Mean absolute error over every element.
+pub(crate) fn l1<B: burn::tensor::backend::Backend>(
+    a: Tensor<B, 4>,
+    b: Tensor<B, 4>,
+) -> Tensor<B, 1> {
     (a - b).abs().mean()
 }
 
-/// The denoiser's loss: L1(net(noisy x ratio), clean).
+/// The denoiser's loss: L1(net(noisy x ratio), clean), `noisy` being the
+/// amplified, clamped input and `clean` the target, both `(n, 4, h, w)`
+/// packed in [0, 1].
 pub fn denoiser_loss<B: burn::tensor::backend::Backend>(
     net: &SidUnet<B>,
     noisy: Tensor<B, 4>,
@@ -26,13 +32,8 @@ pub fn denoiser_loss<B: burn::tensor::backend::Backend>(
     l1(net.forward(noisy), clean)
 }
 
-/// The rectified-flow loss and the path, defined in [`crate::flow`]; named
-/// here too for the training loop and benchmarks that import them from
-/// `step`.
-pub use crate::flow::loss::flow_loss;
-pub use crate::flow::path::interpolate as interpolate_path;
-
-/// One Adam (or other optimiser) step of the denoiser; returns the updated
+/// One Adam (or other optimiser) step of the denoiser at learning rate `lr`
+/// on the batch (`noisy`, `clean`) of [`denoiser_loss`]; returns the updated
 /// network and the loss before the update.
 pub fn denoiser_step<B: AutodiffBackend, O: Optimizer<SidUnet<B>, B>>(
     net: SidUnet<B>,
@@ -48,10 +49,11 @@ pub fn denoiser_step<B: AutodiffBackend, O: Optimizer<SidUnet<B>, B>>(
 }
 
 /// One rectified-flow step (Algorithm 1's update): the loss
-/// |X1 - X0 - v(Xt, T, t)|_1 of [`crate::flow::loss::flow_loss`] with `cond`
+/// |X1 - X0 - v(Xt, T, t)|_1 of [`crate::flow::flow_loss`] with `cond`
 /// T, `x1` X1, `x0` X0 ~ N(0, I) and `t` ~ U(0, 1), the latter two drawn by
 /// the caller (so the loop owns the randomness and its seed;
-/// [`crate::flow::draw`]).
+/// [`crate::flow`]). Returns the updated network and the loss before the
+/// update.
 pub fn flow_step<B: AutodiffBackend, O: Optimizer<Sr3Unet<B>, B>>(
     net: Sr3Unet<B>,
     optim: &mut O,

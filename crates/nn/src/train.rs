@@ -7,9 +7,10 @@ use crate::checkpoint::{self, CheckpointState};
 use crate::data::validation::{psnr, ValSet};
 use crate::data::{Extras, Loader, SampleSpec, Source};
 use crate::error::{NnError, Result};
+use crate::flow::flow_loss;
 use crate::net::Net;
 use crate::schedule::Schedule;
-use crate::step::{denoiser_loss, flow_loss};
+use crate::step::denoiser_loss;
 use crate::weights::{Architecture, NoiseSource, TrainingSummary, WeightMeta};
 use burn::module::{AutodiffModule, Module};
 use burn::optim::grad_clipping::GradientClippingConfig;
@@ -25,33 +26,55 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::Instant;
 
-/// Everything the loop needs to know.
+/// Everything the loop needs to know, resolved (no defaults left): the CLI
+/// makes it from a [`crate::TrainConfig`] and runs it with
+/// [`crate::backend::train`].
 #[derive(Clone, Debug)]
 pub struct TrainSettings {
+    /// The network to train (and so the method: SPC or PGRF).
     pub arch: Architecture,
+    /// Total optimisation steps of the run (a resumed run continues to this).
     pub steps: u64,
+    /// Crops per step.
     pub batch: usize,
+    /// Side of the square packed training crops, in packed pixels.
     pub patch: usize,
+    /// Seed of the initial weights and of every sample (crop, flips, noise,
+    /// X0, t): batch b of a run is a function of (seed, b).
     pub seed: u64,
+    /// Base learning rate of Adam, before the schedule.
     pub lr: f64,
+    /// How the learning rate changes over the run.
     pub schedule: Schedule,
     /// Per-tensor gradient norm limit (burn's clipping), if any.
     pub clip_grad: Option<f32>,
+    /// Draw flips and transposes of the clean crops.
     pub augment: bool,
+    /// Data worker threads synthesising pairs ahead of the optimiser.
     pub workers: usize,
     /// Validate every this many steps (0: only at the end).
     pub val_every: u64,
     /// t2 of the two-stage sampler used for validating the flow model.
     pub val_t2: f32,
+    /// Write a checkpoint every this many steps (0: only at the end).
     pub checkpoint_every: u64,
+    /// The checkpoint file, written and (with `resume`) read.
     pub checkpoint: PathBuf,
+    /// The weight file written at the end (also when stopped early).
     pub out: PathBuf,
     /// CSV log (or JSON lines when the name ends in .jsonl/.json).
     pub log: Option<PathBuf>,
+    /// Log the mean loss every this many steps.
     pub log_every: u64,
+    /// Continue from `checkpoint` instead of starting afresh; the checkpoint
+    /// must be of the same network, seed, batch and patch.
     pub resume: bool,
+    /// The noise the pairs are synthesised with, recorded in the weight file.
     pub noise: NoiseSource,
+    /// Where the clean images came from, in words, recorded in the weight
+    /// file.
     pub data: String,
+    /// The compute device, in words, recorded in the weight file.
     pub device: String,
     /// The configuration the run was started from (stored in the weight
     /// file, so the run can be repeated with `pgrf train --config`).
@@ -61,16 +84,24 @@ pub struct TrainSettings {
 /// How a run ended.
 #[derive(Clone, Debug)]
 pub struct Outcome {
+    /// Step the run started at (0, or the checkpoint's step on resume).
     pub start_step: u64,
+    /// Steps completed when it ended (`steps`, or fewer when stopped).
     pub end_step: u64,
     /// Loss of every step run in this call, in order.
     pub losses: Vec<f32>,
+    /// Loss of the last step (NaN if no step ran).
     pub final_loss: f32,
+    /// Final validation PSNR in dB on the held-out pairs (the last one
+    /// measured when stopped early); None without validation.
     pub val_psnr: Option<f32>,
     /// PSNR of the (amplified, clamped) noisy input on the validation pairs.
     pub val_input_psnr: Option<f32>,
+    /// Wall-clock seconds of this call's training.
     pub seconds: f64,
+    /// Training crops per second in this call.
     pub images_per_s: f64,
+    /// Stopped by the `stop` flag before `steps`.
     pub interrupted: bool,
 }
 
@@ -82,7 +113,7 @@ fn to_tensor<B: Backend>(v: &[f32], shape: [usize; 4], device: &B::Device) -> Te
 
 /// Mean PSNR of the network on the validation pairs (one at a time, so memory
 /// stays that of a single patch).
-pub fn validate<B: Backend>(net: &Net<B>, val: &ValSet, t2: f32, device: &B::Device) -> f32 {
+pub(crate) fn validate<B: Backend>(net: &Net<B>, val: &ValSet, t2: f32, device: &B::Device) -> f32 {
     let p = val.patch;
     let mut sum = 0.0;
     for pair in &val.pairs {
@@ -168,7 +199,7 @@ impl Log {
 }
 
 /// Train from scratch or resume, until `settings.steps` or until `stop` is set.
-pub fn train<B: AutodiffBackend>(
+pub(crate) fn train<B: AutodiffBackend>(
     s: &TrainSettings,
     source: Arc<Source>,
     spec: Arc<PairSpec>,

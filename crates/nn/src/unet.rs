@@ -19,15 +19,22 @@ use burn::tensor::ops::PadMode;
 use burn::tensor::Tensor;
 
 /// Multiple that input sides are padded to (2^4 for four poolings).
-pub const SIDE_MULTIPLE: usize = 16;
+const SIDE_MULTIPLE: usize = 16;
 
+/// The SID U-Net's architecture (burn `Config`: `SidUnetConfig::new()` gives
+/// the defaults, `with_width(..)` etc. change one field). Stored in weight
+/// files (`arch = "sid-unet"`) and built by [`SidUnetConfig::init`].
 #[derive(Config, Debug)]
 pub struct SidUnetConfig {
-    /// Width of the first level (32 in the paper).
+    /// Width of the first level (32 in the paper); level k has
+    /// `width * 2^k` channels, k = 0..4.
     #[config(default = 32)]
     pub width: usize,
+    /// Input planes: 4, the packed R, G1, B, G2 of the amplified noisy raw.
     #[config(default = 4)]
     pub in_channels: usize,
+    /// Output planes: 4, the packed clean estimate (not clamped; inference
+    /// clamps it to [0, 1]).
     #[config(default = 4)]
     pub out_channels: usize,
     /// Add the input to the output, so the network learns the correction
@@ -75,6 +82,11 @@ impl<B: Backend> DoubleConv<B> {
     }
 }
 
+/// The SID U-Net denoiser of the SPC method, on backend `B`: raw -> raw,
+/// `(n, 4, h, w)` in and out, any `h` and `w` ([`SidUnet::forward`]). Built
+/// by [`SidUnetConfig::init`] or loaded from a weight file; its parameters
+/// are private, named by their field path in weight files
+/// ([`crate::named`]).
 #[derive(Module, Debug)]
 pub struct SidUnet<B: Backend> {
     down: Vec<DoubleConv<B>>,
@@ -86,6 +98,10 @@ pub struct SidUnet<B: Backend> {
 }
 
 impl SidUnetConfig {
+    /// A network of this architecture on `device`, with burn's default
+    /// initialisation (drawn lazily from burn's generator: see
+    /// [`crate::seeded`] for reproducible weights); a residual network's
+    /// output layer starts at zero.
     pub fn init<B: Backend>(&self, device: &B::Device) -> SidUnet<B> {
         let w = self.width;
         let widths = [w, 2 * w, 4 * w, 8 * w, 16 * w];

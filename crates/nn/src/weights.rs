@@ -8,7 +8,7 @@ use crate::error::{NnError, Result};
 use crate::named::{self, NamedTensor};
 use crate::net::Net;
 use crate::sr3::{Sr3Config, Sr3Unet};
-use crate::unet::{SidUnet, SidUnetConfig};
+use crate::unet::SidUnetConfig;
 use burn::module::Module;
 use burn::tensor::backend::Backend;
 use pgrf_core::record::{self, RecordError};
@@ -17,10 +17,13 @@ use std::collections::BTreeMap;
 use std::path::Path;
 
 /// Value of `format` in every weight file.
-pub const FORMAT: &str = "pgrf-weights";
-pub const VERSION: u32 = 1;
+const FORMAT: &str = "pgrf-weights";
+/// Version of the record this pgrf writes; newer files are refused.
+const VERSION: u32 = 1;
 
-/// The two networks and their configurations.
+/// The two networks and their configurations: in the record as
+/// `"arch": "sid-unet" | "sr3"` with the configuration under `"config"`.
+/// [`Architecture::init`] builds the network.
 #[derive(Clone, Debug, Serialize, Deserialize)]
 #[serde(tag = "arch", content = "config", rename_all = "kebab-case")]
 pub enum Architecture {
@@ -40,6 +43,8 @@ impl Architecture {
         }
     }
 
+    /// One line for headers and errors, e.g. "SPC denoiser (SID U-Net, width
+    /// 32)" or "PGRF flow model (SR3, 64 channels x [1, 2, 4, 8, 8])".
     pub fn describe(&self) -> String {
         match self {
             Architecture::SidUnet(c) => format!(
@@ -75,16 +80,26 @@ pub struct NoiseSource {
 /// How training went, for people choosing between files.
 #[derive(Clone, Debug, Default, Serialize, Deserialize, PartialEq)]
 pub struct TrainingSummary {
+    /// Optimisation steps completed.
     pub steps: u64,
+    /// Crops per step.
     pub batch: usize,
+    /// Side of the square packed training crops, in packed pixels (the flow
+    /// model's largest inference tile is derived from it).
     pub patch: usize,
+    /// Seed of the run.
     pub seed: u64,
+    /// Where the clean training images came from, in words.
     pub data: String,
+    /// Loss of the last step (L1, on [0, 1] data).
     pub final_loss: f32,
     /// PSNR (dB) on the held-out validation pairs at the end of training.
     pub val_psnr: Option<f32>,
+    /// Training seconds, summed over resumed runs.
     pub seconds: f64,
+    /// Training crops per second of the last run.
     pub images_per_s: f64,
+    /// The compute device, in words.
     pub device: String,
     /// The whole training configuration (files written before it was
     /// recorded have none).
@@ -92,14 +107,20 @@ pub struct TrainingSummary {
     pub config: Option<crate::TrainConfig>,
 }
 
-/// The record stored in every weight file.
+/// The record stored in every weight file, as JSON under the safetensors
+/// metadata key "pgrf".
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct WeightMeta {
+    /// Always "pgrf-weights" (pgrf's calibration files share the container).
     pub format: String,
+    /// Version of the record; files newer than this pgrf reads are refused.
     pub version: u32,
+    /// The network (`arch` and `config` keys at the top level).
     #[serde(flatten)]
     pub arch: Architecture,
+    /// The noise the network learned to remove.
     pub noise: NoiseSource,
+    /// How training went; None for networks not trained by `pgrf train`.
     pub training: Option<TrainingSummary>,
     /// Second time of the two-stage sampler (flow model), from the sampling
     /// search; None until searched.
@@ -107,6 +128,8 @@ pub struct WeightMeta {
 }
 
 impl WeightMeta {
+    /// The record of a network of `arch` trained on `noise`, of the current
+    /// format and version, with no training summary and no searched t2.
     pub fn new(arch: Architecture, noise: NoiseSource) -> WeightMeta {
         WeightMeta {
             format: FORMAT.into(),
@@ -120,7 +143,10 @@ impl WeightMeta {
 }
 
 fn err(path: &Path, reason: impl std::fmt::Display) -> NnError {
-    NnError::Invalid(format!("{}: {reason}", path.display()))
+    NnError::BadFile {
+        path: path.to_path_buf(),
+        reason: reason.to_string(),
+    }
 }
 
 /// Config keys added after files were first written, with the value that
@@ -139,7 +165,7 @@ fn fill_defaults(value: &mut serde_json::Value) {
 }
 
 /// Serialise named tensors and the record to safetensors bytes.
-pub fn encode(tensors: &BTreeMap<String, NamedTensor>, meta: &WeightMeta) -> Result<Vec<u8>> {
+fn encode(tensors: &BTreeMap<String, NamedTensor>, meta: &WeightMeta) -> Result<Vec<u8>> {
     let text = serde_json::to_string(meta).map_err(|e| NnError::Invalid(e.to_string()))?;
     record::encode(
         tensors
@@ -151,13 +177,17 @@ pub fn encode(tensors: &BTreeMap<String, NamedTensor>, meta: &WeightMeta) -> Res
 }
 
 /// Write `module`'s parameters and `meta` atomically.
-pub fn save<B: Backend, M: Module<B>>(path: &Path, module: &M, meta: &WeightMeta) -> Result<()> {
+pub(crate) fn save<B: Backend, M: Module<B>>(
+    path: &Path,
+    module: &M,
+    meta: &WeightMeta,
+) -> Result<()> {
     let bytes = encode(&named::collect::<B, M>(module), meta)?;
     Ok(pgrf_core::write_atomic(path, &bytes)?)
 }
 
 /// Parse weight-file bytes into the record and the tensors.
-pub fn decode(path: &Path, bytes: &[u8]) -> Result<(WeightMeta, BTreeMap<String, NamedTensor>)> {
+fn decode(path: &Path, bytes: &[u8]) -> Result<(WeightMeta, BTreeMap<String, NamedTensor>)> {
     let meta = decode_meta(path, bytes)?;
     let rec = record::decode(bytes).map_err(|e| err(path, e))?;
     for (name, t) in &rec.tensors {
@@ -203,40 +233,49 @@ fn decode_meta(path: &Path, bytes: &[u8]) -> Result<WeightMeta> {
     Ok(meta)
 }
 
-/// Read a weight file's record without building the network.
+/// Read a weight file's record (checked to be a weight file this pgrf
+/// reads) without building the network.
 pub fn read_meta(path: &Path) -> Result<WeightMeta> {
     Ok(read(path)?.0)
 }
 
+/// Read a weight file: its record and its named tensors, checked to be
+/// finite (a damaged file is refused with the tensor's name).
 pub fn read(path: &Path) -> Result<(WeightMeta, BTreeMap<String, NamedTensor>)> {
     decode(path, &read_bytes(path)?)
 }
 
 /// A weight file's bytes, with the path in the error.
-pub fn read_bytes(path: &Path) -> Result<Vec<u8>> {
+pub(crate) fn read_bytes(path: &Path) -> Result<Vec<u8>> {
     std::fs::read(path).map_err(|e| err(path, e))
 }
 
-/// Build the network the file describes and load its weights.
+/// Build the network the file describes and load its weights on `device`;
+/// every tensor must fit the recorded architecture by name and shape.
 pub fn load<B: Backend>(path: &Path, device: &B::Device) -> Result<(Net<B>, WeightMeta)> {
     load_bytes(path, &read_bytes(path)?, device)
 }
 
 /// [`load`] from a weight file's bytes (weights built into the binary);
 /// `path` names them in errors.
-pub fn load_bytes<B: Backend>(
+pub(crate) fn load_bytes<B: Backend>(
     path: &Path,
     bytes: &[u8],
     device: &B::Device,
 ) -> Result<(Net<B>, WeightMeta)> {
     let (meta, tensors) = decode(path, bytes)?;
     let fit = |e: String| {
-        err(
-            path,
-            format!("weights do not fit {}: {e}", meta.arch.describe()),
-        )
+        NnError::SizeMismatch(format!(
+            "{}: weights do not fit {}: {e}",
+            path.display(),
+            meta.arch.describe()
+        ))
     };
-    let net = match meta.arch.init::<B>(device).map_err(|e| err(path, e))? {
+    let net = match meta
+        .arch
+        .init::<B>(device)
+        .map_err(|e| NnError::Config(format!("{}: {e}", path.display())))?
+    {
         Net::Spc(n) => Net::Spc(named::assign(n, &tensors, device).map_err(fit)?),
         Net::Pgrf(n) => Net::Pgrf(named::assign(n, &tensors, device).map_err(fit)?),
     };
@@ -244,33 +283,39 @@ pub fn load_bytes<B: Backend>(
 }
 
 /// Load a file that must hold the SPC denoiser.
-pub fn load_denoiser<B: Backend>(
+#[cfg(test)]
+fn load_denoiser<B: Backend>(
     path: &Path,
     device: &B::Device,
-) -> Result<(SidUnet<B>, WeightMeta)> {
+) -> Result<(crate::unet::SidUnet<B>, WeightMeta)> {
     match load::<B>(path, device)? {
         (Net::Spc(n), m) => Ok((n, m)),
-        (_, m) => Err(err(
-            path,
-            format!("holds a {}, not an SPC denoiser", m.arch.describe()),
-        )),
+        (_, m) => Err(NnError::WrongMethod {
+            path: path.to_path_buf(),
+            wanted: crate::Method::Spc,
+            found: format!("a {}", m.arch.describe()),
+        }),
     }
 }
 
 /// Load a file that must hold the PGRF flow model.
-pub fn load_flow<B: Backend>(path: &Path, device: &B::Device) -> Result<(Sr3Unet<B>, WeightMeta)> {
+pub(crate) fn load_flow<B: Backend>(
+    path: &Path,
+    device: &B::Device,
+) -> Result<(Sr3Unet<B>, WeightMeta)> {
     match load::<B>(path, device)? {
         (Net::Pgrf(n), m) => Ok((n, m)),
-        (_, m) => Err(err(
-            path,
-            format!("holds an {}, not a PGRF flow model", m.arch.describe()),
-        )),
+        (_, m) => Err(NnError::WrongMethod {
+            path: path.to_path_buf(),
+            wanted: crate::Method::Pgrf,
+            found: format!("an {}", m.arch.describe()),
+        }),
     }
 }
 
 /// Rewrite only the record of an existing weight file (e.g. the searched t2),
 /// atomically, keeping the tensors bit for bit.
-pub fn update_meta(path: &Path, f: impl FnOnce(&mut WeightMeta)) -> Result<WeightMeta> {
+pub(crate) fn update_meta(path: &Path, f: impl FnOnce(&mut WeightMeta)) -> Result<WeightMeta> {
     let (mut meta, tensors) = read(path)?;
     f(&mut meta);
     let bytes = encode(&tensors, &meta)?;
@@ -358,7 +403,7 @@ mod tests {
         let p = tmp("flow.safetensors");
         save::<Cpu, _>(&p, &net, &WeightMeta::new(Architecture::Sr3(cfg), noise())).unwrap();
         let e = load_denoiser::<Cpu>(&p, &device).unwrap_err().to_string();
-        assert!(e.contains("not an SPC denoiser"), "{e}");
+        assert!(e.contains("not spc"), "{e}");
         assert!(load_flow::<Cpu>(&p, &device).is_ok());
         // The record says one width, the tensors are of another network.
         let bytes = std::fs::read(&p).unwrap();

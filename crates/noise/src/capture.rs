@@ -16,13 +16,18 @@ use pgrf_raw::{pack_normalized, unpack_normalized, RawFrame};
 /// How the dark frame is taken.
 #[derive(Clone, Debug)]
 pub struct DarkCapture {
+    /// The camera whose noise is simulated.
     pub profile: CameraProfile,
+    /// The noise model.
     pub model: ModelKind,
+    /// ISO of the dark frame: selects the profile's parameters and is
+    /// written to its EXIF.
     pub iso: u32,
     /// Exposure time of the dark frame, written to its EXIF.
     pub exposure_s: f64,
     /// How many times less light than the clean frame (> 0).
     pub ratio: f32,
+    /// Seed of every random draw; the same seed gives the same frame.
     pub seed: u64,
 }
 

@@ -17,6 +17,7 @@ pub struct Components {
 }
 
 impl Components {
+    /// Every term: the full PGRF model ("P,G,H,Q,F,A").
     pub const ALL: Components = Components {
         photon: true,
         read: true,

@@ -10,17 +10,17 @@
 #![warn(missing_docs)]
 
 pub mod capture;
-pub mod components;
-pub mod error;
+mod components;
+mod error;
 pub mod mapfile;
-pub mod maps;
-pub mod model;
+mod maps;
+mod model;
 pub mod pair;
-pub mod params;
-pub mod poisson;
+mod params;
+mod poisson;
 pub mod profile;
 pub mod sensor;
-pub mod tukey;
+mod tukey;
 
 pub use components::Components;
 pub use error::{NoiseError, Result};

@@ -12,8 +12,11 @@ use std::sync::Arc;
 /// packed layout `(4, H/2, W/2)`.
 #[derive(Clone, Debug)]
 pub enum Map {
+    /// The same value at every pixel.
     Scalar(f32),
+    /// One value per packed plane, in R, G1, B, G2 order.
     Plane([f32; 4]),
+    /// One value per pixel, packed `(4, H/2, W/2)`; shared, not copied, by clones.
     Pixel(Arc<Array3<f32>>),
 }
 
@@ -138,6 +141,7 @@ pub struct PixelMaps {
     pub dark_rate: Map,
     /// Fixed-pattern deviation N_FP multiplying the dark signal: D = N_RS (1 + N_FP).
     pub n_fp: Map,
+    /// How the dark signal grows with exposure time (the unit of `dark_rate`).
     pub dark_law: DarkLaw,
 }
 

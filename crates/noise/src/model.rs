@@ -44,9 +44,11 @@ use std::sync::atomic::{AtomicBool, Ordering};
 /// Read-noise distribution.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum ReadDist {
+    /// N(0, sigma_read^2).
     Gaussian,
     /// Tukey-lambda with this shape; `sigma_read` is its scale.
     Tukey {
+        /// Shape parameter lambda (0 is the logistic distribution).
         lambda: f32,
     },
 }
@@ -112,6 +114,7 @@ pub struct NoiseModel {
     pub row_sigma: f32,
     /// Quantisation step q of N_q, DN.
     pub quant_step: f32,
+    /// Which terms are drawn (the paper's ablation letters).
     pub components: Components,
     /// white - black in DN: maps normalised images to the model's DN.
     pub dn_range: f32,
@@ -129,6 +132,7 @@ pub struct Capture {
     /// Sensor-row parity of each packed plane (R, G1, B, G2): row noise is
     /// shared by the planes read out on the same sensor row. From the CFA.
     pub plane_rows: [usize; 4],
+    /// Seed of every draw; the output does not depend on the thread count.
     pub seed: u64,
 }
 
@@ -145,7 +149,12 @@ pub(crate) fn photon_shot<R: Rng + ?Sized>(rng: &mut R, k: f32, electrons: f64) 
 /// (rate x law(t), [`DarkLaw::electrons`]), multiplied by (1 + N_FP) when
 /// the pixel's fixed-pattern deviation `n_fp` is given (component F).
 #[inline]
-pub(crate) fn dark_shot<R: Rng + ?Sized>(rng: &mut R, k: f32, electrons: f64, n_fp: Option<f32>) -> f32 {
+pub(crate) fn dark_shot<R: Rng + ?Sized>(
+    rng: &mut R,
+    k: f32,
+    electrons: f64,
+    n_fp: Option<f32>,
+) -> f32 {
     let d = photon_shot(rng, k, electrons);
     match n_fp {
         Some(fp) => d * (1.0 + fp),

@@ -15,10 +15,19 @@ use crate::profile::CameraProfile;
 use ndarray::{Array3, ArrayView3};
 use pgrf_core::seed::{open01, stream, Domain};
 
+/// How each pair's exposure ratio (clean light / noisy light, > 0) is chosen;
+/// the default is ELD/SID's U(100, 300).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum RatioSpec {
+    /// The same ratio for every pair.
     Fixed(f32),
-    Uniform { lo: f32, hi: f32 },
+    /// Drawn uniformly in [lo, hi] from each pair's seed.
+    Uniform {
+        /// Smallest ratio.
+        lo: f32,
+        /// Largest ratio.
+        hi: f32,
+    },
 }
 
 impl Default for RatioSpec {
@@ -33,10 +42,13 @@ impl Default for RatioSpec {
 /// Exposure time of the noisy capture (drives dark current).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum ExposureSpec {
+    /// The same exposure time for every pair, seconds.
     Fixed(f32),
     /// ln t uniform between the bounds, seconds.
     LogUniform {
+        /// Shortest exposure, seconds.
         lo: f32,
+        /// Longest exposure, seconds.
         hi: f32,
     },
 }
@@ -51,9 +63,14 @@ impl Default for ExposureSpec {
     }
 }
 
+/// The recipe for synthesising training pairs from clean images: camera
+/// profile, noise model and its options, optional calibration maps, and how
+/// ISO, ratio and exposure are chosen. [`PairSpec::new`] gives ELD's defaults;
+/// change the public fields to vary them.
 #[derive(Clone, Debug)]
 pub struct PairSpec {
     pub(crate) profile: CameraProfile,
+    /// Which noise model synthesises the noisy image.
     pub kind: ModelKind,
     /// Components for the PGRF model (P-G and ELD have fixed sets).
     pub components: Components,
@@ -61,6 +78,8 @@ pub struct PairSpec {
     pub global: bool,
     /// ELD read noise: Tukey-lambda (true) or Gaussian.
     pub tukey: bool,
+    /// Per-pixel calibration maps for the PGRF model (None: the profile's
+    /// global values); packed `(4, H/2, W/2)` like the clean images.
     pub maps: Option<PixelMaps>,
     /// Global numbers measured with `maps` (gain, row noise, DN scale): they
     /// replace the profile's, because per-pixel maps are only meaningful on
@@ -68,17 +87,22 @@ pub struct PairSpec {
     pub measured: Option<Measured>,
     /// Fixed ISO, or None to draw parameters from the profile's ELD distribution.
     pub iso: Option<u32>,
+    /// How the exposure ratio is chosen.
     pub ratio: RatioSpec,
+    /// How the noisy capture's exposure time (dark current) is chosen.
     pub exposure: ExposureSpec,
 }
 
 /// Global results of a calibration that accompany its per-pixel maps.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Measured {
+    /// System gain K, DN per electron.
     pub k: f64,
+    /// Row-noise standard deviation sigma_H, DN.
     pub row_sigma: f64,
     /// white - black of the calibrated camera, DN.
     pub dn_range: f64,
+    /// Black level of the calibrated camera, DN (results are clipped at 0 DN above it).
     pub black: f64,
 }
 
@@ -89,12 +113,19 @@ pub struct Pair {
     pub noisy: Array3<f32>,
     /// The clean target, clipped to [0, 1].
     pub clean: Array3<f32>,
+    /// The exposure ratio this pair was synthesised at.
     pub ratio: f32,
+    /// Exposure time of the noisy capture, seconds.
     pub exposure_s: f32,
+    /// The noise parameters (K, read and row sigmas, ...) the pair was drawn with.
     pub params: CaptureParams,
 }
 
 impl PairSpec {
+    /// `kind` on `profile` with ELD's choices: all components, per-pixel
+    /// effects from the profile (no maps), Tukey-lambda read noise for ELD,
+    /// parameters drawn from the profile's ELD distribution (no fixed ISO),
+    /// ratio U(100, 300), exposure log-uniform over 1/30..1 s.
     pub fn new(profile: CameraProfile, kind: ModelKind) -> PairSpec {
         PairSpec {
             profile,
@@ -139,7 +170,8 @@ impl PairSpec {
         Ok((model, params))
     }
 
-    /// Draw ratio and exposure for `seed`.
+    /// Draw (ratio, exposure time in seconds) for `seed`, as
+    /// [`PairSpec::synthesize`] does.
     pub fn conditions(&self, seed: u64) -> Result<(f32, f32)> {
         let mut rng = stream(seed, Domain::Params, 1, 0);
         let ratio = match self.ratio {
@@ -167,7 +199,9 @@ impl PairSpec {
         Ok((ratio, exposure))
     }
 
-    /// Synthesise one pair from a packed normalised clean image.
+    /// Synthesise one pair from a packed normalised clean image `(4, H/2, W/2)`
+    /// in R, G1, B, G2 order; `plane_rows` is each plane's sensor-row parity
+    /// (from the CFA, for row noise). Deterministic in `seed`.
     pub fn synthesize(
         &self,
         clean: ArrayView3<f32>,

@@ -99,11 +99,17 @@ impl std::str::FromStr for DarkLaw {
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct DarkCurrent {
+    /// How the dark signal grows with exposure time.
     pub law: DarkLaw,
     /// Electrons per sqrt(second) (sqrt law) or per second (linear law).
     pub rate: f64,
 }
 
+/// A camera's published noise calibration: the DN scale and black level,
+/// the system-gain range, ELD's parameter fits (to draw capture parameters),
+/// an optional per-ISO table and dark current. Read from JSON (the keys of
+/// `crates/noise/profiles/sony-a7s2.json`) and validated on load; every DN
+/// value refers to this profile's `dn_range` (white - black).
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct CameraProfile {
@@ -126,6 +132,7 @@ pub struct CameraProfile {
     pub(crate) eld: EldFits,
     #[serde(default)]
     pub(crate) per_iso: Vec<IsoPoint>,
+    /// Measured dark current, if any (none of the built-in profiles has one).
     pub dark_current: Option<DarkCurrent>,
 }
 
@@ -152,14 +159,15 @@ pub(crate) fn built_in_names() -> Vec<&'static str> {
 }
 
 impl CameraProfile {
-    /// A built-in profile by name.
+    /// A built-in profile by name ("sony-a7s2", "nikon-d850", "canon-eos70d",
+    /// "canon-eos700d", "canon-eos5d4"), or None.
     pub fn built_in(name: &str) -> Option<CameraProfile> {
         BUILT_IN.iter().find(|(n, _)| *n == name).map(|(n, json)| {
             CameraProfile::from_json(n, json).expect("built-in profiles are valid")
         })
     }
 
-    /// A built-in name or a path to a JSON file.
+    /// A built-in name or a path to a JSON file, validated.
     pub fn load(name_or_path: &str) -> Result<CameraProfile> {
         if let Some(p) = Self::built_in(name_or_path) {
             return Ok(p);

@@ -5,7 +5,7 @@
 //!
 //! Per pixel x (packed layout), a frame with `e` photo-electrons of light and
 //! exposure t is, in DN (each random term drawn by the noise model's own
-//! function: [`photon_shot`], [`dark_shot`], [`read_noise`], [`row_noise`]):
+//! function: `photon_shot`, `dark_shot`, `read_noise`, `row_noise`):
 //!
 //!   black + bias(x) + K prnu(x) Poisson(e) + K Poisson(d(x) g(t)) (1 + n_fp(x))
 //!         + N(0, sigma_r(x)) + row(frame, sensor row),   rounded and clipped to 0..white.
@@ -16,7 +16,7 @@
 use crate::error::{NoiseError, Result};
 use crate::model::{dark_shot, photon_shot, read_noise, row_noise, ReadDist};
 use crate::profile::{CameraProfile, DarkLaw};
-use ndarray::{Array3, Axis};
+use ndarray::Array3;
 use pgrf_core::seed::{open01, seeded_map, stream, Domain};
 use pgrf_raw::{Cfa, RawFrame};
 use rand::Rng;
@@ -32,11 +32,14 @@ use rayon::prelude::*;
 #[derive(Clone, Debug)]
 pub struct SensorSpec {
     pub(crate) name: String,
+    /// Frame width in pixels (even, at least 4).
     pub width: usize,
+    /// Frame height in pixels (even, at least 4).
     pub height: usize,
     pub(crate) cfa: Cfa,
     pub(crate) black: f32,
     pub(crate) white: u32,
+    /// ISO written into every frame's EXIF (the presets' noise is that ISO's).
     pub iso: u32,
     /// Mean system gain, DN per electron.
     pub k: f32,
@@ -47,10 +50,13 @@ pub struct SensorSpec {
     /// Median source-follower sigma, DN, and the log-normal spread around it.
     pub(crate) read_sigma: f32,
     pub(crate) read_spread: f32,
+    /// Row-noise standard deviation sigma_H, DN.
     pub row_sigma: f32,
-    /// Mean dark rate (electrons per sqrt(s) or per s) and its relative spread.
+    /// Mean dark rate, electrons per sqrt(s) (sqrt law) or per s (linear law).
     pub dark_rate: f32,
+    /// Relative spread of the per-pixel dark rate around `dark_rate`.
     pub(crate) dark_spread: f32,
+    /// How the dark signal grows with exposure time.
     pub dark_law: DarkLaw,
     /// Standard deviation of N_FP.
     pub(crate) n_fp: f32,
@@ -102,12 +108,16 @@ impl SensorSpec {
 /// The sensor's ground truth, packed `(4, H/2, W/2)`.
 #[derive(Clone, Debug)]
 pub struct VirtualSensor {
+    /// The design the maps were drawn from.
     pub spec: SensorSpec,
     /// Per-pixel gain K prnu(x), DN per electron.
     pub(crate) gain: Array3<f32>,
     /// Fixed-pattern offset, DN.
     pub bias: Array3<f32>,
+    /// Source-follower read-noise standard deviation sigma_r, DN.
     pub sigma_read: Array3<f32>,
+    /// Dark rate d(x), electrons per sqrt(s) or per s (`spec.dark_law`);
+    /// hot pixels included.
     pub dark_rate: Array3<f32>,
     pub(crate) n_fp: Array3<f32>,
     /// 1 where the pixel is hot.
@@ -115,6 +125,8 @@ pub struct VirtualSensor {
 }
 
 impl VirtualSensor {
+    /// Draw the sensor's per-pixel truth from `spec` (deterministic in its
+    /// seed); refuses sizes that are odd or below 4 x 4.
     pub fn new(spec: SensorSpec) -> Result<VirtualSensor> {
         if spec.width < 4 || spec.height < 4 || spec.width % 2 == 1 || spec.height % 2 == 1 {
             return Err(NoiseError::Invalid(format!(
@@ -242,11 +254,6 @@ impl VirtualSensor {
             "pgrf_version": env!("CARGO_PKG_VERSION"),
         })
     }
-}
-
-/// Plane means, for quick checks.
-pub(crate) fn plane_means(a: &Array3<f32>) -> [f32; 4] {
-    std::array::from_fn(|p| a.index_axis(Axis(0), p).mean().unwrap_or(0.0))
 }
 
 #[cfg(test)]

@@ -18,7 +18,8 @@ pub(crate) fn quantile(u: f64, lambda: f64) -> f64 {
 }
 
 /// dQ/du: the reciprocal of the density at Q(u), used for standard errors.
-pub(crate) fn quantile_slope(u: f64, lambda: f64) -> f64 {
+#[cfg(test)]
+fn quantile_slope(u: f64, lambda: f64) -> f64 {
     u.powf(lambda - 1.0) + (1.0 - u).powf(lambda - 1.0)
 }
 

@@ -11,8 +11,11 @@ use std::str::FromStr;
 
 /// Plane indices in packed order.
 pub(crate) const R: usize = 0;
+// G1 and G2 complete the set; only the unit tests name them.
+#[cfg_attr(not(test), allow(dead_code))]
 pub(crate) const G1: usize = 1;
 pub(crate) const B: usize = 2;
+#[cfg_attr(not(test), allow(dead_code))]
 pub(crate) const G2: usize = 3;
 /// Names of the packed planes, for reports.
 pub const PLANE_NAMES: [&str; 4] = ["R", "G1", "B", "G2"];
@@ -20,13 +23,18 @@ pub const PLANE_NAMES: [&str; 4] = ["R", "G1", "B", "G2"];
 /// A Bayer phase, named by the colours of the top-left 2x2 cell read row by row.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
 pub enum Cfa {
+    /// R G / G B: red at (0, 0), blue at (1, 1).
     Rggb,
+    /// B G / G R: blue at (0, 0), red at (1, 1).
     Bggr,
+    /// G R / B G: red at (0, 1), blue at (1, 0).
     Grbg,
+    /// G B / R G: blue at (0, 1), red at (1, 0).
     Gbrg,
 }
 
 impl Cfa {
+    /// Every Bayer phase, for tests and for trying each phase in turn.
     pub const ALL: [Cfa; 4] = [Cfa::Rggb, Cfa::Bggr, Cfa::Grbg, Cfa::Gbrg];
 
     /// (row, col) inside the 2x2 cell of the planes R, G1, B, G2.
@@ -67,6 +75,8 @@ impl Cfa {
         name.parse().expect("a shifted Bayer cell is a Bayer cell")
     }
 
+    /// The four-letter upper-case name ("RGGB", ...), as DNG's CFAPattern,
+    /// the CLI and calibration records spell it; [`FromStr`] parses it back.
     pub fn name(self) -> &'static str {
         match self {
             Cfa::Rggb => "RGGB",

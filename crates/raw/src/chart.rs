@@ -53,15 +53,22 @@ pub const A7S2_D65_MATRIX: [[f32; 3]; 3] = [
 /// How to render the chart.
 #[derive(Clone, Debug)]
 pub struct ChartSpec {
+    /// Frame width in pixels (even, as for any Bayer frame).
     pub width: usize,
+    /// Frame height in pixels (even).
     pub height: usize,
+    /// Bayer phase of the mosaic.
     pub cfa: Cfa,
+    /// Black level in DN, the same for all four planes.
     pub black: f32,
+    /// White (saturation) level in DN.
     pub white: u32,
     /// Fraction of the white-black range that a perfect white reflector
     /// reaches in the strongest camera channel (headroom below clipping).
     pub exposure: f32,
+    /// ISO written into the frame's metadata (None: no ISO tag).
     pub iso: Option<u32>,
+    /// Exposure time in seconds written into the frame's metadata.
     pub exposure_s: Option<f64>,
 }
 

@@ -16,7 +16,11 @@ use rawler::rawimage::{RawImage, RawImageData, RawPhotometricInterpretation};
 use rawler::rawsource::RawSource;
 use std::path::Path;
 
-/// Decode a RAW file, then apply level overrides.
+/// Decode a camera RAW file (ARW, NEF, CR2, CR3, RAF, DNG, ... through
+/// rawler) into its visible Bayer mosaic with levels, white balance, colour
+/// matrices and EXIF, then apply `overrides` to the levels. Files that are
+/// not integer Bayer mosaics (X-Trans, monochrome, linear or float DNGs) are
+/// refused with [`RawError::Unsupported`].
 pub fn decode_file(path: &Path, overrides: &LevelOverrides) -> Result<RawFrame> {
     let meta = std::fs::metadata(path).map_err(|e| RawError::io(path, e))?;
     if meta.is_dir() {

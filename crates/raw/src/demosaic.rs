@@ -11,9 +11,14 @@
 use crate::cfa::Cfa;
 use rayon::prelude::*;
 
+/// The interpolation a preview demosaics with; parsed from the CLI's
+/// `--demosaic bilinear|malvar` (`mhc` is accepted for Malvar).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
 pub enum Demosaic {
+    /// Average of the nearest same-colour neighbours: simple, softer edges.
     Bilinear,
+    /// Malvar-He-Cutler gradient-corrected interpolation (the default):
+    /// sharper edges, less zippering.
     #[default]
     Malvar,
 }
@@ -50,7 +55,7 @@ fn reflect(i: isize, n: usize) -> usize {
 }
 
 /// Demosaic `mosaic` (row-major, `width * height`) into interleaved RGB.
-pub fn demosaic(
+pub(crate) fn demosaic(
     mosaic: &[f32],
     width: usize,
     height: usize,

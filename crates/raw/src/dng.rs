@@ -8,7 +8,7 @@
 use crate::error::{RawError, Result};
 use crate::frame::{ColorMatrix, RawFrame};
 use crate::panic_guard::quietly;
-use pgrf_core::atomic::write_atomic;
+use pgrf_core::write_atomic;
 use rawler::cfa::{PlaneColor, CFA};
 use rawler::decoders::{Camera, RawMetadata};
 use rawler::dng::writer::DngWriter;
@@ -27,11 +27,15 @@ pub enum Compression {
     /// LJPEG-92, what Adobe's converter writes; about half the size.
     #[default]
     Lossless,
+    /// Plain 16-bit samples: larger, readable by any TIFF reader.
     Uncompressed,
 }
 
+/// How [`write_dng`] and [`encode_dng`] write a frame; the default is
+/// lossless LJPEG-92 with pgrf's version in the Software tag.
 #[derive(Clone, Debug)]
 pub struct DngOptions {
+    /// Pixel compression.
     pub compression: Compression,
     /// Written to the Software tag.
     pub software: String,
@@ -92,7 +96,8 @@ pub fn encode_dng(frame: &RawFrame, opts: &DngOptions) -> Result<Vec<u8>> {
     .map_err(|e| RawError::Invalid(format!("DNG encoding failed: {e}")))
 }
 
-/// Encode and write atomically.
+/// Encode `frame` as DNG (same pixels, CFA, levels, colour matrices, white
+/// balance and EXIF) and write it to `path` atomically.
 pub fn write_dng(frame: &RawFrame, path: &Path, opts: &DngOptions) -> Result<()> {
     let bytes = encode_dng(frame, opts)?;
     Ok(write_atomic(path, &bytes)?)

@@ -9,23 +9,48 @@ use std::path::{Path, PathBuf};
 /// Why a RAW file could not be read, packed or written.
 #[derive(Debug, thiserror::Error)]
 pub enum RawError {
+    /// The file could not be opened or read.
     #[error("{path}: {source}")]
     Io {
+        /// The file.
         path: PathBuf,
+        /// The operating system's error.
         #[source]
         source: std::io::Error,
     },
+    /// The file is damaged, truncated, not a RAW file, or its metadata gives
+    /// unusable levels.
     #[error("{path}: cannot decode: {reason}")]
-    Decode { path: PathBuf, reason: String },
+    Decode {
+        /// The file.
+        path: PathBuf,
+        /// The decoder's complaint, on one line.
+        reason: String,
+    },
+    /// A readable file of a kind pgrf does not handle: linear (demosaiced) or
+    /// monochrome data, X-Trans, floating-point samples.
     #[error("{path}: unsupported: {reason}")]
-    Unsupported { path: PathBuf, reason: String },
+    Unsupported {
+        /// The file.
+        path: PathBuf,
+        /// What about it pgrf cannot handle, on one line.
+        reason: String,
+    },
+    /// Arguments or in-memory data that cannot work: bad levels or geometry,
+    /// a buffer of the wrong length, an encoder failure.
     #[error("invalid input: {0}")]
     Invalid(String),
+    /// An output file that could not be written atomically.
     #[error(transparent)]
     Write(#[from] pgrf_core::WriteError),
     /// An input folder that cannot be listed or holds no files.
     #[error("{path}: {reason}")]
-    Folder { path: PathBuf, reason: String },
+    Folder {
+        /// The folder.
+        path: PathBuf,
+        /// Why it gives no files.
+        reason: String,
+    },
 }
 
 impl RawError {
@@ -77,4 +102,5 @@ pub(crate) fn one_line(s: String) -> String {
     }
 }
 
+/// Result of every fallible function of the RAW layer.
 pub type Result<T> = std::result::Result<T, RawError>;

@@ -21,10 +21,13 @@ pub struct ColorMatrix {
 /// A decoded Bayer raw frame, visible area only.
 #[derive(Clone, Debug)]
 pub struct RawFrame {
+    /// Visible width in pixels.
     pub width: usize,
+    /// Visible height in pixels.
     pub height: usize,
-    /// Row-major u16 samples, `width * height` of them.
+    /// Row-major u16 samples in DN (black not subtracted), `width * height` of them.
     pub mosaic: Vec<u16>,
+    /// Bayer phase of pixel (0, 0) of the visible area.
     pub cfa: Cfa,
     /// Black level in DN of the planes R, G1, B, G2.
     pub black: [f32; 4],
@@ -38,10 +41,13 @@ pub struct RawFrame {
     /// D65-like one last. Raw converters interpolate between them by white
     /// balance, so a DNG written from this frame keeps all of them.
     pub color_matrices: Vec<ColorMatrix>,
+    /// ISO speed from EXIF, when the file records one.
     pub iso: Option<u32>,
     /// Exposure time in seconds.
     pub exposure_s: Option<f64>,
+    /// Camera maker as the file names it ("Sony"); "pgrf" for synthetic frames.
     pub make: String,
+    /// Camera model as the file names it ("ILCE-7SM2").
     pub model: String,
     /// EXIF orientation (1 = as stored, 6 = rotate 90 degrees clockwise to
     /// display, ...). Pixels are never rotated; previews apply it, DNGs keep it.
@@ -50,6 +56,7 @@ pub struct RawFrame {
     /// and the readout's size (height, width): for `pgrf info` and for
     /// checking a decode against another decoder.
     pub sensor_origin: (usize, usize),
+    /// Size (height, width) of the full sensor readout; see `sensor_origin`.
     pub sensor_size: (usize, usize),
     /// The decoder's EXIF record, carried into DNGs written from this frame so
     /// lens, date and exposure tags survive a round trip.
@@ -63,13 +70,8 @@ pub struct RawFrame {
 pub struct LevelOverrides {
     /// One black level for all planes, or four for R, G1, B, G2.
     pub black: Option<Vec<f32>>,
+    /// Saturation level in DN, replacing the file's.
     pub white: Option<u32>,
-}
-
-impl LevelOverrides {
-    pub(crate) fn is_empty(&self) -> bool {
-        self.black.is_none() && self.white.is_none()
-    }
 }
 
 impl RawFrame {

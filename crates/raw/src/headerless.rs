@@ -10,15 +10,19 @@ use std::path::Path;
 /// How to interpret a headerless dump.
 #[derive(Clone, Debug)]
 pub struct HeaderlessSpec {
+    /// Width of the dump in pixels.
     pub width: usize,
+    /// Height of the dump in pixels.
     pub height: usize,
     /// Significant bits per sample (samples above 2^bits - 1 are refused).
     pub bits: u32,
+    /// Bayer phase of the first sample.
     pub cfa: Cfa,
     /// One black level for all planes, or R, G1, B, G2.
     pub black: Vec<f32>,
-    /// Defaults to 2^bits - 1.
+    /// Saturation level in DN; defaults to 2^bits - 1.
     pub white: Option<u32>,
+    /// Samples are big-endian u16 (the default, false, is little-endian).
     pub big_endian: bool,
 }
 

@@ -9,18 +9,18 @@
 
 pub mod cfa;
 pub mod chart;
-pub mod color;
-pub mod decode;
-pub mod demosaic;
-pub mod dng;
-pub mod error;
+mod color;
+mod decode;
+mod demosaic;
+mod dng;
+mod error;
 pub mod files;
-pub mod frame;
+mod frame;
 pub mod headerless;
-pub mod orientation;
-pub mod pack;
+mod orientation;
+mod pack;
 mod panic_guard;
-pub mod preview;
+mod preview;
 pub mod scene;
 
 /// Re-exported so callers use the same ndarray version as the packed arrays.
@@ -35,7 +35,4 @@ pub use frame::{ColorMatrix, LevelOverrides, RawFrame};
 pub use headerless::{read_headerless, HeaderlessSpec};
 pub use pack::{pack_normalized, pack_u16, unpack_normalized, unpack_u16};
 pub use preview::{render_preview, Preview, PreviewOptions};
-pub use scene::{
-    render_demo, render_frame, render_packed, render_packed_cfa, render_rgb, DemoLayout, Scene,
-    SceneKind, SceneLevels, SceneSpec,
-};
+pub use scene::{render_frame, render_packed, SceneKind, SceneLevels, SceneSpec};

@@ -11,12 +11,16 @@ use crate::frame::RawFrame;
 use ndarray::{Array3, ArrayView3, Axis};
 use rayon::prelude::*;
 
-/// Pack the mosaic into 4 planes of raw DN.
+/// Pack the mosaic into 4 planes of raw DN (black not subtracted), shape
+/// `(4, H/2, W/2)` in R, G1, B, G2 order; a trailing odd row or column is
+/// left out.
 pub fn pack_u16(frame: &RawFrame) -> Result<Array3<u16>> {
     pack_map(frame, |_, v| v)
 }
 
-/// Pack and normalise to `(x - black[c]) / (white - black[c])`.
+/// Pack and normalise to `(x - black[c]) / (white - black[c])`: shape
+/// `(4, H/2, W/2)` in R, G1, B, G2 order, the representation every network
+/// and noise model in pgrf works on (a trailing odd row or column is left out).
 ///
 /// With `clip` the result is clamped to [0, 1] (the ELD/SID convention for
 /// network inputs and metrics); without it values below black stay negative,

@@ -10,15 +10,18 @@ use crate::demosaic::{demosaic, Demosaic};
 use crate::error::{RawError, Result};
 use crate::frame::RawFrame;
 use crate::orientation::apply_orientation;
-use pgrf_core::atomic::write_atomic;
+use pgrf_core::write_atomic;
 use rayon::prelude::*;
 use std::path::Path;
 
+/// How [`render_preview`] turns a mosaic into sRGB; the default is gain 1,
+/// Malvar demosaic, full size, as-shot white balance, upright orientation.
 #[derive(Clone, Debug)]
 pub struct PreviewOptions {
     /// Linear exposure multiplier applied before clipping (x100 to look at a
     /// frame shot 100x too dark).
     pub gain: f32,
+    /// Demosaic method for full-size previews (unused with `half`).
     pub demosaic: Demosaic,
     /// Half size: one output pixel per 2x2 cell, no interpolation. Four times
     /// fewer pixels, no demosaic artefacts; what you want for big batches.
@@ -45,7 +48,9 @@ impl Default for PreviewOptions {
 /// A rendered preview: linear-light-free, sRGB-encoded RGB in [0, 1].
 #[derive(Clone, Debug)]
 pub struct Preview {
+    /// Width in pixels, after orientation (and halving).
     pub width: usize,
+    /// Height in pixels, after orientation (and halving).
     pub height: usize,
     /// Interleaved sRGB-encoded values in [0, 1].
     pub rgb: Vec<f32>,
@@ -53,7 +58,9 @@ pub struct Preview {
     pub warnings: Vec<String>,
 }
 
-/// Render `frame` to sRGB.
+/// Render `frame` to sRGB: black/white normalisation, white balance,
+/// exposure gain, highlight clipping, demosaic (or 2x2 binning with `half`),
+/// camera -> sRGB matrix, sRGB curve, EXIF orientation.
 pub fn render_preview(frame: &RawFrame, opts: &PreviewOptions) -> Result<Preview> {
     if !opts.gain.is_finite() || opts.gain <= 0.0 {
         return Err(RawError::Invalid(format!(
@@ -177,7 +184,8 @@ impl Preview {
         Ok(out)
     }
 
-    /// Encode and write atomically.
+    /// Encode as PNG with `bits` (8 or 16) per channel and write it to
+    /// `path` atomically.
     pub fn write_png(&self, path: &Path, bits: u8) -> Result<()> {
         Ok(write_atomic(path, &self.encode_png(bits)?)?)
     }

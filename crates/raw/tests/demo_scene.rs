@@ -3,8 +3,8 @@
 //! statistics are those of a well-exposed photo.
 
 use pgrf_raw::chart::{patch_camera_rgb, A7S2_D65_MATRIX};
-use pgrf_raw::scene::{DEMO_CHART_EXPOSURE, DEMO_RAMP_TOP};
-use pgrf_raw::{pack_normalized, render_demo, Cfa, DemoLayout, SceneLevels};
+use pgrf_raw::scene::{render_demo, DemoLayout, DEMO_CHART_EXPOSURE, DEMO_RAMP_TOP};
+use pgrf_raw::{pack_normalized, Cfa, SceneLevels};
 
 const W: usize = 384;
 const H: usize = 256;

@@ -2,9 +2,9 @@
 //! the RGB, packed and frame renderers.
 
 use pgrf_raw::ndarray::{Array3, Axis};
+use pgrf_raw::scene::{render_packed_cfa, render_rgb, Scene};
 use pgrf_raw::{
-    pack_normalized, render_frame, render_packed, render_packed_cfa, render_rgb, Cfa, Scene,
-    SceneKind, SceneLevels, SceneSpec,
+    pack_normalized, render_frame, render_packed, Cfa, SceneKind, SceneLevels, SceneSpec,
 };
 use sha2::{Digest, Sha256};
 use std::time::Instant;

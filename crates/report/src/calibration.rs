@@ -25,7 +25,9 @@ use std::path::{Path, PathBuf};
 /// and temporal variance (from frame pairs), both in DN / DN^2.
 #[derive(Clone, Copy, Debug)]
 pub struct PtcPoint {
+    /// Mean signal above the bias, DN (x axis).
     pub mean_dn: f64,
+    /// Temporal (shot-noise) variance above the bias's, DN^2 (y axis).
     pub var_dn2: f64,
 }
 
@@ -34,6 +36,7 @@ pub struct PtcPoint {
 pub struct ReportData<'a> {
     /// e.g. "Sony ILCE-7SM2"
     pub camera: String,
+    /// ISO of the calibration frames, for titles (None: unknown).
     pub iso: Option<u32>,
     /// Photon-transfer points, one per flat level (may be empty).
     pub ptc_points: Vec<PtcPoint>,
@@ -43,8 +46,9 @@ pub struct ReportData<'a> {
     pub sigma_read: ArrayView3<'a, f32>,
     /// Per-pixel fixed-pattern offset (bias mean minus black level) in DN, shape (4, H, W).
     pub fixed_pattern: ArrayView3<'a, f32>,
-    /// Per-pixel R^2 of the dark-current fits y = a*sqrt(t) and y = a*t (None when no dark frames).
+    /// Per-pixel R^2 of the dark-current fit y = a*sqrt(t) (None when no dark frames).
     pub r2_sqrt: Option<ArrayView3<'a, f32>>,
+    /// Per-pixel R^2 of the dark-current fit y = a*t (None when no dark frames).
     pub r2_linear: Option<ArrayView3<'a, f32>>,
     /// Rows of the summary table: (quantity, value, unit), EMVA 1288 vocabulary
     /// (system gain, temporal dark noise, DSNU, PRNU, dark current ...), already formatted.

@@ -8,11 +8,11 @@
 
 #![warn(missing_docs)]
 
-pub mod calibration;
+mod calibration;
 mod error;
-pub mod montage;
-pub mod png;
-pub mod search_plot;
+mod montage;
+mod png;
+mod search_plot;
 
 pub use calibration::{write_report, PtcPoint, ReportData};
 pub use error::ReportError;

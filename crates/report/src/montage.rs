@@ -9,7 +9,9 @@ use std::path::Path;
 
 /// One picture and the words above it.
 pub struct Panel {
+    /// Text drawn over the picture (empty: no caption).
     pub caption: String,
+    /// The sRGB picture.
     pub image: Preview,
 }
 

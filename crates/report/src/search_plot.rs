@@ -9,16 +9,21 @@ use std::path::Path;
 
 /// One search's numbers.
 pub struct SearchCurve<'a> {
+    /// The plot's title.
     pub title: &'a str,
+    /// The second times t searched, in [0, 1], ascending.
     pub t: &'a [f64],
+    /// Mean PSNR in dB of the two-stage sampler at each `t` (same length).
     pub psnr: &'a [f64],
     /// PSNR of the first stage alone (XZ), if measured.
     pub one_step: Option<f64>,
     /// PSNR of the amplified noisy input.
     pub input: Option<f64>,
+    /// The chosen t2 (one of `t`), marked on the curve.
     pub best_t: f64,
 }
 
+/// Draw `c` as a PNG at `path` (written atomically); errors are one line.
 pub fn write_search_plot(path: &Path, c: &SearchCurve) -> Result<(), String> {
     if c.t.is_empty() || c.t.len() != c.psnr.len() {
         return Err("search plot needs one PSNR per t".into());

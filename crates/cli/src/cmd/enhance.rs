@@ -11,7 +11,7 @@ use pgrf_nn::backend::DeviceKind;
 use pgrf_nn::infer::prepare::ratio_from_exposure;
 use pgrf_nn::infer::restorer::describe_sampler;
 use pgrf_nn::infer::{restore_frame, Restore, SamplerChoice, Tiling};
-use pgrf_nn::sample::SamplerKind;
+use pgrf_nn::flow::sample::SamplerKind;
 use pgrf_raw::{render_preview, write_dng, DngOptions, PreviewOptions};
 use serde::Serialize;
 use std::path::{Path, PathBuf};

@@ -17,7 +17,7 @@ pub const BIAS_EXPOSURE: f32 = 1.0 / 8000.0;
 
 #[derive(Args, Debug)]
 pub struct SimulateArgs {
-    /// Sensor preset: a7s2-iso<ISO> (published A7S2 gain, read and row noise at that ISO).
+    /// Sensor preset: `a7s2-iso<ISO>` (published A7S2 gain, read and row noise at that ISO).
     #[arg(long, default_value = "a7s2-iso1600")]
     pub preset: String,
     /// Frames per stack (bias) and per exposure (dark, flat).

@@ -31,8 +31,6 @@ pub const X100: [u32; 3] = [4, 9, 14];
 pub const X200: [u32; 3] = [5, 10, 15];
 /// Long-exposure reference frames.
 pub const REFERENCES: [u32; 4] = [1, 6, 11, 16];
-/// Scenes of the benchmark.
-pub(crate) const SCENES: std::ops::RangeInclusive<u32> = 1..=10;
 
 /// The ISO and exposure time of each frame 1..=16 in the ELD table (scene 1;
 /// other scenes scale all exposures alike, so ratios are the same). Used by

@@ -8,7 +8,7 @@
 //! - [`pairs`]: a user's own CSV of noisy, reference, ratio.
 //!
 //! Walkers only look at the file system (every file they name must exist,
-//! else an error naming it); pixels and EXIF are read by [`load_pair`].
+//! else an error naming it); pixels and EXIF are read by `load_pair`.
 //! Loading follows ELD's datasets (`pack_raw_bayer`, `ELDEvalDataset`,
 //! `SIDDataset`): noisy packed R,G1,B,G2, normalised by black per channel
 //! and the white level (16383 for ELD/SID, see
@@ -16,6 +16,7 @@
 //! [0, 1]; reference packed, normalised and clamped to [0, 1].
 
 pub mod eld;
+pub mod miniature;
 pub mod pairs;
 pub mod run;
 pub mod sid;
@@ -29,7 +30,7 @@ use std::path::{Path, PathBuf};
 /// One line, naming the file or setting at fault.
 #[derive(Debug, thiserror::Error)]
 #[error("{0}")]
-pub struct DatasetError(pub String);
+pub struct DatasetError(pub(crate) String);
 
 pub(crate) type Result<T> = std::result::Result<T, DatasetError>;
 
@@ -40,8 +41,11 @@ fn err<T>(msg: impl Into<String>) -> Result<T> {
 /// Which benchmark a sample belongs to.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum DatasetKind {
+    /// ELD's Sony A7S2 set ([`eld`]).
     Eld,
+    /// SID's Sony test list, as ELD evaluates it ([`sid`]).
     Sid,
+    /// A user's own CSV of pairs ([`pairs`]).
     Pairs,
 }
 
@@ -129,8 +133,6 @@ pub struct Sample {
 
 /// A loaded pair, ready for a network and the metrics.
 pub(crate) struct LoadedPair {
-    /// The noisy frame as decoded (geometry and metadata for previews).
-    pub(crate) noisy_frame: RawFrame,
     pub(crate) reference_frame: RawFrame,
     /// Packed noisy x ratio, clamped to [0, 1]: the network input, and the
     /// "noisy input" baseline.
@@ -186,7 +188,6 @@ pub(crate) fn load_pair(s: &Sample, levels: &LevelOverrides) -> Result<LoadedPai
     input.mapv_inplace(|v| (v * ratio).clamp(0.0, 1.0));
     let reference = pack_normalized(&r, true).map_err(|e| DatasetError(e.to_string()))?;
     Ok(LoadedPair {
-        noisy_frame: n,
         reference_frame: r,
         input,
         reference,

@@ -11,6 +11,8 @@ use std::path::{Path, PathBuf};
 /// CSV looked for when `--root` is a folder.
 pub(crate) const DEFAULT_CSV: &str = "pairs.csv";
 
+/// The samples of the CSV `root` (or `root/pairs.csv` when `root` is a
+/// folder), in file order; every file it names must exist.
 pub fn walk(root: &Path) -> Result<Vec<Sample>> {
     let csv = if root.is_dir() {
         root.join(DEFAULT_CSV)

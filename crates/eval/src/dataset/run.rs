@@ -89,9 +89,8 @@ pub fn run(
             outputs.push((NOISY, input.clone()));
         }
         for (name, f) in methods {
-            let out = f(input.view()).map_err(|e| {
-                DatasetError(format!("{}: model {name}: {e}", smp.noisy.display()))
-            })?;
+            let out = f(input.view())
+                .map_err(|e| DatasetError(format!("{}: model {name}: {e}", smp.noisy.display())))?;
             outputs.push((name, out));
         }
         // The worst-images ranking follows the first method (the noisy
@@ -123,7 +122,8 @@ pub fn run(
         progress.note(&line);
         progress.advance(1);
         if opts.worst_count > 0 {
-            let mut tiles: Vec<Array3<f32>> = outputs.iter().map(|(_, o)| thumb(o.view())).collect();
+            let mut tiles: Vec<Array3<f32>> =
+                outputs.iter().map(|(_, o)| thumb(o.view())).collect();
             if !opts.baseline {
                 tiles.insert(0, thumb(input.view()));
             }

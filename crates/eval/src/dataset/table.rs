@@ -8,17 +8,26 @@ use std::fmt::Write;
 /// One image measured for one method.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Row {
+    /// The dataset protocol the pair came from ("eld", "sid" or "pairs").
     pub protocol: String,
+    /// The pair's identifier ("scene-3/IMG_0009", "10003_00_0.1s").
     pub id: String,
     /// Table row (x100, x200, ...).
     pub group: u32,
     /// The exact amplification used.
     pub ratio: f32,
+    /// Path of the noisy file.
     pub noisy: String,
+    /// Path of the reference file.
     pub reference: String,
+    /// The method's name (a model, or [`NOISY`](super::run::NOISY) for the
+    /// amplified input).
     pub method: String,
+    /// PSNR in dB under the protocol.
     pub psnr: f64,
+    /// SSIM (channel mean) under the protocol.
     pub ssim: f64,
+    /// ELD's illuminance gain applied to the output, when the run corrects.
     pub gain: Option<f64>,
 }
 
@@ -29,11 +38,13 @@ pub(crate) type Cell = Option<(f64, f64, usize)>;
 /// Mean PSNR/SSIM per (group, method), methods in first-seen order.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Summary {
+    /// Method names, one PSNR/SSIM column pair each, in first-seen order.
     pub methods: Vec<String>,
     /// group -> per method (mean PSNR, mean SSIM, images).
     pub(crate) rows: BTreeMap<u32, Vec<Cell>>,
 }
 
+/// Average `rows` per (group, method): the paper's table, one row per ratio.
 pub fn summarise(rows: &[Row]) -> Summary {
     let mut methods: Vec<String> = Vec::new();
     for r in rows {

@@ -46,7 +46,8 @@ pub struct IlluminanceGain {
 
 impl IlluminanceGain {
     /// Whether a gain could be fitted (some unsaturated pixel, non-black output).
-    pub(crate) fn fitted(&self) -> bool {
+    #[cfg(test)]
+    fn fitted(&self) -> bool {
         self.pixels > 0 && self.den > 0.0
     }
 }

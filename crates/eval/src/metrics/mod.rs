@@ -11,19 +11,19 @@
 //! All accumulation is f64 and every parallel reduction adds its partial sums
 //! in a fixed order, so a result does not depend on the number of threads.
 
-pub mod correct;
+mod correct;
 mod error;
 mod input;
-pub mod protocol;
-pub mod psnr;
-pub mod ssim;
+mod protocol;
+mod psnr;
+mod ssim;
 mod sum;
 
 pub use correct::{illuminance_correct, illuminance_gain, IlluminanceGain};
 pub use error::MetricError;
 pub use protocol::{evaluate, Protocol, Scores};
-pub use psnr::{mse, psnr};
-pub use ssim::{ssim, ssim_channels, SsimOptions};
+pub use psnr::psnr;
+pub use ssim::{ssim, SsimOptions};
 
 /// Result type of the metric functions.
 pub(crate) type Result<T> = std::result::Result<T, MetricError>;

@@ -80,6 +80,7 @@ impl Default for Protocol {
 pub struct Scores {
     /// dB; `f64::INFINITY` when the measured images are identical.
     pub psnr: f64,
+    /// SSIM, mean over channels, in [-1, 1] (1 when identical).
     pub ssim: f64,
     /// The illuminance gain applied, when the protocol corrects.
     pub gain: Option<f64>,

@@ -19,7 +19,7 @@ use ndarray::ArrayView3;
 use rayon::prelude::*;
 
 /// Mean squared error over all elements, in f64.
-pub fn mse(output: ArrayView3<f32>, reference: ArrayView3<f32>) -> Result<f64> {
+pub(crate) fn mse(output: ArrayView3<f32>, reference: ArrayView3<f32>) -> Result<f64> {
     let p = pair(output, reference)?;
     Ok(mse_mapped(&p.output, &p.reference, widen, widen))
 }

@@ -94,7 +94,7 @@ pub fn ssim(
 }
 
 /// SSIM of each channel (scikit-image's per-channel values before its mean).
-pub fn ssim_channels(
+pub(crate) fn ssim_channels(
     output: ArrayView3<f32>,
     reference: ArrayView3<f32>,
     opts: &SsimOptions,

@@ -5,22 +5,28 @@
 use pgrf_raw::ndarray::{Array3, ArrayView3, Axis};
 use rand::Rng;
 
+/// One of the eight symmetries of the square, as the flips applied first
+/// and the transpose applied last.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct Augment {
-    pub flip_v: bool,
-    pub flip_h: bool,
-    pub transpose: bool,
+pub(crate) struct Augment {
+    /// Flip top to bottom.
+    pub(crate) flip_v: bool,
+    /// Flip left to right.
+    pub(crate) flip_h: bool,
+    /// Swap rows and columns.
+    pub(crate) transpose: bool,
 }
 
 impl Augment {
-    pub const IDENTITY: Augment = Augment {
+    /// No change.
+    pub(crate) const IDENTITY: Augment = Augment {
         flip_v: false,
         flip_h: false,
         transpose: false,
     };
 
     /// Each of the eight symmetries of the square with probability 1/8.
-    pub fn draw<R: Rng + ?Sized>(rng: &mut R) -> Augment {
+    pub(crate) fn draw<R: Rng + ?Sized>(rng: &mut R) -> Augment {
         let b = rng.random::<u8>();
         Augment {
             flip_v: b & 1 != 0,
@@ -30,7 +36,7 @@ impl Augment {
     }
 
     /// The augmented copy of a `(4, H, W)` array, in standard layout.
-    pub fn apply(self, a: ArrayView3<f32>) -> Array3<f32> {
+    pub(crate) fn apply(self, a: ArrayView3<f32>) -> Array3<f32> {
         let mut v = a;
         if self.flip_v {
             v.invert_axis(Axis(1));

@@ -24,33 +24,39 @@ use std::thread::JoinHandle;
 
 /// What to put in a batch besides (noisy, clean).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Extras {
+pub(crate) enum Extras {
+    /// Nothing else: the denoiser's batches.
     None,
     /// X0 ~ N(0, I) and t ~ U(0, 1) per item, for the rectified flow.
     Flow,
 }
 
-/// One batch, NCHW f32, ready to become tensors.
+/// One batch, NCHW f32 (`(n, 4, P, P)` flattened), ready to become tensors.
 #[derive(Clone, Debug)]
-pub struct Batch {
-    pub n: usize,
-    pub patch: usize,
+pub(crate) struct Batch {
     /// Network input: noisy capture amplified by its ratio, clamped to [0, 1].
-    pub noisy: Vec<f32>,
-    pub clean: Vec<f32>,
+    pub(crate) noisy: Vec<f32>,
+    /// Target: the clean crops X1 in [0, 1].
+    pub(crate) clean: Vec<f32>,
     /// Flow only: X0 (same shape) and t (one per item).
-    pub x0: Vec<f32>,
-    pub t: Vec<f32>,
-    pub ratios: Vec<f32>,
+    pub(crate) x0: Vec<f32>,
+    /// Flow only: t ~ U(0, 1), one per item.
+    pub(crate) t: Vec<f32>,
+    /// Exposure ratio of each item.
+    pub(crate) ratios: Vec<f32>,
 }
 
 /// How samples are drawn.
 #[derive(Clone, Debug)]
-pub struct SampleSpec {
-    pub patch: usize,
-    pub seed: u64,
-    pub augment: bool,
-    pub extras: Extras,
+pub(crate) struct SampleSpec {
+    /// Side of the packed crops.
+    pub(crate) patch: usize,
+    /// Seed of the run: sample i is a function of (seed, i).
+    pub(crate) seed: u64,
+    /// Draw flips and transposes.
+    pub(crate) augment: bool,
+    /// What else each item carries.
+    pub(crate) extras: Extras,
 }
 
 const SAMPLE_DOMAIN: u64 = 0x7261_696e; // "rain"
@@ -62,17 +68,26 @@ fn rng_for(seed: u64, domain: u64, index: u64) -> Xoshiro256PlusPlus {
 
 /// One training item, `(4, P, P)` arrays flattened.
 #[derive(Clone, Debug)]
-pub struct Sample {
-    pub noisy: Vec<f32>,
-    pub clean: Vec<f32>,
+pub(crate) struct Sample {
+    /// Amplified noisy crop, clamped to [0, 1].
+    pub(crate) noisy: Vec<f32>,
+    /// Clean crop in [0, 1].
+    pub(crate) clean: Vec<f32>,
     /// Flow only (empty otherwise).
-    pub x0: Vec<f32>,
-    pub t: f32,
-    pub ratio: f32,
+    pub(crate) x0: Vec<f32>,
+    /// Flow only: t ~ U(0, 1) (0 otherwise).
+    pub(crate) t: f32,
+    /// The exposure ratio the pair was synthesised at.
+    pub(crate) ratio: f32,
 }
 
 /// Sample `index` of the run: one (noisy, clean[, x0, t]) item.
-pub fn make_sample(source: &Source, spec: &PairSpec, s: &SampleSpec, index: u64) -> Result<Sample> {
+pub(crate) fn make_sample(
+    source: &Source,
+    spec: &PairSpec,
+    s: &SampleSpec,
+    index: u64,
+) -> Result<Sample> {
     let mut rng = rng_for(s.seed, SAMPLE_DOMAIN, index);
     let pick = rng.random::<u64>();
     let (fy, fx) = (rng.random::<f64>(), rng.random::<f64>());
@@ -124,7 +139,7 @@ pub fn make_sample(source: &Source, spec: &PairSpec, s: &SampleSpec, index: u64)
 }
 
 /// Batch `b` (items b*n .. b*n+n-1).
-pub fn make_batch(
+pub(crate) fn make_batch(
     source: &Source,
     spec: &PairSpec,
     s: &SampleSpec,
@@ -132,8 +147,6 @@ pub fn make_batch(
     b: u64,
 ) -> Result<Batch> {
     let mut batch = Batch {
-        n,
-        patch: s.patch,
         noisy: Vec::with_capacity(n * 4 * s.patch * s.patch),
         clean: Vec::with_capacity(n * 4 * s.patch * s.patch),
         x0: Vec::new(),
@@ -154,7 +167,7 @@ pub fn make_batch(
 }
 
 /// Worker threads producing batches `start, start+1, ...` in order.
-pub struct Loader {
+pub(crate) struct Loader {
     receivers: Vec<Receiver<Result<Batch>>>,
     next: u64,
     start: u64,
@@ -163,7 +176,7 @@ pub struct Loader {
 
 impl Loader {
     /// `workers` threads, each keeping up to `ahead` batches ready.
-    pub fn start(
+    pub(crate) fn start(
         source: Arc<Source>,
         spec: Arc<PairSpec>,
         sample: SampleSpec,
@@ -205,7 +218,7 @@ impl Loader {
     }
 
     /// The next batch in order.
-    pub fn next_batch(&mut self) -> Result<Batch> {
+    pub(crate) fn next_batch(&mut self) -> Result<Batch> {
         let w = ((self.next - self.start) % self.receivers.len() as u64) as usize;
         self.next += 1;
         self.receivers[w]

@@ -1,10 +1,14 @@
 //! Training data: clean sources, augmentation and the worker-thread loader
 //! that synthesises noisy/clean pairs online with pgrf-noise.
+//!
+//! Public here: where clean images come from ([`Source`], [`Folder`]) and
+//! the fixed validation pairs ([`validation::ValSet`]); the loader and the
+//! augmentation serve the training loop only.
 
-pub mod augment;
-pub mod loader;
+mod augment;
+mod loader;
 pub mod source;
 pub mod validation;
 
-pub use loader::{Batch, Extras, Loader, SampleSpec};
+pub(crate) use loader::{Extras, Loader, SampleSpec};
 pub use source::{Folder, Source};

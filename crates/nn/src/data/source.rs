@@ -17,15 +17,15 @@ use std::sync::{Arc, Mutex};
 
 /// A clean crop and its place on the sensor.
 #[derive(Clone, Debug)]
-pub struct Crop {
+pub(crate) struct Crop {
     /// Packed planes R, G1, B, G2, normalised (not clipped).
-    pub clean: Array3<f32>,
+    pub(crate) clean: Array3<f32>,
     /// Sensor-row parity of each plane (from the CFA).
-    pub plane_rows: [usize; 4],
+    pub(crate) plane_rows: [usize; 4],
     /// Top-left corner in packed coordinates of the source image.
-    pub origin: (usize, usize),
+    pub(crate) origin: (usize, usize),
     /// Packed size of the whole source image.
-    pub image: (usize, usize),
+    pub(crate) image: (usize, usize),
 }
 
 /// One decoded clean file, packed.
@@ -63,7 +63,9 @@ impl Packed {
     }
 }
 
-/// A folder of clean RAWs.
+/// A folder of clean RAWs (any format pgrf-raw reads), each file decoded
+/// with its own black and white levels (or the overrides given) and kept
+/// packed in memory up to a budget.
 pub struct Folder {
     files: Vec<PathBuf>,
     levels: LevelOverrides,
@@ -73,7 +75,9 @@ pub struct Folder {
 }
 
 impl Folder {
-    /// `budget_mib`: memory for decoded files (0 decodes on every draw).
+    /// The clean RAWs `files`, decoded with `levels`; `budget_mib`: memory
+    /// for decoded files in MiB (0 decodes on every draw). Refuses an empty
+    /// list; files are only read when first drawn (see [`Folder::check`]).
     pub fn new(files: Vec<PathBuf>, levels: LevelOverrides, budget_mib: usize) -> Result<Folder> {
         if files.is_empty() {
             return Err(NnError::Invalid("no clean RAW files to train on".into()));
@@ -91,6 +95,7 @@ impl Folder {
         Ok(pgrf_raw::files::list_files(dir)?)
     }
 
+    /// The files, in the order given.
     pub fn files(&self) -> &[PathBuf] {
         &self.files
     }
@@ -113,12 +118,14 @@ impl Folder {
     }
 
     /// Packed size of file `i` (decodes it).
-    pub fn shape(&self, i: usize) -> Result<(usize, usize)> {
+    pub(crate) fn shape(&self, i: usize) -> Result<(usize, usize)> {
         Ok(self.get(i)?.shape())
     }
 
     /// Check every file decodes and is large enough, naming the first that is
     /// not, so a bad folder fails before training starts rather than hours in.
+    /// `patch` is the crop side in packed pixels. Decodes every file (and
+    /// keeps what fits in the budget).
     pub fn check(&self, patch: usize) -> Result<()> {
         for (i, path) in self.files.iter().enumerate() {
             let (h, w) = self.shape(i)?;
@@ -135,11 +142,17 @@ impl Folder {
 
 /// Clean images to train or validate on.
 pub enum Source {
+    /// Dead-leaves scenes from pgrf-raw's renderer, packed from an RGGB
+    /// mosaic, a fresh scene (seeded per sample) for every crop: endless
+    /// data with no files.
     Procedural,
+    /// Crops of the clean RAWs in a folder.
     Folder(Folder),
 }
 
 impl Source {
+    /// What the source is, in words ("procedural dead-leaves scenes",
+    /// "12 clean RAW files").
     pub fn describe(&self) -> String {
         match self {
             Source::Procedural => "procedural dead-leaves scenes".into(),
@@ -150,7 +163,14 @@ impl Source {
     /// A `patch` x `patch` crop: procedural scenes are rendered at exactly the
     /// patch size from `scene_seed`; files are cropped at `(fy, fx)` in [0, 1)
     /// of the free range, from file `pick` modulo the file count.
-    pub fn crop(&self, patch: usize, scene_seed: u64, pick: u64, fy: f64, fx: f64) -> Result<Crop> {
+    pub(crate) fn crop(
+        &self,
+        patch: usize,
+        scene_seed: u64,
+        pick: u64,
+        fy: f64,
+        fx: f64,
+    ) -> Result<Crop> {
         match self {
             Source::Procedural => {
                 let spec = SceneSpec::new(SceneKind::DeadLeaves, 2 * patch, 2 * patch, scene_seed);
@@ -182,18 +202,6 @@ impl Source {
                 })
             }
         }
-    }
-
-    /// Number of distinct images (procedural: unbounded).
-    pub fn len(&self) -> Option<usize> {
-        match self {
-            Source::Procedural => None,
-            Source::Folder(f) => Some(f.files.len()),
-        }
-    }
-
-    pub fn is_empty(&self) -> bool {
-        self.len() == Some(0)
     }
 }
 

@@ -10,22 +10,36 @@ use pgrf_noise::pair::PairSpec;
 
 const VAL_DOMAIN: u64 = 0x7661_6c69; // "vali"
 
-/// One validation pair (each `(4, P, P)` flattened) with its flow start X0.
+/// One validation pair (each `(4, P, P)` packed R, G1, B, G2, flattened in
+/// row-major order) with its flow start X0.
 #[derive(Clone, Debug)]
 pub struct ValPair {
+    /// The network input T: the synthetic noisy crop amplified by `ratio`,
+    /// clamped to [0, 1].
     pub noisy: Vec<f32>,
+    /// The clean target X1 in [0, 1].
     pub clean: Vec<f32>,
+    /// The flow model's start X0 ~ N(0, I) for this pair (the denoiser
+    /// ignores it).
     pub x0: Vec<f32>,
+    /// The exposure ratio the pair was synthesised at.
     pub ratio: f32,
 }
 
+/// The held-out pairs a run (or the sampling search) is scored on, all of
+/// one crop size.
 #[derive(Clone, Debug)]
 pub struct ValSet {
+    /// Side P of every crop, in packed pixels.
     pub patch: usize,
+    /// The pairs, in a fixed order.
     pub pairs: Vec<ValPair>,
 }
 
 impl ValSet {
+    /// `count` pairs of `patch` x `patch` crops from `source`, noise from
+    /// `spec`, no augmentation: pair i is a function of (`seed`, i) only,
+    /// drawn from streams apart from the training samples of the same seed.
     pub fn build(
         source: &Source,
         spec: &PairSpec,
@@ -54,7 +68,9 @@ impl ValSet {
     }
 }
 
-/// PSNR (dB) of `a` against reference `b` on [0, 1] data (a clamped first).
+/// PSNR (dB) of `a` against reference `b` on [0, 1] data (a clamped first),
+/// peak 1, over every element; capped at 200 dB for identical inputs. The
+/// quick score of training logs (ELD's protocol is pgrf-eval's).
 pub fn psnr(a: &[f32], b: &[f32]) -> f32 {
     let mse = a
         .iter()

@@ -9,20 +9,20 @@ use rand_distr::{Distribution, StandardNormal};
 
 /// X0 ~ N(0, I): fills `out` with independent standard normal draws, in
 /// order, from `rng`.
-pub fn fill_start<R: Rng + ?Sized>(rng: &mut R, out: &mut [f32]) {
+pub(crate) fn fill_start<R: Rng + ?Sized>(rng: &mut R, out: &mut [f32]) {
     for v in out {
         *v = StandardNormal.sample(rng);
     }
 }
 
 /// t ~ U(0, 1), the training time of one item.
-pub fn draw_time<R: Rng + ?Sized>(rng: &mut R) -> f32 {
+pub(crate) fn draw_time<R: Rng + ?Sized>(rng: &mut R) -> f32 {
     rng.random::<f32>()
 }
 
 /// One training item's X0 (`len` values) and t, drawn from `rng` in that
 /// order (X0 first, then t).
-pub fn training_start_and_time<R: Rng + ?Sized>(rng: &mut R, len: usize) -> (Vec<f32>, f32) {
+pub(crate) fn training_start_and_time<R: Rng + ?Sized>(rng: &mut R, len: usize) -> (Vec<f32>, f32) {
     let mut x0 = vec![0.0f32; len];
     fill_start(rng, &mut x0);
     (x0, draw_time(rng))

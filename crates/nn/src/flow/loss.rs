@@ -23,8 +23,8 @@ use burn::tensor::Tensor;
 /// - `x1`: X1, the clean target; `x0`: X0 ~ N(0, I), same shape;
 /// - `t`: t ~ U(0, 1), one per item, shape `(n)`.
 ///
-/// X0 and t are drawn by the caller ([`super::draw`]) so that the training
-/// loop owns the randomness and its seed.
+/// X0 and t are drawn by the caller so that the training loop owns the
+/// randomness and its seed. Returns the mean over every element, shape `(1)`.
 pub fn flow_loss<B: Backend>(
     net: &Sr3Unet<B>,
     cond: Tensor<B, 4>,

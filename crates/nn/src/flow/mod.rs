@@ -9,11 +9,11 @@
 //!
 //! | paper | here |
 //! |---|---|
-//! | eq. 4.9 path Xt = t X1 + (1 - t) X0 | [`path::interpolate`] |
-//! | loss \|X1 - X0 - v(Xt, T, t)\|_1 | [`loss::flow_loss`] |
-//! | X0 ~ N(0, I), t ~ U(0, 1) (Algorithm 1) | [`draw::fill_start`], [`draw::draw_time`] |
-//! | eq. 4.10 XZ = v(X0, T, 0) + X0 | [`sample::first_stage`] |
-//! | eq. 4.11-4.12 XM = v(t2 XZ + (1 - t2) X0, T, t2) + X0 | [`sample::second_stage`] |
+//! | eq. 4.9 path Xt = t X1 + (1 - t) X0 | [`interpolate`] |
+//! | loss \|X1 - X0 - v(Xt, T, t)\|_1 | [`flow_loss`] |
+//! | X0 ~ N(0, I), t ~ U(0, 1) (Algorithm 1) | `draw::fill_start`, `draw::draw_time` (crate-internal) |
+//! | eq. 4.10 XZ = v(X0, T, 0) + X0 | `sample::first_stage` (crate-internal) |
+//! | eq. 4.11-4.12 XM = v(t2 XZ + (1 - t2) X0, T, t2) + X0 | `sample::second_stage` (crate-internal) |
 //! | two-stage sampler (Algorithm 3's core) | [`sample::two_stage`] |
 //! | sampling search (Algorithm 2) | [`search::run`], [`search::store_t2`] |
 //!
@@ -22,13 +22,12 @@
 //! inference over whole images (tiles, seeded per-row start fields) is
 //! [`crate::infer`], which runs [`sample::Sampler`].
 
-pub mod draw;
-pub mod loss;
-pub mod path;
+pub(crate) mod draw;
+mod loss;
+mod path;
 pub mod sample;
 pub mod search;
 
 pub use loss::flow_loss;
 pub use path::interpolate;
-pub use sample::{two_stage, Sampler, SamplerKind, Velocity};
-pub use search::{SearchOptions, SearchOutcome};
+pub use sample::SamplerKind;

@@ -5,19 +5,24 @@
 //! The paper's point is two network evaluations instead of hundreds
 //! (eq. 4.10-4.12):
 //!
-//! - eq. 4.10, [`first_stage`]: XZ = v(X0, T, 0) + X0 jumps straight from the
-//!   start to a first estimate of X1 (a single Euler step over the whole
-//!   path); on its own it is the one-step sampler;
-//! - eq. 4.11, inside [`second_stage`]: Xt2 = t2 XZ + (1 - t2) X0 re-enters
-//!   the straight path (eq. 4.9, [`super::path::interpolate`]) at the
-//!   searched time t2;
-//! - eq. 4.12, [`second_stage`]: XM = v(Xt2, T, t2) + X0 is the result.
+//! - eq. 4.10, the first stage (`first_stage`, crate-internal):
+//!   XZ = v(X0, T, 0) + X0 jumps straight from the start to a first estimate
+//!   of X1 (a single Euler step over the whole path); on its own it is the
+//!   one-step sampler;
+//! - eq. 4.11, inside the second stage (`second_stage`, crate-internal):
+//!   Xt2 = t2 XZ + (1 - t2) X0 re-enters the straight path (eq. 4.9,
+//!   [`super::interpolate`]) at the searched time t2;
+//! - eq. 4.12, the second stage: XM = v(Xt2, T, t2) + X0 is the result.
 //!
 //! [`two_stage`] chains the two; the sampling search (Algorithm 2,
-//! [`super::search`]) calls [`first_stage`] once per pair and
-//! [`second_stage`] once per candidate t, so it evaluates exactly what the
-//! sampler does at t2 = t. Euler integration of dX/dt = v(X, T, t) is kept
-//! for comparison.
+//! [`super::search`]) runs the first stage once per pair and the second
+//! once per candidate t, so it evaluates exactly what the sampler does at
+//! t2 = t. Euler integration of dX/dt = v(X, T, t) is kept for comparison
+//! ([`Sampler::Euler`]).
+//!
+//! Public: [`two_stage`], the [`Velocity`] trait it samples, and the
+//! sampler a user picks ([`SamplerKind`], resolved to a [`Sampler`] by
+//! [`crate::infer::Restorer`]).
 
 use super::path::interpolate;
 use crate::sr3::Sr3Unet;
@@ -45,7 +50,7 @@ fn times<B: Backend>(n: usize, t: f32, device: &B::Device) -> Tensor<B, 1> {
 
 /// First stage, eq. 4.10: XZ = v(X0, T, 0) + X0 (`cond` is T, `x0` is X0).
 /// Also the whole one-step sampler.
-pub fn first_stage<B: Backend>(
+pub(crate) fn first_stage<B: Backend>(
     net: &impl Velocity<B>,
     cond: Tensor<B, 4>,
     x0: Tensor<B, 4>,
@@ -57,7 +62,7 @@ pub fn first_stage<B: Backend>(
 
 /// Second stage, eq. 4.11-4.12: Xt2 = t2 XZ + (1 - t2) X0 (eq. 4.9 at t2),
 /// then XM = v(Xt2, T, t2) + X0. `xz` is the first stage's XZ.
-pub fn second_stage<B: Backend>(
+pub(crate) fn second_stage<B: Backend>(
     net: &impl Velocity<B>,
     cond: Tensor<B, 4>,
     x0: Tensor<B, 4>,
@@ -72,6 +77,8 @@ pub fn second_stage<B: Backend>(
 
 /// The paper's two-stage sampler (eq. 4.10-4.12) with second time `t2`:
 /// XM = v(t2 XZ + (1 - t2) X0, T, t2) + X0, XZ = v(X0, T, 0) + X0.
+/// `cond` is T and `x0` is X0, both `(n, 4, h, w)`; `t2` in [0, 1]. Returns
+/// XM, the restored batch (not clamped), same shape.
 pub fn two_stage<B: Backend>(
     net: &impl Velocity<B>,
     cond: Tensor<B, 4>,
@@ -83,7 +90,7 @@ pub fn two_stage<B: Backend>(
 }
 
 /// One network evaluation: XZ = X0 + v(X0, T, 0) (the first stage alone).
-pub fn one_step<B: Backend>(
+pub(crate) fn one_step<B: Backend>(
     net: &impl Velocity<B>,
     cond: Tensor<B, 4>,
     x0: Tensor<B, 4>,
@@ -93,7 +100,7 @@ pub fn one_step<B: Backend>(
 
 /// Euler integration of dX/dt = v(X, T, t) from X0 at t = 0 to t = 1 in
 /// `steps` steps (the many-step baseline the two-stage sampler replaces).
-pub fn euler<B: Backend>(
+pub(crate) fn euler<B: Backend>(
     net: &impl Velocity<B>,
     cond: Tensor<B, 4>,
     x0: Tensor<B, 4>,
@@ -118,16 +125,23 @@ pub fn euler<B: Backend>(
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Sampler {
     /// The paper's sampler: two evaluations, second at time `t2`.
-    TwoStage { t2: f32 },
+    TwoStage {
+        /// The second stage's time t2 in [0, 1] (the file's searched value
+        /// unless overridden).
+        t2: f32,
+    },
     /// One evaluation (the first stage alone).
     OneStep,
     /// Euler integration with `steps` evaluations.
-    Euler { steps: usize },
+    Euler {
+        /// Steps of equal length from t = 0 to 1 (at least 1).
+        steps: usize,
+    },
 }
 
 impl Sampler {
     /// Network evaluations per sample (the cost the paper compares).
-    pub fn nfe(&self) -> usize {
+    pub(crate) fn nfe(&self) -> usize {
         match self {
             Sampler::TwoStage { .. } => 2,
             Sampler::OneStep => 1,
@@ -135,7 +149,9 @@ impl Sampler {
         }
     }
 
-    pub fn run<B: Backend>(
+    /// The restored batch from condition T `cond` and start X0 `x0`, both
+    /// `(n, 4, h, w)`.
+    pub(crate) fn run<B: Backend>(
         &self,
         net: &impl Velocity<B>,
         cond: Tensor<B, 4>,
@@ -161,10 +177,16 @@ impl std::fmt::Display for Sampler {
 
 /// The kind of sampler a user names; the two-stage one takes its t2 from
 /// the weight file unless told otherwise, so it is resolved later.
+/// Parsed from `two-stage`, `one-step` or `euler:N` (case-insensitive; `2`,
+/// `1` and `euler-N` also work).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum SamplerKind {
+    /// The paper's two-stage sampler ([`Sampler::TwoStage`]).
     TwoStage,
+    /// The first stage alone ([`Sampler::OneStep`]).
     OneStep,
+    /// Euler integration with this many steps, 1 to 10000
+    /// ([`Sampler::Euler`]).
     Euler(usize),
 }
 

@@ -2,8 +2,8 @@
 //! the two-stage sampler's PSNR/SSIM for every candidate second time
 //! t in {s, 2s, .., ns <= 1}, the best mean PSNR kept as the model's t2.
 //!
-//! For each pair, [`super::sample::first_stage`] gives XZ = v(X0, T, 0) + X0
-//! once (it does not depend on t) and [`super::sample::second_stage`] gives
+//! For each pair, the first stage gives XZ = v(X0, T, 0) + X0 once (it does
+//! not depend on t) and the second stage gives
 //! XM = v(t XZ + (1 - t) X0, T, t) + X0 per candidate: the very functions
 //! [`super::sample::two_stage`] chains, so a grid of n times costs n + 1
 //! network evaluations per pair (not 2n) and scores exactly what inference
@@ -13,7 +13,7 @@
 //! into the weight file. `pgrf search` is those two calls plus printing.
 
 use super::sample::{first_stage, second_stage, two_stage, Velocity};
-use crate::backend::{Cpu, DeviceKind};
+use crate::backend::{on_device, DeviceKind, OnBackend};
 use crate::data::validation::ValSet;
 use crate::error::{NnError, Result};
 use crate::weights::{self, WeightMeta};
@@ -25,7 +25,7 @@ use pgrf_eval::{evaluate, Protocol};
 use std::path::Path;
 
 /// The candidate times {s, 2s, .., ns} with ns <= 1 (1 included when s divides it).
-pub fn grid(step: f64) -> Result<Vec<f64>> {
+pub(crate) fn grid(step: f64) -> Result<Vec<f64>> {
     if !(step.is_finite() && step > 0.0 && step <= 1.0) {
         return Err(NnError::Invalid(format!(
             "--step must be in (0, 1], got {step}"
@@ -41,7 +41,7 @@ pub fn grid(step: f64) -> Result<Vec<f64>> {
 }
 
 /// Sample counts reported by the averaging study: powers of two and `k_max`.
-pub fn reported_counts(k_max: usize) -> Vec<usize> {
+pub(crate) fn reported_counts(k_max: usize) -> Vec<usize> {
     let mut v: Vec<usize> = std::iter::successors(Some(1usize), |k| Some(k * 2))
         .take_while(|k| *k < k_max)
         .collect();
@@ -50,7 +50,7 @@ pub fn reported_counts(k_max: usize) -> Vec<usize> {
 }
 
 /// The most samples the averaging study takes.
-pub const MAX_SAMPLES: usize = 64;
+pub(crate) const MAX_SAMPLES: usize = 64;
 
 /// How to search.
 #[derive(Clone, Debug)]
@@ -59,7 +59,7 @@ pub struct SearchOptions {
     pub step: f64,
     /// Also measure the mean of up to this many two-stage samples (different
     /// X0) at the best t, reported for K = 1, 2, 4, .., `samples`; 1: no
-    /// averaging study (1 to [`MAX_SAMPLES`]).
+    /// averaging study (1 to 64).
     pub samples: usize,
     /// Seed of the extra start fields of the averaging study (sample 1 uses
     /// each pair's own X0).
@@ -131,16 +131,27 @@ pub fn run(
     progress: &dyn Progress,
 ) -> Result<SearchOutcome> {
     opts.times()?;
-    opts.device.check_available().map_err(NnError::Invalid)?;
-    match opts.device {
-        DeviceKind::Cpu => run_on::<Cpu>(model, &Default::default(), pairs, opts, progress),
-        #[cfg(feature = "cuda")]
-        DeviceKind::Cuda => {
-            run_on::<crate::backend::Gpu>(model, &Default::default(), pairs, opts, progress)
-        }
-        #[cfg(not(feature = "cuda"))]
-        DeviceKind::Cuda => unreachable!("checked above"),
+    struct Job<'a> {
+        model: &'a Path,
+        pairs: &'a ValSet,
+        opts: &'a SearchOptions,
+        progress: &'a dyn Progress,
     }
+    impl OnBackend for Job<'_> {
+        type Output = SearchOutcome;
+        fn run<B: Backend>(self, device: B::Device) -> Result<SearchOutcome> {
+            run_on::<B>(self.model, &device, self.pairs, self.opts, self.progress)
+        }
+    }
+    on_device(
+        opts.device,
+        Job {
+            model,
+            pairs,
+            opts,
+            progress,
+        },
+    )
 }
 
 fn run_on<B: Backend>(
@@ -157,7 +168,7 @@ fn run_on<B: Backend>(
 /// [`run`] with a network already in memory (any velocity field `net` on
 /// `device`): the same measurement, for callers that hold the model and
 /// for tests.
-pub fn search_with<B: Backend>(
+pub(crate) fn search_with<B: Backend>(
     net: &impl Velocity<B>,
     device: &B::Device,
     pairs: &ValSet,
@@ -320,6 +331,7 @@ fn to_array<B: Backend>(t: Tensor<B, 4>, patch: usize) -> Result<Array3<f32>> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::backend::Cpu;
 
     #[test]
     fn averaging_reports_powers_of_two_and_the_maximum() {

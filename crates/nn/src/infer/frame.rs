@@ -30,7 +30,7 @@ pub struct Tiling {
 
 impl Tiling {
     /// The concrete tiling of a `(4, ph, pw)` input for `r`.
-    pub fn options(&self, r: &dyn Restore, ph: usize, pw: usize) -> ImageOptions {
+    pub(crate) fn options(&self, r: &dyn Restore, ph: usize, pw: usize) -> ImageOptions {
         let tile = self
             .tile
             .unwrap_or_else(|| auto_tile(self.device, r, ph, pw));
@@ -57,8 +57,10 @@ impl RestoredPacked {
     }
 }
 
-/// Restore a packed, amplified network input `(4, h, w)` in [0, 1].
-/// `progress` hears one `start(tiles, "tiles")` and one `advance` per tile.
+/// Restore a packed, amplified network input `(4, h, w)` in [0, 1] (as
+/// [`crate::infer::prepare::network_input`] makes it) with `r`, tiled as
+/// `tiling` says. `progress` hears one `start(tiles, "tiles")` and one
+/// `advance` per tile.
 pub fn restore_packed(
     r: &dyn Restore,
     input: ArrayView3<f32>,
@@ -85,8 +87,10 @@ pub struct RestoredFrame {
     pub frame: RawFrame,
 }
 
-/// Restore a dark capture `frame` brightened by `ratio`, after subtracting
-/// `dark_dn` (a calibration's dark shading in DN, packed like the frame).
+/// Restore a dark capture `frame` brightened by `ratio` (the exposure
+/// ratio, positive), after subtracting `dark_dn` (a calibration's dark
+/// shading in DN above black, packed like the frame), with `r`, tiled as
+/// `tiling` says. `progress` hears the tiles as in [`restore_packed`].
 pub fn restore_frame(
     r: &dyn Restore,
     frame: &RawFrame,

@@ -27,11 +27,16 @@ pub const DEFAULT_OVERLAP: usize = 64;
 /// a smaller tile (a tile must be at least 4x its overlap). Flow models
 /// trained on small crops are capped at small tiles, and a fixed 64 would
 /// refuse them.
-pub fn overlap_for(tile: usize) -> usize {
+pub(crate) fn overlap_for(tile: usize) -> usize {
     DEFAULT_OVERLAP.min(tile / 4)
 }
 
-/// The restored frame in [0, 1], `(4, H, W)` like `input`.
+/// The restored frame in [0, 1], `(4, H, W)` like `input` (packed, amplified,
+/// in [0, 1]): `r` run on the tiles of `opts` (see [`plan_for`]), each tile
+/// given its window of the frame-wide start fields X0 (sample k drawn from
+/// stream k of `opts.seed`), the tiles blended, the result clamped.
+/// `progress` hears one `advance` per tile. Refuses a non-finite input and a
+/// NaN output.
 pub fn restore_image(
     r: &dyn Restore,
     input: ArrayView3<f32>,
@@ -69,6 +74,8 @@ pub fn restore_image(
 /// each axis the tiles are then shrunk to the smallest multiple that still
 /// covers it with as many tiles: 2128 columns in tiles of 2048 become two
 /// tiles of 1104, not a second tile of 2048 that repeats 1968 columns.
+/// `h` x `w` is the packed frame's size, `multiple` the network's side
+/// multiple ([`crate::Restore::side_multiple`]).
 pub fn plan_for(h: usize, w: usize, opts: &ImageOptions, multiple: usize) -> Result<TilePlan> {
     let m = multiple.max(1);
     let o = opts.overlap;

@@ -16,7 +16,7 @@
 use crate::weights::Architecture;
 
 /// Estimated peak bytes per packed pixel of one tile's forward pass.
-pub fn bytes_per_pixel(arch: &Architecture) -> f64 {
+pub(crate) fn bytes_per_pixel(arch: &Architecture) -> f64 {
     let floats = match arch {
         Architecture::SidUnet(c) => 7.0 * c.width as f64,
         Architecture::Sr3(c) => {
@@ -55,7 +55,12 @@ pub fn tile_bytes(arch: &Architecture, h: usize, w: usize) -> f64 {
 
 /// The largest square tile, a multiple of `multiple` between 128 (or
 /// 8 x `multiple`) and `cap`, whose estimated peak fits in `budget` bytes.
-pub fn tile_for_budget(arch: &Architecture, multiple: usize, budget: u64, cap: usize) -> usize {
+pub(crate) fn tile_for_budget(
+    arch: &Architecture,
+    multiple: usize,
+    budget: u64,
+    cap: usize,
+) -> usize {
     let m = multiple.max(1);
     let lo = (8 * m).max(128);
     let by_pixels = (budget as f64 / bytes_per_pixel(arch)).sqrt() as usize;
@@ -75,7 +80,7 @@ pub fn tile_for_budget(arch: &Architecture, multiple: usize, budget: u64, cap: u
 /// in tiles of 256 and 30.03 as one 768 x 512 tile: small tiles cost more
 /// at their borders than a softmax over more tokens than in training does.
 /// The convolutional denoiser is limited by memory alone.
-pub fn tile_cap(meta: &crate::weights::WeightMeta) -> usize {
+pub(crate) fn tile_cap(meta: &crate::weights::WeightMeta) -> usize {
     match meta.arch {
         Architecture::SidUnet(_) => 8192,
         Architecture::Sr3(_) => meta
@@ -95,8 +100,10 @@ pub fn fixed_bytes(r: &dyn crate::infer::Restore, ph: usize, pw: usize) -> u64 {
 /// The tile `pgrf enhance` uses unless told: on the CPU the largest tile
 /// whose estimated peak fits in half the available memory once the frame's
 /// buffers and the weights are set aside (the whole frame when it fits), on
-/// CUDA (where burn does not report free memory) 1024, both within
-/// [`tile_cap`].
+/// CUDA (where burn does not report free memory) 1024, both within the
+/// file's cap: twice the training patch clamped to 512..2048 for flow models
+/// (512 when unrecorded), 8192 for the denoiser. `ph` x `pw` is the packed
+/// frame's size; returns a tile side in packed pixels.
 pub fn auto_tile(
     device: crate::backend::DeviceKind,
     r: &dyn crate::infer::Restore,

@@ -7,8 +7,12 @@ use crate::error::{NnError, Result};
 use ndarray::{Array3, Axis};
 use pgrf_raw::{pack_normalized, RawFrame};
 
-/// `dark_dn`: per-pixel dark level above black in DN (packed like the
-/// frame), e.g. a calibration's fixed pattern plus dark current.
+/// The network input of a dark capture: `(4, H/2, W/2)` packed R, G1, B, G2,
+/// each plane normalised by its black and white levels, multiplied by
+/// `ratio` (the exposure ratio, > 0) and clamped to [0, 1]. `dark_dn`:
+/// per-pixel dark level above black in DN (packed like the frame), e.g. a
+/// calibration's fixed pattern plus dark current, subtracted before the
+/// ratio.
 pub fn network_input(
     frame: &RawFrame,
     ratio: f32,
@@ -19,10 +23,10 @@ pub fn network_input(
             "the exposure ratio must be a positive number, got {ratio}"
         )));
     }
-    let mut x = pack_normalized(frame, false).map_err(|e| NnError::Invalid(e.to_string()))?;
+    let mut x = pack_normalized(frame, false)?;
     if let Some(dark) = dark_dn {
         if dark.shape() != x.shape() {
-            return Err(NnError::Invalid(format!(
+            return Err(NnError::SizeMismatch(format!(
                 "dark shading packs to {:?}, the frame to {:?}",
                 dark.shape(),
                 x.shape()
@@ -44,7 +48,9 @@ pub fn network_input(
 }
 
 /// The exposure ratio that brings a capture to a target exposure, by
-/// exposure time x ISO (the ELD convention).
+/// exposure time x ISO (the ELD convention): `target_exposure_s` / the
+/// file's exposure time, times `target_iso` / the file's ISO when a target
+/// ISO is given. Refuses files that do not record what is needed.
 pub fn ratio_from_exposure(
     frame: &RawFrame,
     target_exposure_s: f64,

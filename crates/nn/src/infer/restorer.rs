@@ -3,10 +3,10 @@
 //! runs. Commands hold it as `Box<dyn Restore>` so that they are not generic
 //! over burn's backends.
 
-use crate::backend::{Cpu, DeviceKind};
+use crate::backend::{on_device, DeviceKind, OnBackend};
 use crate::error::{NnError, Result};
+use crate::flow::sample::{Sampler, SamplerKind};
 use crate::net::Net;
-use crate::sample::{Sampler, SamplerKind};
 use crate::weights::{self, WeightMeta};
 use burn::tensor::backend::Backend;
 use burn::tensor::{Tensor, TensorData};
@@ -19,6 +19,7 @@ pub const UNSEARCHED_T2: f32 = 0.5;
 /// How the user asked the flow model to be sampled.
 #[derive(Clone, Copy, Debug)]
 pub struct SamplerChoice {
+    /// Which sampler (default: the two-stage one).
     pub kind: SamplerKind,
     /// Overrides the file's searched t2.
     pub t2: Option<f32>,
@@ -37,7 +38,10 @@ impl Default for SamplerChoice {
 }
 
 /// Restores packed `(4, h, w)` tiles of amplified noisy raw in [0, 1].
+/// Implemented by [`Restorer`] on every backend; [`load`] gives one as a
+/// `Box<dyn Restore>`.
 pub trait Restore {
+    /// The weight file's record (architecture, noise, training, t2).
     fn meta(&self) -> &WeightMeta;
     /// The flow model's sampler; None for the one-pass denoiser.
     fn sampler(&self) -> Option<Sampler>;
@@ -45,7 +49,10 @@ pub trait Restore {
     fn samples(&self) -> usize;
     /// Sides of tiles should be multiples of this (no internal padding).
     fn side_multiple(&self) -> usize;
-    /// `input` and one X0 per sample (none for the denoiser).
+    /// The restored tile, `(4, h, w)` like `input` and not clamped, from
+    /// `input` (T, packed, amplified, in [0, 1]) and one X0 per sample
+    /// (none for the denoiser), each of `input`'s shape; the flow model's
+    /// samples are averaged.
     fn restore(&self, input: ArrayView3<f32>, x0s: &[ArrayView3<f32>]) -> Result<Array3<f32>>;
 
     /// Bytes the network's parameters occupy.
@@ -57,7 +64,9 @@ pub trait Restore {
     }
 }
 
-/// Where t2 came from, for headers.
+/// The sampler in words for headers: "one pass" for the denoiser, else the
+/// sampler, where t2 came from, the samples averaged and the network
+/// evaluations per image.
 pub fn describe_sampler(r: &dyn Restore) -> String {
     match r.sampler() {
         None => "one pass".into(),
@@ -77,7 +86,8 @@ pub fn describe_sampler(r: &dyn Restore) -> String {
     }
 }
 
-/// A network on backend `B`.
+/// A network on backend `B` with its record and sampler, ready to restore
+/// tiles ([`Restore`]).
 pub struct Restorer<B: Backend> {
     net: Net<B>,
     meta: WeightMeta,
@@ -88,7 +98,7 @@ pub struct Restorer<B: Backend> {
 
 impl<B: Backend> Restorer<B> {
     /// Build from a weight file's bytes; `path` names them in errors.
-    pub fn load_bytes(
+    pub(crate) fn load_bytes(
         path: &Path,
         bytes: &[u8],
         choice: SamplerChoice,
@@ -99,6 +109,10 @@ impl<B: Backend> Restorer<B> {
         Self::new(net, meta, choice, t2, device)
     }
 
+    /// Wrap `net` (described by `meta`) on `device`, sampling the flow model
+    /// as `choice` says with second time `t2` for the two-stage sampler
+    /// (callers resolve it: `choice.t2`, else the file's, else
+    /// [`UNSEARCHED_T2`]). Refuses `t2` outside [0, 1] and zero samples.
     pub fn new(
         net: Net<B>,
         meta: WeightMeta,
@@ -205,7 +219,9 @@ impl<B: Backend> Restore for Restorer<B> {
     }
 }
 
-/// Load weights for the chosen device.
+/// Load the weight file at `path` on `device`, sampled as `choice` says
+/// (t2: `choice.t2`, else the file's searched one, else [`UNSEARCHED_T2`]).
+/// Refuses `cuda` in a build without it.
 pub fn load(path: &Path, choice: SamplerChoice, device: DeviceKind) -> Result<Box<dyn Restore>> {
     load_bytes(path, &weights::read_bytes(path)?, choice, device)
 }
@@ -218,22 +234,28 @@ pub fn load_bytes(
     choice: SamplerChoice,
     device: DeviceKind,
 ) -> Result<Box<dyn Restore>> {
-    device.check_available().map_err(NnError::Invalid)?;
-    match device {
-        DeviceKind::Cpu => Ok(Box::new(Restorer::<Cpu>::load_bytes(
-            path,
-            bytes,
-            choice,
-            Default::default(),
-        )?)),
-        #[cfg(feature = "cuda")]
-        DeviceKind::Cuda => Ok(Box::new(Restorer::<crate::backend::Gpu>::load_bytes(
-            path,
-            bytes,
-            choice,
-            Default::default(),
-        )?)),
-        #[cfg(not(feature = "cuda"))]
-        DeviceKind::Cuda => unreachable!("checked above"),
+    struct Job<'a> {
+        path: &'a Path,
+        bytes: &'a [u8],
+        choice: SamplerChoice,
     }
+    impl OnBackend for Job<'_> {
+        type Output = Box<dyn Restore>;
+        fn run<B: Backend>(self, device: B::Device) -> Result<Box<dyn Restore>> {
+            Ok(Box::new(Restorer::<B>::load_bytes(
+                self.path,
+                self.bytes,
+                self.choice,
+                device,
+            )?))
+        }
+    }
+    on_device(
+        device,
+        Job {
+            path,
+            bytes,
+            choice,
+        },
+    )
 }

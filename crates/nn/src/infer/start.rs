@@ -13,7 +13,9 @@ use rayon::prelude::*;
 /// Keeps start-noise streams apart from the noise model's.
 const START_DOMAIN: u64 = 0x7830; // "x0"
 
-/// Standard normal `(c, h, w)` field for sample `k` under `seed`.
+/// The start X0 ~ N(0, I): a standard normal `(c, h, w)` field for sample
+/// `k` under `seed`, row r of the flattened `(c * h)` rows drawn from its
+/// own stream, so any window of it is the same whatever the tiling.
 pub fn start_noise(seed: u64, k: u64, c: usize, h: usize, w: usize) -> Array3<f32> {
     let mut a = Array3::<f32>::zeros((c, h, w));
     if w == 0 {

@@ -16,7 +16,8 @@ use ndarray::{s, Array2, Array3, ArrayView3, Axis};
 /// Tile positions along one axis and the handover ramps between them.
 #[derive(Clone, Debug, PartialEq)]
 pub struct AxisPlan {
-    /// Start of each tile.
+    /// Start of each tile, in packed pixels, increasing; the first is 0 and
+    /// the last tile ends flush with the axis.
     pub starts: Vec<usize>,
     /// Tile length (the whole axis when it fits in one tile).
     pub len: usize,
@@ -27,7 +28,7 @@ pub struct AxisPlan {
 impl AxisPlan {
     /// Tiles of `tile` samples overlapping by at least `overlap`, the last one
     /// flush with the end; one tile if the axis fits.
-    pub fn new(total: usize, tile: usize, overlap: usize) -> Result<AxisPlan> {
+    pub(crate) fn new(total: usize, tile: usize, overlap: usize) -> Result<AxisPlan> {
         if total == 0 {
             return Err(NnError::Invalid("cannot tile an empty image".into()));
         }
@@ -69,12 +70,13 @@ impl AxisPlan {
         })
     }
 
+    /// Tiles along this axis.
     pub fn count(&self) -> usize {
         self.starts.len()
     }
 
     /// Weights of tile `i` along this axis (length `self.len`).
-    pub fn weights(&self, i: usize) -> Vec<f32> {
+    pub(crate) fn weights(&self, i: usize) -> Vec<f32> {
         let start = self.starts[i];
         let mut w = vec![1.0f32; self.len];
         if i > 0 {
@@ -113,35 +115,49 @@ fn up(j: usize, n: usize) -> f32 {
     (0.5 - 0.5 * (std::f64::consts::PI * (j as f64 + 0.5) / n as f64).cos()) as f32
 }
 
-/// One tile: where it sits in the packed image and its blend weights.
+/// One tile: where it sits in the packed image (its blend weights come from
+/// the plan).
 #[derive(Clone, Debug)]
 pub struct Tile {
-    pub index: usize,
+    /// Position in [`TilePlan::tiles`]'s order (row-major over the tiles).
+    pub(crate) index: usize,
+    /// Top row in the packed image.
     pub y: usize,
+    /// Left column in the packed image.
     pub x: usize,
+    /// Height in packed pixels.
     pub h: usize,
+    /// Width in packed pixels.
     pub w: usize,
 }
 
-/// The tiles covering a packed `(C, H, W)` image.
+/// The tiles covering a packed `(C, H, W)` image: every combination of a
+/// row tile and a column tile.
 #[derive(Clone, Debug)]
 pub struct TilePlan {
+    /// The tiles along the height.
     pub rows: AxisPlan,
+    /// The tiles along the width.
     pub cols: AxisPlan,
 }
 
 impl TilePlan {
-    pub fn new(h: usize, w: usize, tile: usize, overlap: usize) -> Result<TilePlan> {
+    /// Square tiles of side `tile` over an `h` x `w` image, overlapping by at
+    /// least `overlap` ([`AxisPlan::new`] along each axis).
+    #[cfg(test)]
+    pub(crate) fn new(h: usize, w: usize, tile: usize, overlap: usize) -> Result<TilePlan> {
         Ok(TilePlan {
             rows: AxisPlan::new(h, tile, overlap)?,
             cols: AxisPlan::new(w, tile, overlap)?,
         })
     }
 
+    /// Tiles in all.
     pub fn count(&self) -> usize {
         self.rows.count() * self.cols.count()
     }
 
+    /// Every tile, row by row.
     pub fn tiles(&self) -> Vec<Tile> {
         let mut out = Vec::with_capacity(self.count());
         for &y in &self.rows.starts {
@@ -159,7 +175,7 @@ impl TilePlan {
     }
 
     /// The tile's 2-D weights: the product of its row and column weights.
-    pub fn weights(&self, tile: &Tile) -> Array2<f32> {
+    pub(crate) fn weights(&self, tile: &Tile) -> Array2<f32> {
         let nc = self.cols.count();
         let wy = self.rows.weights(tile.index / nc);
         let wx = self.cols.weights(tile.index % nc);
@@ -168,23 +184,25 @@ impl TilePlan {
 }
 
 /// Accumulates blended tile outputs into the full image.
-pub struct Blender {
+pub(crate) struct Blender {
     plan: TilePlan,
     sum: Array3<f32>,
 }
 
 impl Blender {
-    pub fn new(plan: TilePlan, channels: usize, h: usize, w: usize) -> Blender {
+    /// An empty `(channels, h, w)` image to blend the tiles of `plan` into.
+    pub(crate) fn new(plan: TilePlan, channels: usize, h: usize, w: usize) -> Blender {
         Blender {
             plan,
             sum: Array3::zeros((channels, h, w)),
         }
     }
 
-    pub fn add(&mut self, tile: &Tile, out: ArrayView3<f32>) -> Result<()> {
+    /// Add `out`, the output for `tile`, times the tile's weights.
+    pub(crate) fn add(&mut self, tile: &Tile, out: ArrayView3<f32>) -> Result<()> {
         let c = self.sum.shape()[0];
         if out.shape() != [c, tile.h, tile.w] {
-            return Err(NnError::Invalid(format!(
+            return Err(NnError::SizeMismatch(format!(
                 "tile output has shape {:?}, expected [{c}, {}, {}]",
                 out.shape(),
                 tile.h,
@@ -205,13 +223,13 @@ impl Blender {
     }
 
     /// The blended image (the weights already sum to one everywhere).
-    pub fn finish(self) -> Array3<f32> {
+    pub(crate) fn finish(self) -> Array3<f32> {
         self.sum
     }
 }
 
 /// Run `f` on every tile of `inputs` (all `(C, H, W)` of one size) and blend.
-pub fn run_tiled(
+pub(crate) fn run_tiled(
     inputs: &[ArrayView3<f32>],
     out_channels: usize,
     plan: &TilePlan,
@@ -223,7 +241,7 @@ pub fn run_tiled(
         .shape()
         .to_vec();
     if inputs.iter().any(|a| a.shape() != shape.as_slice()) {
-        return Err(NnError::Invalid("tiled inputs differ in shape".into()));
+        return Err(NnError::SizeMismatch("tiled inputs differ in shape".into()));
     }
     let (h, w) = (shape[1], shape[2]);
     let mut blend = Blender::new(plan.clone(), out_channels, h, w);

@@ -26,8 +26,10 @@ pub struct DemoLayout {
     /// Chart card: rows and columns `[start, end)`.
     pub(crate) chart_rows: (usize, usize),
     pub(crate) chart_cols: (usize, usize),
-    /// Ramp strip.
+    /// Ramp strip: rows `[start, end)`.
     pub ramp_rows: (usize, usize),
+    /// Ramp strip: columns `[start, end)`; light rises linearly from 0 at
+    /// the first column to [`DEMO_RAMP_TOP`] at the last.
     pub ramp_cols: (usize, usize),
 }
 
@@ -36,6 +38,8 @@ fn even(v: usize) -> usize {
 }
 
 impl DemoLayout {
+    /// The layout of a `width` x `height` demo frame: the chart card in the
+    /// upper right, the ramp strip along the bottom; all bounds even.
     pub fn new(width: usize, height: usize) -> DemoLayout {
         let at = |n: usize, f: f32| even((n as f32 * f) as usize);
         DemoLayout {

@@ -48,8 +48,11 @@ pub enum SceneKind {
 }
 
 impl SceneKind {
+    /// Every scene kind.
     pub const ALL: [SceneKind; 2] = [SceneKind::DeadLeaves, SceneKind::Gradient];
 
+    /// The name the CLI and frame metadata use ("dead-leaves", "gradient");
+    /// [`FromStr`] parses it back.
     pub fn name(self) -> &'static str {
         match self {
             SceneKind::DeadLeaves => "dead-leaves",
@@ -89,6 +92,8 @@ pub struct SceneSpec {
 }
 
 impl SceneSpec {
+    /// A `kind` scene of `width` x `height` mosaic pixels drawn from `seed`
+    /// (the same seed gives the same scene on any machine and thread count).
     pub fn new(kind: SceneKind, width: usize, height: usize, seed: u64) -> Self {
         SceneSpec {
             kind,
@@ -105,6 +110,7 @@ impl SceneSpec {
 pub struct SceneLevels {
     /// Black level of the planes R, G1, B, G2 in DN.
     pub black: [f32; 4],
+    /// Saturation level in DN; scene value 1.0 maps to it.
     pub white: u32,
     /// Bits per sample the frame declares; at least what `white` needs.
     pub bits: u32,
@@ -145,6 +151,7 @@ enum Inner {
 }
 
 impl Scene {
+    /// Lay out the scene `spec` describes (for dead leaves: place every disc).
     pub fn new(spec: &SceneSpec) -> Self {
         let inner = match spec.kind {
             SceneKind::DeadLeaves => {
@@ -163,10 +170,6 @@ impl Scene {
             }
         };
         Scene { spec: *spec, inner }
-    }
-
-    pub(crate) fn spec(&self) -> &SceneSpec {
-        &self.spec
     }
 
     /// Visible discs for dead leaves; 1 for the gradient, which is a single
