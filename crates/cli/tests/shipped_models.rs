@@ -28,7 +28,10 @@ fn check(name: &str, method: Method) {
     assert_eq!(noise.model, cfg.noise);
     assert_eq!(noise.iso, cfg.iso);
     assert_eq!(noise.ratio, [cfg.ratio_min, cfg.ratio_max]);
-    let t = meta.training.as_ref().expect("shipped files record their training");
+    let t = meta
+        .training
+        .as_ref()
+        .expect("shipped files record their training");
     assert_eq!(
         (t.steps, t.batch, t.patch, t.seed, t.data.as_str()),
         (cfg.steps, cfg.batch, cfg.patch, cfg.seed, cfg.data.as_str()),

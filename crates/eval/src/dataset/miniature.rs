@@ -80,9 +80,16 @@ fn clean_scene(w: usize, h: usize, seed: u64, iso: u32, t: f64) -> Result<RawFra
     Ok(f)
 }
 
-fn dark_capture(clean: &RawFrame, iso: u32, t: f64, ratio: f32, seed: u64, path: &Path) -> Result<()> {
-    let profile = CameraProfile::built_in("sony-a7s2")
-        .ok_or_else(|| err("no sony-a7s2 profile"))?;
+fn dark_capture(
+    clean: &RawFrame,
+    iso: u32,
+    t: f64,
+    ratio: f32,
+    seed: u64,
+    path: &Path,
+) -> Result<()> {
+    let profile =
+        CameraProfile::built_in("sony-a7s2").ok_or_else(|| err("no sony-a7s2 profile"))?;
     let out = DarkCapture {
         profile,
         model: ModelKind::Pgrf,
