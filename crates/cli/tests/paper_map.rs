@@ -12,10 +12,14 @@ fn every_paper_row_names_a_function_defined_in_its_file() {
     for line in text.lines().filter(|l| l.starts_with('|')) {
         // Cells: paper | what | `function` | `file`.
         let cells: Vec<&str> = line.split(" | ").collect();
-        let (Some(func), Some(file)) = (cells.get(cells.len().wrapping_sub(2)), cells.last()) else {
+        let (Some(func), Some(file)) = (cells.get(cells.len().wrapping_sub(2)), cells.last())
+        else {
             continue;
         };
-        let (func, file) = (func.trim().trim_matches('`'), file.trim_end_matches('|').trim());
+        let (func, file) = (
+            func.trim().trim_matches('`'),
+            file.trim_end_matches('|').trim(),
+        );
         let file = file.trim_matches('`');
         if !file.starts_with("crates/") || !func.contains("::") {
             continue;
