@@ -13,6 +13,15 @@ use crate::pair::{ExposureSpec, PairSpec, RatioSpec};
 use crate::{CameraProfile, ModelKind};
 use pgrf_raw::{pack_normalized, unpack_normalized, RawFrame};
 
+/// What the camera records of a synthesised pair's noisy image: the pair is
+/// amplified by the exposure ratio, as networks see it; the sensor holds it
+/// un-amplified, clipped at white (1.0), with the read noise around black
+/// kept (values below black stay, down to 0 DN on unpacking), as a real
+/// dark frame has them.
+pub fn recorded(noisy_amplified: &ndarray::Array3<f32>, ratio: f32) -> ndarray::Array3<f32> {
+    noisy_amplified.mapv(|v| (v / ratio).min(1.0))
+}
+
 /// How the dark frame is taken.
 #[derive(Clone, Debug)]
 pub struct DarkCapture {
@@ -50,9 +59,7 @@ impl DarkCapture {
         let packed = pack_normalized(clean, true).map_err(raw)?;
         let plane_rows = clean.cfa.offsets().map(|(r, _)| r);
         let pair = spec.synthesize(packed.view(), plane_rows, self.seed)?;
-        // The pair's noisy image is amplified by the ratio, as networks see
-        // it; the camera records it un-amplified.
-        let dark = pair.noisy.mapv(|v| (v / self.ratio).min(1.0));
+        let dark = recorded(&pair.noisy, self.ratio);
         let mut out = unpack_normalized(dark.view(), clean).map_err(raw)?;
         out.iso = Some(self.iso);
         out.exposure_s = Some(self.exposure_s);

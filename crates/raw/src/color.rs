@@ -49,9 +49,10 @@ pub(crate) fn invert(m: &Mat3) -> Option<Mat3> {
     Some(inv)
 }
 
-/// sRGB-from-camera matrix for a DNG-style XYZ->camera matrix, or None when
-/// the matrix cannot be used (singular, or a row that sums to zero).
-pub(crate) fn srgb_from_camera(xyz_to_cam: &[[f32; 3]; 3]) -> Option<Mat3> {
+/// Camera-from-sRGB matrix (white-balanced camera RGB from linear sRGB) for
+/// a DNG-style XYZ->camera matrix: rows normalised so that sRGB white maps
+/// to camera white. None when a row sums to zero.
+pub(crate) fn camera_from_srgb(xyz_to_cam: &[[f32; 3]; 3]) -> Option<Mat3> {
     let x2c: Mat3 = std::array::from_fn(|i| std::array::from_fn(|j| xyz_to_cam[i][j] as f64));
     let mut cam_from_srgb = mul(&x2c, &SRGB_TO_XYZ);
     for row in cam_from_srgb.iter_mut() {
@@ -61,7 +62,14 @@ pub(crate) fn srgb_from_camera(xyz_to_cam: &[[f32; 3]; 3]) -> Option<Mat3> {
         }
         row.iter_mut().for_each(|v| *v /= s);
     }
-    invert(&cam_from_srgb)
+    Some(cam_from_srgb)
+}
+
+/// sRGB-from-camera matrix for a DNG-style XYZ->camera matrix, or None when
+/// the matrix cannot be used (singular, or a row that sums to zero): the
+/// inverse of [`camera_from_srgb`].
+pub(crate) fn srgb_from_camera(xyz_to_cam: &[[f32; 3]; 3]) -> Option<Mat3> {
+    invert(&camera_from_srgb(xyz_to_cam)?)
 }
 
 /// sRGB opto-electronic transfer function (linear [0,1] -> encoded [0,1]).
@@ -72,6 +80,17 @@ pub(crate) fn srgb_encode(x: f32) -> f32 {
         12.92 * x
     } else {
         1.055 * x.powf(1.0 / 2.4) - 0.055
+    }
+}
+
+/// Inverse of [`srgb_encode`]: encoded [0,1] -> linear [0,1].
+#[inline]
+pub(crate) fn srgb_decode(e: f32) -> f32 {
+    let e = e.clamp(0.0, 1.0);
+    if e <= 0.040_449_936 {
+        e / 12.92
+    } else {
+        ((e + 0.055) / 1.055).powf(2.4)
     }
 }
 
@@ -87,6 +106,14 @@ mod tests {
         // 18% grey encodes to 0.4613561 (118/255).
         assert!((srgb_encode(0.18) - 0.461_356_1).abs() < 1e-6);
         assert!((srgb_encode(0.5) - 0.735_357).abs() < 1e-6);
+    }
+
+    #[test]
+    fn decode_inverts_encode() {
+        for i in 0..=1000 {
+            let x = i as f32 / 1000.0;
+            assert!((srgb_decode(srgb_encode(x)) - x).abs() < 2e-6, "{x}");
+        }
     }
 
     #[test]

@@ -22,6 +22,7 @@ mod pack;
 mod panic_guard;
 mod preview;
 pub mod scene;
+pub mod unprocess;
 
 /// Re-exported so callers use the same ndarray version as the packed arrays.
 pub use ndarray;

@@ -1,5 +1,8 @@
 //! `pgrf synth`: a clean RAW in, a simulated low-light capture of the same
-//! scene out (as a DNG with the input's size, CFA and levels).
+//! scene out (as a DNG with the input's size, CFA and levels): by default
+//! the dark capture the camera would record (un-amplified, EXIF exposure
+//! divided by the ratio), so that `pgrf enhance --ratio R` restores it;
+//! `--brightened` writes it multiplied back by the ratio instead.
 
 use crate::input::InputArgs;
 use anyhow::{bail, Context, Result};
@@ -67,9 +70,17 @@ pub struct SynthArgs {
     /// Also write an sRGB preview of the result.
     #[arg(long)]
     pub png: Option<PathBuf>,
-    /// Exposure gain for the PNG preview.
-    #[arg(long, default_value_t = 1.0)]
-    pub png_gain: f32,
+    /// Exposure gain for the PNG preview [default: the ratio for the dark
+    /// capture, so the preview shows the scene at the clean frame's
+    /// brightness; 1 with --brightened].
+    #[arg(long)]
+    pub png_gain: Option<f32>,
+    /// Write the capture brightened: multiplied back by the ratio and
+    /// clipped to black..white, as a network is fed it (what `pgrf synth`
+    /// wrote before). Without it the output is the dark capture the camera
+    /// would record, for `pgrf enhance --ratio R`.
+    #[arg(long)]
+    pub brightened: bool,
     #[command(flatten)]
     pub input: InputArgs,
 }
@@ -139,7 +150,11 @@ pub fn run(a: &SynthArgs) -> Result<()> {
         .synthesize(clean.view(), plane_rows, a.seed)
         .with_context(|| format!("{}", a.clean.display()))?;
 
-    let noisy = pair.noisy.mapv(|v| v.clamp(0.0, 1.0));
+    let noisy = if a.brightened {
+        pair.noisy.mapv(|v| v.clamp(0.0, 1.0))
+    } else {
+        pgrf_noise::capture::recorded(&pair.noisy, pair.ratio)
+    };
     let mut out = unpack_normalized(noisy.view(), &frame)?;
     if let Some(iso) = spec.iso {
         out.iso = Some(iso);
@@ -148,8 +163,9 @@ pub fn run(a: &SynthArgs) -> Result<()> {
     write_dng(&out, &a.output, &DngOptions::default())?;
     let p = &pair.params;
     eprintln!(
-        "wrote {}: model {:?}{}, ratio {:.1}, exposure {:.4} s, {}, K {:.4} DN/e-, read {:.3} DN, row {:.3} DN, seed {}",
+        "wrote {} ({}): model {:?}{}, ratio {:.1}, exposure {:.4} s, {}, K {:.4} DN/e-, read {:.3} DN, row {:.3} DN, seed {}",
         a.output.display(),
+        if a.brightened { "brightened by the ratio" } else { "dark capture" },
         a.model,
         if a.model == ModelKind::Pgrf { format!(" [{}{}]", components, if a.global { ", noD" } else { "" }) } else { String::new() },
         pair.ratio,
@@ -164,7 +180,9 @@ pub fn run(a: &SynthArgs) -> Result<()> {
         let prev = render_preview(
             &out,
             &PreviewOptions {
-                gain: a.png_gain,
+                gain: a
+                    .png_gain
+                    .unwrap_or(if a.brightened { 1.0 } else { pair.ratio }),
                 ..Default::default()
             },
         )?;
