@@ -20,6 +20,7 @@ pub mod headerless;
 mod orientation;
 mod pack;
 mod panic_guard;
+pub mod photo;
 mod preview;
 pub mod scene;
 pub mod unprocess;

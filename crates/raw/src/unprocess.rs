@@ -12,6 +12,7 @@
 
 use crate::color::{camera_from_srgb, srgb_decode};
 use crate::error::{RawError, Result};
+use crate::photo::Photo;
 use crate::{Cfa, ColorMatrix, RawFrame};
 use rayon::prelude::*;
 
@@ -57,19 +58,13 @@ impl CameraSpace {
     }
 }
 
-/// Unprocess an sRGB-encoded image (`rgb`: `height` rows of `width` pixels,
-/// R, G, B interleaved, in [0, 1]) into `camera`'s RAW space, scaled by
+/// Unprocess an sRGB-encoded photo into `camera`'s RAW space, scaled by
 /// `exposure` (linear light; 1 keeps the photo's brightness). Values that
 /// leave the sensor's range are clipped at white and at 0 DN. The result
 /// carries the camera's matrix and white balance so that its preview
 /// renders the photo again.
-pub fn unprocess(
-    rgb: &[f32],
-    width: usize,
-    height: usize,
-    camera: &CameraSpace,
-    exposure: f32,
-) -> Result<RawFrame> {
+pub fn unprocess(photo: &Photo, camera: &CameraSpace, exposure: f32) -> Result<RawFrame> {
+    let (rgb, width, height) = (&photo.rgb, photo.width, photo.height);
     if width < 2 || height < 2 || rgb.len() != width * height * 3 {
         return Err(RawError::Invalid(format!(
             "unprocess: {} values for a {width}x{height} RGB image",
@@ -144,7 +139,7 @@ mod tests {
     /// A moderately saturated test photo: colour gradients with texture
     /// (sinusoids of 12- to 20-pixel periods, different per channel), which
     /// the demosaic reproduces only to within its interpolation error.
-    fn photo(w: usize, h: usize) -> Vec<f32> {
+    fn photo(w: usize, h: usize) -> Photo {
         let mut v = Vec::with_capacity(w * h * 3);
         for r in 0..h {
             for c in 0..w {
@@ -156,7 +151,11 @@ mod tests {
                 v.push(0.55 - 0.25 * x + 0.15 * y + tex(2.2, 3.4));
             }
         }
-        v
+        Photo {
+            width: w,
+            height: h,
+            rgb: v,
+        }
     }
 
     fn psnr(a: &[f32], b: &[f32]) -> f64 {
@@ -177,7 +176,7 @@ mod tests {
         let (w, h) = (96, 64);
         let src = photo(w, h);
         for cfa in [Cfa::Rggb, Cfa::Bggr, Cfa::Grbg, Cfa::Gbrg] {
-            let frame = unprocess(&src, w, h, &a7s2(cfa), 1.0).unwrap();
+            let frame = unprocess(&src, &a7s2(cfa), 1.0).unwrap();
             assert!(frame
                 .mosaic
                 .iter()
@@ -190,7 +189,7 @@ mod tests {
                     .flat_map(|(r, c)| img[(r * w + c) * 3..(r * w + c) * 3 + 3].to_vec())
                     .collect()
             };
-            let p = psnr(&inner(&back.rgb), &inner(&src));
+            let p = psnr(&inner(&back.rgb), &inner(&src.rgb));
             assert!(p > 40.0, "{cfa:?}: {p:.2} dB");
         }
     }
@@ -200,15 +199,19 @@ mod tests {
     /// the exposure factor scales linear light.
     #[test]
     fn neutral_grey_follows_the_white_balance_and_exposure() {
-        let grey = vec![0.5f32; 4 * 4 * 3];
-        let f = unprocess(&grey, 4, 4, &a7s2(Cfa::Rggb), 1.0).unwrap();
+        let grey = Photo {
+            width: 4,
+            height: 4,
+            rgb: vec![0.5f32; 4 * 4 * 3],
+        };
+        let f = unprocess(&grey, &a7s2(Cfa::Rggb), 1.0).unwrap();
         let at = |r: usize, c: usize| f.mosaic[r * 4 + c] as f64 - 512.0;
         let (red, green) = (at(0, 0), at(0, 1));
         assert!((green / red - 2.4).abs() < 0.01, "{green} / {red}");
         // Linear 0.5^2.2-ish grey: sRGB 0.5 decodes to 0.21404.
         let expect = 0.214_041 * (16383.0 - 512.0);
         assert!((green - expect).abs() < 1.0, "{green} vs {expect}");
-        let half = unprocess(&grey, 4, 4, &a7s2(Cfa::Rggb), 0.5).unwrap();
+        let half = unprocess(&grey, &a7s2(Cfa::Rggb), 0.5).unwrap();
         let g2 = half.mosaic[1] as f64 - 512.0;
         assert!((g2 - expect / 2.0).abs() < 1.0);
     }
@@ -216,13 +219,18 @@ mod tests {
     #[test]
     fn bad_arguments_are_refused() {
         let cam = a7s2(Cfa::Rggb);
-        assert!(unprocess(&[0.5; 10], 2, 2, &cam, 1.0).is_err());
-        assert!(unprocess(&[0.5; 12], 2, 2, &cam, 0.0).is_err());
-        assert!(unprocess(&[0.5; 12], 2, 2, &cam, f32::NAN).is_err());
+        let img = |n: usize| Photo {
+            width: 2,
+            height: 2,
+            rgb: vec![0.5; n],
+        };
+        assert!(unprocess(&img(10), &cam, 1.0).is_err());
+        assert!(unprocess(&img(12), &cam, 0.0).is_err());
+        assert!(unprocess(&img(12), &cam, f32::NAN).is_err());
         let mut no_wb = cam.clone();
         no_wb.wb = [0.0, 1.0, 1.0];
-        assert!(unprocess(&[0.5; 12], 2, 2, &no_wb, 1.0).is_err());
-        let mut frame = unprocess(&[0.5; 12], 2, 2, &cam, 1.0).unwrap();
+        assert!(unprocess(&img(12), &no_wb, 1.0).is_err());
+        let mut frame = unprocess(&img(12), &cam, 1.0).unwrap();
         frame.color_matrices.clear();
         let e = CameraSpace::of(&frame).unwrap_err().to_string();
         assert!(e.contains("no colour matrix"), "{e}");
