@@ -42,7 +42,9 @@ impl Bar {
     /// all with `--quiet`).
     pub fn println(&self, line: &str) {
         if self.quiet {
-        } else if self.bar.is_hidden() {
+            return;
+        }
+        if self.bar.is_hidden() {
             eprintln!("{line}");
         } else {
             self.bar.println(line);

@@ -32,7 +32,7 @@ pub fn read_photo(path: &Path) -> Result<Photo> {
         .map_err(|e| fail(e.to_string()))?
         .with_guessed_format()
         .map_err(|e| fail(e.to_string()))?;
-    let mut decoder = reader
+    let decoder = reader
         .into_decoder()
         .map_err(|e| fail(format!("not a photo pgrf reads ({e})")))?;
     let original = decoder.original_color_type();
@@ -44,7 +44,6 @@ pub fn read_photo(path: &Path) -> Result<Photo> {
             "CMYK image: only RGB photos can be unprocessed".into(),
         ));
     }
-    let _ = decoder.icc_profile();
     let img = image::DynamicImage::from_decoder(decoder).map_err(|e| fail(e.to_string()))?;
     if !img.color().has_color() {
         return Err(fail(
