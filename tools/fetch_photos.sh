@@ -23,8 +23,9 @@
 #   mate-backgrounds 1.26.0-1            keep nature/*.jpg (12 photos, GPL-2+).
 #       Rejected: abstract/* (rendered; Elephants*.jpg is a painting),
 #       desktop/* (rendered: stripes, logo, Ubuntu-Mate-*-no-logo aurora art).
-#   plasma-workspace-wallpapers 4:5.27.5-2  keep 11 photographic wallpapers
-#       (authors from metadata.json). Rejected 19 rendered/vector ones (Altai,
+#   plasma-workspace-wallpapers 4:5.27.5-2  keep 10 photographic wallpapers
+#       (authors from metadata.json). Left out Grey (a grey-scale photo: no
+#       colour to unprocess, pgrf refuses it). Rejected 19 rendered/vector ones (Altai,
 #       Autumn, Canopee, Cascade, Cluster, Elarun, Flow, FlyingKonqui,
 #       Honeywave, IceCold, Kay, Kokkini, MilkyWay, Opal, PastelHills, Patak,
 #       SafeLanding, Shell, Volna) and every contents/screenshot.*.
@@ -85,7 +86,6 @@ ALLOW=(
     "plasma-workspace-wallpapers usr/share/wallpapers/DarkestHour/contents/images/2560x1600.jpg"
     "plasma-workspace-wallpapers usr/share/wallpapers/EveningGlow/contents/images/2560x1600.jpg"
     "plasma-workspace-wallpapers usr/share/wallpapers/FallenLeaf/contents/images/2560x1600.jpg"
-    "plasma-workspace-wallpapers usr/share/wallpapers/Grey/contents/images/2560x1600.jpg"
     "plasma-workspace-wallpapers usr/share/wallpapers/Kite/contents/images/2560x1600.jpg"
     "plasma-workspace-wallpapers usr/share/wallpapers/OneStandsOut/contents/images/2560x1600.jpg"
     "plasma-workspace-wallpapers usr/share/wallpapers/Path/contents/images/2560x1600.jpg"

@@ -9,6 +9,7 @@
 
 mod decode;
 mod enhance;
+mod loader;
 mod ssim;
 mod stack;
 mod synth;
@@ -36,6 +37,9 @@ enum Bench {
     Stack(stack::StackArgs),
     /// Decode + pack + normalise RAW files.
     Decode(decode::DecodeArgs),
+    /// Crops per second of `pgrf train`'s data loader alone (photos,
+    /// RAW folders or procedural scenes), to compare with the trainer's.
+    Loader(loader::LoaderArgs),
     /// Forward and training-step time of the SID U-Net and the SR3 velocity
     /// field on the CPU (bench/train.sh runs PyTorch beside it).
     Train(train::TrainArgs),
@@ -55,6 +59,7 @@ fn main() -> ExitCode {
         Bench::Stack(a) => stack::run(a),
         Bench::Decode(a) => decode::run(a),
         Bench::Train(a) => train::run(a),
+        Bench::Loader(a) => loader::run(a),
         Bench::Enhance(a) => enhance::run(a),
         Bench::Ssim(a) => ssim::run(a),
     };

@@ -44,7 +44,7 @@ enum Command {
     Search(cmd::search::SearchArgs),
     /// Raw-domain PSNR and SSIM of a result against its reference (ELD protocol).
     Metrics(cmd::metrics::MetricsArgs),
-    /// Evaluate models on ELD / SID / a pair list: the paper's ratio x PSNR/SSIM table, per-image CSV, worst images.
+    /// Evaluate models on ELD / SID / a pair list, or on clean RAWs given synthetic dark captures (`--protocol synthetic`): PSNR/SSIM (and colour cast) per ratio or condition, per-image CSV, worst images.
     Eval(Box<cmd::eval::EvalArgs>),
     /// Write a miniature benchmark folder in the ELD or SID layout (procedural scenes, A7S2 noise).
     MakeDataset(cmd::make_dataset::MakeDatasetArgs),

@@ -400,3 +400,101 @@ fn print_config_round_trips_through_a_config_file() {
     assert_eq!(String::from_utf8(again.stdout).unwrap(), text);
     let _ = std::fs::remove_dir_all(&d);
 }
+
+/// A folder of small photos written here (PNG, distinct seeded textures),
+/// plus one broken JPEG.
+fn photo_folder(d: &Path) -> PathBuf {
+    let dir = d.join("photos");
+    std::fs::create_dir_all(&dir).unwrap();
+    for k in 0..4u32 {
+        let img = image::RgbImage::from_fn(96, 80, |x, y| {
+            let v = |c: u32| ((x * (2 + c + k) + y * (3 + 2 * c) + 40 * k) % 256) as u8;
+            image::Rgb([v(0), v(1), v(2)])
+        });
+        img.save(dir.join(format!("p{k}.png"))).unwrap();
+    }
+    std::fs::write(dir.join("broken.jpg"), b"\xff\xd8\xff\xe0 cut short").unwrap();
+    dir
+}
+
+#[test]
+fn photos_train_mixed_with_procedural_and_a_broken_photo_is_one_warning() {
+    let d = scratch("photos");
+    let photos = photo_folder(&d);
+    let out = d.join("p.safetensors");
+    let data = format!("{}@3,procedural@1", photos.display());
+    let args = [
+        "train",
+        "spc",
+        "--data",
+        &data,
+        "--patch",
+        "16",
+        "--batch",
+        "2",
+        "--steps",
+        "2",
+        "--width",
+        "4",
+        "--val-pairs",
+        "2",
+        "--val-every",
+        "0",
+        "--quiet",
+        "--json",
+        "-o",
+        s(&out),
+    ];
+    let run = pgrf(&args);
+    let sum = summary(&run);
+    assert_eq!(sum["steps"], 2);
+    assert!(sum["val_psnr"].as_f64().unwrap().is_finite());
+    let err = String::from_utf8_lossy(&run.stderr);
+    let warnings: Vec<&str> = err.lines().filter(|l| l.contains("warning")).collect();
+    assert_eq!(warnings.len(), 1, "{err}");
+    assert!(
+        warnings[0].starts_with("pgrf: warning: skipped") && warnings[0].contains("broken.jpg"),
+        "{err}"
+    );
+    // Bad photo settings: one line each, nothing written.
+    let bad = d.join("bad.safetensors");
+    let only_broken = d.join("broken");
+    std::fs::create_dir_all(&only_broken).unwrap();
+    std::fs::copy(photos.join("broken.jpg"), only_broken.join("b.jpg")).unwrap();
+    let cases: Vec<(Vec<String>, &str)> = vec![
+        (
+            vec!["--data".into(), format!("{}@x", photos.display())],
+            "weight",
+        ),
+        (
+            vec!["--data".into(), s(&only_broken).into()],
+            "no usable photo",
+        ),
+        (
+            vec![
+                "--data".into(),
+                s(&photos).into(),
+                "--profile".into(),
+                "nikon-d850".into(),
+            ],
+            "--camera-like",
+        ),
+        (vec!["--iso-range".into(), "6400,800".into()], "iso-range"),
+        (
+            vec!["--iso-range".into(), "10,200".into()],
+            "ISO 10 is outside",
+        ),
+    ];
+    for (extra, needle) in cases {
+        let mut a: Vec<String> = ["train", "spc", "--patch", "16", "--steps", "1", "-o"]
+            .iter()
+            .map(|v| v.to_string())
+            .collect();
+        a.push(s(&bad).into());
+        a.extend(extra);
+        let refs: Vec<&str> = a.iter().map(|v| v.as_str()).collect();
+        let e = one_line_error(&pgrf(&refs));
+        assert!(e.contains(needle), "{a:?}: {e}");
+        assert!(!bad.exists());
+    }
+}

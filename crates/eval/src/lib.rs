@@ -12,7 +12,8 @@
 pub mod dataset;
 mod metrics;
 
+pub use metrics::cast;
 pub use metrics::{
-    evaluate, illuminance_correct, illuminance_gain, psnr, ssim, IlluminanceGain, MetricError,
-    Protocol, Scores, SsimOptions,
+    colour_cast, evaluate, illuminance_correct, illuminance_gain, psnr, ssim, CameraColour, Cast,
+    IlluminanceGain, MetricError, Protocol, Scores, SsimOptions,
 };

@@ -64,7 +64,10 @@ impl std::fmt::Display for Method {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct TrainConfig {
-    /// Clean training images: a folder of RAWs, or "procedural".
+    /// Clean training images: comma-separated entries `SOURCE[@WEIGHT]`,
+    /// each a folder (or file) of clean RAWs, a folder of photos (JPEG, PNG,
+    /// TIFF), or "procedural"; crops are drawn from the entries in
+    /// proportion to their weights (default 1 each). See [`crate::data::build`].
     pub data: String,
     /// Validation images (default: 10% of `data`'s files held out).
     pub val_data: Option<String>,
@@ -76,7 +79,18 @@ pub struct TrainConfig {
     pub noise: ModelKind,
     /// Fixed ISO (None: parameters drawn from the profile's distribution).
     pub iso: Option<u32>,
-    /// Smallest exposure ratio (ELD/SID: 100).
+    /// Without a fixed ISO: draw the gain between these two ISOs only
+    /// (None: the profile's whole range, ELD's distribution).
+    pub iso_range: Option<Vec<u32>>,
+    /// The camera photos are unprocessed into: any RAW file of it (its
+    /// colour matrix, white balance, CFA and levels). None: the built-in
+    /// A7S2's with the sony-a7s2 profile; other profiles need one.
+    pub camera_like: Option<PathBuf>,
+    /// Photos: downscale factor per side before cropping (area filter).
+    pub photo_downscale: usize,
+    /// Photos: invert a global S-shaped tone curve before the sRGB transfer.
+    pub photo_inverse_tone: bool,
+    /// Smallest exposure ratio (ELD/SID: 100; pgrf's general models: 1).
     pub ratio_min: f32,
     /// Largest exposure ratio (ELD/SID: 300).
     pub ratio_max: f32,
@@ -140,8 +154,10 @@ pub struct TrainConfig {
 }
 
 impl Default for TrainConfig {
-    /// ELD/SID's recipe where it applies (512 crops, ratio 100..300, Adam at
-    /// 1e-4 with the step schedule), the A7S2 profile and pgrf's noise model.
+    /// ELD/SID's recipe where it applies (512 crops, Adam at 1e-4 with the
+    /// step schedule), the A7S2 profile and pgrf's noise model; exposure
+    /// ratios 1..300 (a general model meets bright captures too, not only
+    /// ELD's x100..x300).
     fn default() -> Self {
         TrainConfig {
             data: "procedural".into(),
@@ -150,7 +166,11 @@ impl Default for TrainConfig {
             calib: None,
             noise: ModelKind::Pgrf,
             iso: None,
-            ratio_min: 100.0,
+            iso_range: None,
+            camera_like: None,
+            photo_downscale: 2,
+            photo_inverse_tone: false,
+            ratio_min: 1.0,
             ratio_max: 300.0,
             patch: 512,
             batch: 1,
@@ -254,6 +274,25 @@ impl TrainConfig {
         })
     }
 
+    /// The ISO range as (low, high), checked: two positive ISOs, ordered,
+    /// and not given together with a fixed ISO.
+    pub fn iso_range(&self) -> Result<Option<(u32, u32)>> {
+        let Some(r) = &self.iso_range else {
+            return Ok(None);
+        };
+        match r.as_slice() {
+            [lo, hi] if *lo > 0 && hi >= lo => {
+                if self.iso.is_some() {
+                    return Err(invalid("give --iso or --iso-range, not both"));
+                }
+                Ok(Some((*lo, *hi)))
+            }
+            _ => Err(invalid(format!(
+                "--iso-range takes two positive ISOs, low first (got {r:?})"
+            ))),
+        }
+    }
+
     /// Side of the validation crops.
     pub fn val_patch(&self) -> usize {
         self.val_patch.unwrap_or(self.patch.min(256))
@@ -273,6 +312,10 @@ impl TrainConfig {
                 "ratio range {lo}..{hi} must be positive and ordered"
             )));
         }
+        if self.photo_downscale == 0 {
+            return Err(invalid("--photo-downscale must be at least 1"));
+        }
+        self.iso_range()?;
         Ok(())
     }
 }

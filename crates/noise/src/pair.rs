@@ -87,6 +87,9 @@ pub struct PairSpec {
     pub measured: Option<Measured>,
     /// Fixed ISO, or None to draw parameters from the profile's ELD distribution.
     pub iso: Option<u32>,
+    /// With no fixed ISO: draw the gain only between these ISOs' (inclusive)
+    /// instead of over the profile's whole range.
+    pub iso_range: Option<(u32, u32)>,
     /// How the exposure ratio is chosen.
     pub ratio: RatioSpec,
     /// How the noisy capture's exposure time (dark current) is chosen.
@@ -136,6 +139,7 @@ impl PairSpec {
             maps: None,
             measured: None,
             iso: None,
+            iso_range: None,
             ratio: RatioSpec::default(),
             exposure: ExposureSpec::default(),
         }
@@ -143,9 +147,13 @@ impl PairSpec {
 
     /// Resolve the model for one capture.
     pub(crate) fn model(&self, seed: u64) -> Result<(NoiseModel, CaptureParams)> {
-        let mut params = match self.iso {
-            Some(iso) => self.profile.params_at_iso(iso)?,
-            None => self.profile.sample_params(seed),
+        let mut params = match (self.iso, self.iso_range) {
+            (Some(iso), _) => self.profile.params_at_iso(iso)?,
+            (None, None) => self.profile.sample_params(seed, None),
+            (None, Some((lo, hi))) => {
+                let range = self.k_range(lo, hi)?;
+                self.profile.sample_params(seed, Some(range))
+            }
         };
         let mut profile = std::borrow::Cow::Borrowed(&self.profile);
         if let Some(m) = self.measured {
@@ -168,6 +176,21 @@ impl PairSpec {
             ),
         };
         Ok((model, params))
+    }
+
+    /// The gains of ISO `lo` and `hi`, checked: ordered, and both within
+    /// what the profile knows.
+    pub fn k_range(&self, lo: u32, hi: u32) -> Result<(f64, f64)> {
+        if lo == 0 || hi < lo {
+            return Err(NoiseError::Invalid(format!(
+                "ISO range {lo}..{hi} must be positive and ordered"
+            )));
+        }
+        let (a, b) = (
+            self.profile.params_at_iso(lo)?.k,
+            self.profile.params_at_iso(hi)?.k,
+        );
+        Ok((a.min(b), a.max(b)))
     }
 
     /// Draw (ratio, exposure time in seconds) for `seed`, as

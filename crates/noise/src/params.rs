@@ -89,10 +89,12 @@ impl CameraProfile {
 
     /// ELD's sampling: ln K ~ U(ln k_min, ln k_max); each scale
     /// ln(sigma) = slope ln K + bias + N(0, sigma_fit^2); Tukey shape and colour
-    /// bias from one calibration setting drawn uniformly.
-    pub(crate) fn sample_params(&self, seed: u64) -> CaptureParams {
+    /// bias from one calibration setting drawn uniformly. `k_range`
+    /// narrows the gain range (an ISO range a user asked for).
+    pub(crate) fn sample_params(&self, seed: u64, k_range: Option<(f64, f64)>) -> CaptureParams {
         let mut rng = stream(seed, Domain::Params, 0, 0);
-        let log_k = self.k_min.ln() + open01(&mut rng) * (self.k_max.ln() - self.k_min.ln());
+        let (k_lo, k_hi) = k_range.unwrap_or((self.k_min, self.k_max));
+        let log_k = k_lo.ln() + open01(&mut rng) * (k_hi.ln() - k_lo.ln());
         let k = log_k.exp();
         let mut draw = |fit: &crate::profile::LogFit| {
             let z: f64 = rng.sample(StandardNormal);
@@ -148,7 +150,7 @@ mod tests {
         let mut resid = Vec::new();
         let mut ks = Vec::new();
         for s in 0..n {
-            let c = p.sample_params(s);
+            let c = p.sample_params(s, None);
             assert!(c.k >= p.k_min && c.k <= p.k_max);
             ks.push(c.k.ln());
             resid.push(
@@ -165,6 +167,15 @@ mod tests {
         let rsd = (resid.iter().map(|r| (r - rm).powi(2)).sum::<f64>() / (n - 1) as f64).sqrt();
         assert!(rm.abs() < 5.0 * p.eld.gauss_scale.sigma / (n as f64).sqrt());
         assert!((rsd / p.eld.gauss_scale.sigma - 1.0).abs() < 0.05, "{rsd}");
-        assert_eq!(p.sample_params(3), p.sample_params(3));
+        assert_eq!(p.sample_params(3, None), p.sample_params(3, None));
+        // A narrowed range: every K inside it.
+        let (lo, hi) = (
+            p.params_at_iso(1600).unwrap().k,
+            p.params_at_iso(3200).unwrap().k,
+        );
+        for s in 0..200 {
+            let k = p.sample_params(s, Some((lo, hi))).k;
+            assert!(k >= lo * (1.0 - 1e-12) && k <= hi * (1.0 + 1e-12), "{k}");
+        }
     }
 }

@@ -131,16 +131,23 @@ fn white_response() -> ([f64; 3], f64) {
     (white, white.iter().cloned().fold(f64::MIN, f64::max))
 }
 
-/// Render the chart as a RawFrame with the A7S2 colour matrix and the white
-/// balance that makes its D65 white neutral.
-pub fn render_chart(spec: &ChartSpec) -> Result<RawFrame> {
-    let (white_cam, peak) = white_response();
-    let k = spec.exposure as f64 / peak;
-    let wb = [
+/// White-balance multipliers (R, G, B) that make a D65 white neutral on
+/// the A7S2: the camera's daylight neutral, green 1.
+pub fn a7s2_daylight_wb() -> [f32; 3] {
+    let (white_cam, _) = white_response();
+    [
         (white_cam[1] / white_cam[0]) as f32,
         1.0,
         (white_cam[1] / white_cam[2]) as f32,
-    ];
+    ]
+}
+
+/// Render the chart as a RawFrame with the A7S2 colour matrix and the white
+/// balance that makes its D65 white neutral.
+pub fn render_chart(spec: &ChartSpec) -> Result<RawFrame> {
+    let (_, peak) = white_response();
+    let k = spec.exposure as f64 / peak;
+    let wb = a7s2_daylight_wb();
 
     let (w, h) = (spec.width, spec.height);
     let chart_h = h * 7 / 10;

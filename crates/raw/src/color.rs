@@ -6,17 +6,19 @@
 //! equal in camera space), and invert it.
 
 /// Linear sRGB (D65) -> XYZ, IEC 61966-2-1.
-pub(crate) const SRGB_TO_XYZ: [[f64; 3]; 3] = [
+pub const SRGB_TO_XYZ: [[f64; 3]; 3] = [
     [0.4124564, 0.3575761, 0.1804375],
     [0.2126729, 0.7151522, 0.0721750],
     [0.0193339, 0.1191920, 0.9503041],
 ];
 
-pub(crate) type Mat3 = [[f64; 3]; 3];
+/// A 3x3 colour matrix, row-major.
+pub type Mat3 = [[f64; 3]; 3];
 
 pub(crate) const IDENTITY: Mat3 = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
 
-fn mul(a: &Mat3, b: &Mat3) -> Mat3 {
+/// The product `a x b`.
+pub fn mul(a: &Mat3, b: &Mat3) -> Mat3 {
     let mut m = [[0.0; 3]; 3];
     for i in 0..3 {
         for j in 0..3 {
@@ -52,7 +54,7 @@ pub(crate) fn invert(m: &Mat3) -> Option<Mat3> {
 /// Camera-from-sRGB matrix (white-balanced camera RGB from linear sRGB) for
 /// a DNG-style XYZ->camera matrix: rows normalised so that sRGB white maps
 /// to camera white. None when a row sums to zero.
-pub(crate) fn camera_from_srgb(xyz_to_cam: &[[f32; 3]; 3]) -> Option<Mat3> {
+pub fn camera_from_srgb(xyz_to_cam: &[[f32; 3]; 3]) -> Option<Mat3> {
     let x2c: Mat3 = std::array::from_fn(|i| std::array::from_fn(|j| xyz_to_cam[i][j] as f64));
     let mut cam_from_srgb = mul(&x2c, &SRGB_TO_XYZ);
     for row in cam_from_srgb.iter_mut() {
@@ -68,8 +70,14 @@ pub(crate) fn camera_from_srgb(xyz_to_cam: &[[f32; 3]; 3]) -> Option<Mat3> {
 /// sRGB-from-camera matrix for a DNG-style XYZ->camera matrix, or None when
 /// the matrix cannot be used (singular, or a row that sums to zero): the
 /// inverse of [`camera_from_srgb`].
-pub(crate) fn srgb_from_camera(xyz_to_cam: &[[f32; 3]; 3]) -> Option<Mat3> {
+pub fn srgb_from_camera(xyz_to_cam: &[[f32; 3]; 3]) -> Option<Mat3> {
     invert(&camera_from_srgb(xyz_to_cam)?)
+}
+
+/// XYZ (D65) from white-balanced camera RGB: sRGB->XYZ x
+/// [`srgb_from_camera`], the colour pgrf's preview gives a camera value.
+pub fn xyz_from_camera(xyz_to_cam: &[[f32; 3]; 3]) -> Option<Mat3> {
+    Some(mul(&SRGB_TO_XYZ, &srgb_from_camera(xyz_to_cam)?))
 }
 
 /// sRGB opto-electronic transfer function (linear [0,1] -> encoded [0,1]).

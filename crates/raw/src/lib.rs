@@ -9,7 +9,7 @@
 
 pub mod cfa;
 pub mod chart;
-mod color;
+pub mod color;
 mod decode;
 mod demosaic;
 mod dng;

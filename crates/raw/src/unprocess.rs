@@ -33,6 +33,19 @@ pub struct CameraSpace {
 }
 
 impl CameraSpace {
+    /// The Sony A7S2 of pgrf's built-in noise profile: its published D65
+    /// matrix, the white balance that makes D65 neutral, RGGB, black 512,
+    /// white 16383 (its 14-bit ARW).
+    pub fn sony_a7s2() -> CameraSpace {
+        CameraSpace {
+            xyz_to_cam: crate::chart::A7S2_D65_MATRIX,
+            wb: crate::chart::a7s2_daylight_wb(),
+            cfa: Cfa::Rggb,
+            black: [512.0; 4],
+            white: 16383,
+        }
+    }
+
     /// The camera space of a decoded RAW file: its colour matrix, as-shot
     /// white balance, CFA and levels. Refused (with the reason) when the
     /// file has no colour matrix or no white balance.
@@ -58,12 +71,92 @@ impl CameraSpace {
     }
 }
 
+/// The parameters of one unprocessing: which colours the camera sees and
+/// how bright the scene is. Training draws a different one per crop
+/// (pgrf-nn's photo source) so that a network cannot learn a colour prior;
+/// [`Unprocessing::plain`] is the camera's own.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Unprocessing {
+    /// White-balanced camera RGB from linear sRGB; each row sums to 1 so
+    /// that sRGB white maps to camera white before the white balance.
+    pub cam_from_srgb: [[f32; 3]; 3],
+    /// White-balance multipliers R, G, B that the result is divided by.
+    pub wb: [f32; 3],
+    /// Linear-light exposure factor (1 keeps the photo's brightness).
+    pub exposure: f32,
+    /// Invert a global S-shaped tone curve (Brooks et al.'s smoothstep,
+    /// `3x^2 - 2x^3`) before the sRGB transfer, for photos whose renderer
+    /// added one.
+    pub inverse_tone: bool,
+}
+
+impl Unprocessing {
+    /// `camera`'s own matrix and white balance at `exposure`, no tone curve;
+    /// refused when the matrix cannot be used.
+    pub fn plain(camera: &CameraSpace, exposure: f32) -> Result<Unprocessing> {
+        let m = camera_from_srgb(&camera.xyz_to_cam).ok_or_else(|| {
+            RawError::Invalid(
+                "unprocess: the colour matrix cannot be used (a row sums to zero)".into(),
+            )
+        })?;
+        let u = Unprocessing {
+            cam_from_srgb: m.map(|row| row.map(|v| v as f32)),
+            wb: camera.wb,
+            exposure,
+            inverse_tone: false,
+        };
+        u.check()?;
+        Ok(u)
+    }
+
+    /// Refuse parameters that would make nonsense (non-positive exposure or
+    /// multipliers, non-finite matrix entries).
+    pub fn check(&self) -> Result<()> {
+        if !(self.exposure.is_finite() && self.exposure > 0.0) {
+            return Err(RawError::Invalid(format!(
+                "unprocess: exposure must be a positive number, got {}",
+                self.exposure
+            )));
+        }
+        if self.wb.iter().any(|g| !(g.is_finite() && *g > 0.0)) {
+            return Err(RawError::Invalid(format!(
+                "unprocess: white-balance multipliers must be positive, got {:?}",
+                self.wb
+            )));
+        }
+        if self.cam_from_srgb.iter().flatten().any(|v| !v.is_finite()) {
+            return Err(RawError::Invalid(
+                "unprocess: the colour matrix has a non-finite entry".into(),
+            ));
+        }
+        Ok(())
+    }
+
+    /// Channel `ch` (0 R, 1 G, 2 B) of the camera for linear sRGB `lin`, as
+    /// a fraction of the sensor's range (not clipped).
+    #[inline]
+    fn camera_fraction(&self, ch: usize, lin: [f32; 3]) -> f32 {
+        let m = &self.cam_from_srgb[ch];
+        (m[0] * lin[0] + m[1] * lin[1] + m[2] * lin[2]) / self.wb[ch] * self.exposure
+    }
+}
+
+/// Brooks et al.'s inverse of the smoothstep tone curve `3x^2 - 2x^3`.
+fn inverse_smoothstep(y: f32) -> f32 {
+    let y = y.clamp(0.0, 1.0);
+    0.5 - ((1.0 - 2.0 * y).asin() / 3.0).sin()
+}
+
+/// The plane order R, G1, B, G2 as colour channels.
+const CHANNEL_OF_PLANE: [usize; 4] = [0, 1, 2, 1];
+
 /// Unprocess an sRGB-encoded photo into `camera`'s RAW space, scaled by
 /// `exposure` (linear light; 1 keeps the photo's brightness). Values that
 /// leave the sensor's range are clipped at white and at 0 DN. The result
 /// carries the camera's matrix and white balance so that its preview
 /// renders the photo again.
 pub fn unprocess(photo: &Photo, camera: &CameraSpace, exposure: f32) -> Result<RawFrame> {
+    let u = Unprocessing::plain(camera, exposure)?;
     let (rgb, width, height) = (&photo.rgb, photo.width, photo.height);
     if width < 2 || height < 2 || rgb.len() != width * height * 3 {
         return Err(RawError::Invalid(format!(
@@ -71,21 +164,6 @@ pub fn unprocess(photo: &Photo, camera: &CameraSpace, exposure: f32) -> Result<R
             rgb.len()
         )));
     }
-    if !(exposure.is_finite() && exposure > 0.0) {
-        return Err(RawError::Invalid(format!(
-            "unprocess: exposure must be a positive number, got {exposure}"
-        )));
-    }
-    if camera.wb.iter().any(|g| !(g.is_finite() && *g > 0.0)) {
-        return Err(RawError::Invalid(format!(
-            "unprocess: white-balance multipliers must be positive, got {:?}",
-            camera.wb
-        )));
-    }
-    let m = camera_from_srgb(&camera.xyz_to_cam).ok_or_else(|| {
-        RawError::Invalid("unprocess: the colour matrix cannot be used (a row sums to zero)".into())
-    })?;
-    let channel_of_plane = [0usize, 1, 2, 1];
     let mut mosaic = vec![0u16; width * height];
     mosaic
         .par_chunks_mut(width)
@@ -95,12 +173,9 @@ pub fn unprocess(photo: &Photo, camera: &CameraSpace, exposure: f32) -> Result<R
                 let px = &rgb[(r * width + c) * 3..(r * width + c) * 3 + 3];
                 let lin = [srgb_decode(px[0]), srgb_decode(px[1]), srgb_decode(px[2])];
                 let p = camera.cfa.plane_at(r, c);
-                let ch = channel_of_plane[p];
-                let balanced = (0..3).map(|k| m[ch][k] * lin[k] as f64).sum::<f64>();
-                let x = balanced / camera.wb[ch] as f64 * exposure as f64;
-                let range = camera.white as f64 - camera.black[p] as f64;
-                let dn = (camera.black[p] as f64 + x.min(1.0) * range).round();
-                *v = dn.clamp(0.0, camera.white as f64) as u16;
+                let x = u.camera_fraction(CHANNEL_OF_PLANE[p], lin);
+                let range = camera.white as f32 - camera.black[p];
+                *v = (camera.black[p] + quantise(x, range) * range).round() as u16;
             }
         });
     let mut frame = RawFrame::from_mosaic(
@@ -117,6 +192,101 @@ pub fn unprocess(photo: &Photo, camera: &CameraSpace, exposure: f32) -> Result<R
         xyz_to_cam: camera.xyz_to_cam,
     }];
     Ok(frame)
+}
+
+/// A fraction of the sensor's range clipped to [0, 1] and rounded to the
+/// sensor's DN steps (`range` DN from black to white).
+#[inline]
+fn quantise(x: f32, range: f32) -> f32 {
+    (x.clamp(0.0, 1.0) * range).round() / range
+}
+
+/// A photo held for cropping again and again (a training cache):
+/// sRGB-encoded values as 16-bit codes, half the memory of f32 and 257
+/// times finer than an 8-bit JPEG's steps.
+#[derive(Clone, Debug, PartialEq)]
+pub struct EncodedPhoto {
+    /// Width in pixels.
+    pub width: usize,
+    /// Height in pixels.
+    pub height: usize,
+    codes: Vec<u16>,
+}
+
+impl EncodedPhoto {
+    /// The photo's values as 16-bit codes.
+    pub fn from_photo(p: &Photo) -> EncodedPhoto {
+        EncodedPhoto {
+            width: p.width,
+            height: p.height,
+            codes: p
+                .rgb
+                .iter()
+                .map(|v| (v.clamp(0.0, 1.0) * 65535.0).round() as u16)
+                .collect(),
+        }
+    }
+
+    /// Memory held, bytes.
+    pub fn bytes(&self) -> usize {
+        self.codes.len() * 2
+    }
+}
+
+/// Linear light of every 16-bit code, without and with the inverse tone
+/// curve: a table lookup instead of a `powf` per value.
+fn decode_table(inverse_tone: bool) -> &'static [f32] {
+    static TABLES: std::sync::OnceLock<[Vec<f32>; 2]> = std::sync::OnceLock::new();
+    let t = TABLES.get_or_init(|| {
+        let make = |tone: bool| -> Vec<f32> {
+            (0..=u16::MAX)
+                .map(|c| {
+                    let e = c as f32 / 65535.0;
+                    srgb_decode(if tone { inverse_smoothstep(e) } else { e })
+                })
+                .collect()
+        };
+        [make(false), make(true)]
+    });
+    &t[inverse_tone as usize]
+}
+
+/// The packed clean crop `(4, patch, patch)` (planes R, G1, B, G2,
+/// normalised from black to white, rounded to the camera's DN steps) of
+/// the `2 * patch` square of `img` whose top-left pixel is `(y, x)`,
+/// unprocessed with `u` into `camera`'s CFA and levels: what training
+/// reads from a photo.
+pub fn unprocess_packed(
+    img: &EncodedPhoto,
+    (y, x): (usize, usize),
+    patch: usize,
+    camera: &CameraSpace,
+    u: &Unprocessing,
+) -> Result<ndarray::Array3<f32>> {
+    u.check()?;
+    if patch == 0 || y + 2 * patch > img.height || x + 2 * patch > img.width {
+        return Err(RawError::Invalid(format!(
+            "unprocess: a {0}x{0} window at ({y}, {x}) does not fit a {1}x{2} photo",
+            2 * patch,
+            img.width,
+            img.height
+        )));
+    }
+    let lut = decode_table(u.inverse_tone);
+    let offsets = camera.cfa.offsets();
+    let mut out = ndarray::Array3::<f32>::zeros((4, patch, patch));
+    for (p, &(dr, dc)) in offsets.iter().enumerate() {
+        let ch = CHANNEL_OF_PLANE[p];
+        let range = camera.white as f32 - camera.black[p];
+        let mut plane = out.index_axis_mut(ndarray::Axis(0), p);
+        for ((py, px), o) in plane.indexed_iter_mut() {
+            let i = ((y + 2 * py + dr) * img.width + x + 2 * px + dc) * 3;
+            let c = &img.codes[i..i + 3];
+            let lin = [lut[c[0] as usize], lut[c[1] as usize], lut[c[2] as usize]];
+            *o = quantise(u.camera_fraction(ch, lin), range);
+        }
+    }
+    Ok(out)
 }
 
 #[cfg(test)]
@@ -234,5 +404,67 @@ mod tests {
         frame.color_matrices.clear();
         let e = CameraSpace::of(&frame).unwrap_err().to_string();
         assert!(e.contains("no colour matrix"), "{e}");
+    }
+
+    /// The training path (16-bit codes, table lookups, a crop straight to
+    /// packed planes) gives the full-frame path's pixels of the same window
+    /// (the crop starts its own CFA phase at its corner), for every CFA
+    /// phase and an odd crop position: within one DN (the codes' own
+    /// rounding).
+    #[test]
+    fn packed_crops_match_the_full_frame() {
+        let src = photo(96, 64);
+        let enc = EncodedPhoto::from_photo(&src);
+        assert_eq!(enc.bytes(), 96 * 64 * 3 * 2);
+        for cfa in [Cfa::Rggb, Cfa::Bggr, Cfa::Grbg, Cfa::Gbrg] {
+            let cam = a7s2(cfa);
+            let u = Unprocessing::plain(&cam, 0.8).unwrap();
+            let (y, x, patch) = (5usize, 11usize, 24usize);
+            let crop = unprocess_packed(&enc, (y, x), patch, &cam, &u).unwrap();
+            let side = 2 * patch;
+            let window = Photo {
+                width: side,
+                height: side,
+                rgb: (0..side)
+                    .flat_map(|r| {
+                        let i = ((y + r) * 96 + x) * 3;
+                        src.rgb[i..i + side * 3].to_vec()
+                    })
+                    .collect(),
+            };
+            let frame = unprocess(&window, &cam, 0.8).unwrap();
+            let range = 16383.0 - 512.0;
+            for (p, &(dr, dc)) in cfa.offsets().iter().enumerate() {
+                for py in 0..patch {
+                    for px in 0..patch {
+                        let (r, c) = (2 * py + dr, 2 * px + dc);
+                        let want = (frame.mosaic[r * side + c] as f32 - 512.0) / range;
+                        let got = crop[[p, py, px]];
+                        assert!(
+                            (got - want).abs() * range <= 1.001,
+                            "{cfa:?} {p} {py} {px} {} {}",
+                            got * range,
+                            want * range
+                        );
+                    }
+                }
+            }
+        }
+        let cam = a7s2(Cfa::Rggb);
+        let u = Unprocessing::plain(&cam, 1.0).unwrap();
+        let e = unprocess_packed(&enc, (60, 0), 8, &cam, &u).unwrap_err();
+        assert!(e.to_string().contains("does not fit"), "{e}");
+    }
+
+    /// The inverse tone curve undoes smoothstep, and brightens the shadows
+    /// of what it is applied to (the curve darkened them).
+    #[test]
+    fn inverse_tone_undoes_smoothstep() {
+        for i in 0..=100 {
+            let x = i as f32 / 100.0;
+            let y = 3.0 * x * x - 2.0 * x * x * x;
+            assert!((inverse_smoothstep(y) - x).abs() < 1e-4, "{x}");
+        }
+        assert!(inverse_smoothstep(0.2) > 0.2 && inverse_smoothstep(0.8) < 0.8);
     }
 }

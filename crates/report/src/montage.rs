@@ -20,6 +20,14 @@ const GAP: usize = 8;
 /// Height of the caption band over each panel when any panel has one.
 const CAPTION: usize = 30;
 
+/// Font size of a caption: 20 px, smaller (down to 9 px) for a caption that
+/// would otherwise run into the next panel (a glyph is taken as ~0.55 of
+/// the size wide, generous for DejaVu Sans).
+fn caption_size(text: &str, cell_width: usize) -> f64 {
+    let fit = (cell_width.saturating_sub(8)) as f64 / (0.55 * text.chars().count().max(1) as f64);
+    fit.clamp(9.0, 20.0)
+}
+
 /// Write `rows` of panels as a grid (cells as large as the largest panel,
 /// white between them), atomically.
 pub fn write_montage(path: &Path, rows: &[Vec<Panel>]) -> Result<(), String> {
@@ -45,7 +53,9 @@ pub fn write_montage(path: &Path, rows: &[Vec<Panel>]) -> Result<(), String> {
                 if !p.caption.is_empty() {
                     root.draw_text(
                         &p.caption,
-                        &(FONT_FAMILY, 20).into_font().color(&BLACK),
+                        &(FONT_FAMILY, caption_size(&p.caption, cw))
+                            .into_font()
+                            .color(&BLACK),
                         (x0 as i32 + 4, y0 as i32 + 5),
                     )?;
                 }
@@ -65,4 +75,18 @@ pub fn write_montage(path: &Path, rows: &[Vec<Panel>]) -> Result<(), String> {
         Ok(())
     })
     .map_err(|e| e.to_string())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::caption_size;
+
+    #[test]
+    fn long_captions_shrink_to_their_panel() {
+        assert_eq!(caption_size("noisy input", 256), 20.0);
+        let long = "kodak_dc50.kdc ISO 6400 x300: noisy input";
+        let size = caption_size(long, 256);
+        assert!((9.0..12.0).contains(&size), "{size}");
+        assert!(0.55 * size * long.chars().count() as f64 <= 248.0 + 1e-9);
+    }
 }

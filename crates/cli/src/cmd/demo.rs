@@ -223,6 +223,9 @@ fn print_report(
                 psnr: s.psnr,
                 ssim: s.ssim,
                 gain: s.gain,
+                iso: None,
+                seed: None,
+                cast: None,
             });
         }
     }

@@ -1,19 +1,23 @@
 //! `pgrf eval`: one or more models on a benchmark (ELD Sony A7S2, SID Sony,
-//! or a CSV of pairs), measured under the ELD protocol, printed as the
-//! paper's tables print them (one row per ratio, PSNR/SSIM per method), with
-//! per-image CSV, a Markdown table and a PNG of the worst images.
+//! a CSV of pairs, or dark captures synthesised from clean files), measured
+//! under the ELD protocol, printed as the paper's tables print them (one row
+//! per ratio, or per ISO and ratio, PSNR/SSIM per method, plus the colour
+//! cast for synthetic captures), with per-image CSV, a Markdown table and a
+//! PNG of the worst images.
 
 use crate::progress::Bar;
 use anyhow::{bail, Context, Result};
 use clap::{Args, ValueEnum};
 use pgrf_core::NoProgress;
 use pgrf_eval::dataset::run::{MethodFn, Outcome, RunOptions, Worst, NOISY};
+use pgrf_eval::dataset::synthetic::{self, Synthetic};
 use pgrf_eval::dataset::table::{csv, summarise};
 use pgrf_eval::dataset::{eld, pairs, sid, DatasetKind, Sample};
-use pgrf_eval::Protocol;
+use pgrf_eval::{cast, Protocol};
 use pgrf_nn::backend::DeviceKind;
 use pgrf_nn::infer::restorer::describe_sampler;
 use pgrf_nn::infer::{restore_packed, Restore, SamplerChoice, Tiling};
+use pgrf_noise::ModelKind;
 use pgrf_raw::ndarray::ArrayView3;
 use pgrf_raw::{render_preview, unpack_normalized, PreviewOptions};
 use pgrf_report::{write_montage, Panel};
@@ -42,18 +46,34 @@ noisy frame's (EXIF); full images; illuminance correction on (ELD's test_ELD.py)
 the file names, capped at 300, rows x100/x250/x300; scenes 10034, 10045, 10172 left out (misaligned); centre \
 512x512 of the packed planes; illuminance correction on (ELD's test_SID.py).\n\
   pairs  ROOT (a CSV, or a folder with pairs.csv) of noisy,reference,ratio (ratio empty: from EXIF); full \
-images; no correction.\n\n\
+images; no correction.\n\
+  synthetic  --root FILE|FOLDER... of clean RAW files (or JPEG/PNG/TIFF photos: downscaled 2x and unprocessed \
+into the Sony A7S2's camera space); each is made dark at every --iso x --ratio condition (default ISO \
+800,1600,3200,6400 x ratio 50,100,200,300) with the --profile's noise (--noise pgrf|eld|pg) at that ISO: \
+reference / ratio -> noise model -> x ratio, clamped [0,1]; each file's own black/white levels; full images; no \
+correction (the exposure is known). Capture seed = mix64(mix64(mix64(SEED ^ fnv1a64(file name)) ^ ISO) ^ f32 bits \
+of the ratio) (SplitMix64 finaliser, 64-bit FNV-1a): the same command gives the same numbers, and adding files \
+leaves the others' noise as it was. Rows per ISO and ratio; the CSV has one line per file, condition and method.\n\
+  colour cast (synthetic): mean CIE76 chroma difference sqrt(da*^2 + db*^2) in dE*ab units (L* left out, so \
+brightness errors do not count) of result vs reference over low-texture 16x16 packed-pixel blocks: blocks \
+without a reference value >= 0.98 and with reference mean green >= 0.002, whose reference green coefficient of \
+variation is at most the median of those blocks; each block's mean R, (G1+G2)/2, B converted to CIELAB (D65, \
+white = 1) through the file's white balance and colour matrix (camera -> sRGB as pgrf preview, -> XYZ); the CSV \
+adds the signed mean da* (+ magenta, - green) and db* (+ yellow, - blue). Results are clamped to [0,1] \
+first; a file without white balance or colour matrix is measured with multipliers 1 or camera RGB as sRGB, \
+and a `note` line in the header says so.\n\n\
 Inputs are packed R,G1,B,G2, normalised by the files' black levels and white 16383 (eld, sid: ELD's \
-pack_raw_bayer; pairs: the files' white), multiplied by the ratio and clamped to [0,1]; references are clamped \
+pack_raw_bayer; pairs, synthetic: the files' white), multiplied by the ratio and clamped to [0,1]; references are clamped \
 to [0,1]; a crop is applied before the network runs; then ELD's measurement (x255 floats, PSNR data range 255, \
 SSIM 7x7). The `noisy input` column is measured without the correction, as ELD's res_in.")]
 pub struct EvalArgs {
-    /// Benchmark: eld, sid or pairs.
+    /// Benchmark: eld, sid, pairs or synthetic.
     #[arg(long)]
     pub protocol: DatasetKind,
-    /// Dataset folder (pairs: the CSV or its folder).
-    #[arg(long)]
-    pub root: PathBuf,
+    /// Dataset folder (pairs: the CSV or its folder; synthetic: clean files and folders of them,
+    /// several allowed: `--root A B` or `--root A --root B`).
+    #[arg(long, required = true, num_args = 1..)]
+    pub root: Vec<PathBuf>,
     /// Weight file from `pgrf train`; repeat for a comparison table.
     #[arg(long, short = 'm')]
     pub model: Vec<PathBuf>,
@@ -68,7 +88,8 @@ pub struct EvalArgs {
     #[arg(long)]
     pub crop: Option<String>,
     /// White level for normalising both files: a number, or `file` for each file's own
-    /// (default: the protocol's, 16383 for eld and sid as ELD's pack_raw_bayer; file for pairs).
+    /// (default: the protocol's, 16383 for eld and sid as ELD's pack_raw_bayer; file for pairs and
+    /// synthetic).
     #[arg(long)]
     pub white: Option<String>,
     /// ELD scenes, e.g. 1-10 (default) or 1,2.
@@ -99,9 +120,21 @@ pub struct EvalArgs {
     /// cpu, or cuda (needs a build with `--features cuda`).
     #[arg(long, default_value = "cpu")]
     pub device: DeviceKind,
-    /// Seed of the flow model's start noise.
+    /// Seed of the flow model's start noise, and (synthetic) the base of every capture's noise seed.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
+    /// Synthetic: ISOs of the captures, comma-separated (default 800,1600,3200,6400).
+    #[arg(long)]
+    pub iso: Option<String>,
+    /// Synthetic: exposure ratios, comma-separated, each >= 1 (default 50,100,200,300).
+    #[arg(long)]
+    pub ratio: Option<String>,
+    /// Synthetic: camera noise profile, a built-in name or a JSON file (default sony-a7s2).
+    #[arg(long)]
+    pub profile: Option<String>,
+    /// Synthetic: noise model, pgrf, eld or pg (default pgrf).
+    #[arg(long)]
+    pub noise: Option<ModelKind>,
     /// No per-image progress lines on stderr.
     #[arg(long, short)]
     pub quiet: bool,
@@ -129,13 +162,8 @@ fn parse_white(a: &EvalArgs) -> Result<Option<u32>> {
     }
 }
 
-fn header(
-    a: &EvalArgs,
-    samples: &[Sample],
-    crop: Option<usize>,
-    correct: bool,
-    white: Option<u32>,
-) -> String {
+/// What a file-pair run measures, for the header's first line.
+fn pairs_description(a: &EvalArgs, samples: &[Sample]) -> String {
     let what = match a.protocol {
         DatasetKind::Eld => format!(
             "ELD Sony A7S2, scenes {}: x100 = frames 4,9,14, x200 = frames 5,10,15, reference = nearest of frames 1,6,11,16, ratio = ISO x exposure of reference / noisy (EXIF)",
@@ -153,8 +181,34 @@ fn header(
                 "misaligned 10034, 10045, 10172 excluded"
             }
         ),
-        DatasetKind::Pairs => format!("pairs of {}", a.root.display()),
+        DatasetKind::Pairs => format!("pairs of {}", a.root[0].display()),
+        DatasetKind::Synthetic => "synthetic captures".into(),
     };
+    format!("{what}; {} images", samples.len())
+}
+
+/// What a synthetic run measures, for the header's first line.
+fn synthetic_description(images: &[synthetic::Image], synth: &Synthetic) -> String {
+    let names: Vec<&str> = images.iter().map(|i| i.id.as_str()).collect();
+    format!(
+        "{} clean files ({}); {}; {} captures",
+        images.len(),
+        names.join(", "),
+        synth.describe(),
+        images.len() * synth.conditions.len()
+    )
+}
+
+/// The header: what is measured (`what`), how, and for synthetic runs the
+/// colour-cast definition.
+fn header(
+    a: &EvalArgs,
+    what: &str,
+    crop: Option<usize>,
+    correct: bool,
+    white: Option<u32>,
+) -> String {
+    let synthetic = a.protocol == DatasetKind::Synthetic;
     let crop = match crop {
         Some(c) => {
             format!("centre {c}x{c} of the packed planes (input cropped before the network)")
@@ -165,28 +219,68 @@ fn header(
         Some(w) => format!("white {w}"),
         None => "white from each file".into(),
     };
-    format!(
-        "protocol {}: {what}; {} images; {crop}\nmeasure  packed R,G1,B,G2, black per channel from the files, {white}; input x ratio clamped [0,1], reference clamped [0,1]; {}{}",
+    let input = if synthetic {
+        "capture = reference / ratio through the noise model, x ratio, clamped [0,1]"
+    } else {
+        "input x ratio clamped [0,1]"
+    };
+    let mut s = format!(
+        "protocol {}: {what}; {crop}\nmeasure  packed R,G1,B,G2, black per channel from the files, {white}; {input}, reference clamped [0,1]; {}{}",
         a.protocol,
-        samples.len(),
         Protocol::eld(correct).describe(),
         if correct && a.noise_baseline == Baseline::Input {
             format!("; `{NOISY}` without the correction (ELD's res_in)")
         } else {
             String::new()
         }
-    )
+    );
+    if synthetic {
+        s.push_str(&format!("\ncast     {}", cast::DEFINITION));
+    }
+    s
+}
+
+/// The file-pair protocols take exactly one --root.
+fn one_root(a: &EvalArgs) -> Result<&Path> {
+    match a.root.as_slice() {
+        [r] => Ok(r),
+        r => bail!(
+            "--root: the {} protocol takes one folder or file, got {}",
+            a.protocol,
+            r.len()
+        ),
+    }
 }
 
 fn walk(a: &EvalArgs) -> Result<Vec<Sample>> {
+    let root = one_root(a)?;
     Ok(match a.protocol {
         DatasetKind::Eld => {
             let scenes = eld::parse_scenes(&a.scenes).map_err(anyhow::Error::msg)?;
-            eld::walk(&a.root, &scenes)?
+            eld::walk(root, &scenes)?
         }
-        DatasetKind::Sid => sid::walk(&a.root, a.list.as_deref(), a.keep_misaligned)?,
-        DatasetKind::Pairs => pairs::walk(&a.root)?,
+        DatasetKind::Sid => sid::walk(root, a.list.as_deref(), a.keep_misaligned)?,
+        DatasetKind::Pairs => pairs::walk(root)?,
+        DatasetKind::Synthetic => bail!("the synthetic protocol has no file pairs to walk"),
     })
+}
+
+/// The synthetic recipe from --iso, --ratio, --profile, --noise and --seed.
+fn synthetic_recipe(a: &EvalArgs) -> Result<Synthetic> {
+    let isos = match &a.iso {
+        Some(t) => synthetic::parse_isos(t)?,
+        None => synthetic::DEFAULT_ISOS.to_vec(),
+    };
+    let ratios = match &a.ratio {
+        Some(t) => synthetic::parse_ratios(t)?,
+        None => synthetic::DEFAULT_RATIOS.to_vec(),
+    };
+    Ok(Synthetic::new(
+        a.profile.as_deref().unwrap_or("sony-a7s2"),
+        a.noise.unwrap_or_default(),
+        synthetic::grid(&isos, &ratios),
+        a.seed,
+    )?)
 }
 
 fn write_file(path: &Path, text: &str) -> Result<()> {
@@ -205,7 +299,26 @@ pub fn run(a: &EvalArgs) -> Result<()> {
     if a.model.is_empty() && !baseline {
         bail!("nothing to evaluate: give --model (or keep the noisy-input baseline)");
     }
-    let samples = walk(a)?;
+    let synthetic = a.protocol == DatasetKind::Synthetic;
+    if !synthetic {
+        for (flag, given) in [
+            ("--iso", a.iso.is_some()),
+            ("--ratio", a.ratio.is_some()),
+            ("--profile", a.profile.is_some()),
+            ("--noise", a.noise.is_some()),
+        ] {
+            if given {
+                bail!("{flag} goes with --protocol synthetic only");
+            }
+        }
+    }
+    // What is measured: file pairs, or clean files and the synthetic recipe.
+    let (samples, images, recipe) = if synthetic {
+        let recipe = synthetic_recipe(a)?;
+        (Vec::new(), synthetic::walk(&a.root)?, Some(recipe))
+    } else {
+        (walk(a)?, Vec::new(), None)
+    };
     a.device.check_available().map_err(anyhow::Error::msg)?;
     let mut models: Vec<(String, Box<dyn Restore>)> = Vec::new();
     for m in &a.model {
@@ -227,8 +340,16 @@ pub fn run(a: &EvalArgs) -> Result<()> {
         }
         models.push((name, r));
     }
-    let head = header(a, &samples, crop, correct, white);
-    let bar = Bar::new("eval", samples.len() as u64, "images", a.quiet);
+    let (what, cases, units) = match &recipe {
+        Some(r) => (
+            synthetic_description(&images, r),
+            images.len() * r.conditions.len(),
+            "captures",
+        ),
+        None => (pairs_description(a, &samples), samples.len(), "images"),
+    };
+    let head = header(a, &what, crop, correct, white);
+    let bar = Bar::new("eval", cases as u64, units, a.quiet);
     let tiling = Tiling {
         tile: a.tile,
         overlap: None,
@@ -256,9 +377,17 @@ pub fn run(a: &EvalArgs) -> Result<()> {
         correct,
         baseline,
         worst_count: a.worst_count,
+        cast: false,
     };
-    let Outcome { rows, worst } = pgrf_eval::dataset::run::run(&samples, &methods, &opts, &bar)?;
+    let Outcome { rows, worst, notes } = match &recipe {
+        Some(r) => synthetic::run(&images, r, &methods, &opts, &bar)?,
+        None => pgrf_eval::dataset::run::run(&samples, &methods, &opts, &bar)?,
+    };
     let summary = summarise(&rows);
+    let head = std::iter::once(head)
+        .chain(notes.iter().map(|n| format!("note     {n}")))
+        .collect::<Vec<_>>()
+        .join("\n");
     println!("{head}");
     print!("{}", summary.text());
     if let Some(p) = &a.csv {

@@ -9,16 +9,14 @@ use clap::Args;
 use pgrf_calib::Calibration;
 use pgrf_nn::backend::DeviceKind;
 use pgrf_nn::data::validation::ValSet;
-use pgrf_nn::data::{Folder, Source};
 use pgrf_nn::schedule::Schedule;
 use pgrf_nn::train::{Outcome, TrainSettings};
 use pgrf_nn::weights::NoiseSource;
 use pgrf_nn::{Method, TrainConfig};
 use pgrf_noise::pair::{PairSpec, RatioSpec};
 use pgrf_noise::{CameraProfile, ModelKind};
-use pgrf_raw::LevelOverrides;
 use serde::Serialize;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 
@@ -27,12 +25,21 @@ use std::sync::Arc;
 /// TOML table, unset flags are left out).
 #[derive(Args, Debug, Default, Clone, Serialize)]
 pub struct Settings {
-    /// Clean training images: a folder of RAWs, or "procedural" (dead-leaves scenes).
+    /// Clean training images, comma-separated entries `SOURCE[@WEIGHT]`: a folder (or file) of clean RAWs, a folder of photos (JPEG/PNG/TIFF, unprocessed into the camera's RAW space), or "procedural" (dead-leaves scenes); crops are drawn in proportion to the weights (default 1 each), e.g. `photos/@3,procedural@1` [default: procedural].
     #[arg(long)]
     pub data: Option<String>,
-    /// Validation images: a folder of RAWs or "procedural" (default: 10% of --data's files held out, or procedural).
+    /// Validation images, entries as --data (default: 10% of each folder's files held out; procedural entries validate on procedural scenes).
     #[arg(long)]
     pub val_data: Option<String>,
+    /// The camera photos are unprocessed into: any RAW file of it (colour matrix, white balance, CFA, levels) [default: the built-in A7S2's with the sony-a7s2 profile].
+    #[arg(long)]
+    pub camera_like: Option<PathBuf>,
+    /// Photos: downscale factor per side before cropping (area filter; removes JPEG and demosaicing artefacts) [default: 2].
+    #[arg(long)]
+    pub photo_downscale: Option<usize>,
+    /// Photos: invert a global S-shaped tone curve (Brooks et al.'s smoothstep) before the sRGB transfer.
+    #[arg(long, num_args = 0..=1, default_missing_value = "true")]
+    pub photo_inverse_tone: Option<bool>,
     /// Camera noise profile (built-in name or JSON path) [default: sony-a7s2].
     #[arg(long)]
     pub profile: Option<String>,
@@ -45,7 +52,10 @@ pub struct Settings {
     /// Fixed ISO (default: parameters drawn from the profile's ELD distribution).
     #[arg(long)]
     pub iso: Option<u32>,
-    /// Smallest exposure ratio [default: 100].
+    /// Draw the gain between two ISOs only, e.g. 800,6400 (default: the profile's whole range).
+    #[arg(long, value_delimiter = ',')]
+    pub iso_range: Option<Vec<u32>>,
+    /// Smallest exposure ratio [default: 1].
     #[arg(long)]
     pub ratio_min: Option<f32>,
     /// Largest exposure ratio [default: 300].
@@ -175,52 +185,6 @@ fn merged(a: &TrainArgs) -> Result<TrainConfig> {
     Ok(c)
 }
 
-/// Training and validation sources.
-fn sources(s: &TrainConfig, patch: usize, val_patch: usize) -> Result<(Source, Source, String)> {
-    let data = s.data.clone();
-    let cache = s.cache_mib;
-    let folder = |dir: &Path| -> Result<Vec<PathBuf>> {
-        Folder::list(dir).with_context(|| "--data".to_string())
-    };
-    let (train, mut held) = if data == "procedural" {
-        (Source::Procedural, None)
-    } else {
-        let mut files = folder(Path::new(&data))?;
-        let held = if s.val_data.is_none() && files.len() >= 2 {
-            let k = (files.len() / 10).max(1);
-            Some(files.split_off(files.len() - k))
-        } else {
-            None
-        };
-        let f = Folder::new(files, LevelOverrides::default(), cache)?;
-        f.check(patch)?;
-        (Source::Folder(f), held)
-    };
-    let val = match s.val_data.as_deref() {
-        Some("procedural") => Source::Procedural,
-        Some(dir) => {
-            let f = Folder::new(folder(Path::new(dir))?, LevelOverrides::default(), 256)?;
-            f.check(val_patch)?;
-            Source::Folder(f)
-        }
-        None => match held.take() {
-            Some(files) => {
-                let f = Folder::new(files, LevelOverrides::default(), 256)?;
-                f.check(val_patch)?;
-                Source::Folder(f)
-            }
-            None => match &train {
-                Source::Procedural => Source::Procedural,
-                Source::Folder(f) => {
-                    let f = Folder::new(f.files().to_vec(), LevelOverrides::default(), 256)?;
-                    Source::Folder(f)
-                }
-            },
-        },
-    };
-    Ok((train, val, data))
-}
-
 pub fn run(a: &TrainArgs) -> Result<()> {
     let s = merged(a)?;
     if a.print_config {
@@ -242,6 +206,10 @@ pub fn run(a: &TrainArgs) -> Result<()> {
     let profile = CameraProfile::load(&profile_name)?;
     let mut spec = PairSpec::new(profile, model);
     spec.iso = s.iso;
+    spec.iso_range = s.iso_range()?;
+    if let Some((lo, hi)) = spec.iso_range {
+        spec.k_range(lo, hi).context("--iso-range")?;
+    }
     let (lo, hi) = (s.ratio_min, s.ratio_max);
     spec.ratio = RatioSpec::Uniform { lo, hi };
     let mut calibration = None;
@@ -251,7 +219,11 @@ pub fn run(a: &TrainArgs) -> Result<()> {
             .with_context(|| format!("--calib {}", path.display()))?;
         calibration = Some(cal.identity(path));
     }
-    let (train_src, val_src, data) = sources(&s, patch, val_patch)?;
+    let built = pgrf_nn::data::build::sources(&s)?;
+    for w in &built.warnings {
+        eprintln!("pgrf: warning: {w}");
+    }
+    let (train_src, val_src, data) = (built.train, built.val, s.data.clone());
     let val_pairs = s.val_pairs;
     let seed = s.seed;
     let spec = Arc::new(spec);

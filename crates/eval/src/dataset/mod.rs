@@ -6,6 +6,8 @@
 //! - [`eld`]: the ELD Sony A7S2 folder layout (ELD's `ELDEvalDataset`).
 //! - [`sid`]: the SID Sony test list, as ELD evaluates SID (`test_SID.py`).
 //! - [`pairs`]: a user's own CSV of noisy, reference, ratio.
+//! - [`synthetic`]: clean RAW files (or photos, unprocessed) made dark and
+//!   noisy in memory at a grid of ISO x ratio conditions with fixed seeds.
 //!
 //! Walkers only look at the file system (every file they name must exist,
 //! else an error naming it); pixels and EXIF are read by `load_pair`.
@@ -20,6 +22,7 @@ pub mod miniature;
 pub mod pairs;
 pub mod run;
 pub mod sid;
+pub mod synthetic;
 pub mod table;
 
 use ndarray::{s, Array3, ArrayView3};
@@ -47,6 +50,8 @@ pub enum DatasetKind {
     Sid,
     /// A user's own CSV of pairs ([`pairs`]).
     Pairs,
+    /// Dark captures synthesised from clean files ([`synthetic`]).
+    Synthetic,
 }
 
 impl DatasetKind {
@@ -55,24 +60,26 @@ impl DatasetKind {
             DatasetKind::Eld => "eld",
             DatasetKind::Sid => "sid",
             DatasetKind::Pairs => "pairs",
+            DatasetKind::Synthetic => "synthetic",
         }
     }
 
     /// The protocol's own illuminance-correction setting: ELD's `test_ELD.py`
     /// and `test_SID.py` both call `engine.eval(..., correct=True)`; a user's
-    /// pairs are measured without it unless asked.
+    /// pairs are measured without it unless asked, and so are synthetic
+    /// captures, whose exposure is known exactly.
     pub fn default_correct(self) -> bool {
-        !matches!(self, DatasetKind::Pairs)
+        matches!(self, DatasetKind::Eld | DatasetKind::Sid)
     }
 
     /// The protocol's white level: ELD's `pack_raw_bayer` normalises by
     /// `(x - black[c]) / (16383 - black[c])` whatever the file says (Sony's
     /// compressed ARW reports 15360), black per channel from the file; a
-    /// user's pairs use each file's own levels.
+    /// user's pairs and synthetic captures use each file's own levels.
     pub fn default_white(self) -> Option<u32> {
         match self {
-            DatasetKind::Pairs => None,
-            _ => Some(16383),
+            DatasetKind::Eld | DatasetKind::Sid => Some(16383),
+            DatasetKind::Pairs | DatasetKind::Synthetic => None,
         }
     }
 
@@ -100,8 +107,9 @@ impl std::str::FromStr for DatasetKind {
             "eld" => Ok(DatasetKind::Eld),
             "sid" => Ok(DatasetKind::Sid),
             "pairs" => Ok(DatasetKind::Pairs),
+            "synthetic" => Ok(DatasetKind::Synthetic),
             _ => Err(format!(
-                "unknown protocol {s:?}: expected eld, sid or pairs"
+                "unknown protocol {s:?}: expected eld, sid, pairs or synthetic"
             )),
         }
     }
@@ -267,5 +275,9 @@ mod tests {
         assert_eq!(DatasetKind::Eld.default_crop(), None);
         assert_eq!(DatasetKind::Eld.default_white(), Some(16383));
         assert_eq!(DatasetKind::Pairs.default_white(), None);
+        assert!(!DatasetKind::Synthetic.default_correct());
+        assert_eq!(DatasetKind::Synthetic.default_white(), None);
+        assert_eq!(DatasetKind::Synthetic.default_crop(), None);
+        assert_eq!("synthetic".parse(), Ok(DatasetKind::Synthetic));
     }
 }

@@ -6,8 +6,8 @@
 //! so this crate needs no network framework: the CLI wraps its models.
 
 use super::table::Row;
-use super::{centre_crop, load_pair, DatasetError, Result, Sample};
-use crate::metrics::{evaluate, Protocol};
+use super::{centre_crop, load_pair, DatasetError, LoadedPair, Result, Sample};
+use crate::metrics::{colour_cast, evaluate, CameraColour, MetricError, Protocol};
 use ndarray::{Array3, ArrayView3};
 use pgrf_core::Progress;
 use pgrf_raw::{LevelOverrides, RawFrame};
@@ -37,6 +37,8 @@ pub struct RunOptions {
     pub baseline: bool,
     /// How many worst images (by the first method's PSNR) to keep.
     pub worst_count: usize,
+    /// Measure the colour cast ([`crate::cast`]) of every output too.
+    pub cast: bool,
 }
 
 /// One of the worst images: its thumbnails, in column order.
@@ -58,10 +60,27 @@ pub struct Outcome {
     pub rows: Vec<Row>,
     /// The worst images, worst first.
     pub worst: Vec<Worst>,
+    /// Lines for the header about how some cases were measured (e.g. a
+    /// file without a colour matrix).
+    pub notes: Vec<String>,
 }
 
 fn thumb(a: ArrayView3<f32>) -> Array3<f32> {
     centre_crop(a, Some(THUMB)).to_owned()
+}
+
+/// One case of a run: a loaded pair and what its rows and messages say
+/// about it.
+pub(crate) struct Case {
+    pub(crate) pair: LoadedPair,
+    /// The rows' common fields (method and scores are filled per method).
+    pub(crate) row: Row,
+    /// What a failing method's error names (the noisy file).
+    pub(crate) source: String,
+    /// The case in error messages and the worst-images picture.
+    pub(crate) title: String,
+    /// The case in the progress line, after `[i/n]`.
+    pub(crate) line: String,
 }
 
 /// Run `methods` (name and closure, in column order) over `samples`.
@@ -73,50 +92,92 @@ pub fn run(
     opts: &RunOptions,
     progress: &dyn Progress,
 ) -> Result<Outcome> {
-    let protocol = Protocol::eld(opts.correct);
-    let plain = Protocol::eld(false);
-    let n = samples.len();
-    let mut rows = Vec::new();
-    let mut worst: Vec<Worst> = Vec::new();
-    progress.start(n as u64, "images");
-    for (i, smp) in samples.iter().enumerate() {
+    let load = |i: usize| -> Result<Case> {
+        let smp = &samples[i];
         let pair = load_pair(smp, &opts.levels)?;
-        // ELD crops input and reference before the network runs.
-        let input = centre_crop(pair.input.view(), opts.crop).to_owned();
-        let reference = centre_crop(pair.reference.view(), opts.crop);
-        let mut outputs: Vec<(&str, Array3<f32>)> = Vec::new();
-        if opts.baseline {
-            outputs.push((NOISY, input.clone()));
-        }
-        for (name, f) in methods {
-            let out = f(input.view())
-                .map_err(|e| DatasetError(format!("{}: model {name}: {e}", smp.noisy.display())))?;
-            outputs.push((name, out));
-        }
-        // The worst-images ranking follows the first method (the noisy
-        // input when there is none).
-        let rank = outputs.iter().position(|(n, _)| *n != NOISY).unwrap_or(0);
-        let mut first = None;
-        let mut line = format!("[{}/{n}] {} x{:.1}", i + 1, smp.id, pair.ratio);
-        for (k, (name, out)) in outputs.iter().enumerate() {
-            let p = if *name == NOISY { &plain } else { &protocol };
-            let sc = evaluate(out.view(), reference, p)
-                .map_err(|e| DatasetError(format!("{}: {e}", smp.id)))?;
-            if k == rank {
-                first = Some(sc.psnr);
-            }
-            line.push_str(&format!("  {name} {:.2}/{:.4}", sc.psnr, sc.ssim));
-            rows.push(Row {
+        Ok(Case {
+            row: Row {
                 protocol: smp.kind.name().into(),
                 id: smp.id.clone(),
                 group: smp.group,
                 ratio: pair.ratio,
                 noisy: smp.noisy.display().to_string(),
                 reference: smp.reference.display().to_string(),
+                method: String::new(),
+                psnr: f64::NAN,
+                ssim: f64::NAN,
+                gain: None,
+                iso: None,
+                seed: None,
+                cast: None,
+            },
+            source: smp.noisy.display().to_string(),
+            title: smp.id.clone(),
+            line: format!("{} x{:.1}", smp.id, pair.ratio),
+            pair,
+        })
+    };
+    run_cases(samples.len(), "images", load, methods, opts, progress)
+}
+
+/// The one evaluation loop: case `i` of `n` from `load(i)` (called in
+/// order), every method on its input, every output measured.
+pub(crate) fn run_cases(
+    n: usize,
+    units: &str,
+    mut load: impl FnMut(usize) -> Result<Case>,
+    methods: &[(String, &MethodFn)],
+    opts: &RunOptions,
+    progress: &dyn Progress,
+) -> Result<Outcome> {
+    let protocol = Protocol::eld(opts.correct);
+    let plain = Protocol::eld(false);
+    let mut rows = Vec::new();
+    let mut worst: Vec<Worst> = Vec::new();
+    progress.start(n as u64, units);
+    for i in 0..n {
+        let case = load(i)?;
+        let pair = &case.pair;
+        // ELD crops input and reference before the network runs.
+        let input = centre_crop(pair.input.view(), opts.crop).to_owned();
+        let reference = centre_crop(pair.reference.view(), opts.crop);
+        let colour = opts.cast.then(|| CameraColour::of(&pair.reference_frame));
+        let mut outputs: Vec<(&str, Array3<f32>)> = Vec::new();
+        if opts.baseline {
+            outputs.push((NOISY, input.clone()));
+        }
+        for (name, f) in methods {
+            let out = f(input.view())
+                .map_err(|e| DatasetError(format!("{}: model {name}: {e}", case.source)))?;
+            outputs.push((name, out));
+        }
+        // The worst-images ranking follows the first method (the noisy
+        // input when there is none).
+        let rank = outputs.iter().position(|(n, _)| *n != NOISY).unwrap_or(0);
+        let mut first = None;
+        let mut line = format!("[{}/{n}] {}", i + 1, case.line);
+        for (k, (name, out)) in outputs.iter().enumerate() {
+            let p = if *name == NOISY { &plain } else { &protocol };
+            let at = |e: MetricError| DatasetError(format!("{}: {e}", case.title));
+            let sc = evaluate(out.view(), reference, p).map_err(at)?;
+            let cast = match &colour {
+                Some(c) => colour_cast(out.view(), reference, c).map_err(at)?,
+                None => None,
+            };
+            if k == rank {
+                first = Some(sc.psnr);
+            }
+            line.push_str(&format!("  {name} {:.2}/{:.4}", sc.psnr, sc.ssim));
+            if let Some(c) = &cast {
+                line.push_str(&format!("/{:.2}", c.dab));
+            }
+            rows.push(Row {
                 method: name.to_string(),
                 psnr: sc.psnr,
                 ssim: sc.ssim,
                 gain: sc.gain,
+                cast,
+                ..case.row.clone()
             });
         }
         progress.note(&line);
@@ -135,7 +196,7 @@ pub fn run(
             template.mosaic = vec![0; 4 * tw * th];
             worst.push(Worst {
                 score: first.unwrap_or(f64::INFINITY),
-                id: smp.id.clone(),
+                id: case.title.clone(),
                 template,
                 tiles,
             });
@@ -144,5 +205,9 @@ pub fn run(
         }
     }
     progress.finish();
-    Ok(Outcome { rows, worst })
+    Ok(Outcome {
+        rows,
+        worst,
+        notes: Vec::new(),
+    })
 }

@@ -4,6 +4,8 @@
 //! - [`psnr`](mod@psnr): peak signal-to-noise ratio, as `skimage.metrics.peak_signal_noise_ratio`.
 //! - [`ssim`](mod@ssim): structural similarity, as `skimage.metrics.structural_similarity`
 //!   with its defaults (7x7 uniform window, sample covariance, channel mean).
+//! - [`cast`]: the colour-cast figure, a mean CIELAB chroma shift over
+//!   low-texture blocks (not part of ELD's protocol; pgrf's synthetic one).
 //! - [`correct`]: ELD's single least-squares brightness gain over unsaturated pixels.
 //! - [`protocol`]: the evaluation protocol that strings them together (clamp,
 //!   optional correction, x255 as floats) and says in one line what it measured.
@@ -11,6 +13,7 @@
 //! All accumulation is f64 and every parallel reduction adds its partial sums
 //! in a fixed order, so a result does not depend on the number of threads.
 
+pub mod cast;
 mod correct;
 mod error;
 mod input;
@@ -19,6 +22,7 @@ mod psnr;
 mod ssim;
 mod sum;
 
+pub use cast::{colour_cast, CameraColour, Cast};
 pub use correct::{illuminance_correct, illuminance_gain, IlluminanceGain};
 pub use error::MetricError;
 pub use protocol::{evaluate, Protocol, Scores};

@@ -6,9 +6,13 @@
 //! augmentation serve the training loop only.
 
 mod augment;
+pub mod build;
 mod loader;
+pub mod photos;
 pub mod source;
 pub mod validation;
 
+pub use loader::loader_rate;
 pub(crate) use loader::{Extras, Loader, SampleSpec};
+pub use photos::{PhotoFolder, PhotoOptions};
 pub use source::{Folder, Source};

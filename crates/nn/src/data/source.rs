@@ -8,7 +8,9 @@
 //! half the bytes of f32) up to a memory budget; beyond it they are decoded
 //! again when drawn.
 
+use crate::data::photos::PhotoFolder;
 use crate::error::{NnError, Result};
+use pgrf_core::seed::mix64;
 use pgrf_raw::ndarray::{s, Array3};
 use pgrf_raw::{decode_file, pack_u16, LevelOverrides, RawFrame, SceneKind, SceneSpec};
 use std::collections::HashMap;
@@ -148,7 +150,14 @@ pub enum Source {
     Procedural,
     /// Crops of the clean RAWs in a folder.
     Folder(Folder),
+    /// Crops of ordinary photos unprocessed into a camera's RAW space.
+    Photos(PhotoFolder),
+    /// Several sources, each crop drawn from one of them with probability
+    /// proportional to its weight.
+    Mixture(Vec<(f64, Source)>),
 }
+
+const MIX_DOMAIN: u64 = 0x6d69_7874; // "mixt"
 
 impl Source {
     /// What the source is, in words ("procedural dead-leaves scenes",
@@ -157,6 +166,24 @@ impl Source {
         match self {
             Source::Procedural => "procedural dead-leaves scenes".into(),
             Source::Folder(f) => format!("{} clean RAW files", f.files.len()),
+            Source::Photos(p) => format!(
+                "{} photos unprocessed into the camera's RAW space ({}x downscale{})",
+                p.files().len(),
+                p.options().downscale,
+                if p.options().inverse_tone {
+                    ", inverse tone curve"
+                } else {
+                    ""
+                }
+            ),
+            Source::Mixture(parts) => {
+                let total: f64 = parts.iter().map(|(w, _)| w).sum();
+                parts
+                    .iter()
+                    .map(|(w, s)| format!("{} ({:.0}%)", s.describe(), 100.0 * w / total))
+                    .collect::<Vec<_>>()
+                    .join(" + ")
+            }
         }
     }
 
@@ -200,6 +227,21 @@ impl Source {
                     origin: (y, x),
                     image: (h, w),
                 })
+            }
+            Source::Photos(p) => p.crop(patch, scene_seed, pick, fy, fx),
+            Source::Mixture(parts) => {
+                let total: f64 = parts.iter().map(|(w, _)| w).sum();
+                let u = (mix64(pick ^ MIX_DOMAIN) >> 11) as f64 / (1u64 << 53) as f64 * total;
+                let mut acc = 0.0;
+                let part = parts
+                    .iter()
+                    .find(|(w, _)| {
+                        acc += w;
+                        u < acc
+                    })
+                    .or(parts.last())
+                    .ok_or_else(|| NnError::Invalid("an empty mixture of sources".into()))?;
+                part.1.crop(patch, scene_seed, mix64(pick), fy, fx)
             }
         }
     }

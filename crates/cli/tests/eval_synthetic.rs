@@ -1,0 +1,337 @@
+//! `pgrf eval --protocol synthetic` end to end: a chart rendered by `pgrf
+//! chart` is made dark at ISO x ratio conditions with fixed seeds, restored
+//! by the built-in SPC model and measured; the CSV has one line per
+//! condition, image and method, the numbers repeat byte for byte, adding a
+//! file leaves the others' numbers alone, and bad input is one line.
+
+mod common;
+use common::{one_line_error, pgrf, s};
+
+use std::path::{Path, PathBuf};
+
+/// Run pgrf, require success, return its stdout.
+fn succeed(args: &[&str]) -> String {
+    let out = pgrf(args);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "pgrf {}: {err}", args.join(" "));
+    String::from_utf8(out.stdout).expect("UTF-8 stdout")
+}
+
+/// A fresh folder for test `name` with a 512x384 chart DNG (A7S2 colour,
+/// white balance and levels) in it, named chart.dng.
+fn setup(name: &str) -> (PathBuf, PathBuf) {
+    let d = common::scratch("eval-synthetic", name);
+    let p = d.join("chart.dng");
+    succeed(&["chart", "-o", s(&p), "--width", "512", "--height", "384"]);
+    (d, p)
+}
+
+/// One CSV line of the synthetic protocol.
+#[derive(Debug, PartialEq)]
+struct Line {
+    id: String,
+    iso: u32,
+    ratio: f32,
+    seed: u64,
+    method: String,
+    psnr: f64,
+    ssim: f64,
+    cast: f64,
+    gain: String,
+    raw: String,
+}
+
+fn lines(csv: &str) -> Vec<Line> {
+    let mut it = csv.lines();
+    assert_eq!(
+        it.next().unwrap(),
+        "protocol,id,reference,iso,ratio,seed,method,psnr,ssim,cast_dab,cast_da,cast_db,cast_blocks,gain"
+    );
+    it.map(|l| {
+        let f: Vec<&str> = l.split(',').collect();
+        assert_eq!(f.len(), 14, "{l}");
+        assert_eq!(f[0], "synthetic");
+        assert!(f[12].parse::<usize>().unwrap() > 10, "cast blocks: {l}");
+        Line {
+            id: f[1].into(),
+            iso: f[3].parse().unwrap(),
+            ratio: f[4].parse().unwrap(),
+            seed: f[5].parse().unwrap(),
+            method: f[6].into(),
+            psnr: f[7].parse().unwrap(),
+            ssim: f[8].parse().unwrap(),
+            cast: f[9].parse().unwrap(),
+            gain: f[13].into(),
+            raw: l.to_string(),
+        }
+    })
+    .collect()
+}
+
+/// `pgrf eval --protocol synthetic --root ROOT... EXTRA...`'s arguments.
+fn eval<'a>(root: &[&'a Path], extra: &[&'a str]) -> Vec<&'a str> {
+    let mut args = vec!["eval", "--protocol", "synthetic", "--root"];
+    args.extend(root.iter().map(|p| s(p)));
+    args.extend_from_slice(extra);
+    args
+}
+
+#[test]
+fn chart_conditions_seeds_and_outputs() {
+    let (d, clean) = setup("chart");
+    let (csv, md) = (d.join("out.csv"), d.join("out.md"));
+    let args = [
+        "--iso",
+        "1600",
+        "--ratio",
+        "100,200",
+        "--model",
+        "builtin:spc",
+        "--csv",
+        s(&csv),
+        "--markdown",
+        s(&md),
+    ];
+    let out = succeed(&eval(&[&clean], &args));
+    assert!(
+        out.starts_with("protocol synthetic: 1 clean files (chart.dng)"),
+        "{out}"
+    );
+    for want in [
+        "ISO 1600 x ratio 100,200 (2 conditions)",
+        "noise model pgrf of profile sony-a7s2",
+        "fnv1a64(file name)",
+        "illuminance correction off",
+        "white from each file",
+        "cast     colour cast = mean CIE76 chroma difference",
+    ] {
+        assert!(out.contains(want), "{want}: {out}");
+    }
+    // The table: one row per condition, PSNR / SSIM / dEab per method.
+    let rows: Vec<&str> = out.lines().filter(|l| l.starts_with("ISO ")).collect();
+    assert_eq!(rows.len(), 2, "{out}");
+    assert!(rows[0].starts_with("ISO 1600 x100      1 "), "{out}");
+    assert!(rows[1].starts_with("ISO 1600 x200      1 "), "{out}");
+    assert!(out.contains("PSNR / SSIM / dEab"), "{out}");
+
+    let text = std::fs::read_to_string(&csv).unwrap();
+    let l = lines(&text);
+    // Conditions x images x methods, condition-major per image.
+    let shape: Vec<(&str, u32, f32, &str)> = l
+        .iter()
+        .map(|x| (x.id.as_str(), x.iso, x.ratio, x.method.as_str()))
+        .collect();
+    assert_eq!(
+        shape,
+        vec![
+            ("chart.dng", 1600, 100.0, "noisy input"),
+            ("chart.dng", 1600, 100.0, "builtin:spc"),
+            ("chart.dng", 1600, 200.0, "noisy input"),
+            ("chart.dng", 1600, 200.0, "builtin:spc"),
+        ]
+    );
+    assert_eq!(l[0].seed, l[1].seed);
+    assert_ne!(l[0].seed, l[2].seed);
+    assert!(
+        l.iter().all(|x| x.gain.is_empty()),
+        "no correction by default"
+    );
+    // Observed (seed 0): noisy 26.31 / 21.17 dB, SPC 34.01 / 31.73 dB; casts
+    // 16.6 / 28.8 against 9.9 / 10.1 dE*ab. SPC must clear the input by 6 dB
+    // and leave a clearly smaller cast.
+    for pair in l.chunks(2) {
+        let (noisy, spc) = (&pair[0], &pair[1]);
+        assert!(spc.psnr > noisy.psnr + 6.0, "{pair:?}");
+        assert!(spc.ssim > noisy.ssim + 0.2, "{pair:?}");
+        assert!(spc.cast < 0.8 * noisy.cast, "{pair:?}");
+        assert!(noisy.psnr > 15.0 && spc.psnr < 45.0, "{pair:?}");
+    }
+    // x200 is harder than x100 for the input.
+    assert!(l[2].psnr < l[0].psnr - 3.0, "{l:?}");
+
+    let table = std::fs::read_to_string(&md).unwrap();
+    assert!(table.starts_with("> protocol synthetic:"), "{table}");
+    assert!(
+        table.contains(
+            "| Condition | Images | noisy input PSNR | noisy input SSIM | noisy input cast ΔE*ab |"
+        ),
+        "{table}"
+    );
+    assert!(table.contains("| ISO 1600 x200 | 1 |"), "{table}");
+    let png = d.join("out_worst.png");
+    let bytes = std::fs::read(&png).unwrap();
+    assert!(bytes.starts_with(b"\x89PNG"), "{}", png.display());
+
+    // The same command, the same bytes.
+    succeed(&eval(&[&clean], &args));
+    assert_eq!(std::fs::read_to_string(&csv).unwrap(), text);
+
+    // Another file beside it: its own noise, and the first file's lines
+    // exactly as before (seeds come from file names, not list positions).
+    let other = d.join("other.dng");
+    std::fs::copy(&clean, &other).unwrap();
+    let out2 = succeed(&eval(&[&other, &clean], &args));
+    assert!(
+        out2.contains("2 clean files (other.dng, chart.dng)"),
+        "{out2}"
+    );
+    let l2 = lines(&std::fs::read_to_string(&csv).unwrap());
+    assert_eq!(l2.len(), 8);
+    let chart_lines: Vec<&str> = l2
+        .iter()
+        .filter(|x| x.id == "chart.dng")
+        .map(|x| x.raw.as_str())
+        .collect();
+    let before: Vec<&str> = l.iter().map(|x| x.raw.as_str()).collect();
+    assert_eq!(chart_lines, before);
+    assert_ne!(l2[0].seed, l[0].seed);
+    assert_ne!(l2[0].psnr, l[0].psnr);
+    // Images are averaged per condition.
+    assert!(
+        out2.lines().any(|x| x.starts_with("ISO 1600 x100      2 ")),
+        "{out2}"
+    );
+    std::fs::remove_dir_all(&d).unwrap();
+}
+
+#[test]
+fn photos_are_unprocessed_and_seed_and_correction_apply() {
+    let (d, clean) = setup("photo");
+    let photo = d.join("chart.png");
+    succeed(&["preview", s(&clean), "-o", s(&photo), "--gain", "2"]);
+    let csv = d.join("p.csv");
+    let base = [
+        "--iso",
+        "3200",
+        "--ratio",
+        "50",
+        "--csv",
+        s(&csv),
+        "--worst-count",
+        "0",
+    ];
+    let out = succeed(&eval(&[&photo], &base));
+    assert!(out.contains("1 clean files (chart.png)"), "{out}");
+    let a = lines(&std::fs::read_to_string(&csv).unwrap());
+    assert_eq!(a.len(), 1);
+    assert_eq!(
+        (a[0].iso, a[0].ratio, a[0].method.as_str()),
+        (3200, 50.0, "noisy input")
+    );
+    assert!(a[0].psnr.is_finite() && a[0].psnr > 10.0, "{a:?}");
+    assert!(!d.join("p_worst.png").exists());
+    // --seed moves every capture's noise.
+    let mut seeded = base.to_vec();
+    seeded.extend(["--seed", "5"]);
+    succeed(&eval(&[&photo], &seeded));
+    let b = lines(&std::fs::read_to_string(&csv).unwrap());
+    assert_ne!(a[0].seed, b[0].seed);
+    assert_ne!(a[0].psnr, b[0].psnr);
+    // The illuminance correction when asked: a gain on the model's line,
+    // none on the input's (ELD's res_in).
+    let mut corrected = base.to_vec();
+    corrected.extend(["--illuminance-correct", "on", "--model", "builtin:spc"]);
+    let out = succeed(&eval(&[&photo], &corrected));
+    assert!(out.contains("illuminance correction on"), "{out}");
+    let c = lines(&std::fs::read_to_string(&csv).unwrap());
+    assert_eq!(c.len(), 2);
+    assert!(c[0].gain.is_empty(), "{c:?}");
+    let g: f64 = c[1].gain.parse().unwrap();
+    assert!((0.5..2.0).contains(&g), "{c:?}");
+    assert_eq!((c[0].psnr, c[0].seed), (a[0].psnr, a[0].seed));
+    std::fs::remove_dir_all(&d).unwrap();
+}
+
+#[test]
+fn bad_input_is_one_line() {
+    let (d, clean) = setup("bad");
+    let junk = d.join("junk.dng");
+    std::fs::write(&junk, b"not a raw file at all").unwrap();
+    let empty = d.join("empty");
+    std::fs::create_dir(&empty).unwrap();
+    let missing = d.join("missing.dng");
+    let cases: Vec<(Vec<&Path>, Vec<&str>, &str)> = vec![
+        (vec![&missing], vec![], "missing.dng: no such file"),
+        (
+            vec![&junk],
+            vec!["--iso", "1600", "--ratio", "100"],
+            "junk.dng",
+        ),
+        (vec![&empty], vec![], "folder has no files"),
+        (vec![&clean], vec!["--iso", "0"], "--iso"),
+        (vec![&clean], vec!["--iso", "800,800"], "given twice"),
+        (vec![&clean], vec!["--iso", "102400"], "outside the range"),
+        (vec![&clean], vec!["--ratio", "0.5"], "--ratio"),
+        (vec![&clean], vec!["--ratio", "100,100"], "same table row"),
+        (vec![&clean], vec!["--ratio", "100,"], "comma-separated"),
+        (
+            vec![&clean],
+            vec!["--profile", "no-such-camera"],
+            "no-such-camera",
+        ),
+        (vec![&clean], vec!["--model", s(&missing)], "missing.dng"),
+    ];
+    for (roots, extra, want) in cases {
+        let err = one_line_error(&pgrf(&eval(&roots, &extra)));
+        assert!(err.starts_with("pgrf: error: "), "{err}");
+        assert!(err.contains(want), "{want}: {err}");
+    }
+    // The file-pair protocols keep their one root and refuse the synthetic flags.
+    let err = one_line_error(&pgrf(&[
+        "eval",
+        "--protocol",
+        "eld",
+        "--root",
+        s(&d),
+        "--iso",
+        "1600",
+    ]));
+    assert!(
+        err.contains("--iso goes with --protocol synthetic"),
+        "{err}"
+    );
+    let err = one_line_error(&pgrf(&[
+        "eval",
+        "--protocol",
+        "pairs",
+        "--root",
+        s(&d),
+        s(&empty),
+    ]));
+    assert!(err.contains("takes one folder or file, got 2"), "{err}");
+    std::fs::remove_dir_all(&d).unwrap();
+}
+
+/// The standing real photo: the 550D colour chart, one condition, SPC.
+#[test]
+#[cfg_attr(not(shared_data), ignore = "needs ../shared/data")]
+fn canon_550d_chart_one_condition() {
+    let data = pgrf_core::shared_data_dir().expect("../shared/data");
+    let clean = data.join("raw").join("canon550d_colorchart.dng");
+    let d = common::scratch("eval-synthetic", "550d");
+    let csv = d.join("550d.csv");
+    let out = succeed(&eval(
+        &[&clean],
+        &[
+            "--iso",
+            "1600",
+            "--ratio",
+            "100",
+            "--model",
+            "builtin:spc",
+            "--csv",
+            s(&csv),
+        ],
+    ));
+    assert!(
+        !out.contains("note "),
+        "the DNG has a matrix and a white balance: {out}"
+    );
+    let l = lines(&std::fs::read_to_string(&csv).unwrap());
+    assert_eq!(l.len(), 2);
+    // Observed: noisy 26.98 dB / cast 12.9, SPC 35.37 dB / cast 8.4.
+    assert!(l[1].psnr > l[0].psnr + 6.0, "{l:?}");
+    assert!(l[1].cast < l[0].cast, "{l:?}");
+    assert!(d.join("550d_worst.png").is_file());
+    std::fs::remove_dir_all(&d).unwrap();
+}

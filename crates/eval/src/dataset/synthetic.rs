@@ -1,0 +1,657 @@
+//! The synthetic protocol: real clean photographs made dark and noisy in
+//! memory, at a grid of conditions, so a model can be judged on real scene
+//! content without a paired low-light dataset.
+//!
+//! For every clean file (a RAW pgrf decodes, or a JPEG/PNG/TIFF photo) and
+//! every condition (ISO x exposure ratio, default
+//! [`DEFAULT_ISOS`] x [`DEFAULT_RATIOS`]):
+//!
+//! 1. the clean reference is the file packed R, G1, B, G2, normalised by its
+//!    own black and white levels and clipped to [0, 1] (a photo is first
+//!    downscaled 2x and unprocessed into the Sony A7S2's camera space,
+//!    [`pgrf_raw::unprocess`]);
+//! 2. the dark capture is synthesised from it by [`PairSpec::synthesize`]
+//!    with the camera profile's parameters at that ISO and the fixed ratio:
+//!    the reference, taken as the profile camera's normalised signal, is
+//!    divided by the ratio, put through the noise model and multiplied back;
+//! 3. the network input is that capture clamped to [0, 1] (the "noisy input"
+//!    column too), exactly what the file-pair protocols feed;
+//! 4. PSNR/SSIM under ELD's measurement, by default without illuminance
+//!    correction (the exposure is known exactly), and the colour cast of
+//!    [`crate::cast`].
+//!
+//! Seeds: the capture of file `name` at (ISO, ratio) is drawn with seed
+//! [`capture_seed`]`(seed, name, condition)` =
+//! `mix64(mix64(mix64(seed ^ fnv1a64(name)) ^ ISO) ^ bits(ratio as f32))`
+//! (`mix64` is SplitMix64's finaliser, [`pgrf_core::seed::mix64`];
+//! `fnv1a64` the 64-bit FNV-1a hash of the file name's UTF-8 bytes, without
+//! its folder). It depends on the file's name, not on its place in the list,
+//! so adding files does not change the others' noise, and the same command
+//! gives byte-identical numbers. Two clean files with the same name are
+//! refused.
+
+use super::run::{run_cases, Case, MethodFn, Outcome, RunOptions};
+use super::table::Row;
+use super::{err, DatasetError, DatasetKind, LoadedPair, Result};
+use ndarray::{Array3, ArrayView3};
+use pgrf_core::seed::mix64;
+use pgrf_core::Progress;
+use pgrf_noise::pair::{PairSpec, RatioSpec};
+use pgrf_noise::{CameraProfile, ModelKind};
+use pgrf_raw::unprocess::{unprocess, CameraSpace};
+use pgrf_raw::{decode_file, pack_normalized, LevelOverrides, RawFrame};
+use std::path::{Path, PathBuf};
+
+/// The default ISOs of the grid.
+pub const DEFAULT_ISOS: [u32; 4] = [800, 1600, 3200, 6400];
+/// The default exposure ratios of the grid.
+pub const DEFAULT_RATIOS: [f32; 4] = [50.0, 100.0, 200.0, 300.0];
+/// Photo extensions (lower case) read as photos and unprocessed.
+pub const PHOTO_EXTENSIONS: [&str; 5] = ["jpg", "jpeg", "png", "tif", "tiff"];
+
+/// One capture condition.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Condition {
+    /// ISO: the noise parameters are the profile's at this ISO.
+    pub iso: u32,
+    /// Exposure ratio: the capture gets 1/ratio of the reference's light.
+    pub ratio: f32,
+}
+
+impl Condition {
+    /// "ISO 1600 x100".
+    pub fn label(&self) -> String {
+        format!("ISO {} x{}", self.iso, self.ratio)
+    }
+}
+
+fn split(text: &str, flag: &str) -> Result<Vec<String>> {
+    let items: Vec<String> = text.split(',').map(|s| s.trim().to_string()).collect();
+    if items.iter().any(String::is_empty) {
+        return err(format!(
+            "{flag} {text:?}: expected a comma-separated list of numbers"
+        ));
+    }
+    Ok(items)
+}
+
+/// Parse `--iso`: comma-separated positive whole numbers, no duplicates.
+pub fn parse_isos(text: &str) -> Result<Vec<u32>> {
+    let mut out: Vec<u32> = Vec::new();
+    for item in split(text, "--iso")? {
+        let v = match item.parse::<u32>() {
+            Ok(v) if v > 0 => v,
+            _ => return err(format!("--iso {item:?}: not a positive whole number")),
+        };
+        if out.contains(&v) {
+            return err(format!("--iso {text:?}: ISO {v} is given twice"));
+        }
+        out.push(v);
+    }
+    Ok(out)
+}
+
+/// Parse `--ratio`: comma-separated finite numbers >= 1, no two in the same
+/// table row (rows are the ratios rounded to whole numbers).
+pub fn parse_ratios(text: &str) -> Result<Vec<f32>> {
+    let mut out: Vec<f32> = Vec::new();
+    for item in split(text, "--ratio")? {
+        let v = match item.parse::<f32>() {
+            Ok(v) if v.is_finite() && v >= 1.0 => v,
+            _ => {
+                return err(format!(
+                    "--ratio {item:?}: not a finite number >= 1 (the exposure ratio)"
+                ))
+            }
+        };
+        if let Some(o) = out.iter().find(|o| o.round() == v.round()) {
+            return err(format!(
+                "--ratio {text:?}: {o} and {v} are the same table row x{}",
+                v.round()
+            ));
+        }
+        out.push(v);
+    }
+    Ok(out)
+}
+
+/// Every ISO with every ratio, ISO-major (the table's row order).
+pub fn grid(isos: &[u32], ratios: &[f32]) -> Vec<Condition> {
+    isos.iter()
+        .flat_map(|&iso| ratios.iter().map(move |&ratio| Condition { iso, ratio }))
+        .collect()
+}
+
+/// 64-bit FNV-1a of `bytes`: a hash fixed by its definition, stable across
+/// platforms and Rust versions (unlike `std`'s hasher).
+fn fnv1a64(bytes: &[u8]) -> u64 {
+    bytes.iter().fold(0xcbf2_9ce4_8422_2325, |h, &b| {
+        (h ^ b as u64).wrapping_mul(0x0000_0100_0000_01b3)
+    })
+}
+
+/// The noise seed of the capture of clean file `name` (its file name,
+/// without folder) at `c`, under the user's `seed`:
+/// `mix64(mix64(mix64(seed ^ fnv1a64(name)) ^ iso) ^ bits(ratio))`.
+pub fn capture_seed(seed: u64, name: &str, c: &Condition) -> u64 {
+    mix64(mix64(mix64(seed ^ fnv1a64(name.as_bytes())) ^ c.iso as u64) ^ c.ratio.to_bits() as u64)
+}
+
+/// One clean file of the protocol.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Image {
+    /// Its file name: the id in tables and the seed's input.
+    pub id: String,
+    /// The file.
+    pub path: PathBuf,
+    /// A photo to unprocess (by extension), not a RAW file.
+    pub photo: bool,
+}
+
+impl Image {
+    fn of(path: &Path) -> Image {
+        let ext = path
+            .extension()
+            .map(|e| e.to_string_lossy().to_ascii_lowercase())
+            .unwrap_or_default();
+        Image {
+            id: path
+                .file_name()
+                .map(|n| n.to_string_lossy().into_owned())
+                .unwrap_or_else(|| path.display().to_string()),
+            path: path.to_path_buf(),
+            photo: PHOTO_EXTENSIONS.contains(&ext.as_str()),
+        }
+    }
+
+    /// Decode it: a RAW file with `levels` overriding its own, or a photo
+    /// downscaled 2x and unprocessed into the Sony A7S2's camera space.
+    pub fn load(&self, levels: &LevelOverrides) -> Result<RawFrame> {
+        let e = |e: pgrf_raw::RawError| DatasetError(e.to_string());
+        if !self.photo {
+            return decode_file(&self.path, levels).map_err(e);
+        }
+        let photo = pgrf_raw::photo::read_photo(&self.path)
+            .and_then(|p| p.downscale(2))
+            .map_err(e)?;
+        unprocess(&photo, &CameraSpace::sony_a7s2(), 1.0)
+            .map_err(|x| DatasetError(format!("{}: {x}", self.path.display())))
+    }
+}
+
+/// The clean files of `roots`, in the order given: a file is itself, a
+/// folder its files sorted by name (hidden ones skipped). Every root must
+/// exist; file names must be unique (they seed the noise).
+pub fn walk(roots: &[PathBuf]) -> Result<Vec<Image>> {
+    if roots.is_empty() {
+        return err("no clean files: give --root FILE or FOLDER");
+    }
+    let mut out: Vec<Image> = Vec::new();
+    for root in roots {
+        let files = if root.is_dir() {
+            pgrf_raw::files::list_files(root).map_err(|e| DatasetError(e.to_string()))?
+        } else if root.is_file() {
+            vec![root.clone()]
+        } else {
+            return err(format!("{}: no such file or folder", root.display()));
+        };
+        for f in files {
+            let img = Image::of(&f);
+            if let Some(o) = out.iter().find(|o| o.id == img.id) {
+                return err(format!(
+                    "{} and {} have the same file name: the synthetic protocol seeds each \
+                     capture from the name, so names must be unique",
+                    o.path.display(),
+                    f.display()
+                ));
+            }
+            out.push(img);
+        }
+    }
+    Ok(out)
+}
+
+/// The recipe of a synthetic run: noise model, conditions and seed.
+#[derive(Clone, Debug)]
+pub struct Synthetic {
+    /// The conditions, in table order.
+    pub conditions: Vec<Condition>,
+    /// The user's seed, mixed into every capture's ([`capture_seed`]).
+    pub seed: u64,
+    profile: String,
+    kind: ModelKind,
+    /// One pair recipe per condition (ISO and ratio fixed).
+    specs: Vec<PairSpec>,
+}
+
+impl Synthetic {
+    /// `kind` noise on camera profile `profile` (a built-in name or a JSON
+    /// file) at `conditions`; every ISO must be one the profile has
+    /// parameters for, every ratio >= 1, and the list not empty.
+    pub fn new(
+        profile: &str,
+        kind: ModelKind,
+        conditions: Vec<Condition>,
+        seed: u64,
+    ) -> Result<Synthetic> {
+        if conditions.is_empty() {
+            return err("no conditions: give at least one --iso and one --ratio");
+        }
+        let camera = CameraProfile::load(profile).map_err(|e| DatasetError(e.to_string()))?;
+        let mut specs = Vec::new();
+        for c in &conditions {
+            if !(c.ratio.is_finite() && c.ratio >= 1.0) {
+                return err(format!("ratio {} is not a finite number >= 1", c.ratio));
+            }
+            camera
+                .params_at_iso(c.iso)
+                .map_err(|e| DatasetError(format!("--iso {}: {e}", c.iso)))?;
+            let mut spec = PairSpec::new(camera.clone(), kind);
+            spec.iso = Some(c.iso);
+            spec.ratio = RatioSpec::Fixed(c.ratio);
+            specs.push(spec);
+        }
+        Ok(Synthetic {
+            conditions,
+            seed,
+            profile: profile.to_string(),
+            kind,
+            specs,
+        })
+    }
+
+    /// The network input for clean packed `clean` (file `name`, planes on
+    /// sensor rows `plane_rows`) at condition number `k`: the amplified
+    /// capture clamped to [0, 1], and the seed it was drawn with.
+    pub fn capture(
+        &self,
+        clean: ArrayView3<f32>,
+        plane_rows: [usize; 4],
+        name: &str,
+        k: usize,
+    ) -> Result<(Array3<f32>, u64)> {
+        let c = &self.conditions[k];
+        let seed = capture_seed(self.seed, name, c);
+        let pair = self.specs[k]
+            .synthesize(clean, plane_rows, seed)
+            .map_err(|e| DatasetError(format!("{name} {}: {e}", c.label())))?;
+        Ok((pair.noisy.mapv(|v| v.clamp(0.0, 1.0)), seed))
+    }
+
+    /// One line: conditions, noise model and seeds.
+    pub fn describe(&self) -> String {
+        let isos: Vec<String> = dedup(self.conditions.iter().map(|c| c.iso.to_string()));
+        let ratios: Vec<String> = dedup(self.conditions.iter().map(|c| c.ratio.to_string()));
+        format!(
+            "ISO {} x ratio {} ({} conditions), noise model {} of profile {} at each ISO; \
+             capture seed = mix64(mix64(mix64({} ^ fnv1a64(file name)) ^ ISO) ^ f32 bits of ratio)",
+            isos.join(","),
+            ratios.join(","),
+            self.conditions.len(),
+            self.kind,
+            self.profile,
+            self.seed
+        )
+    }
+}
+
+fn dedup(items: impl Iterator<Item = String>) -> Vec<String> {
+    let mut v: Vec<String> = Vec::new();
+    for i in items {
+        if !v.contains(&i) {
+            v.push(i);
+        }
+    }
+    v
+}
+
+/// Run `methods` over every image of `images` at every condition of
+/// `synth` (image-major; each file is decoded once). `progress` hears one
+/// `advance` per capture. The colour cast is measured whatever
+/// `opts.cast` says; `opts.crop` crops reference and capture before the
+/// methods run.
+pub fn run(
+    images: &[Image],
+    synth: &Synthetic,
+    methods: &[(String, &MethodFn)],
+    opts: &RunOptions,
+    progress: &dyn Progress,
+) -> Result<Outcome> {
+    if images.is_empty() {
+        return err("no clean files to evaluate");
+    }
+    let opts = RunOptions {
+        cast: true,
+        ..opts.clone()
+    };
+    let nc = synth.conditions.len();
+    let mut cache: Option<(usize, RawFrame, Array3<f32>)> = None;
+    let load = |k: usize| -> Result<Case> {
+        let (i, ci) = (k / nc, k % nc);
+        let img = &images[i];
+        let (_, frame, clean) = match cache.take() {
+            Some(e) if e.0 == i => cache.insert(e),
+            _ => {
+                let frame = img.load(&opts.levels)?;
+                let clean = pack_normalized(&frame, true)
+                    .map_err(|e| DatasetError(format!("{}: {e}", img.path.display())))?;
+                cache.insert((i, frame, clean))
+            }
+        };
+        let c = synth.conditions[ci];
+        let plane_rows = frame.cfa.offsets().map(|(r, _)| r);
+        let (input, seed) = synth.capture(clean.view(), plane_rows, &img.id, ci)?;
+        Ok(Case {
+            pair: LoadedPair {
+                reference_frame: frame.clone(),
+                input,
+                reference: clean.clone(),
+                ratio: c.ratio,
+            },
+            row: Row {
+                protocol: DatasetKind::Synthetic.name().into(),
+                id: img.id.clone(),
+                group: c.ratio.round() as u32,
+                ratio: c.ratio,
+                noisy: String::new(),
+                reference: img.path.display().to_string(),
+                method: String::new(),
+                psnr: f64::NAN,
+                ssim: f64::NAN,
+                gain: None,
+                iso: Some(c.iso),
+                seed: Some(seed),
+                cast: None,
+            },
+            source: format!("{} ({})", img.path.display(), c.label()),
+            title: format!("{} {}", img.id, c.label()),
+            line: format!("{} {}", img.id, c.label()),
+        })
+    };
+    let mut out = run_cases(
+        images.len() * nc,
+        "captures",
+        load,
+        methods,
+        &opts,
+        progress,
+    )?;
+    for img in images {
+        let Some(c) = out
+            .rows
+            .iter()
+            .find(|r| r.id == img.id)
+            .and_then(|r| r.cast)
+        else {
+            continue;
+        };
+        let mut missing = Vec::new();
+        if !c.white_balance {
+            missing.push("no white balance (multipliers 1)");
+        }
+        if !c.matrix {
+            missing.push("no usable colour matrix (camera RGB taken as linear sRGB)");
+        }
+        if !missing.is_empty() {
+            out.notes.push(format!(
+                "{}: cast measured with {}",
+                img.id,
+                missing.join(", ")
+            ));
+        }
+    }
+    Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn condition_lists_parse_and_refuse() {
+        assert_eq!(parse_isos("800, 1600,3200").unwrap(), vec![800, 1600, 3200]);
+        assert_eq!(
+            parse_ratios("50,100.5,300").unwrap(),
+            vec![50.0, 100.5, 300.0]
+        );
+        for bad in ["", "800,", "0", "-800", "16o0", "800,800", "1.5"] {
+            assert!(parse_isos(bad).is_err(), "{bad}");
+        }
+        for bad in ["", "0.5", "-100", "inf", "NaN", "100,100", "100,100.2", "x"] {
+            assert!(parse_ratios(bad).is_err(), "{bad}");
+        }
+        let e = parse_ratios("100,100.2").unwrap_err().to_string();
+        assert!(e.contains("x100"), "{e}");
+        let g = grid(&[800, 1600], &[50.0, 100.0, 200.0]);
+        assert_eq!(g.len(), 6);
+        assert_eq!(
+            g[0],
+            Condition {
+                iso: 800,
+                ratio: 50.0
+            }
+        );
+        assert_eq!(
+            g[3],
+            Condition {
+                iso: 1600,
+                ratio: 50.0
+            }
+        );
+        assert_eq!(g[5].label(), "ISO 1600 x200");
+        let d = grid(&DEFAULT_ISOS, &DEFAULT_RATIOS);
+        assert_eq!(d.len(), 16);
+    }
+
+    #[test]
+    fn isos_outside_the_profile_are_refused() {
+        let c = |iso| vec![Condition { iso, ratio: 100.0 }];
+        assert!(Synthetic::new("sony-a7s2", ModelKind::Pgrf, c(1600), 0).is_ok());
+        let e = Synthetic::new("sony-a7s2", ModelKind::Pgrf, c(102400), 0)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("102400") && e.contains("outside"), "{e}");
+        assert!(Synthetic::new("sony-a7s2", ModelKind::Pgrf, vec![], 0).is_err());
+        assert!(Synthetic::new("no-such-camera", ModelKind::Pgrf, c(1600), 0).is_err());
+    }
+
+    #[test]
+    fn seeds_are_fixed_functions_of_name_and_condition() {
+        // Pinned: a change of the formula changes every published number.
+        let c = Condition {
+            iso: 1600,
+            ratio: 100.0,
+        };
+        assert_eq!(fnv1a64(b""), 0xcbf2_9ce4_8422_2325);
+        assert_eq!(fnv1a64(b"a"), 0xaf63_dc4c_8601_ec8c);
+        let want = mix64(mix64(mix64(fnv1a64(b"chart.dng")) ^ 1600) ^ 100f32.to_bits() as u64);
+        assert_eq!(capture_seed(0, "chart.dng", &c), want);
+        let others = [
+            capture_seed(1, "chart.dng", &c),
+            capture_seed(0, "chart2.dng", &c),
+            capture_seed(0, "chart.dng", &Condition { iso: 3200, ..c }),
+            capture_seed(0, "chart.dng", &Condition { ratio: 200.0, ..c }),
+        ];
+        for o in others {
+            assert_ne!(o, want);
+        }
+    }
+
+    #[test]
+    fn captures_repeat_exactly_and_differ_between_conditions() {
+        let clean = Array3::from_shape_fn((4, 32, 48), |(p, y, x)| {
+            0.05 + 0.1 * p as f32 + 0.01 * ((x + 2 * y) % 17) as f32
+        });
+        let conds = grid(&[1600, 6400], &[100.0, 200.0]);
+        let s = Synthetic::new("sony-a7s2", ModelKind::Pgrf, conds, 7).unwrap();
+        let rows = [0, 0, 1, 1];
+        let (a, sa) = s.capture(clean.view(), rows, "a.dng", 0).unwrap();
+        let (b, sb) = s.capture(clean.view(), rows, "a.dng", 0).unwrap();
+        assert_eq!(sa, sb);
+        assert_eq!(a, b);
+        assert!(a.iter().all(|v| (0.0..=1.0).contains(v)));
+        // Noisy, but about the right brightness: the mean within 10 % of the
+        // clean mean (the profile's black-level error and the clamp at 0
+        // lift it by ~6 % here).
+        let mean = |x: &Array3<f32>| x.iter().map(|&v| v as f64).sum::<f64>() / x.len() as f64;
+        let rel = mean(&a) / mean(&clean) - 1.0;
+        assert!(a != clean && rel.abs() < 0.1, "{rel}");
+        // Another condition, or another name: other noise.
+        for (k, name) in [(1, "a.dng"), (2, "a.dng"), (0, "b.dng")] {
+            let (o, so) = s.capture(clean.view(), rows, name, k).unwrap();
+            assert_ne!(so, sa);
+            assert_ne!(o, a, "condition {k} {name}");
+        }
+        // Higher ISO at the same ratio: noisier.
+        let err = |x: &Array3<f32>| {
+            x.iter()
+                .zip(clean.iter())
+                .map(|(&o, &c)| ((o - c) as f64).powi(2))
+                .sum::<f64>()
+        };
+        let (hi, _) = s.capture(clean.view(), rows, "a.dng", 2).unwrap();
+        assert!(err(&hi) > err(&a), "{} vs {}", err(&hi), err(&a));
+        // The same capture from a recipe with another seed base differs.
+        let s2 = Synthetic::new("sony-a7s2", ModelKind::Pgrf, s.conditions.clone(), 8).unwrap();
+        assert_ne!(s2.capture(clean.view(), rows, "a.dng", 0).unwrap().0, a);
+    }
+
+    #[test]
+    fn walk_lists_files_and_folders_and_refuses_twins() {
+        let d = std::env::temp_dir().join(format!("pgrf-synth-walk-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&d);
+        std::fs::create_dir_all(d.join("sub")).unwrap();
+        for n in ["b.dng", "a.JPG", ".hidden"] {
+            std::fs::write(d.join("sub").join(n), b"x").unwrap();
+        }
+        std::fs::write(d.join("c.dng"), b"x").unwrap();
+        let v = walk(&[d.join("c.dng"), d.join("sub")]).unwrap();
+        let got: Vec<(&str, bool)> = v.iter().map(|i| (i.id.as_str(), i.photo)).collect();
+        assert_eq!(
+            got,
+            vec![("c.dng", false), ("a.JPG", true), ("b.dng", false)]
+        );
+        let e = walk(&[d.join("nope.dng")]).unwrap_err().to_string();
+        assert!(e.contains("nope.dng"), "{e}");
+        assert!(walk(&[]).is_err());
+        std::fs::write(d.join("b.dng"), b"x").unwrap();
+        let e = walk(&[d.join("b.dng"), d.join("sub")])
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("same file name"), "{e}");
+        // A file that does not decode is an error naming it, not a panic.
+        let e = v[2]
+            .load(&LevelOverrides::default())
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("b.dng"), "{e}");
+        let e = v[1]
+            .load(&LevelOverrides::default())
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("a.JPG"), "{e}");
+        std::fs::remove_dir_all(&d).unwrap();
+    }
+
+    #[test]
+    fn a_run_covers_every_image_condition_and_method_reproducibly() {
+        use pgrf_core::NoProgress;
+        use pgrf_raw::chart::{render_chart, ChartSpec};
+        let d = std::env::temp_dir().join(format!("pgrf-synth-run-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&d);
+        std::fs::create_dir_all(&d).unwrap();
+        let frame = render_chart(&ChartSpec {
+            width: 128,
+            height: 96,
+            ..Default::default()
+        })
+        .unwrap();
+        for n in ["one.dng", "two.dng"] {
+            pgrf_raw::write_dng(&frame, &d.join(n), &Default::default()).unwrap();
+        }
+        let images = walk(std::slice::from_ref(&d)).unwrap();
+        let synth = Synthetic::new(
+            "sony-a7s2",
+            ModelKind::Pgrf,
+            grid(&[1600], &[100.0, 200.0]),
+            0,
+        )
+        .unwrap();
+        // A 3x3 box blur per plane: a "denoiser" that must beat the input.
+        let blur = |x: ArrayView3<f32>| -> std::result::Result<Array3<f32>, String> {
+            let (c, h, w) = x.dim();
+            Ok(Array3::from_shape_fn((c, h, w), |(p, i, j)| {
+                let (mut s, mut n) = (0.0, 0.0);
+                for y in i.saturating_sub(1)..(i + 2).min(h) {
+                    for xx in j.saturating_sub(1)..(j + 2).min(w) {
+                        s += x[[p, y, xx]];
+                        n += 1.0;
+                    }
+                }
+                s / n
+            }))
+        };
+        let methods: Vec<(String, &MethodFn)> = vec![("blur".into(), &blur)];
+        let opts = RunOptions {
+            baseline: true,
+            worst_count: 2,
+            ..Default::default()
+        };
+        let a = run(&images, &synth, &methods, &opts, &NoProgress).unwrap();
+        assert_eq!(a.rows.len(), 2 * 2 * 2);
+        assert!(a.notes.is_empty(), "{:?}", a.notes);
+        let order: Vec<(&str, f32, &str)> = a
+            .rows
+            .iter()
+            .map(|r| (r.id.as_str(), r.ratio, r.method.as_str()))
+            .collect();
+        assert_eq!(
+            order[..4],
+            [
+                ("one.dng", 100.0, "noisy input"),
+                ("one.dng", 100.0, "blur"),
+                ("one.dng", 200.0, "noisy input"),
+                ("one.dng", 200.0, "blur"),
+            ]
+        );
+        for pair in a.rows.chunks(2) {
+            assert!(pair[1].psnr > pair[0].psnr + 1.0, "{pair:?}");
+            assert!(pair.iter().all(|r| r.cast.is_some() && r.iso == Some(1600)));
+            assert_eq!(pair[0].seed, pair[1].seed);
+        }
+        // Same chart, other name: other noise, other scores.
+        assert_ne!(a.rows[0].psnr, a.rows[4].psnr);
+        assert_eq!(a.worst.len(), 2);
+        let b = run(&images, &synth, &methods, &opts, &NoProgress).unwrap();
+        assert_eq!(a.rows, b.rows);
+        // A failing method is an error naming the file and condition.
+        let fail = |_: ArrayView3<f32>| -> std::result::Result<Array3<f32>, String> {
+            Err("out of memory".into())
+        };
+        let methods: Vec<(String, &MethodFn)> = vec![("bad".into(), &fail)];
+        let e = run(&images, &synth, &methods, &opts, &NoProgress)
+            .err()
+            .unwrap()
+            .to_string();
+        assert!(
+            e.contains("one.dng (ISO 1600 x100): model bad: out of memory"),
+            "{e}"
+        );
+        // A file without white balance or colour matrix: measured with the
+        // fallbacks, and a note says so.
+        let mut plain = frame.clone();
+        plain.wb = None;
+        plain.color_matrices.clear();
+        let p = d.join("plain").join("plain.dng");
+        std::fs::create_dir_all(p.parent().unwrap()).unwrap();
+        pgrf_raw::write_dng(&plain, &p, &Default::default()).unwrap();
+        let methods: Vec<(String, &MethodFn)> = vec![];
+        let o = run(&walk(&[p]).unwrap(), &synth, &methods, &opts, &NoProgress).unwrap();
+        assert_eq!(o.rows.len(), 2);
+        let c = o.rows[0].cast.unwrap();
+        assert!(!c.white_balance && !c.matrix, "{c:?}");
+        assert_eq!(o.notes.len(), 1, "{:?}", o.notes);
+        assert!(o.notes[0].starts_with("plain.dng: cast measured with no white balance"));
+        std::fs::remove_dir_all(&d).unwrap();
+    }
+}
