@@ -7,6 +7,7 @@
 
 mod augment;
 pub mod build;
+mod cache;
 mod loader;
 pub mod photos;
 pub mod source;

@@ -21,6 +21,7 @@
 //! camera's demosaicing), and kept as 16-bit codes within the memory budget;
 //! beyond it they are decoded again when drawn.
 
+use crate::data::cache::BudgetCache;
 use crate::data::source::Crop;
 use crate::error::{NnError, Result};
 use pgrf_core::seed::mix64;
@@ -29,9 +30,8 @@ use pgrf_raw::unprocess::{unprocess_packed, CameraSpace, EncodedPhoto, Unprocess
 use rand::{Rng, SeedableRng};
 use rand_xoshiro::Xoshiro256PlusPlus;
 use rayon::prelude::*;
-use std::collections::HashMap;
 use std::path::{Path, PathBuf};
-use std::sync::{Arc, Mutex};
+use std::sync::Arc;
 
 /// Range of the per-crop exposure factor (log-uniform).
 pub const EXPOSURE: (f32, f32) = (0.5, 1.5);
@@ -71,8 +71,10 @@ pub struct PhotoOptions {
 pub struct PhotoFolder {
     files: Vec<PathBuf>,
     opts: PhotoOptions,
-    cache: Mutex<(HashMap<usize, Arc<EncodedPhoto>>, usize)>,
-    budget_bytes: usize,
+    /// The camera's own unprocessing (checked once), which each crop's
+    /// draw starts from.
+    plain: Unprocessing,
+    cache: BudgetCache<EncodedPhoto>,
 }
 
 fn load(path: &Path, downscale: usize) -> Result<EncodedPhoto> {
@@ -95,7 +97,9 @@ impl PhotoFolder {
         patch: usize,
         budget_mib: usize,
     ) -> Result<(PhotoFolder, Vec<String>)> {
-        Unprocessing::plain(&opts.camera, 1.0).map_err(|e| NnError::Invalid(e.to_string()))?;
+        let mut plain =
+            Unprocessing::plain(&opts.camera, 1.0).map_err(|e| NnError::Invalid(e.to_string()))?;
+        plain.inverse_tone = opts.inverse_tone;
         if opts.downscale == 0 {
             return Err(NnError::Invalid(
                 "the photo downscale must be at least 1".into(),
@@ -121,16 +125,12 @@ impl PhotoFolder {
             .collect();
         let mut warnings = Vec::new();
         let mut kept = Vec::new();
-        let mut cache = HashMap::new();
-        let mut used = 0usize;
-        let budget_bytes = budget_mib << 20;
+        let cache = BudgetCache::new(budget_mib);
         for (path, r) in files.into_iter().zip(loaded) {
             match r {
                 Ok(img) => {
-                    if used + img.bytes() <= budget_bytes {
-                        used += img.bytes();
-                        cache.insert(kept.len(), Arc::new(img));
-                    }
+                    let bytes = img.bytes();
+                    cache.offer(kept.len(), &Arc::new(img), bytes);
                     kept.push(path);
                 }
                 Err(e) => warnings.push(format!("skipped {e}")),
@@ -146,8 +146,8 @@ impl PhotoFolder {
             PhotoFolder {
                 files: kept,
                 opts,
-                cache: Mutex::new((cache, used)),
-                budget_bytes,
+                plain,
+                cache,
             },
             warnings,
         ))
@@ -164,26 +164,16 @@ impl PhotoFolder {
     }
 
     fn get(&self, i: usize) -> Result<Arc<EncodedPhoto>> {
-        if let Some(p) = self.cache.lock().expect("cache lock").0.get(&i) {
-            return Ok(p.clone());
-        }
-        let img = Arc::new(load(&self.files[i], self.opts.downscale)?);
-        let mut cache = self.cache.lock().expect("cache lock");
-        if cache.1 + img.bytes() <= self.budget_bytes && !cache.0.contains_key(&i) {
-            cache.1 += img.bytes();
-            cache.0.insert(i, img.clone());
-        }
-        Ok(img)
+        let load = || load(&self.files[i], self.opts.downscale);
+        self.cache.get_or_load(i, load, EncodedPhoto::bytes)
     }
 
     /// The unprocessing of the crop with seed `seed`: the camera's own, or
     /// jittered as the module documentation says.
-    pub fn unprocessing(&self, seed: u64) -> Result<Unprocessing> {
-        let mut u = Unprocessing::plain(&self.opts.camera, 1.0)
-            .map_err(|e| NnError::Invalid(e.to_string()))?;
-        u.inverse_tone = self.opts.inverse_tone;
+    pub fn unprocessing(&self, seed: u64) -> Unprocessing {
+        let mut u = self.plain.clone();
         if !self.opts.jitter {
-            return Ok(u);
+            return u;
         }
         let mut rng = Xoshiro256PlusPlus::seed_from_u64(mix64(seed ^ COLOUR_DOMAIN));
         let mut log_uniform = |lo: f32, hi: f32| -> f32 {
@@ -202,7 +192,7 @@ impl PhotoFolder {
                 row.iter_mut().for_each(|v| *v *= sum / new);
             }
         }
-        Ok(u)
+        u
     }
 
     /// A packed `patch` crop of photo `pick` (modulo the count) at `(fy,
@@ -229,7 +219,7 @@ impl PhotoFolder {
         }
         let y = (((img.height - side + 1) as f64 * fy) as usize).min(img.height - side);
         let x = (((img.width - side + 1) as f64 * fx) as usize).min(img.width - side);
-        let u = self.unprocessing(seed)?;
+        let u = self.unprocessing(seed);
         let clean = unprocess_packed(&img, (y, x), patch, &self.opts.camera, &u)
             .map_err(|e| NnError::Invalid(format!("{}: {e}", self.files[i].display())))?;
         Ok(Crop {
@@ -299,8 +289,8 @@ mod tests {
         let base = CameraSpace::sony_a7s2().wb;
         let mut exposures = Vec::new();
         for seed in 0..200u64 {
-            let u = f.unprocessing(seed).unwrap();
-            assert_eq!(u, f.unprocessing(seed).unwrap());
+            let u = f.unprocessing(seed);
+            assert_eq!(u, f.unprocessing(seed));
             assert!(u.exposure >= EXPOSURE.0 && u.exposure <= EXPOSURE.1);
             for k in [0, 2] {
                 let r = u.wb[k] / base[k];
@@ -320,7 +310,7 @@ mod tests {
         let gm = (exposures.iter().map(|e| e.ln()).sum::<f32>() / 200.0).exp();
         assert!((gm - 0.866).abs() < 0.06, "{gm}");
         let (plain, _) = PhotoFolder::open(f.files().to_vec(), options(false), 8, 16).unwrap();
-        let u = plain.unprocessing(7).unwrap();
+        let u = plain.unprocessing(7);
         assert_eq!(u.exposure, 1.0);
         assert_eq!(u.wb, base);
         let c1 = f.crop(8, 5, 0, 0.5, 0.5).unwrap();

@@ -8,14 +8,14 @@
 //! half the bytes of f32) up to a memory budget; beyond it they are decoded
 //! again when drawn.
 
+use crate::data::cache::BudgetCache;
 use crate::data::photos::PhotoFolder;
 use crate::error::{NnError, Result};
 use pgrf_core::seed::mix64;
 use pgrf_raw::ndarray::{s, Array3};
 use pgrf_raw::{decode_file, pack_u16, LevelOverrides, RawFrame, SceneKind, SceneSpec};
-use std::collections::HashMap;
 use std::path::{Path, PathBuf};
-use std::sync::{Arc, Mutex};
+use std::sync::Arc;
 
 /// A clean crop and its place on the sensor.
 #[derive(Clone, Debug)]
@@ -72,8 +72,7 @@ pub struct Folder {
     files: Vec<PathBuf>,
     levels: LevelOverrides,
     /// Decoded files and the bytes they hold, under one lock.
-    cache: Mutex<(HashMap<usize, Arc<Packed>>, usize)>,
-    budget_bytes: usize,
+    cache: BudgetCache<Packed>,
 }
 
 impl Folder {
@@ -87,8 +86,7 @@ impl Folder {
         Ok(Folder {
             files,
             levels,
-            cache: Mutex::new((HashMap::new(), 0)),
-            budget_bytes: budget_mib << 20,
+            cache: BudgetCache::new(budget_mib),
         })
     }
 
@@ -103,20 +101,13 @@ impl Folder {
     }
 
     fn get(&self, i: usize) -> Result<Arc<Packed>> {
-        if let Some(p) = self.cache.lock().expect("cache lock").0.get(&i) {
-            return Ok(p.clone());
-        }
         let path = &self.files[i];
-        let frame = decode_file(path, &self.levels)
-            .map_err(|e| NnError::Invalid(format!("{}: {e}", path.display())))?;
-        let packed = Arc::new(Packed::from_frame(&frame)?);
-        let bytes = packed.planes.len() * 2;
-        let mut cache = self.cache.lock().expect("cache lock");
-        if cache.1 + bytes <= self.budget_bytes && !cache.0.contains_key(&i) {
-            cache.1 += bytes;
-            cache.0.insert(i, packed.clone());
-        }
-        Ok(packed)
+        let load = || {
+            let frame = decode_file(path, &self.levels)
+                .map_err(|e| NnError::Invalid(format!("{}: {e}", path.display())))?;
+            Packed::from_frame(&frame)
+        };
+        self.cache.get_or_load(i, load, |p| p.planes.len() * 2)
     }
 
     /// Packed size of file `i` (decodes it).
