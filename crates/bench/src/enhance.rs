@@ -21,7 +21,6 @@
 
 use anyhow::{ensure, Context, Result};
 use burn::module::Module;
-use burn::tensor::backend::Backend;
 use clap::{Args, ValueEnum};
 use pgrf_core::seed::mix64;
 use pgrf_core::stats::median;
@@ -229,7 +228,7 @@ fn parse_levels(s: &str) -> Result<Vec<usize>> {
 /// A restorer, its parameter count and where its weights came from.
 type Built = (Box<dyn Restore>, usize, String);
 
-fn build<B: Backend>(a: &EnhanceArgs, device: B::Device) -> Result<Built> {
+fn build<B: pgrf_nn::ops::PgrfOps>(a: &EnhanceArgs, device: B::Device) -> Result<Built> {
     let choice = SamplerChoice {
         kind: a.sampler,
         t2: a.t2,
@@ -273,10 +272,7 @@ pub fn run(a: &EnhanceArgs) -> Result<()> {
     struct Build<'a>(&'a EnhanceArgs);
     impl pgrf_nn::backend::OnBackend for Build<'_> {
         type Output = Built;
-        fn run<B: burn::tensor::backend::Backend>(
-            self,
-            device: B::Device,
-        ) -> pgrf_nn::Result<Built> {
+        fn run<B: pgrf_nn::ops::PgrfOps>(self, device: B::Device) -> pgrf_nn::Result<Built> {
             build::<B>(self.0, device).map_err(|e| pgrf_nn::NnError::Invalid(format!("{e:#}")))
         }
     }

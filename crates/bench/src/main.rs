@@ -54,6 +54,10 @@ enum Bench {
 fn main() -> ExitCode {
     pgrf_core::exit::one_line_panics("pgrf-bench");
     let cli = Cli::parse();
+    // As `pgrf` does; `pgrf-bench train --default-malloc` measures without.
+    if !matches!(&cli.what, Bench::Train(a) if a.default_malloc) {
+        pgrf_core::mem::keep_freed_buffers();
+    }
     let result = match &cli.what {
         Bench::Synth(a) => synth::run(a),
         Bench::Stack(a) => stack::run(a),

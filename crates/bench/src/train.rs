@@ -14,13 +14,15 @@ mod breakdown;
 use anyhow::{ensure, Result};
 use breakdown::Breakdown;
 use burn::module::Module;
-use burn::optim::{AdamConfig, GradientsParams, Optimizer};
+use burn::optim::adaptor::OptimizerAdaptor;
+use burn::optim::{GradientsParams, Optimizer};
 use burn::tensor::backend::Backend;
 use burn::tensor::{Distribution, ElementConversion, Tensor};
 use clap::{Args, ValueEnum};
 use pgrf_core::stats::median;
 use pgrf_nn::backend::{Cpu, CpuTrain};
 use pgrf_nn::flow::{flow_loss, interpolate};
+use pgrf_nn::ops::adam::PgrfAdam;
 use pgrf_nn::step::{denoiser_loss, denoiser_step, flow_step};
 use pgrf_nn::{SidUnetConfig, Sr3Config};
 use serde::Serialize;
@@ -70,6 +72,15 @@ pub struct TrainArgs {
     /// Time the training step only (no forward timing): for profilers.
     #[arg(long)]
     pub step_only: bool,
+    /// Whose operations the networks run: pgrf's own (the default) or
+    /// burn 0.21's, for comparison in the same binary.
+    #[arg(long, default_value = "pgrf")]
+    pub kernels: pgrf_nn::ops::Kernels,
+    /// Leave glibc's allocator at its defaults (large buffers unmapped on
+    /// free and faulted in again) instead of keeping freed buffers, as
+    /// `pgrf` does: measures what `pgrf_core::mem::keep_freed_buffers` buys.
+    #[arg(long)]
+    pub default_malloc: bool,
     /// Print one JSON line instead of text.
     #[arg(long)]
     pub json: bool,
@@ -92,6 +103,8 @@ struct NetResult {
 struct Report {
     burn: &'static str,
     backend: &'static str,
+    kernels: String,
+    malloc: &'static str,
     threads: usize,
     batch: usize,
     size: usize,
@@ -112,6 +125,7 @@ pub fn run(a: &TrainArgs) -> Result<()> {
         a.size > 0 && a.size.is_multiple_of(16),
         "--size must be a positive multiple of 16"
     );
+    pgrf_nn::ops::set_kernels(a.kernels);
     let want = |n| a.net == NetChoice::Both || a.net == n;
     let unet = if want(NetChoice::Unet) {
         Some(bench_unet(a)?)
@@ -126,6 +140,12 @@ pub fn run(a: &TrainArgs) -> Result<()> {
     let r = Report {
         burn: BURN_VERSION,
         backend: "flex",
+        kernels: a.kernels.to_string(),
+        malloc: if a.default_malloc {
+            "glibc defaults"
+        } else {
+            "freed buffers kept"
+        },
         threads: rayon::current_num_threads(),
         batch: a.batch,
         size: a.size,
@@ -140,8 +160,8 @@ pub fn run(a: &TrainArgs) -> Result<()> {
         return Ok(());
     }
     println!(
-        "burn {} (Flex CPU), {} threads, batch {} x 4 x {} x {}, median of {} after {} warm-up",
-        r.burn, r.threads, r.batch, r.size, r.size, r.iters, r.warmup
+        "burn {} (Flex CPU, {} operations, malloc: {}), {} threads, batch {} x 4 x {} x {}, median of {} after {} warm-up",
+        r.burn, r.kernels, r.malloc, r.threads, r.batch, r.size, r.size, r.iters, r.warmup
     );
     for (name, res) in [("SID U-Net", &r.unet), ("SR3", &r.sr3)] {
         let Some(res) = res else { continue };
@@ -243,7 +263,8 @@ fn bench_unet(a: &TrainArgs) -> Result<NetResult> {
     drop(net);
 
     let mut net = Some(cfg.init::<CpuTrain>(&device));
-    let mut optim = AdamConfig::new().init();
+    let mut optim =
+        OptimizerAdaptor::<PgrfAdam, _, CpuTrain>::from(PgrfAdam::new(0.9, 0.999, 1e-8));
     let noisy = uniform::<CpuTrain>(shape, &device);
     let clean = uniform::<CpuTrain>(shape, &device);
     let (train_step_ms, train_step_ms_min) = time_it(a.warmup, a.iters, || {
@@ -308,7 +329,8 @@ fn bench_sr3(a: &TrainArgs) -> Result<NetResult> {
     drop(net);
 
     let mut net = Some(cfg.init::<CpuTrain>(&device).map_err(anyhow::Error::msg)?);
-    let mut optim = AdamConfig::new().init();
+    let mut optim =
+        OptimizerAdaptor::<PgrfAdam, _, CpuTrain>::from(PgrfAdam::new(0.9, 0.999, 1e-8));
     let cond = uniform::<CpuTrain>(shape, &device);
     let x1 = uniform::<CpuTrain>(shape, &device);
     let x0 = Tensor::<CpuTrain, 4>::random(shape, Distribution::Normal(0.0, 1.0), &device);

@@ -16,6 +16,9 @@ use std::process::ExitCode;
 struct Cli {
     #[command(subcommand)]
     command: Command,
+    /// Whose CPU operations the networks run: pgrf's own kernels (convolution gradients, transposed convolution, activations, Adam) or burn 0.21's, for comparison. Same numbers to rounding; CUDA always runs burn's.
+    #[arg(long, global = true, default_value = "pgrf", value_name = "pgrf|burn")]
+    kernels: pgrf_nn::ops::Kernels,
 }
 
 #[derive(Subcommand, Debug)]
@@ -53,6 +56,8 @@ enum Command {
 fn main() -> ExitCode {
     pgrf_core::exit::one_line_panics("pgrf");
     let cli = Cli::parse();
+    pgrf_nn::ops::set_kernels(cli.kernels);
+    pgrf_core::mem::keep_freed_buffers();
     let result = match &cli.command {
         Command::Demo(a) => cmd::demo::run(a),
         Command::Info(a) => cmd::info::run(a),

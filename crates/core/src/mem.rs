@@ -29,8 +29,44 @@ pub fn peak_rss_mib() -> Option<f64> {
     peak_rss().map(|b| b as f64 / (1024.0 * 1024.0))
 }
 
+/// Keep large freed buffers inside the process for the next allocation of
+/// that size instead of returning them to the OS; call once at start-up.
+///
+/// glibc serves allocations above its mmap threshold (at most 32 MiB) with
+/// fresh `mmap`s and unmaps them on free, so every training step that
+/// allocates tens of MB of im2col, gradient and activation buffers paid for
+/// zeroing and faulting in every page again: 31 % of a 1-thread SID U-Net
+/// step was the kernel's page-fault path (BENCHMARKS.md, issue 15). With the
+/// threshold raised to 1 GiB and heap trimming off, freed buffers are reused.
+/// The cost: the process keeps its peak heap until it exits (peak RSS is
+/// unchanged). Returns whether the allocator accepted both settings (false
+/// off glibc, where this does nothing).
+#[allow(unsafe_code)]
+pub fn keep_freed_buffers() -> bool {
+    #[cfg(all(target_os = "linux", target_env = "gnu"))]
+    {
+        // SAFETY: mallopt only changes two thresholds of glibc's allocator
+        // (no pointers, no memory is touched); it is thread-safe.
+        let mmap = unsafe { libc::mallopt(libc::M_MMAP_THRESHOLD, 1 << 30) };
+        let trim = unsafe { libc::mallopt(libc::M_TRIM_THRESHOLD, i32::MAX) };
+        mmap == 1 && trim == 1
+    }
+    #[cfg(not(all(target_os = "linux", target_env = "gnu")))]
+    {
+        false
+    }
+}
+
 #[cfg(test)]
 mod tests {
+    /// glibc accepts the thresholds (the 1 GiB mmap threshold is above the
+    /// 32 MiB that older glibc versions allowed).
+    #[cfg(all(target_os = "linux", target_env = "gnu"))]
+    #[test]
+    fn glibc_accepts_the_thresholds() {
+        assert!(super::keep_freed_buffers());
+    }
+
     #[test]
     fn peak_rss_grows_with_a_touched_allocation() {
         let before = super::peak_rss().expect("Linux /proc");

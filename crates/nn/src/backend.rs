@@ -5,6 +5,7 @@
 //! CUDA is behind the `cuda` cargo feature: burn 0.21's CUDA runtime loads the
 //! driver libraries at run time, so building needs no CUDA toolkit.
 
+use crate::ops::PgrfOps;
 use burn::backend::Autodiff;
 
 /// Inference on the CPU.
@@ -70,10 +71,7 @@ pub trait OnBackend {
     /// What the work returns.
     type Output;
     /// Run on backend `B` and its default device.
-    fn run<B: burn::tensor::backend::Backend>(
-        self,
-        device: B::Device,
-    ) -> crate::Result<Self::Output>;
+    fn run<B: PgrfOps>(self, device: B::Device) -> crate::Result<Self::Output>;
 }
 
 /// Work generic over a training (autodiff) backend, run by [`on_train_device`].
@@ -81,10 +79,7 @@ pub(crate) trait OnTrainBackend {
     /// What the work returns.
     type Output;
     /// Run on backend `B` and its default device.
-    fn run<B: burn::tensor::backend::AutodiffBackend>(
-        self,
-        device: B::Device,
-    ) -> crate::Result<Self::Output>;
+    fn run<B: crate::ops::PgrfAutodiff>(self, device: B::Device) -> crate::Result<Self::Output>;
 }
 
 /// Run `job` on the inference backend of `kind` (refused without CUDA).
@@ -117,7 +112,11 @@ pub(crate) fn on_train_device<J: OnTrainBackend>(
 /// One line about the compute device, for headers and summaries.
 pub fn describe(kind: DeviceKind) -> String {
     match kind {
-        DeviceKind::Cpu => format!("Flex, {} threads", rayon::current_num_threads()),
+        DeviceKind::Cpu => format!(
+            "Flex, {} threads, {} operations",
+            rayon::current_num_threads(),
+            crate::ops::kernels()
+        ),
         DeviceKind::Cuda => "CUDA device 0".into(),
     }
 }
@@ -147,7 +146,7 @@ pub fn train(
     }
     impl OnTrainBackend for Job<'_> {
         type Output = crate::train::Outcome;
-        fn run<B: burn::tensor::backend::AutodiffBackend>(
+        fn run<B: crate::ops::PgrfAutodiff>(
             self,
             device: B::Device,
         ) -> crate::Result<Self::Output> {

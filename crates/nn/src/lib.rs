@@ -32,6 +32,7 @@ pub mod layers;
 pub mod named;
 mod net;
 pub mod norm;
+pub mod ops;
 pub mod schedule;
 pub mod seeded;
 pub mod sr3;

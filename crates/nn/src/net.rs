@@ -2,6 +2,7 @@
 //! format and loader serve both methods (SPC and PGRF).
 
 use crate::error::{NnError, Result};
+use crate::ops::PgrfOps;
 use crate::sr3::Sr3Unet;
 use crate::unet::SidUnet;
 use crate::weights::{self, Architecture, WeightMeta};
@@ -53,7 +54,7 @@ impl Architecture {
     }
 }
 
-impl<B: Backend> Net<B> {
+impl<B: PgrfOps> Net<B> {
     /// The denoised batch: one pass for SPC, the two-stage sampler at `t2`
     /// for the flow model. `noisy` is T, `(n, 4, h, w)`; `x0` is X0, same
     /// shape (ignored by SPC).

@@ -17,24 +17,38 @@ use burn::tensor::Tensor;
 /// returns the same shape. Equal to `norm.forward(x)` to rounding, faster on
 /// Flex; SR3 ([`crate::sr3`]) runs every GroupNorm through it.
 pub fn group_norm<B: Backend>(norm: &GroupNorm<B>, x: Tensor<B, 4>) -> Tensor<B, 4> {
+    folded(
+        x,
+        norm.gamma.as_ref().map(|g| g.val()),
+        norm.beta.as_ref().map(|b| b.val()),
+        norm.num_groups,
+        norm.epsilon,
+    )
+}
+
+/// [`group_norm`] from its parts: `groups` groups, `epsilon`, the optional
+/// per-channel scale `gamma` and shift `beta` (both or neither).
+pub(crate) fn folded<B: Backend>(
+    x: Tensor<B, 4>,
+    gamma: Option<Tensor<B, 1>>,
+    beta: Option<Tensor<B, 1>>,
+    groups: usize,
+    epsilon: f64,
+) -> Tensor<B, 4> {
     let [n, c, h, w] = x.dims();
-    let g = norm.num_groups;
+    let g = groups;
     let cg = c / g;
     let grouped = x.reshape([n, g, cg * h * w]);
     let mean = grouped.clone().mean_dim(2);
     let centred = grouped - mean;
     let var = centred.clone().square().mean_dim(2);
-    let rstd = var.add_scalar(norm.epsilon).sqrt().recip(); // (n, g, 1)
-    let (Some(gamma), Some(beta)) = (&norm.gamma, &norm.beta) else {
+    let rstd = var.add_scalar(epsilon).sqrt().recip(); // (n, g, 1)
+    let (Some(gamma), Some(beta)) = (gamma, beta) else {
         return (centred * rstd).reshape([n, c, h, w]);
     };
     let rows = centred.reshape([n * c, h * w]);
-    let scale = (rstd * gamma.val().reshape([1, g, cg])).reshape([n * c, 1]);
-    let shift = beta
-        .val()
-        .reshape([1, c])
-        .expand([n, c])
-        .reshape([n * c, 1]);
+    let scale = (rstd * gamma.reshape([1, g, cg])).reshape([n * c, 1]);
+    let shift = beta.reshape([1, c]).expand([n, c]).reshape([n * c, 1]);
     (rows * scale + shift).reshape([n, c, h, w])
 }
 

@@ -10,14 +10,14 @@
 //! level 3 is the paper's 16 x 16 level.
 
 use crate::layers::Layer;
-use crate::norm::group_norm;
+use crate::ops::{self, group_norm, silu, PgrfOps};
 use burn::config::Config;
 use burn::module::Module;
 use burn::nn::conv::{Conv2d, Conv2dConfig};
 use burn::nn::{
     Dropout, DropoutConfig, GroupNorm, GroupNormConfig, Linear, LinearConfig, PaddingConfig2d,
 };
-use burn::tensor::activation::{silu, softmax};
+use burn::tensor::activation::softmax;
 use burn::tensor::backend::Backend;
 use burn::tensor::module::interpolate;
 use burn::tensor::ops::{InterpolateMode, InterpolateOptions, PadMode};
@@ -222,17 +222,17 @@ pub fn attention_core<B: Backend>(qkv: Tensor<B, 3>, c: usize) -> Tensor<B, 3> {
     v.matmul(weights.swap_dims(1, 2))
 }
 
-impl<B: Backend> SelfAttention<B> {
+impl<B: PgrfOps> SelfAttention<B> {
     fn forward(&self, x: Tensor<B, 4>) -> Tensor<B, 4> {
         let [n, c, h, w] = x.dims();
-        let qkv = self
-            .qkv
-            .forward(group_norm(&self.norm, x.clone()))
-            .reshape([n, 3 * c, h * w]);
+        let qkv =
+            ops::conv2d(&self.qkv, group_norm(&self.norm, x.clone())).reshape([n, 3 * c, h * w]);
         let out = attention_core(qkv, c).reshape([n, c, h, w]);
-        x + self.out.forward(out)
+        x + ops::conv2d(&self.out, out)
     }
+}
 
+impl<B: Backend> SelfAttention<B> {
     /// What `forward` runs on an `h` x `w` input, appended to `out`.
     fn layers(&self, h: usize, w: usize, out: &mut Vec<Layer>) {
         let channels = self.norm.num_channels;
@@ -282,17 +282,20 @@ impl<B: Backend> ResBlock<B> {
             }),
         }
     }
+}
 
+impl<B: PgrfOps> ResBlock<B> {
     fn forward(&self, x: Tensor<B, 4>, emb: &Tensor<B, 2>) -> Tensor<B, 4> {
         let [n, _, _, _] = x.dims();
-        let h = self.conv1.forward(silu(group_norm(&self.norm1, x.clone())));
+        let h = ops::conv2d(&self.conv1, silu(group_norm(&self.norm1, x.clone())));
         let c = h.dims()[1];
         let h = h + self.emb.forward(emb.clone()).reshape([n, c, 1, 1]);
-        let h = self
-            .conv2
-            .forward(self.dropout.forward(silu(group_norm(&self.norm2, h))));
+        let h = ops::conv2d(
+            &self.conv2,
+            self.dropout.forward(silu(group_norm(&self.norm2, h))),
+        );
         let res = match &self.skip {
-            Some(s) => s.forward(x),
+            Some(s) => ops::conv2d(s, x),
             None => x,
         };
         let out = h + res;
@@ -301,7 +304,9 @@ impl<B: Backend> ResBlock<B> {
             None => out,
         }
     }
+}
 
+impl<B: Backend> ResBlock<B> {
     /// What `forward` runs on an `h` x `w` input, appended to `out`.
     fn layers(&self, h: usize, w: usize, out: &mut Vec<Layer>) {
         let silu = |norm: &GroupNorm<B>| Layer::Silu {
@@ -363,7 +368,7 @@ fn time_embedding<B: Backend>(t: Tensor<B, 1>, dim: usize) -> Tensor<B, 2> {
     Tensor::cat(vec![arg.clone().sin(), arg.cos()], 1)
 }
 
-impl<B: Backend> Sr3Unet<B> {
+impl<B: PgrfOps> Sr3Unet<B> {
     /// v(Xt, T, t): `xt` and `cond` are `(batch, 4, H, W)`, `t` is `(batch)`.
     /// Returns `(batch, 4, H, W)`; sides that are not multiples of
     /// 2^(levels-1) are padded by reflection (zeros if too small) and cropped back.
@@ -390,7 +395,7 @@ impl<B: Backend> Sr3Unet<B> {
             .t_out
             .forward(silu(self.t_in.forward(time_embedding(t, self.inner))));
 
-        let mut x = self.first.forward(x);
+        let mut x = ops::conv2d(&self.first, x);
         let mut feats = vec![x.clone()];
         let mut res = self.downs.iter();
         for level in 0..self.levels {
@@ -399,7 +404,7 @@ impl<B: Backend> Sr3Unet<B> {
                 feats.push(x.clone());
             }
             if level + 1 < self.levels {
-                x = self.downsamples[level].forward(x);
+                x = ops::conv2d(&self.downsamples[level], x);
                 feats.push(x.clone());
             }
         }
@@ -423,12 +428,10 @@ impl<B: Backend> Sr3Unet<B> {
                     [2 * hh, 2 * ww],
                     InterpolateOptions::new(InterpolateMode::Nearest),
                 );
-                x = upsamples.next().expect("upsample").forward(x);
+                x = ops::conv2d(upsamples.next().expect("upsample"), x);
             }
         }
-        let out = self
-            .final_conv
-            .forward(silu(group_norm(&self.final_norm, x)));
+        let out = ops::conv2d(&self.final_conv, silu(group_norm(&self.final_norm, x)));
         let c = out.dims()[1];
         let out = out.slice([0..n, 0..c, 0..h, 0..w]);
         match skip {
@@ -436,7 +439,9 @@ impl<B: Backend> Sr3Unet<B> {
             None => out,
         }
     }
+}
 
+impl<B: Backend> Sr3Unet<B> {
     /// The layers [`Sr3Unet::forward`] runs on `(batch, 4, h, w)` inputs, in
     /// order, at the sizes they run at (after the padding to a multiple of
     /// 2^(levels-1)), read from this network's modules; see

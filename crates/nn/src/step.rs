@@ -7,24 +7,21 @@
 //!   the path and the loss are [`crate::flow`]'s.
 
 use crate::flow::flow_loss;
+use crate::ops::{PgrfAutodiff, PgrfOps};
 use crate::sr3::Sr3Unet;
 use crate::unet::SidUnet;
 use burn::optim::{GradientsParams, Optimizer};
-use burn::tensor::backend::AutodiffBackend;
 use burn::tensor::{ElementConversion, Tensor};
 
 /// Mean absolute error over every element.
-pub(crate) fn l1<B: burn::tensor::backend::Backend>(
-    a: Tensor<B, 4>,
-    b: Tensor<B, 4>,
-) -> Tensor<B, 1> {
+pub(crate) fn l1<B: PgrfOps>(a: Tensor<B, 4>, b: Tensor<B, 4>) -> Tensor<B, 1> {
     (a - b).abs().mean()
 }
 
 /// The denoiser's loss: L1(net(noisy x ratio), clean), `noisy` being the
 /// amplified, clamped input and `clean` the target, both `(n, 4, h, w)`
 /// packed in [0, 1].
-pub fn denoiser_loss<B: burn::tensor::backend::Backend>(
+pub fn denoiser_loss<B: PgrfOps>(
     net: &SidUnet<B>,
     noisy: Tensor<B, 4>,
     clean: Tensor<B, 4>,
@@ -35,7 +32,7 @@ pub fn denoiser_loss<B: burn::tensor::backend::Backend>(
 /// One Adam (or other optimiser) step of the denoiser at learning rate `lr`
 /// on the batch (`noisy`, `clean`) of [`denoiser_loss`]; returns the updated
 /// network and the loss before the update.
-pub fn denoiser_step<B: AutodiffBackend, O: Optimizer<SidUnet<B>, B>>(
+pub fn denoiser_step<B: PgrfAutodiff, O: Optimizer<SidUnet<B>, B>>(
     net: SidUnet<B>,
     optim: &mut O,
     noisy: Tensor<B, 4>,
@@ -54,7 +51,7 @@ pub fn denoiser_step<B: AutodiffBackend, O: Optimizer<SidUnet<B>, B>>(
 /// the caller (so the loop owns the randomness and its seed;
 /// [`crate::flow`]). Returns the updated network and the loss before the
 /// update.
-pub fn flow_step<B: AutodiffBackend, O: Optimizer<Sr3Unet<B>, B>>(
+pub fn flow_step<B: PgrfAutodiff, O: Optimizer<Sr3Unet<B>, B>>(
     net: Sr3Unet<B>,
     optim: &mut O,
     cond: Tensor<B, 4>,

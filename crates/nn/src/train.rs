@@ -9,14 +9,16 @@ use crate::data::{Extras, Loader, SampleSpec, Source};
 use crate::error::{NnError, Result};
 use crate::flow::flow_loss;
 use crate::net::Net;
+use crate::ops::adam::PgrfAdam;
+use crate::ops::{PgrfAutodiff, PgrfOps};
 use crate::schedule::Schedule;
 use crate::step::denoiser_loss;
 use crate::weights::{Architecture, NoiseSource, TrainingSummary, WeightMeta};
 use burn::module::{AutodiffModule, Module};
+use burn::optim::adaptor::OptimizerAdaptor;
 use burn::optim::grad_clipping::GradientClippingConfig;
-use burn::optim::{AdamConfig, GradientsParams, Optimizer};
+use burn::optim::{GradientsParams, Optimizer};
 use burn::record::{BinBytesRecorder, FullPrecisionSettings, Recorder};
-use burn::tensor::backend::{AutodiffBackend, Backend};
 use burn::tensor::{ElementConversion, Tensor, TensorData};
 use pgrf_core::Progress;
 use pgrf_noise::pair::PairSpec;
@@ -107,13 +109,13 @@ pub struct Outcome {
 
 type Rec = BinBytesRecorder<FullPrecisionSettings>;
 
-fn to_tensor<B: Backend>(v: &[f32], shape: [usize; 4], device: &B::Device) -> Tensor<B, 4> {
+fn to_tensor<B: PgrfOps>(v: &[f32], shape: [usize; 4], device: &B::Device) -> Tensor<B, 4> {
     Tensor::from_data(TensorData::new(v.to_vec(), shape), device)
 }
 
 /// Mean PSNR of the network on the validation pairs (one at a time, so memory
 /// stays that of a single patch).
-pub(crate) fn validate<B: Backend>(net: &Net<B>, val: &ValSet, t2: f32, device: &B::Device) -> f32 {
+pub(crate) fn validate<B: PgrfOps>(net: &Net<B>, val: &ValSet, t2: f32, device: &B::Device) -> f32 {
     let p = val.patch;
     let mut sum = 0.0;
     for pair in &val.pairs {
@@ -199,7 +201,7 @@ impl Log {
 }
 
 /// Train from scratch or resume, until `settings.steps` or until `stop` is set.
-pub(crate) fn train<B: AutodiffBackend>(
+pub(crate) fn train<B: PgrfAutodiff>(
     s: &TrainSettings,
     source: Arc<Source>,
     spec: Arc<PairSpec>,
@@ -221,11 +223,12 @@ pub(crate) fn train<B: AutodiffBackend>(
     }
     let arch_json = serde_json::to_value(&s.arch).map_err(|e| NnError::Invalid(e.to_string()))?;
     let mut net: Net<B> = s.arch.init_seeded(device, s.seed)?;
-    let mut adam = AdamConfig::new().with_epsilon(1e-8);
+    // burn's Adam defaults (beta 0.9, 0.999) with epsilon 1e-8; one pass per
+    // parameter tensor on the CPU (crate::ops::adam), burn's Adam elsewhere.
+    let mut optim = OptimizerAdaptor::<PgrfAdam, Net<B>, B>::from(PgrfAdam::new(0.9, 0.999, 1e-8));
     if let Some(c) = s.clip_grad {
-        adam = adam.with_grad_clipping(Some(GradientClippingConfig::Norm(c)));
+        optim = optim.with_grad_clipping(GradientClippingConfig::Norm(c).init());
     }
-    let mut optim = adam.init::<B, Net<B>>();
     let recorder = Rec::default();
 
     let (mut start, mut elapsed0, mut last_val) = (0u64, 0.0f64, None);
@@ -281,33 +284,32 @@ pub(crate) fn train<B: AutodiffBackend>(
     let mut window = (0.0f64, 0u64);
     let mut interrupted = false;
     let mut step = start;
-    let save_checkpoint =
-        |net: &Net<B>,
-         optim: &burn::optim::adaptor::OptimizerAdaptor<burn::optim::Adam, Net<B>, B>,
-         step: u64,
-         elapsed: f64,
-         last_loss: Option<f32>,
-         last_val: Option<f32>|
-         -> Result<()> {
-            let bad = |e: burn::record::RecorderError| NnError::Invalid(e.to_string());
-            let model = recorder
-                .record(net.clone().into_record(), ())
-                .map_err(bad)?;
-            let opt = recorder.record(optim.to_record(), ()).map_err(bad)?;
-            let state = CheckpointState {
-                task: s.arch.method(),
-                arch: arch_json.clone(),
-                step,
-                steps: s.steps,
-                seed: s.seed,
-                batch: s.batch,
-                patch: s.patch,
-                elapsed_s: elapsed,
-                last_loss,
-                last_val_psnr: last_val,
-            };
-            checkpoint::save(&s.checkpoint, &state, &model, &opt)
+    let save_checkpoint = |net: &Net<B>,
+                           optim: &OptimizerAdaptor<PgrfAdam, Net<B>, B>,
+                           step: u64,
+                           elapsed: f64,
+                           last_loss: Option<f32>,
+                           last_val: Option<f32>|
+     -> Result<()> {
+        let bad = |e: burn::record::RecorderError| NnError::Invalid(e.to_string());
+        let model = recorder
+            .record(net.clone().into_record(), ())
+            .map_err(bad)?;
+        let opt = recorder.record(optim.to_record(), ()).map_err(bad)?;
+        let state = CheckpointState {
+            task: s.arch.method(),
+            arch: arch_json.clone(),
+            step,
+            steps: s.steps,
+            seed: s.seed,
+            batch: s.batch,
+            patch: s.patch,
+            elapsed_s: elapsed,
+            last_loss,
+            last_val_psnr: last_val,
         };
+        checkpoint::save(&s.checkpoint, &state, &model, &opt)
+    };
 
     progress.start(s.steps, "steps");
     progress.set_position(start);

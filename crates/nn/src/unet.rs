@@ -9,6 +9,7 @@
 //! back, so any packed image size works.
 
 use crate::layers::Layer;
+use crate::ops::{self, PgrfOps};
 use burn::config::Config;
 use burn::module::Module;
 use burn::nn::conv::{Conv2d, Conv2dConfig, ConvTranspose2d, ConvTranspose2dConfig};
@@ -67,11 +68,6 @@ impl<B: Backend> DoubleConv<B> {
         }
     }
 
-    fn forward(&self, x: Tensor<B, 4>) -> Tensor<B, 4> {
-        let x = self.act.forward(self.first.forward(x));
-        self.act.forward(self.second.forward(x))
-    }
-
     /// What `forward` runs on an `h` x `w` input, appended to `out`.
     fn layers(&self, h: usize, w: usize, out: &mut Vec<Layer>) {
         for conv in [&self.first, &self.second] {
@@ -79,6 +75,14 @@ impl<B: Backend> DoubleConv<B> {
             let channels = layer.out_channels().expect("a convolution");
             out.extend([layer, Layer::LeakyRelu { channels, h, w }]);
         }
+    }
+}
+
+impl<B: PgrfOps> DoubleConv<B> {
+    fn forward(&self, x: Tensor<B, 4>) -> Tensor<B, 4> {
+        let slope = self.act.negative_slope as f32;
+        let x = ops::leaky_relu(ops::conv2d(&self.first, x), slope);
+        ops::leaky_relu(ops::conv2d(&self.second, x), slope)
     }
 }
 
@@ -141,7 +145,7 @@ impl SidUnetConfig {
     }
 }
 
-impl<B: Backend> SidUnet<B> {
+impl<B: PgrfOps> SidUnet<B> {
     /// `x`: `(batch, 4, H, W)` packed, normalised and amplified raw. Returns
     /// the same shape.
     pub fn forward(&self, x: Tensor<B, 4>) -> Tensor<B, 4> {
@@ -168,9 +172,9 @@ impl<B: Backend> SidUnet<B> {
         }
         for (up, merge) in self.up.iter().zip(&self.merge) {
             let skip = skips.pop().expect("one skip per level");
-            x = merge.forward(Tensor::cat(vec![up.forward(x), skip], 1));
+            x = merge.forward(Tensor::cat(vec![ops::conv_transpose2d(up, x), skip], 1));
         }
-        let out = self.head.forward(x);
+        let out = ops::conv2d(&self.head, x);
         let c = out.dims()[1];
         let out = out.slice([0..n, 0..c, 0..h, 0..w]);
         match input {

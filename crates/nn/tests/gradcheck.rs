@@ -1,6 +1,8 @@
-//! Backward passes of the two layers every pgrf network leans on — burn's 3x3
-//! convolution and pgrf's GroupNorm (pgrf_nn::norm, the folded form SR3 runs) — against central finite differences of the
-//! same layer on the plain backend. f32 arithmetic: steps of 1e-2 and a
+//! Backward passes of the layers pgrf's networks run — the 3x3 convolution
+//! (burn's and pgrf's own, `pgrf_nn::ops`), pgrf's transposed convolution,
+//! LeakyReLU, SiLU and GroupNorm (the folded form in burn's operations and
+//! pgrf's fused one) — against central finite differences of the same layer
+//! on the plain backend. f32 arithmetic: steps of 1e-2 and a
 //! tolerance of 2 % of the gradient's scale (conv is linear in its weights,
 //! so there the difference quotient is exact up to rounding).
 
@@ -12,6 +14,7 @@ use burn::tensor::{Distribution, Tensor, TensorData};
 use pgrf_nn::backend::{Cpu, CpuTrain};
 use pgrf_nn::named::{assign, collect};
 use pgrf_nn::norm::group_norm;
+use pgrf_nn::ops;
 use pgrf_nn::seeded::seeded;
 
 const H: f32 = 1e-2;
@@ -50,6 +53,16 @@ fn loss_plain<M: Module<Cpu>>(
 
 #[test]
 fn conv3x3_gradients_match_finite_differences() {
+    conv3x3_case(false);
+}
+
+#[test]
+fn pgrf_conv3x3_gradients_match_finite_differences() {
+    conv3x3_case(true);
+}
+
+/// burn's convolution (`pgrf` false) or pgrf's.
+fn conv3x3_case(pgrf: bool) {
     let device = Default::default();
     let shape = [2, 3, 7, 6];
     let cfg = Conv2dConfig::new([3, 4], [3, 3]).with_padding(PaddingConfig2d::Same);
@@ -57,7 +70,11 @@ fn conv3x3_gradients_match_finite_differences() {
         let conv = cfg.init::<CpuTrain>(&device);
         let x = Tensor::<CpuTrain, 4>::random(shape, Distribution::Normal(0.0, 1.0), &device)
             .require_grad();
-        let out = conv.forward(x.clone());
+        let out = if pgrf {
+            ops::conv2d(&conv, x.clone())
+        } else {
+            conv.forward(x.clone())
+        };
         let r = Tensor::<CpuTrain, 4>::random(out.dims(), Distribution::Normal(0.0, 1.0), &device);
         (conv, x, out, r)
     });
@@ -70,7 +87,13 @@ fn conv3x3_gradients_match_finite_differences() {
     let r = r.inner();
     let xv = values(x.inner());
     let named = collect::<Cpu, _>(&plain);
-    let fwd = |m: &burn::nn::conv::Conv2d<Cpu>, x| m.forward(x);
+    let fwd = |m: &burn::nn::conv::Conv2d<Cpu>, x| {
+        if pgrf {
+            ops::conv2d(m, x)
+        } else {
+            m.forward(x)
+        }
+    };
     let perturbed = |name: &str, i: usize, d: f32| {
         let mut n = named.clone();
         n.get_mut(name).unwrap().values[i] += d;
@@ -159,5 +182,100 @@ fn group_norm_gradients_match_finite_differences() {
         &gx,
         |i| (in_x(i, H) - in_x(i, -H)) / (2.0 * H),
         &[0, 19, 77, 160, 319],
+    );
+}
+
+/// Input gradient of `layer` (the same function on both backends) against
+/// central differences at `picks`.
+fn input_gradient_case(
+    what: &str,
+    shape: [usize; 4],
+    seed: u64,
+    train: impl Fn(Tensor<CpuTrain, 4>) -> Tensor<CpuTrain, 4>,
+    plain: impl Fn(Tensor<Cpu, 4>) -> Tensor<Cpu, 4>,
+    picks: &[usize],
+) {
+    let device = Default::default();
+    let (x, r) = seeded::<CpuTrain, _>(&device, seed, || {
+        let x = Tensor::<CpuTrain, 4>::random(shape, Distribution::Normal(0.0, 2.0), &device)
+            .require_grad();
+        let r = Tensor::<CpuTrain, 4>::random(
+            train(x.clone()).dims(),
+            Distribution::Normal(0.0, 1.0),
+            &device,
+        );
+        (x, r)
+    });
+    let grads = (train(x.clone()) * r.clone()).sum().backward();
+    let gx = values(x.grad(&grads).unwrap());
+    let (xv, r) = (values(x.inner()), r.inner());
+    let at = |i: usize, d: f32| {
+        let mut xs = xv.clone();
+        xs[i] += d;
+        let xt = Tensor::<Cpu, 4>::from_data(TensorData::new(xs, shape), &device);
+        values((plain(xt) * r.clone()).sum())[0]
+    };
+    // Points within H of LeakyReLU's kink would compare a one-sided slope.
+    let picks: Vec<usize> = picks
+        .iter()
+        .copied()
+        .filter(|&i| xv[i].abs() > 2.0 * H)
+        .collect();
+    assert!(picks.len() >= 3, "{what}: too few usable points");
+    check(what, &gx, |i| (at(i, H) - at(i, -H)) / (2.0 * H), &picks);
+}
+
+#[test]
+fn pgrf_activations_and_norm_gradients_match_finite_differences() {
+    let picks = [0, 11, 37, 64, 101, 150, 199];
+    input_gradient_case(
+        "leaky relu",
+        [2, 4, 5, 5],
+        21,
+        |x| ops::leaky_relu(x, 0.2),
+        |x| ops::leaky_relu(x, 0.2),
+        &picks,
+    );
+    input_gradient_case("silu", [2, 4, 5, 5], 22, ops::silu, ops::silu, &picks);
+    let device = Default::default();
+    let gn = GroupNormConfig::new(2, 4).init::<CpuTrain>(&device);
+    let mut named = collect::<CpuTrain, _>(&gn);
+    for (k, t) in named.iter_mut() {
+        for (i, v) in t.values.iter_mut().enumerate() {
+            *v = if k.ends_with("gamma") {
+                0.7 + 0.2 * i as f32
+            } else {
+                0.1 * i as f32
+            };
+        }
+    }
+    let gn = assign(gn, &named, &device).unwrap();
+    let plain = gn.valid();
+    input_gradient_case(
+        "pgrf group norm",
+        [2, 4, 5, 5],
+        23,
+        |x| ops::group_norm(&gn, x),
+        |x| ops::group_norm(&plain, x),
+        &picks,
+    );
+}
+
+#[test]
+fn pgrf_transposed_convolution_gradient_matches_finite_differences() {
+    let device = Default::default();
+    let up = seeded::<CpuTrain, _>(&device, 24, || {
+        burn::nn::conv::ConvTranspose2dConfig::new([3, 2], [2, 2])
+            .with_stride([2, 2])
+            .init::<CpuTrain>(&device)
+    });
+    let plain = up.valid();
+    input_gradient_case(
+        "pgrf transposed conv",
+        [2, 3, 4, 5],
+        25,
+        |x| ops::conv_transpose2d(&up, x),
+        |x| ops::conv_transpose2d(&plain, x),
+        &[0, 9, 33, 58, 77, 101, 119],
     );
 }

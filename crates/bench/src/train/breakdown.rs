@@ -14,7 +14,6 @@ use burn::nn::conv::{Conv2d, Conv2dConfig, ConvTranspose2d, ConvTranspose2dConfi
 use burn::nn::{
     GroupNorm, GroupNormConfig, LeakyRelu, LeakyReluConfig, Linear, LinearConfig, PaddingConfig2d,
 };
-use burn::tensor::activation::silu;
 use burn::tensor::backend::Backend;
 use burn::tensor::ops::{AttentionModuleOptions, ConvOptions, ModuleOps, PadMode};
 use burn::tensor::{Distribution, Tensor, TensorData};
@@ -22,6 +21,7 @@ use pgrf_core::stats::median;
 use pgrf_nn::backend::{Cpu, CpuTrain};
 use pgrf_nn::layers::Layer;
 use pgrf_nn::norm::group_norm;
+use pgrf_nn::ops::{self, PgrfOps};
 use pgrf_nn::sr3::attention_core;
 use serde::Serialize;
 use std::collections::BTreeMap;
@@ -135,14 +135,18 @@ impl<B: Backend> Built<B> {
             }
         }
     }
+}
 
+impl<B: PgrfOps> Built<B> {
+    /// The layer as the networks run it: through pgrf's operations unless
+    /// `--kernels burn` chose burn's.
     fn forward(&self, x: Tensor<B, 4>) -> Tensor<B, 4> {
         match self {
-            Built::Conv(m) => m.forward(x),
-            Built::ConvT(m) => m.forward(x),
-            Built::Norm(m) => m.forward(x),
-            Built::LeakyRelu(m) => m.forward(x),
-            Built::Silu => silu(x),
+            Built::Conv(m) => ops::conv2d(m, x),
+            Built::ConvT(m) => ops::conv_transpose2d(m, x),
+            Built::Norm(m) => ops::group_norm(m, x),
+            Built::LeakyRelu(m) => ops::leaky_relu(x, m.negative_slope as f32),
+            Built::Silu => ops::silu(x),
             Built::Attention(c) => {
                 let [n, _, h, w] = x.dims();
                 attention_core(x.reshape([n, 3 * c, h * w]), *c).reshape([n, *c, h, w])

@@ -11,9 +11,9 @@
 //! input.
 
 use super::path::interpolate;
+use crate::ops::PgrfOps;
 use crate::sr3::Sr3Unet;
 use crate::step::l1;
-use burn::tensor::backend::Backend;
 use burn::tensor::Tensor;
 
 /// The flow loss |X1 - X0 - v(Xt, T, t)|_1 at Xt = t X1 + (1 - t) X0.
@@ -25,7 +25,7 @@ use burn::tensor::Tensor;
 ///
 /// X0 and t are drawn by the caller so that the training loop owns the
 /// randomness and its seed. Returns the mean over every element, shape `(1)`.
-pub fn flow_loss<B: Backend>(
+pub fn flow_loss<B: PgrfOps>(
     net: &Sr3Unet<B>,
     cond: Tensor<B, 4>,
     x1: Tensor<B, 4>,

@@ -25,32 +25,32 @@
 //! [`crate::infer::Restorer`]).
 
 use super::path::interpolate;
+use crate::ops::PgrfOps;
 use crate::sr3::Sr3Unet;
-use burn::tensor::backend::Backend;
 use burn::tensor::Tensor;
 
 /// A velocity field v(X, T, t) (the paper's v, an SR3-style U-Net with the
 /// condition T concatenated to its input). The samplers are written against
 /// this so that their arithmetic can be checked on fields with closed forms.
-pub trait Velocity<B: Backend> {
+pub trait Velocity<B: PgrfOps> {
     /// v(X, T, t) for a batch: `x` and `cond` `(n, c, h, w)`, `t` `(n)`.
     fn velocity(&self, x: Tensor<B, 4>, cond: Tensor<B, 4>, t: Tensor<B, 1>) -> Tensor<B, 4>;
 }
 
-impl<B: Backend> Velocity<B> for Sr3Unet<B> {
+impl<B: PgrfOps> Velocity<B> for Sr3Unet<B> {
     fn velocity(&self, x: Tensor<B, 4>, cond: Tensor<B, 4>, t: Tensor<B, 1>) -> Tensor<B, 4> {
         self.forward(x, cond, t)
     }
 }
 
 /// The time `t` for each of `n` batch items.
-fn times<B: Backend>(n: usize, t: f32, device: &B::Device) -> Tensor<B, 1> {
+fn times<B: PgrfOps>(n: usize, t: f32, device: &B::Device) -> Tensor<B, 1> {
     Tensor::<B, 1>::full([n], t, device)
 }
 
 /// First stage, eq. 4.10: XZ = v(X0, T, 0) + X0 (`cond` is T, `x0` is X0).
 /// Also the whole one-step sampler.
-pub(crate) fn first_stage<B: Backend>(
+pub(crate) fn first_stage<B: PgrfOps>(
     net: &impl Velocity<B>,
     cond: Tensor<B, 4>,
     x0: Tensor<B, 4>,
@@ -62,7 +62,7 @@ pub(crate) fn first_stage<B: Backend>(
 
 /// Second stage, eq. 4.11-4.12: Xt2 = t2 XZ + (1 - t2) X0 (eq. 4.9 at t2),
 /// then XM = v(Xt2, T, t2) + X0. `xz` is the first stage's XZ.
-pub(crate) fn second_stage<B: Backend>(
+pub(crate) fn second_stage<B: PgrfOps>(
     net: &impl Velocity<B>,
     cond: Tensor<B, 4>,
     x0: Tensor<B, 4>,
@@ -79,7 +79,7 @@ pub(crate) fn second_stage<B: Backend>(
 /// XM = v(t2 XZ + (1 - t2) X0, T, t2) + X0, XZ = v(X0, T, 0) + X0.
 /// `cond` is T and `x0` is X0, both `(n, 4, h, w)`; `t2` in [0, 1]. Returns
 /// XM, the restored batch (not clamped), same shape.
-pub fn two_stage<B: Backend>(
+pub fn two_stage<B: PgrfOps>(
     net: &impl Velocity<B>,
     cond: Tensor<B, 4>,
     x0: Tensor<B, 4>,
@@ -90,7 +90,7 @@ pub fn two_stage<B: Backend>(
 }
 
 /// One network evaluation: XZ = X0 + v(X0, T, 0) (the first stage alone).
-pub(crate) fn one_step<B: Backend>(
+pub(crate) fn one_step<B: PgrfOps>(
     net: &impl Velocity<B>,
     cond: Tensor<B, 4>,
     x0: Tensor<B, 4>,
@@ -100,7 +100,7 @@ pub(crate) fn one_step<B: Backend>(
 
 /// Euler integration of dX/dt = v(X, T, t) from X0 at t = 0 to t = 1 in
 /// `steps` steps (the many-step baseline the two-stage sampler replaces).
-pub(crate) fn euler<B: Backend>(
+pub(crate) fn euler<B: PgrfOps>(
     net: &impl Velocity<B>,
     cond: Tensor<B, 4>,
     x0: Tensor<B, 4>,
@@ -151,7 +151,7 @@ impl Sampler {
 
     /// The restored batch from condition T `cond` and start X0 `x0`, both
     /// `(n, 4, h, w)`.
-    pub(crate) fn run<B: Backend>(
+    pub(crate) fn run<B: PgrfOps>(
         &self,
         net: &impl Velocity<B>,
         cond: Tensor<B, 4>,

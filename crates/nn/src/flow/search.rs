@@ -16,8 +16,8 @@ use super::sample::{first_stage, second_stage, two_stage, Velocity};
 use crate::backend::{on_device, DeviceKind, OnBackend};
 use crate::data::validation::ValSet;
 use crate::error::{NnError, Result};
+use crate::ops::PgrfOps;
 use crate::weights::{self, WeightMeta};
-use burn::tensor::backend::Backend;
 use burn::tensor::{Tensor, TensorData};
 use ndarray::{Array3, ArrayView3};
 use pgrf_core::Progress;
@@ -139,7 +139,7 @@ pub fn run(
     }
     impl OnBackend for Job<'_> {
         type Output = SearchOutcome;
-        fn run<B: Backend>(self, device: B::Device) -> Result<SearchOutcome> {
+        fn run<B: PgrfOps>(self, device: B::Device) -> Result<SearchOutcome> {
             run_on::<B>(self.model, &device, self.pairs, self.opts, self.progress)
         }
     }
@@ -154,7 +154,7 @@ pub fn run(
     )
 }
 
-fn run_on<B: Backend>(
+fn run_on<B: PgrfOps>(
     model: &Path,
     device: &B::Device,
     pairs: &ValSet,
@@ -168,7 +168,7 @@ fn run_on<B: Backend>(
 /// [`run`] with a network already in memory (any velocity field `net` on
 /// `device`): the same measurement, for callers that hold the model and
 /// for tests.
-pub(crate) fn search_with<B: Backend>(
+pub(crate) fn search_with<B: PgrfOps>(
     net: &impl Velocity<B>,
     device: &B::Device,
     pairs: &ValSet,
@@ -252,7 +252,7 @@ pub fn store_t2(model: &Path, t2: f64) -> Result<WeightMeta> {
 /// pair the running mean of samples 1..=K, scored at K = 1, 2, 4, .. and
 /// `opts.samples`. Sample 1 uses the pair's own X0; the others draw fresh
 /// start noise from `opts.seed`.
-fn average<B: Backend>(
+fn average<B: PgrfOps>(
     net: &impl Velocity<B>,
     device: &B::Device,
     pairs: &ValSet,
@@ -309,7 +309,7 @@ fn view(v: &[f32], patch: usize) -> Result<ArrayView3<'_, f32>> {
         .map_err(|_| NnError::Invalid("validation pair of the wrong size".into()))
 }
 
-fn to_tensor<B: Backend>(v: &[f32], patch: usize, device: &B::Device) -> Result<Tensor<B, 4>> {
+fn to_tensor<B: PgrfOps>(v: &[f32], patch: usize, device: &B::Device) -> Result<Tensor<B, 4>> {
     if v.len() != 4 * patch * patch {
         return Err(NnError::Invalid("validation pair of the wrong size".into()));
     }
@@ -319,7 +319,7 @@ fn to_tensor<B: Backend>(v: &[f32], patch: usize, device: &B::Device) -> Result<
     ))
 }
 
-fn to_array<B: Backend>(t: Tensor<B, 4>, patch: usize) -> Result<Array3<f32>> {
+fn to_array<B: PgrfOps>(t: Tensor<B, 4>, patch: usize) -> Result<Array3<f32>> {
     let v: Vec<f32> = t
         .into_data()
         .to_vec()

@@ -7,6 +7,7 @@ use crate::backend::{on_device, DeviceKind, OnBackend};
 use crate::error::{NnError, Result};
 use crate::flow::sample::{Sampler, SamplerKind};
 use crate::net::Net;
+use crate::ops::PgrfOps;
 use crate::weights::{self, WeightMeta};
 use burn::tensor::backend::Backend;
 use burn::tensor::{Tensor, TensorData};
@@ -96,7 +97,7 @@ pub struct Restorer<B: Backend> {
     device: B::Device,
 }
 
-impl<B: Backend> Restorer<B> {
+impl<B: PgrfOps> Restorer<B> {
     /// Build from a weight file's bytes; `path` names them in errors.
     pub(crate) fn load_bytes(
         path: &Path,
@@ -147,7 +148,7 @@ impl<B: Backend> Restorer<B> {
     }
 }
 
-impl<B: Backend> Restore for Restorer<B> {
+impl<B: PgrfOps> Restore for Restorer<B> {
     fn meta(&self) -> &WeightMeta {
         &self.meta
     }
@@ -241,7 +242,7 @@ pub fn load_bytes(
     }
     impl OnBackend for Job<'_> {
         type Output = Box<dyn Restore>;
-        fn run<B: Backend>(self, device: B::Device) -> Result<Box<dyn Restore>> {
+        fn run<B: PgrfOps>(self, device: B::Device) -> Result<Box<dyn Restore>> {
             Ok(Box::new(Restorer::<B>::load_bytes(
                 self.path,
                 self.bytes,

@@ -1,0 +1,436 @@
+//! Data movement around the matrix products of a 2-D convolution, NCHW f32.
+//!
+//! A convolution of `n` images is one product per batch when its input is
+//! laid out as im2col rows `[ci * kh * kw, n * oh * ow]` (row `(c, ky, kx)`
+//! holds plane `c` shifted by `(ky, kx)` for every output pixel of every
+//! image): the weight gradient is `dY · colᵀ`, the input gradient's columns
+//! are `Wᵀ · dY`, scattered back by [`col2im`]. Rows of that layout are
+//! contiguous copies of input rows (for stride 1), so building it costs one
+//! pass, in parallel over rows, with no NHWC transposition. A transposed
+//! convolution whose kernel equals its stride (the U-Net's 2x2 upsampling)
+//! touches every output pixel once: it is one product followed by
+//! [`depth_to_space`], and its gradients one [`space_to_depth`] followed by
+//! products.
+
+use rayon::prelude::*;
+use std::ops::Range;
+
+/// Shape of a convolution's input and kernel: `n` images of `ci` planes of
+/// `h` x `w`, a `kh` x `kw` kernel moved by `stride` (rows, columns) over the
+/// input padded by `pad` zeros on both sides of each axis. Dilation 1, one
+/// group.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ConvGeom {
+    /// Images in the batch.
+    pub n: usize,
+    /// Input channels.
+    pub ci: usize,
+    /// Input height.
+    pub h: usize,
+    /// Input width.
+    pub w: usize,
+    /// Kernel height.
+    pub kh: usize,
+    /// Kernel width.
+    pub kw: usize,
+    /// Stride along rows and columns (non-zero).
+    pub stride: [usize; 2],
+    /// Zeros added before and after each axis (rows, columns).
+    pub pad: [usize; 2],
+}
+
+impl ConvGeom {
+    /// Output height and width, `None` when the kernel does not fit in the
+    /// padded input or a stride is zero.
+    pub fn out_hw(&self) -> Option<(usize, usize)> {
+        let side = |len: usize, k: usize, s: usize, p: usize| {
+            let padded = len + 2 * p;
+            (s > 0 && k > 0 && padded >= k).then(|| (padded - k) / s + 1)
+        };
+        Some((
+            side(self.h, self.kh, self.stride[0], self.pad[0])?,
+            side(self.w, self.kw, self.stride[1], self.pad[1])?,
+        ))
+    }
+
+    /// Rows of the im2col layout: `ci * kh * kw`.
+    pub fn rows(&self) -> usize {
+        self.ci * self.kh * self.kw
+    }
+
+    /// Output pixels per image.
+    fn out_pixels(&self) -> usize {
+        let (oh, ow) = self.out_hw().expect("a valid geometry");
+        oh * ow
+    }
+
+    /// Images per chunk so that one chunk's im2col buffer stays within
+    /// `budget` bytes (at least one image).
+    pub fn images_per_chunk(&self, budget: usize) -> usize {
+        let per_image = self.rows() * self.out_pixels() * std::mem::size_of::<f32>();
+        (budget / per_image.max(1)).clamp(1, self.n.max(1))
+    }
+}
+
+/// Output columns `lo..hi` of one row whose input column `ox * s + k - p`
+/// lies inside `0..w`.
+fn valid_columns(ow: usize, w: usize, k: usize, s: usize, p: usize) -> (usize, usize) {
+    let lo = if p > k { (p - k).div_ceil(s) } else { 0 }.min(ow);
+    let hi = (w + p).saturating_sub(k).div_ceil(s).min(ow).max(lo);
+    (lo, hi)
+}
+
+/// im2col of `images` of `x` (`(n, ci, h, w)` contiguous) into `col`,
+/// `[g.rows(), images.len() * oh * ow]`: `col[(c, ky, kx), (j, oy, ox)] =
+/// x[images.start + j, c, oy * sy + ky - py, ox * sx + kx - px]`, zero
+/// outside the image. Parallel over rows.
+pub fn im2col(x: &[f32], g: &ConvGeom, images: Range<usize>, col: &mut [f32]) {
+    let (oh, ow) = g.out_hw().expect("a valid geometry");
+    let (plane, per) = (g.h * g.w, oh * ow);
+    let len = images.len() * per;
+    assert_eq!(x.len(), g.n * g.ci * plane, "input size");
+    assert_eq!(col.len(), g.rows() * len, "im2col buffer size");
+    let ([sy, sx], [py, px]) = (g.stride, g.pad);
+    col.par_chunks_mut(len.max(1))
+        .enumerate()
+        .for_each(|(r, row)| {
+            let (c, ky, kx) = (r / (g.kh * g.kw), (r / g.kw) % g.kh, r % g.kw);
+            let (lo, hi) = valid_columns(ow, g.w, kx, sx, px);
+            for (j, img) in images.clone().enumerate() {
+                let src = &x[(img * g.ci + c) * plane..][..plane];
+                for oy in 0..oh {
+                    let out = &mut row[j * per + oy * ow..][..ow];
+                    let iy = oy * sy + ky;
+                    if iy < py || iy - py >= g.h {
+                        out.fill(0.0);
+                        continue;
+                    }
+                    let line = &src[(iy - py) * g.w..][..g.w];
+                    out[..lo].fill(0.0);
+                    out[hi..].fill(0.0);
+                    if sx == 1 {
+                        let start = lo + kx - px;
+                        out[lo..hi].copy_from_slice(&line[start..start + hi - lo]);
+                    } else {
+                        for (ox, o) in out.iter_mut().enumerate().take(hi).skip(lo) {
+                            *o = line[ox * sx + kx - px];
+                        }
+                    }
+                }
+            }
+        });
+}
+
+/// The adjoint of [`im2col`]: `dx` (`(images, ci, h, w)`, the chunk's
+/// images) receives the sum of every `dcol` entry at the input pixel it was
+/// copied from; entries that came from padding are dropped. Overwrites `dx`.
+/// Parallel over (image, channel) planes, each written by one task.
+pub fn col2im(dcol: &[f32], g: &ConvGeom, images: usize, dx: &mut [f32]) {
+    let (oh, ow) = g.out_hw().expect("a valid geometry");
+    let (plane, per) = (g.h * g.w, oh * ow);
+    let len = images * per;
+    assert_eq!(dcol.len(), g.rows() * len, "im2col buffer size");
+    assert_eq!(dx.len(), images * g.ci * plane, "input gradient size");
+    let ([sy, sx], [py, px]) = (g.stride, g.pad);
+    dx.par_chunks_mut(plane.max(1))
+        .enumerate()
+        .for_each(|(p, out)| {
+            let (j, c) = (p / g.ci, p % g.ci);
+            out.fill(0.0);
+            for ky in 0..g.kh {
+                for kx in 0..g.kw {
+                    let r = (c * g.kh + ky) * g.kw + kx;
+                    let (lo, hi) = valid_columns(ow, g.w, kx, sx, px);
+                    let row = &dcol[r * len + j * per..][..per];
+                    for oy in 0..oh {
+                        let iy = oy * sy + ky;
+                        if iy < py || iy - py >= g.h {
+                            continue;
+                        }
+                        let line = &mut out[(iy - py) * g.w..][..g.w];
+                        let src = &row[oy * ow..][..ow];
+                        if sx == 1 {
+                            let start = lo + kx - px;
+                            for (d, s) in line[start..start + hi - lo].iter_mut().zip(&src[lo..hi])
+                            {
+                                *d += s;
+                            }
+                        } else {
+                            for (ox, s) in src.iter().enumerate().take(hi).skip(lo) {
+                                line[ox * sx + kx - px] += s;
+                            }
+                        }
+                    }
+                }
+            }
+        });
+}
+
+/// `(n, c, per)` batch-major to `[c, n * per]` channel-major: `dst[ch, j *
+/// per + i] = src[j, ch, i]`. Parallel over channels.
+pub fn to_channel_major(src: &[f32], n: usize, c: usize, per: usize, dst: &mut [f32]) {
+    assert_eq!(src.len(), n * c * per, "source size");
+    assert_eq!(dst.len(), n * c * per, "destination size");
+    dst.par_chunks_mut((n * per).max(1))
+        .enumerate()
+        .for_each(|(ch, row)| {
+            for j in 0..n {
+                row[j * per..][..per].copy_from_slice(&src[(j * c + ch) * per..][..per]);
+            }
+        });
+}
+
+/// The inverse of [`to_channel_major`]: `[c, n * per]` to `(n, c, per)`.
+/// Parallel over (image, channel) planes.
+pub fn to_batch_major(src: &[f32], n: usize, c: usize, per: usize, dst: &mut [f32]) {
+    assert_eq!(src.len(), n * c * per, "source size");
+    assert_eq!(dst.len(), n * c * per, "destination size");
+    dst.par_chunks_mut(per.max(1))
+        .enumerate()
+        .for_each(|(p, out)| {
+            let (j, ch) = (p / c, p % c);
+            out.copy_from_slice(&src[ch * n * per + j * per..][..per]);
+        });
+}
+
+/// Per-channel sums of `(n, c, per)` (a bias gradient), accumulated in f64.
+pub fn channel_sums(src: &[f32], n: usize, c: usize, per: usize) -> Vec<f32> {
+    assert_eq!(src.len(), n * c * per, "source size");
+    (0..c)
+        .into_par_iter()
+        .map(|ch| {
+            (0..n)
+                .map(|j| {
+                    src[(j * c + ch) * per..][..per]
+                        .iter()
+                        .map(|&v| f64::from(v))
+                        .sum::<f64>()
+                })
+                .sum::<f64>() as f32
+        })
+        .collect()
+}
+
+/// Output of a transposed convolution whose kernel equals its stride `k`
+/// (no overlap, no padding): from the product `z = Wᵀ · x`, `[co * k * k,
+/// n * h * w]` (row `(c, dy, dx)`), to `out`, `(n, co, h * k, w * k)`, with
+/// `bias[c]` added when given. Parallel over output planes.
+#[allow(clippy::too_many_arguments)]
+pub fn depth_to_space(
+    z: &[f32],
+    n: usize,
+    co: usize,
+    h: usize,
+    w: usize,
+    k: usize,
+    bias: Option<&[f32]>,
+    out: &mut [f32],
+) {
+    let (hw, len, ow) = (h * w, n * h * w, w * k);
+    assert_eq!(z.len(), co * k * k * len, "product size");
+    assert_eq!(out.len(), n * co * hw * k * k, "output size");
+    if let Some(b) = bias {
+        assert_eq!(b.len(), co, "bias size");
+    }
+    out.par_chunks_mut((hw * k * k).max(1))
+        .enumerate()
+        .for_each(|(p, plane)| {
+            let (j, c) = (p / co, p % co);
+            let b = bias.map_or(0.0, |b| b[c]);
+            for dy in 0..k {
+                for dx in 0..k {
+                    let row = &z[((c * k + dy) * k + dx) * len + j * hw..][..hw];
+                    for y in 0..h {
+                        let line = &mut plane[(y * k + dy) * ow..][..ow];
+                        for (x, v) in row[y * w..][..w].iter().enumerate() {
+                            line[x * k + dx] = v + b;
+                        }
+                    }
+                }
+            }
+        });
+}
+
+/// The adjoint of [`depth_to_space`] without the bias: `dy`, `(n, co, h *
+/// k, w * k)`, to `s`, `[co * k * k, n * h * w]`. Parallel over rows.
+pub fn space_to_depth(
+    dy: &[f32],
+    n: usize,
+    co: usize,
+    h: usize,
+    w: usize,
+    k: usize,
+    s: &mut [f32],
+) {
+    let (hw, len, ow) = (h * w, n * h * w, w * k);
+    assert_eq!(dy.len(), n * co * hw * k * k, "gradient size");
+    assert_eq!(s.len(), co * k * k * len, "shuffled size");
+    s.par_chunks_mut(len.max(1))
+        .enumerate()
+        .for_each(|(r, row)| {
+            let (c, ddy, ddx) = (r / (k * k), (r / k) % k, r % k);
+            for j in 0..n {
+                let plane = &dy[(j * co + c) * hw * k * k..][..hw * k * k];
+                for y in 0..h {
+                    let line = &plane[(y * k + ddy) * ow..][..ow];
+                    for (x, o) in row[j * hw + y * w..][..w].iter_mut().enumerate() {
+                        *o = line[x * k + ddx];
+                    }
+                }
+            }
+        });
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Deterministic pseudo-random values in [-1, 1).
+    fn values(len: usize, seed: u64) -> Vec<f32> {
+        let mut s = seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1;
+        (0..len)
+            .map(|_| {
+                s ^= s << 13;
+                s ^= s >> 7;
+                s ^= s << 17;
+                (s >> 40) as f32 / (1u64 << 23) as f32 - 1.0
+            })
+            .collect()
+    }
+
+    /// Reference im2col entry by definition.
+    fn reference_entry(x: &[f32], g: &ConvGeom, img: usize, r: usize, oy: usize, ox: usize) -> f32 {
+        let (c, ky, kx) = (r / (g.kh * g.kw), (r / g.kw) % g.kh, r % g.kw);
+        let iy = (oy * g.stride[0] + ky) as isize - g.pad[0] as isize;
+        let ix = (ox * g.stride[1] + kx) as isize - g.pad[1] as isize;
+        if iy < 0 || ix < 0 || iy >= g.h as isize || ix >= g.w as isize {
+            return 0.0;
+        }
+        x[((img * g.ci + c) * g.h + iy as usize) * g.w + ix as usize]
+    }
+
+    fn geometries() -> Vec<ConvGeom> {
+        let mut out = Vec::new();
+        for (h, w) in [(5, 7), (8, 8), (1, 6), (4, 1)] {
+            for (k, s, p) in [
+                (3, 1, 1),
+                (3, 2, 1),
+                (1, 1, 0),
+                (3, 1, 0),
+                (2, 2, 0),
+                (3, 3, 2),
+            ] {
+                let g = ConvGeom {
+                    n: 3,
+                    ci: 2,
+                    h,
+                    w,
+                    kh: k,
+                    kw: k,
+                    stride: [s, s],
+                    pad: [p, p],
+                };
+                if g.out_hw().is_some() {
+                    out.push(g);
+                }
+            }
+        }
+        out
+    }
+
+    #[test]
+    fn im2col_matches_its_definition() {
+        for g in geometries() {
+            let x = values(g.n * g.ci * g.h * g.w, 1);
+            let (oh, ow) = g.out_hw().unwrap();
+            let images = 1..3;
+            let mut col = vec![f32::NAN; g.rows() * 2 * oh * ow];
+            im2col(&x, &g, images.clone(), &mut col);
+            for r in 0..g.rows() {
+                for (j, img) in images.clone().enumerate() {
+                    for oy in 0..oh {
+                        for ox in 0..ow {
+                            let got = col[r * 2 * oh * ow + j * oh * ow + oy * ow + ox];
+                            assert_eq!(got, reference_entry(&x, &g, img, r, oy, ox), "{g:?}");
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    /// <col2im(d), x> = <d, im2col(x)> for every geometry: the adjoint.
+    #[test]
+    fn col2im_is_the_adjoint_of_im2col() {
+        for g in geometries() {
+            let x = values(g.n * g.ci * g.h * g.w, 2);
+            let (oh, ow) = g.out_hw().unwrap();
+            let mut col = vec![0.0; g.rows() * g.n * oh * ow];
+            im2col(&x, &g, 0..g.n, &mut col);
+            let d = values(col.len(), 3);
+            let mut dx = vec![f32::NAN; x.len()];
+            col2im(&d, &g, g.n, &mut dx);
+            let lhs: f64 = dx.iter().zip(&x).map(|(a, b)| f64::from(a * b)).sum();
+            let rhs: f64 = d.iter().zip(&col).map(|(a, b)| f64::from(a * b)).sum();
+            assert!(
+                (lhs - rhs).abs() <= 1e-4 * rhs.abs().max(1.0),
+                "{g:?}: {lhs} vs {rhs}"
+            );
+        }
+    }
+
+    #[test]
+    fn layouts_round_trip_and_sum() {
+        let (n, c, per) = (3, 5, 7);
+        let src = values(n * c * per, 4);
+        let mut cm = vec![0.0; src.len()];
+        to_channel_major(&src, n, c, per, &mut cm);
+        assert_eq!(cm[2 * n * per + per + 3], src[(c + 2) * per + 3]);
+        let mut back = vec![0.0; src.len()];
+        to_batch_major(&cm, n, c, per, &mut back);
+        assert_eq!(back, src);
+        let sums = channel_sums(&src, n, c, per);
+        for (ch, s) in sums.iter().enumerate() {
+            let want: f32 = cm[ch * n * per..][..n * per].iter().sum();
+            assert!((s - want).abs() < 1e-5, "{s} vs {want}");
+        }
+    }
+
+    #[test]
+    fn space_to_depth_is_the_adjoint_of_depth_to_space() {
+        let (n, co, h, w, k) = (2, 3, 3, 4, 2);
+        let z = values(co * k * k * n * h * w, 5);
+        let mut out = vec![f32::NAN; n * co * h * w * k * k];
+        depth_to_space(&z, n, co, h, w, k, None, &mut out);
+        assert!(
+            out.iter().all(|v| v.is_finite()),
+            "every output pixel written once"
+        );
+        let mut s = vec![f32::NAN; z.len()];
+        space_to_depth(&out, n, co, h, w, k, &mut s);
+        assert_eq!(s, z, "a permutation: its adjoint is its inverse");
+        let bias = [1.0, -2.0, 0.5];
+        let mut with_bias = vec![0.0; out.len()];
+        depth_to_space(&z, n, co, h, w, k, Some(&bias), &mut with_bias);
+        let plane = h * w * k * k;
+        assert_eq!(with_bias[plane + 5], out[plane + 5] - 2.0);
+    }
+
+    #[test]
+    fn chunks_respect_the_budget() {
+        let g = ConvGeom {
+            n: 8,
+            ci: 4,
+            h: 16,
+            w: 16,
+            kh: 3,
+            kw: 3,
+            stride: [1, 1],
+            pad: [1, 1],
+        };
+        let per_image = 36 * 256 * 4;
+        assert_eq!(g.images_per_chunk(3 * per_image + 1), 3);
+        assert_eq!(g.images_per_chunk(1), 1);
+        assert_eq!(g.images_per_chunk(usize::MAX), 8);
+    }
+}

@@ -1,0 +1,32 @@
+//! The loops under pgrf's own training operations (`pgrf_nn::ops`), on plain
+//! `f32` slices in NCHW order, free of the deep-learning framework so that
+//! they are tested against naive references here and compiled with full
+//! optimisation even in the dev profile.
+//!
+//! Why they exist: burn 0.21's Flex backend computes a convolution's weight
+//! gradient as a forward convolution over strided `swap_dims` views, copies
+//! the whole output gradient for the bias gradient, scatters the input
+//! gradient serially (col2im), and decomposes activations and Adam into
+//! many full-size passes (BENCHMARKS.md, "Training step"). The matrix
+//! products stay in Flex's gemm; what is here is the data movement around
+//! them, done once, contiguously and in parallel.
+//!
+//! - [`conv`]: convolution geometry, im2col and its adjoint col2im, the
+//!   `[channels, n * pixels]` layouts the products run on, the
+//!   space-to-depth shuffles of a non-overlapping transposed convolution and
+//!   per-channel sums (bias gradients).
+//! - [`act`]: LeakyReLU and SiLU forward and backward, SiLU with a
+//!   branch-free exp the compiler vectorises.
+//! - [`norm`]: GroupNorm with its affine, forward and backward, per
+//!   (image, group) block.
+//! - [`adam`]: one pass per parameter tensor for Adam's update.
+
+pub mod act;
+pub mod adam;
+pub mod conv;
+pub mod norm;
+
+/// Elements per rayon task in the element-wise kernels: large enough that
+/// task overhead is negligible, small enough that two threads share a
+/// 100 k-element tensor.
+pub(crate) const CHUNK: usize = 1 << 14;

@@ -1,0 +1,386 @@
+//! pgrf's operations against burn's on `Autodiff<Flex>`: forward values and
+//! every gradient (input, weight, bias) within 1e-4 of the largest
+//! magnitude, on seeded random inputs and a random output weighting `r`
+//! (loss `sum(y * r)`); the fused Adam against burn's Adam; a short seeded
+//! training run of both networks with either set of operations.
+
+use super::*;
+use crate::backend::CpuTrain;
+use crate::seeded::{materialise, seeded};
+use burn::module::Module;
+use burn::nn::conv::{Conv2dConfig, ConvTranspose2dConfig};
+use burn::optim::{AdamConfig, GradientsParams, Optimizer};
+use burn::tensor::{Distribution, Tensor};
+
+type B = CpuTrain;
+
+fn values<Bk: Backend, const D: usize>(t: Tensor<Bk, D>) -> Vec<f32> {
+    t.into_data().convert::<f32>().to_vec().unwrap()
+}
+
+/// max |a - b| / max |b|.
+fn rel(a: &[f32], b: &[f32]) -> f32 {
+    assert_eq!(a.len(), b.len(), "sizes");
+    let scale = b.iter().fold(0.0f32, |m, v| m.max(v.abs())).max(1e-12);
+    let diff = a
+        .iter()
+        .zip(b)
+        .fold(0.0f32, |m, (x, y)| m.max((x - y).abs()));
+    diff / scale
+}
+
+fn close(what: &str, a: &[f32], b: &[f32], tol: f32) {
+    let r = rel(a, b);
+    assert!(r <= tol, "{what}: relative difference {r:e} > {tol:e}");
+}
+
+fn random(shape: [usize; 4], seed: u64) -> Tensor<B, 4> {
+    seeded::<B, _>(&Default::default(), seed, || {
+        Tensor::<B, 4>::random(shape, Distribution::Normal(0.0, 1.0), &Default::default())
+    })
+}
+
+/// Forward and gradients of `layer` on `x` under `kernels`: (y, dx, dW, db).
+/// `track_x` false leaves the input out of the graph (a network's first
+/// layer).
+fn run_conv<M: Module<B>>(
+    m: &M,
+    layer: impl Fn(&M, Tensor<B, 4>) -> Tensor<B, 4>,
+    params: impl Fn(&M) -> (Tensor<B, 4>, Tensor<B, 1>),
+    x: Tensor<B, 4>,
+    track_x: bool,
+    kernels: Kernels,
+) -> [Option<Vec<f32>>; 4] {
+    with_kernels(kernels, || {
+        let x = if track_x { x.require_grad() } else { x };
+        let y = layer(m, x.clone());
+        let r = random(y.dims(), 99);
+        let grads = (y.clone() * r).sum().backward();
+        let (w, b) = params(m);
+        [
+            Some(values(y)),
+            x.grad(&grads).map(values),
+            w.grad(&grads).map(values),
+            b.grad(&grads).map(values),
+        ]
+    })
+}
+
+fn compare(what: &str, a: [Option<Vec<f32>>; 4], b: [Option<Vec<f32>>; 4]) {
+    for (part, (a, b)) in ["forward", "dx", "dW", "db"].iter().zip(a.iter().zip(&b)) {
+        match (a, b) {
+            (Some(a), Some(b)) => close(&format!("{what} {part}"), a, b, 1e-4),
+            (None, None) => {}
+            _ => panic!("{what} {part}: a gradient on one side only"),
+        }
+    }
+}
+
+#[test]
+fn convolutions_match_burns() {
+    let device = Default::default();
+    // (cin, cout, kernel, stride, padding, h, w, batch)
+    let cases = [
+        (3, 5, 3, 1, PaddingConfig2d::Same, 7, 6, 2),
+        (4, 6, 3, 1, PaddingConfig2d::Explicit(1, 1, 1, 1), 8, 8, 3),
+        (4, 6, 3, 2, PaddingConfig2d::Explicit(1, 1, 1, 1), 9, 8, 2),
+        (5, 3, 1, 1, PaddingConfig2d::Valid, 5, 7, 2),
+        (2, 3, 3, 1, PaddingConfig2d::Valid, 6, 1 + 4, 1),
+    ];
+    for (i, &(cin, cout, k, s, ref pad, h, w, n)) in cases.iter().enumerate() {
+        let conv = seeded::<B, _>(&device, 10 + i as u64, || {
+            materialise(
+                Conv2dConfig::new([cin, cout], [k, k])
+                    .with_stride([s, s])
+                    .with_padding(pad.clone())
+                    .init::<B>(&device),
+            )
+        });
+        let params = |m: &Conv2d<B>| (m.weight.val(), m.bias.as_ref().unwrap().val());
+        let x = random([n, cin, h, w], 20 + i as u64);
+        for track_x in [true, false] {
+            let ours = run_conv(&conv, conv2d, params, x.clone(), track_x, Kernels::Pgrf);
+            let burns = run_conv(
+                &conv,
+                |m, x| m.forward(x),
+                params,
+                x.clone(),
+                track_x,
+                Kernels::Pgrf,
+            );
+            compare(
+                &format!("conv case {i} (x tracked: {track_x})"),
+                ours,
+                burns,
+            );
+        }
+    }
+}
+
+/// A batch whose im2col buffer exceeds one chunk is processed in chunks
+/// whose partial weight gradients add up to the whole.
+#[test]
+fn chunked_weight_gradients_add_up() {
+    let device = Default::default();
+    // 32 input channels x 9 x 64 x 64 pixels x 4 B = 4.7 MB per image; 16
+    // images exceed the 64 MiB budget.
+    let conv = seeded::<B, _>(&device, 5, || {
+        materialise(
+            Conv2dConfig::new([32, 2], [3, 3])
+                .with_padding(PaddingConfig2d::Same)
+                .init::<B>(&device),
+        )
+    });
+    let params = |m: &Conv2d<B>| (m.weight.val(), m.bias.as_ref().unwrap().val());
+    let x = random([16, 32, 64, 64], 6);
+    let ours = run_conv(&conv, conv2d, params, x.clone(), true, Kernels::Pgrf);
+    let burns = run_conv(&conv, |m, x| m.forward(x), params, x, true, Kernels::Pgrf);
+    compare("chunked conv", ours, burns);
+}
+
+#[test]
+fn transposed_convolutions_match_burns() {
+    let device = Default::default();
+    // (cin, cout, kernel, stride, h, w, batch): the U-Net's 2x2 stride 2
+    // (pgrf's product and shuffle), then an overlapping kernel (burn's).
+    let cases = [
+        (6, 3, 2, 2, 5, 4, 2),
+        (4, 4, 2, 2, 1, 3, 1),
+        (3, 2, 3, 1, 4, 5, 2),
+    ];
+    for (i, &(cin, cout, k, s, h, w, n)) in cases.iter().enumerate() {
+        let up = seeded::<B, _>(&device, 30 + i as u64, || {
+            materialise(
+                ConvTranspose2dConfig::new([cin, cout], [k, k])
+                    .with_stride([s, s])
+                    .init::<B>(&device),
+            )
+        });
+        let params = |m: &ConvTranspose2d<B>| (m.weight.val(), m.bias.as_ref().unwrap().val());
+        let x = random([n, cin, h, w], 40 + i as u64);
+        let ours = run_conv(
+            &up,
+            conv_transpose2d,
+            params,
+            x.clone(),
+            true,
+            Kernels::Pgrf,
+        );
+        let burns = run_conv(&up, |m, x| m.forward(x), params, x, true, Kernels::Pgrf);
+        compare(&format!("transposed case {i}"), ours, burns);
+    }
+}
+
+/// Activation `f` under `kernels` on `x`: (y, dx).
+fn run_act(
+    x: Tensor<B, 4>,
+    f: impl Fn(Tensor<B, 4>) -> Tensor<B, 4>,
+    kernels: Kernels,
+) -> [Vec<f32>; 2] {
+    with_kernels(kernels, || {
+        let x = x.require_grad();
+        let y = f(x.clone());
+        let r = random(y.dims(), 7);
+        let grads = (y.clone() * r).sum().backward();
+        [values(y), values(x.grad(&grads).unwrap())]
+    })
+}
+
+#[test]
+fn activations_match_burns() {
+    // Scaled so that SiLU meets its tails (|x| up to ~40).
+    let x = random([2, 3, 17, 19], 8) * 8.0;
+    for (name, f) in [
+        (
+            "leaky_relu",
+            (|x| leaky_relu(x, 0.2)) as fn(Tensor<B, 4>) -> Tensor<B, 4>,
+        ),
+        ("silu", |x| silu(x)),
+    ] {
+        let [y1, d1] = run_act(x.clone(), f, Kernels::Pgrf);
+        let [y2, d2] = run_act(x.clone(), f, Kernels::Burn);
+        close(&format!("{name} forward"), &y1, &y2, 1e-4);
+        close(&format!("{name} gradient"), &d1, &d2, 1e-4);
+    }
+}
+
+#[test]
+fn kernels_choice_is_per_thread_and_restored() {
+    assert_eq!(with_kernels(Kernels::Burn, kernels), Kernels::Burn);
+    assert_eq!(
+        with_kernels(Kernels::Burn, || with_kernels(Kernels::Pgrf, kernels)),
+        Kernels::Pgrf
+    );
+    assert_eq!(with_kernels(Kernels::Pgrf, kernels), Kernels::Pgrf);
+    assert!("cuda".parse::<Kernels>().is_err());
+    assert_eq!("burn".parse::<Kernels>(), Ok(Kernels::Burn));
+}
+
+/// Five Adam steps on a small network, burn's Adam against pgrf's fused
+/// step; then the record written by one continues in the other.
+#[test]
+fn fused_adam_matches_burns_adam_and_shares_its_records() {
+    use burn::optim::adaptor::OptimizerAdaptor;
+    use burn::record::{BinBytesRecorder, FullPrecisionSettings, Recorder};
+    let device = Default::default();
+    let make = || {
+        seeded::<B, _>(&device, 50, || {
+            materialise(
+                Conv2dConfig::new([3, 4], [3, 3])
+                    .with_padding(PaddingConfig2d::Same)
+                    .init::<B>(&device),
+            )
+        })
+    };
+    let x = random([2, 3, 6, 6], 51);
+    let grads_of = |m: &Conv2d<B>| {
+        let loss = (m.forward(x.clone()) - 0.5).powi_scalar(2).mean();
+        GradientsParams::from_grads(loss.backward(), m)
+    };
+    let mut burn_optim = AdamConfig::new().with_epsilon(1e-8).init::<B, Conv2d<B>>();
+    let mut ours = OptimizerAdaptor::<adam::PgrfAdam, Conv2d<B>, B>::from(adam::PgrfAdam::new(
+        0.9, 0.999, 1e-8,
+    ));
+    let (mut a, mut b) = (make(), make());
+    for _ in 0..5 {
+        a = burn_optim.step(1e-2, a.clone(), grads_of(&a));
+        b = with_kernels(Kernels::Pgrf, || ours.step(1e-2, b.clone(), grads_of(&b)));
+    }
+    close(
+        "weights after 5 steps",
+        &values(b.weight.val()),
+        &values(a.weight.val()),
+        1e-5,
+    );
+    let bias = |m: &Conv2d<B>| values(m.bias.as_ref().unwrap().val());
+    close("biases after 5 steps", &bias(&b), &bias(&a), 1e-5);
+
+    // Records: the same bytes layout; burn's record loads into pgrf's Adam.
+    let recorder = BinBytesRecorder::<FullPrecisionSettings>::default();
+    let burn_bytes = recorder.record(burn_optim.to_record(), ()).unwrap();
+    let our_bytes = recorder.record(ours.to_record(), ()).unwrap();
+    assert_eq!(burn_bytes.len(), our_bytes.len(), "record sizes");
+    let mut resumed = OptimizerAdaptor::<adam::PgrfAdam, Conv2d<B>, B>::from(adam::PgrfAdam::new(
+        0.9, 0.999, 1e-8,
+    ))
+    .load_record(recorder.load(burn_bytes, &device).unwrap());
+    let (mut c, mut d) = (a.clone(), a);
+    for _ in 0..2 {
+        c = burn_optim.step(1e-2, c.clone(), grads_of(&c));
+        d = with_kernels(Kernels::Pgrf, || {
+            resumed.step(1e-2, d.clone(), grads_of(&d))
+        });
+    }
+    close(
+        "weights after resuming",
+        &values(d.weight.val()),
+        &values(c.weight.val()),
+        1e-5,
+    );
+}
+
+/// A short seeded training run of each network gives the same loss curve
+/// with pgrf's operations as with burn's (losses within 1e-3 relative
+/// over 8 Adam steps).
+#[test]
+fn training_curves_match_burns() {
+    use crate::sr3::Sr3Config;
+    use crate::step::{denoiser_step, flow_step};
+    use crate::unet::SidUnetConfig;
+    use burn::optim::adaptor::OptimizerAdaptor;
+    let device = Default::default();
+    let noisy = random([2, 4, 32, 32], 60).clamp(-1.0, 1.0) * 0.5 + 0.5;
+    let clean = random([2, 4, 32, 32], 61).clamp(-1.0, 1.0) * 0.25 + 0.5;
+    let x0 = random([2, 4, 32, 32], 62);
+    let t = Tensor::<B, 1>::from_floats([0.3, 0.8], &device);
+    let curve = |kernels: Kernels, flow: bool| {
+        with_kernels(kernels, || {
+            let adam = || adam::PgrfAdam::new(0.9, 0.999, 1e-8);
+            let mut losses = Vec::new();
+            if flow {
+                let mut net = seeded::<B, _>(&device, 63, || {
+                    materialise(
+                        Sr3Config::new()
+                            .with_inner_channels(8)
+                            .with_channel_mults(vec![1, 2])
+                            .with_res_blocks(1)
+                            .with_attn_levels(vec![1])
+                            .with_norm_groups(4)
+                            .init::<B>(&device)
+                            .unwrap(),
+                    )
+                });
+                let mut optim = OptimizerAdaptor::<_, _, B>::from(adam());
+                for _ in 0..8 {
+                    let (n, l) = flow_step(
+                        net,
+                        &mut optim,
+                        noisy.clone(),
+                        clean.clone(),
+                        x0.clone(),
+                        t.clone(),
+                        3e-3,
+                    );
+                    net = n;
+                    losses.push(l);
+                }
+            } else {
+                let mut net = seeded::<B, _>(&device, 64, || {
+                    materialise(SidUnetConfig::new().with_width(4).init::<B>(&device))
+                });
+                let mut optim = OptimizerAdaptor::<_, _, B>::from(adam());
+                for _ in 0..8 {
+                    let (n, l) = denoiser_step(net, &mut optim, noisy.clone(), clean.clone(), 3e-3);
+                    net = n;
+                    losses.push(l);
+                }
+            }
+            losses
+        })
+    };
+    for flow in [false, true] {
+        let (ours, burns) = (curve(Kernels::Pgrf, flow), curve(Kernels::Burn, flow));
+        assert!(ours[7] < ours[0], "the run learns: {ours:?}");
+        close(&format!("loss curve (flow: {flow})"), &ours, &burns, 1e-3);
+    }
+}
+
+#[test]
+fn group_norm_matches_burns() {
+    use burn::nn::GroupNormConfig;
+    let device = Default::default();
+    // Scale and shift away from burn's (1, 0) initialisation.
+    let gn = GroupNormConfig::new(4, 12).init::<B>(&device);
+    let mut named = crate::named::collect::<B, _>(&gn);
+    for t in named.values_mut() {
+        for (i, v) in t.values.iter_mut().enumerate() {
+            *v += 0.1 * i as f32 - 0.4;
+        }
+    }
+    let gn = crate::named::assign(gn, &named, &device).unwrap();
+    let x = random([3, 12, 5, 7], 70) * 3.0 + 1.0;
+    let run = |pgrf: bool| {
+        let x = x.clone().require_grad();
+        let y = if pgrf {
+            group_norm(&gn, x.clone())
+        } else {
+            gn.forward(x.clone())
+        };
+        let grads = (y.clone() * random(y.dims(), 71)).sum().backward();
+        let gamma = gn.gamma.as_ref().unwrap().val().grad(&grads).map(values);
+        let beta = gn.beta.as_ref().unwrap().val().grad(&grads).map(values);
+        [
+            values(y),
+            values(x.grad(&grads).unwrap()),
+            gamma.unwrap(),
+            beta.unwrap(),
+        ]
+    };
+    let (ours, burns) = (run(true), run(false));
+    for (part, (a, b)) in ["forward", "dx", "dgamma", "dbeta"]
+        .iter()
+        .zip(ours.iter().zip(&burns))
+    {
+        close(&format!("group norm {part}"), a, b, 1e-4);
+    }
+}
