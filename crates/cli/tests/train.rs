@@ -271,6 +271,9 @@ fn bad_settings_are_one_line_errors_and_write_nothing() {
     let bad = pgrf(&["train", "denoiser", "--device", "tpu", "-o", s(&out)]);
     assert_eq!(bad.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&bad.stderr).contains("unknown device"));
+    let bad = pgrf(&["train", "denoiser", "--kernels", "mkl", "-o", s(&out)]);
+    assert_eq!(bad.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&bad.stderr).contains("expected pgrf or burn"));
     for (args, needle) in cases {
         let e = one_line_error(&pgrf(&args));
         assert!(e.contains(needle), "{args:?}: {e}");

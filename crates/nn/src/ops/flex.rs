@@ -92,14 +92,14 @@ pub(super) fn conv2d_backward(
     let mut weight_grad: Option<FlexTensor> = None;
     let mut x_grad = needed
         .x
-        .then(|| vec![0.0f32; n * geom.ci * geom.h * geom.w]);
+        .then(|| pgrf_kernels::zeroed(n * geom.ci * geom.h * geom.w));
     let w_rows = contiguous(weight).reshape(Shape::from(vec![co, k]));
     let chunk = geom.images_per_chunk(COL_BUDGET);
     if needed.weight || needed.x {
         for start in (0..n).step_by(chunk) {
             let images = start..(start + chunk).min(n);
             let len = images.len() * per;
-            let mut dyc = vec![0.0f32; co * len];
+            let mut dyc = pgrf_kernels::zeroed(co * len);
             conv::to_channel_major(
                 &dyv[start * co * per..images.end * co * per],
                 images.len(),
@@ -109,7 +109,7 @@ pub(super) fn conv2d_backward(
             );
             let dyc = new(dyc, &[co, len]);
             if needed.weight {
-                let mut col = vec![0.0f32; k * len];
+                let mut col = pgrf_kernels::zeroed(k * len);
                 conv::im2col(xv, &geom, images.clone(), &mut col);
                 let part = matmul(dyc.clone(), new(col, &[k, len]).transpose(0, 1));
                 weight_grad = Some(match weight_grad {
@@ -172,12 +172,12 @@ pub(super) fn conv_transpose2d(
     let (n, ci, h, w, co) = (xd[0], xd[1], xd[2], xd[3], wd[1]);
     let len = n * h * w;
     let x = contiguous(x);
-    let mut xc = vec![0.0f32; ci * len];
+    let mut xc = pgrf_kernels::zeroed(ci * len);
     conv::to_channel_major(values(&x), n, ci, h * w, &mut xc);
     let w_rows = contiguous(weight).reshape(Shape::from(vec![ci, co * k * k]));
     let z = contiguous(matmul(w_rows.transpose(0, 1), new(xc, &[ci, len])));
     let bias = bias.map(contiguous);
-    let mut out = vec![0.0f32; n * co * h * w * k * k];
+    let mut out = pgrf_kernels::zeroed(n * co * h * w * k * k);
     conv::depth_to_space(
         values(&z),
         n,
@@ -215,12 +215,12 @@ pub(super) fn conv_transpose2d_backward(
     let dyv = values(&dy);
     let bias_grad = (needed.bias && bias.is_some())
         .then(|| new(conv::channel_sums(dyv, n, co, h * w * k * k), &[co]));
-    let mut s = vec![0.0f32; rows * len];
+    let mut s = pgrf_kernels::zeroed(rows * len);
     conv::space_to_depth(dyv, n, co, h, w, k, &mut s);
     let s = new(s, &[rows, len]);
     let weight_grad = needed.weight.then(|| {
         let x = contiguous(x);
-        let mut xc = vec![0.0f32; ci * len];
+        let mut xc = pgrf_kernels::zeroed(ci * len);
         conv::to_channel_major(values(&x), n, ci, h * w, &mut xc);
         let g = matmul(new(xc, &[ci, len]), s.clone().transpose(0, 1));
         contiguous(g).reshape(Shape::from(wd.clone()))
@@ -228,7 +228,7 @@ pub(super) fn conv_transpose2d_backward(
     let x_grad = needed.x.then(|| {
         let w_rows = contiguous(weight).reshape(Shape::from(vec![ci, rows]));
         let dxc = contiguous(matmul(w_rows, s));
-        let mut dx = vec![0.0f32; n * ci * h * w];
+        let mut dx = pgrf_kernels::zeroed(n * ci * h * w);
         conv::to_batch_major(values(&dxc), n, ci, h * w, &mut dx);
         new(dx, &xd)
     });
@@ -253,7 +253,7 @@ fn map(
         in_place(buf);
         return x;
     }
-    let mut out = vec![0.0f32; x.layout().num_elements()];
+    let mut out = pgrf_kernels::zeroed(x.layout().num_elements());
     f(values(&x), &mut out);
     new(out, &shape)
 }
@@ -262,7 +262,7 @@ fn map(
 fn map2(x: FlexTensor, dy: FlexTensor, f: impl FnOnce(&[f32], &[f32], &mut [f32])) -> FlexTensor {
     let shape = dims(&x);
     let (x, dy) = (contiguous(x), contiguous(dy));
-    let mut out = vec![0.0f32; x.layout().num_elements()];
+    let mut out = pgrf_kernels::zeroed(x.layout().num_elements());
     f(values(&x), values(&dy), &mut out);
     new(out, &shape)
 }
@@ -317,7 +317,7 @@ pub(super) fn group_norm(
     let (gamma, beta) = (contiguous(gamma), contiguous(beta));
     let xd = dims(&x);
     let x = contiguous(x);
-    let mut out = vec![0.0f32; x.layout().num_elements()];
+    let mut out = pgrf_kernels::zeroed(x.layout().num_elements());
     norm::group_norm(
         values(&x),
         &shape,
@@ -361,7 +361,7 @@ pub(super) fn group_norm_backward(
     };
     let xd = dims(&x);
     let (x, dy, gamma) = (contiguous(x), contiguous(dy), contiguous(gamma));
-    let mut dx = vec![0.0f32; x.layout().num_elements()];
+    let mut dx = pgrf_kernels::zeroed(x.layout().num_elements());
     let (dgamma, dbeta) = norm::group_norm_backward(
         values(&x),
         values(&dy),
@@ -403,8 +403,8 @@ pub(super) fn adam(
     let first = m.is_none();
     let mut param = contiguous(param);
     let grad = contiguous(grad);
-    let mut m = m.map_or_else(|| new(vec![0.0; numel], &shape), contiguous);
-    let mut v = v.map_or_else(|| new(vec![0.0; numel], &shape), contiguous);
+    let mut m = m.map_or_else(|| new(pgrf_kernels::zeroed(numel), &shape), contiguous);
+    let mut v = v.map_or_else(|| new(pgrf_kernels::zeroed(numel), &shape), contiguous);
     adam::adam(
         param.storage_mut::<f32>(),
         values(&grad),
