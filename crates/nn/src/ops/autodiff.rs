@@ -41,6 +41,49 @@ macro_rules! conv_backward {
     }};
 }
 
+/// The graph node of a convolution-like operation with a bias: records the
+/// three inputs as checkpoints (when any needs a gradient) and runs
+/// `forward` on the inner backend. `node`'s backward is `conv_backward!`.
+fn conv_node<B, C, O, N>(
+    node: N,
+    x: FloatTensor<Autodiff<B, C>>,
+    weight: FloatTensor<Autodiff<B, C>>,
+    bias: FloatTensor<Autodiff<B, C>>,
+    options: O,
+    forward: impl FnOnce(FloatTensor<B>, FloatTensor<B>, Option<FloatTensor<B>>, O) -> FloatTensor<B>,
+) -> FloatTensor<Autodiff<B, C>>
+where
+    B: PgrfOps,
+    C: CheckpointStrategy,
+    O: Clone + Send + std::fmt::Debug + 'static,
+    N: Backward<B, 3, State = (NodeId, NodeId, NodeId, O)>,
+{
+    match node
+        .prepare::<C>([x.node.clone(), weight.node.clone(), bias.node.clone()])
+        .compute_bound()
+        .stateful()
+    {
+        OpsKind::Tracked(mut prep) => {
+            let state = (
+                prep.checkpoint(&x),
+                prep.checkpoint(&weight),
+                prep.checkpoint(&bias),
+                options.clone(),
+            );
+            prep.finish(
+                state,
+                forward(x.primitive, weight.primitive, Some(bias.primitive), options),
+            )
+        }
+        OpsKind::UnTracked(prep) => prep.finish(forward(
+            x.primitive,
+            weight.primitive,
+            Some(bias.primitive),
+            options,
+        )),
+    }
+}
+
 impl<B: PgrfOps, C: CheckpointStrategy> PgrfOps for Autodiff<B, C> {
     fn pgrf_kernels() -> bool {
         B::pgrf_kernels()
@@ -72,29 +115,7 @@ impl<B: PgrfOps, C: CheckpointStrategy> PgrfOps for Autodiff<B, C> {
         let Some(bias) = bias else {
             return <Self as ModuleOps<Self>>::conv2d(x, weight, None, options);
         };
-        match Conv2d
-            .prepare::<C>([x.node.clone(), weight.node.clone(), bias.node.clone()])
-            .compute_bound()
-            .stateful()
-        {
-            OpsKind::Tracked(mut prep) => {
-                let state = (
-                    prep.checkpoint(&x),
-                    prep.checkpoint(&weight),
-                    prep.checkpoint(&bias),
-                    options.clone(),
-                );
-                let out =
-                    B::pgrf_conv2d(x.primitive, weight.primitive, Some(bias.primitive), options);
-                prep.finish(state, out)
-            }
-            OpsKind::UnTracked(prep) => prep.finish(B::pgrf_conv2d(
-                x.primitive,
-                weight.primitive,
-                Some(bias.primitive),
-                options,
-            )),
-        }
+        conv_node::<B, C, _, _>(Conv2d, x, weight, bias, options, B::pgrf_conv2d)
     }
 
     fn pgrf_conv_transpose2d(
@@ -122,33 +143,14 @@ impl<B: PgrfOps, C: CheckpointStrategy> PgrfOps for Autodiff<B, C> {
         let Some(bias) = bias else {
             return <Self as ModuleOps<Self>>::conv_transpose2d(x, weight, None, options);
         };
-        match ConvTranspose2d
-            .prepare::<C>([x.node.clone(), weight.node.clone(), bias.node.clone()])
-            .compute_bound()
-            .stateful()
-        {
-            OpsKind::Tracked(mut prep) => {
-                let state = (
-                    prep.checkpoint(&x),
-                    prep.checkpoint(&weight),
-                    prep.checkpoint(&bias),
-                    options.clone(),
-                );
-                let out = B::pgrf_conv_transpose2d(
-                    x.primitive,
-                    weight.primitive,
-                    Some(bias.primitive),
-                    options,
-                );
-                prep.finish(state, out)
-            }
-            OpsKind::UnTracked(prep) => prep.finish(B::pgrf_conv_transpose2d(
-                x.primitive,
-                weight.primitive,
-                Some(bias.primitive),
-                options,
-            )),
-        }
+        conv_node::<B, C, _, _>(
+            ConvTranspose2d,
+            x,
+            weight,
+            bias,
+            options,
+            B::pgrf_conv_transpose2d,
+        )
     }
 
     fn pgrf_leaky_relu(x: FloatTensor<Self>, slope: f32) -> FloatTensor<Self> {
