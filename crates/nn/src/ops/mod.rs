@@ -1,8 +1,8 @@
 //! pgrf's own training operations, added to burn 0.21 as a backend
 //! extension: a trait of ours ([`PgrfOps`]) whose defaults are burn's own
 //! operations, implemented with pgrf's kernels (`pgrf_kernels`) for the Flex
-//! CPU backend ([`flex`]) and with graph nodes of their own (`Backward`) for
-//! the autodiff backend ([`autodiff`]); the CUDA backend keeps every
+//! CPU backend (module `flex`) and with graph nodes of their own (`Backward`) for
+//! the autodiff backend (module `autodiff`); the CUDA backend keeps every
 //! default.
 //!
 //! Why: on the CPU, burn's Flex backend leaves a training step 2.6-2.9x
