@@ -6,7 +6,8 @@
 
 use super::{
     burn_adam, burn_conv2d_backward, burn_conv_transpose2d_backward, burn_group_norm,
-    burn_group_norm_backward, burn_leaky_relu_backward, burn_silu_backward, ConvGrads, Needed,
+    burn_group_norm_backward, burn_leaky_relu_backward, burn_silu, burn_silu_backward, ConvGrads,
+    Needed,
 };
 use burn::backend::Flex;
 use burn::tensor::ops::{
@@ -289,8 +290,7 @@ pub(super) fn leaky_relu_backward(x: FlexTensor, dy: FlexTensor, slope: f32) -> 
 
 pub(super) fn silu(x: FlexTensor) -> FlexTensor {
     if !is_f32(&[&x]) {
-        let s = <Flex as ActivationOps<Flex>>::sigmoid(x.clone());
-        return <Flex as FloatTensorOps<Flex>>::float_mul(x, s);
+        return burn_silu::<Flex>(x);
     }
     map(x, act::silu, act::silu_in_place)
 }

@@ -208,7 +208,7 @@ pub trait PgrfOps: Backend {
 
     /// SiLU, `x * sigmoid(x)`.
     fn pgrf_silu(x: FloatTensor<Self>) -> FloatTensor<Self> {
-        Self::float_mul(x.clone(), Self::sigmoid(x))
+        burn_silu::<Self>(x)
     }
 
     /// SiLU's input gradient, `dy * s * (1 + x (1 - s))` with `s =
@@ -264,6 +264,11 @@ pub(crate) fn burn_leaky_relu_backward<B: Backend>(
     let mask = B::float_lower_elem(x, 0f32.into(), settings.bool_dtype);
     let scaled = B::float_mul_scalar(dy.clone(), slope.into());
     B::float_mask_where(dy, mask, scaled)
+}
+
+/// SiLU in burn's tensor operations, `x * sigmoid(x)`.
+pub(crate) fn burn_silu<B: Backend>(x: FloatTensor<B>) -> FloatTensor<B> {
+    B::float_mul(x.clone(), B::sigmoid(x))
 }
 
 /// SiLU's input gradient in burn's tensor operations.
