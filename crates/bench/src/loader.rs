@@ -62,7 +62,7 @@ pub fn run(a: &LoaderArgs) -> Result<()> {
     let what = built.train.describe();
     let rate = loader_rate(
         Arc::new(built.train),
-        Arc::new(spec),
+        Arc::new(spec.into()),
         a.patch,
         a.batch,
         a.workers,

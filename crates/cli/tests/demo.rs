@@ -1,7 +1,8 @@
-//! `pgrf demo` end to end at a reduced size with the built-in models: the
-//! JSON contract, both models beating the noisy input by a stated margin,
-//! the shipped weights reproducing the scores MODELS.md records, the files
-//! it writes, and its refusals.
+//! `pgrf demo` end to end at a reduced size with the built-in models, on the
+//! procedural scene and on a centre window of the built-in photograph: the
+//! JSON contract, the models beating the noisy input by stated margins, the
+//! shipped weights reproducing the scores MODELS.md records, the files it
+//! writes, and its refusals.
 
 mod common;
 
@@ -9,11 +10,19 @@ use common::{one_line_error, pgrf, s, scratch};
 use serde_json::Value;
 use std::path::Path;
 
-/// The reduced demo every test here runs (MODELS.md, "Check").
+/// The reduced procedural demo (MODELS.md, "Check").
 const SIZE: &str = "384x256";
+/// The centre window of the built-in photograph the photo tests run on.
+const PHOTO_SIZE: &str = "512x384";
 
 fn run_demo(dir: &Path) -> Value {
-    let out = pgrf(&["demo", "-o", s(dir), "--size", SIZE, "--json", "--quiet"]);
+    run_scene(dir, &["--scene", "procedural", "--size", SIZE])
+}
+
+fn run_scene(dir: &Path, scene: &[&str]) -> Value {
+    let mut args = vec!["demo", "-o", s(dir), "--json", "--quiet"];
+    args.extend_from_slice(scene);
+    let out = pgrf(&args);
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(out.status.success(), "demo failed: {err}");
     let stdout = String::from_utf8_lossy(&out.stdout);
@@ -135,17 +144,74 @@ const RECORDED: [(&str, &str, f64, f64); 6] = [
 const SPC_MARGIN_DB: f64 = 3.0;
 const PGRF_MARGIN_DB: f64 = 3.0;
 
-#[test]
-fn shipped_models_reproduce_the_recorded_scores() {
-    let dir = scratch("demo", "recorded");
-    let v = run_demo(&dir);
-    for (ratio, method, p, q) in RECORDED {
-        let (gp, gq) = (psnr(&v, ratio, method), ssim(&v, ratio, method));
+/// Every (ratio, method, PSNR, SSIM) of `table` within 0.02 dB and 5e-4.
+fn assert_recorded(v: &Value, table: &[(&str, &str, f64, f64)]) {
+    for &(ratio, method, p, q) in table {
+        let (gp, gq) = (psnr(v, ratio, method), ssim(v, ratio, method));
         assert!(
             (gp - p).abs() < 0.02 && (gq - q).abs() < 5e-4,
             "{ratio} {method}: {gp:.4} dB / {gq:.5}, MODELS.md records {p} / {q}"
         );
     }
+}
+
+#[test]
+fn shipped_models_reproduce_the_recorded_scores() {
+    let dir = scratch("demo", "recorded");
+    let v = run_demo(&dir);
+    assert_recorded(&v, &RECORDED);
+}
+
+/// Scores of the built-in models on the photograph's 512 x 384 centre
+/// window (seed 0), as MODELS.md records them.
+const RECORDED_PHOTO: [(&str, &str, f64, f64); 6] = [
+    ("x100", "noisy", 28.2011, 0.21777),
+    ("x100", "spc", 34.5500, 0.60820),
+    ("x100", "pgrf", 27.1024, 0.22546),
+    ("x200", "noisy", 22.3389, 0.05426),
+    ("x200", "spc", 33.0348, 0.50331),
+    ("x200", "pgrf", 25.8183, 0.14559),
+];
+/// SPC must beat the noisy input on the photograph by this much at both
+/// ratios (the shipped model does by 6.3 / 10.7 dB). The shipped PGRF
+/// model, trained on dead leaves only, does not beat it at x100 (MODELS.md,
+/// "Known limits"); its margin is asserted once the photo-trained model ships.
+const SPC_PHOTO_MARGIN_DB: f64 = 5.0;
+
+#[test]
+fn the_photo_demo_restores_a_window_of_the_built_in_photograph() {
+    let dir = scratch("demo", "photo");
+    let v = run_scene(&dir, &["--size", PHOTO_SIZE]);
+    assert_recorded(&v, &RECORDED_PHOTO);
+    for ratio in ["x100", "x200"] {
+        let (noisy, spc) = (psnr(&v, ratio, "noisy"), psnr(&v, ratio, "spc"));
+        assert!(
+            spc >= noisy + SPC_PHOTO_MARGIN_DB,
+            "{ratio}: SPC {spc:.2}, noisy {noisy:.2}"
+        );
+    }
+    // clean.dng is the photograph's centre window, sample for sample: the
+    // 1734 x 1156 frame less 512 x 384 leaves (1222, 772) around it, halved
+    // to whole CFA cells: columns 610.., rows 386...
+    let asset = Path::new(env!("CARGO_MANIFEST_DIR")).join("assets/canon550d_colorchart.dng");
+    let levels = pgrf_raw::LevelOverrides::default();
+    let photo = pgrf_raw::decode_file(&asset, &levels).unwrap();
+    let clean = pgrf_raw::decode_file(&dir.join("clean.dng"), &levels).unwrap();
+    assert_eq!(
+        (clean.width, clean.height, clean.cfa),
+        (512, 384, photo.cfa)
+    );
+    assert_eq!((clean.black, clean.white), (photo.black, photo.white));
+    for (r, c) in [(0, 0), (1, 1), (200, 301), (383, 511)] {
+        assert_eq!(clean.at(r, c), photo.at(386 + r, 610 + c), "({r}, {c})");
+    }
+    let dark = pgrf_raw::decode_file(&dir.join("noisy_x200.dng"), &levels).unwrap();
+    assert_eq!(dark.iso, Some(1600));
+    assert!(
+        (dark.exposure_s.unwrap() - 1.0 / 200.0).abs() < 1e-9,
+        "{:?}",
+        dark.exposure_s
+    );
 }
 
 #[test]
@@ -163,6 +229,32 @@ fn bad_demo_arguments_are_one_line_errors() {
     assert!(e.contains("not the SPC model"), "{e}");
     let e = one_line_error(&pgrf(&["demo", "-o", s(&dir.join("b")), "--size", "100x7"]));
     assert!(e.contains("--size 100x7"), "{e}");
+    let e = one_line_error(&pgrf(&[
+        "demo",
+        "-o",
+        s(&dir.join("b")),
+        "--size",
+        "2000x1000",
+    ]));
+    assert!(e.contains("larger than"), "{e}");
+    let e = one_line_error(&pgrf(&[
+        "demo",
+        "-o",
+        s(&dir.join("b")),
+        "--scene",
+        "procedural",
+        "--photo",
+        s(&models.join("spc.toml")),
+    ]));
+    assert!(e.contains("--photo goes with --scene photo"), "{e}");
+    let e = one_line_error(&pgrf(&[
+        "demo",
+        "-o",
+        s(&dir.join("b")),
+        "--photo",
+        s(&models.join("spc.toml")),
+    ]));
+    assert!(e.contains("--photo"), "{e}");
     let e = one_line_error(&pgrf(&["demo", "-o", s(&dir.join("missing/out"))]));
     assert!(e.contains("does not exist"), "{e}");
     let e = one_line_error(&pgrf(&[

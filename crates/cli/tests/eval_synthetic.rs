@@ -242,6 +242,95 @@ fn photos_are_unprocessed_and_seed_and_correction_apply() {
     std::fs::remove_dir_all(&d).unwrap();
 }
 
+/// The hand-off to methods outside pgrf: `--dump` writes each capture's
+/// planes and true noise, `--outputs` measures a folder of restorations by
+/// the same code. Handing back the dumped input itself must reproduce the
+/// noisy-input column exactly; a file of another shape is one line.
+#[test]
+fn dumped_cases_come_back_as_an_outside_column() {
+    let (d, clean) = setup("dump");
+    let dump = d.join("dump");
+    let back = d.join("back");
+    std::fs::create_dir_all(&dump).unwrap();
+    std::fs::create_dir_all(&back).unwrap();
+    let conditions = ["--iso", "3200", "--ratio", "100,200"];
+    let mut args = eval(&[&clean], &conditions);
+    args.extend_from_slice(&["--dump", s(&dump), "--quiet"]);
+    succeed(&args);
+    for x in ["100", "200"] {
+        let key = format!("chart.dng_iso3200_x{x}");
+        let meta: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(dump.join(format!("{key}.json"))).unwrap())
+                .unwrap();
+        let n = &meta["noise"];
+        // The A7S2 at ISO 3200: K = 9.563e-4 x 3200 DN/e-, white - black 15871 DN;
+        // alpha = ratio K / range.
+        let ratio: f64 = x.parse().unwrap();
+        assert!(
+            (n["k_dn_per_electron"].as_f64().unwrap() - 3.06016).abs() < 1e-6,
+            "{n}"
+        );
+        let alpha = n["alpha"].as_f64().unwrap();
+        assert!((alpha - ratio * 3.06016 / 15871.0).abs() < 1e-9, "{n}");
+        assert_eq!(meta["shape"], serde_json::json!([4, 192, 256]));
+        let input = pgrf_eval::npy::read(&dump.join(format!("{key}.input.npy")), 1 << 20).unwrap();
+        let capture =
+            pgrf_eval::npy::read(&dump.join(format!("{key}.capture.npy")), 1 << 20).unwrap();
+        assert_eq!(input.dim(), (4, 192, 256));
+        // The input is the capture clamped to [0, 1].
+        assert!(input
+            .iter()
+            .zip(&capture)
+            .all(|(a, b)| *a == b.clamp(0.0, 1.0)));
+        assert!(capture.iter().any(|v| *v < 0.0));
+        std::fs::copy(
+            dump.join(format!("{key}.input.npy")),
+            back.join(format!("{key}.output.npy")),
+        )
+        .unwrap();
+    }
+    let csv = d.join("back.csv");
+    let outputs = format!("same={}", s(&back));
+    let mut args = eval(&[&clean], &conditions);
+    args.extend_from_slice(&["--outputs", &outputs, "--csv", s(&csv), "--quiet"]);
+    succeed(&args);
+    let rows = lines(&std::fs::read_to_string(&csv).unwrap());
+    assert_eq!(rows.len(), 4);
+    for pair in rows.chunks(2) {
+        assert_eq!(
+            (pair[0].method.as_str(), pair[1].method.as_str()),
+            ("noisy input", "same")
+        );
+        assert_eq!((pair[0].psnr, pair[0].ssim), (pair[1].psnr, pair[1].ssim));
+    }
+    // A restoration of the wrong shape, a missing one, a bad NAME=DIR.
+    let small = pgrf_raw::ndarray::Array3::<f32>::zeros((4, 8, 8));
+    pgrf_eval::npy::write(
+        &back.join("chart.dng_iso3200_x100.output.npy"),
+        small.view(),
+    )
+    .unwrap();
+    let mut args = eval(&[&clean], &conditions);
+    args.extend_from_slice(&["--outputs", &outputs]);
+    assert!(one_line_error(&pgrf(&args)).contains("shape (4, 8, 8)"));
+    std::fs::remove_file(back.join("chart.dng_iso3200_x200.output.npy")).unwrap();
+    let mut args = eval(
+        &[&clean],
+        &["--iso", "3200", "--ratio", "200", "--outputs", &outputs],
+    );
+    args.push("--quiet");
+    assert!(one_line_error(&pgrf(&args)).contains("x200.output.npy"));
+    for bad in ["same", "=dir", "same=/no/such/folder"] {
+        let mut args = eval(&[&clean], &conditions);
+        args.extend_from_slice(&["--outputs", bad]);
+        assert!(one_line_error(&pgrf(&args)).contains("--outputs"), "{bad}");
+    }
+    let mut args = eval(&[&clean], &conditions);
+    args.extend_from_slice(&["--dump", "/no/such/folder"]);
+    assert!(one_line_error(&pgrf(&args)).contains("--dump"));
+    std::fs::remove_dir_all(&d).unwrap();
+}
+
 #[test]
 fn bad_input_is_one_line() {
     let (d, clean) = setup("bad");

@@ -192,6 +192,71 @@ fn flow_trains_from_a_toml_config_that_flags_override() {
     assert!(meta["t2"].is_null());
 }
 
+/// A mix of cameras' noise: the header names the shares, the weight file
+/// records the mix and the ISO range, and the sampling search rebuilds its
+/// pairs from that record.
+#[test]
+fn a_profile_mix_trains_is_recorded_and_searches() {
+    let d = scratch("mix");
+    let out = d.join("mix.safetensors");
+    let r = pgrf(&[
+        "train",
+        "flow",
+        "--data",
+        "procedural",
+        "--profile",
+        "sony-a7s2@3,nikon-d850@1",
+        "--iso-range",
+        "800,3200",
+        "--steps",
+        "2",
+        "--patch",
+        "16",
+        "--batch",
+        "2",
+        "--inner-channels",
+        "8",
+        "--channel-mults",
+        "1,2",
+        "--attn-levels",
+        "1",
+        "--val-pairs",
+        "1",
+        "-o",
+        s(&out),
+    ]);
+    let err = String::from_utf8_lossy(&r.stderr);
+    assert!(r.status.success(), "{err}");
+    assert!(
+        err.contains("noise pgrf from sony-a7s2 (75%) + nikon-d850 (25%)"),
+        "{err}"
+    );
+    let meta = pgrf_nn::weights::read_meta(&out).unwrap();
+    assert_eq!(
+        meta.noise.profile.as_deref(),
+        Some("sony-a7s2@3,nikon-d850@1")
+    );
+    assert_eq!(meta.noise.iso_range, Some([800, 3200]));
+    let r = pgrf(&[
+        "search",
+        "--model",
+        s(&out),
+        "--procedural",
+        "2",
+        "--patch",
+        "16",
+        "--step",
+        "0.5",
+        "--dry-run",
+    ]);
+    let text = String::from_utf8_lossy(&r.stdout);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    assert!(
+        text.contains("noise: sony-a7s2 (75%) + nikon-d850 (25%) pgrf, ISO 800..3200"),
+        "{text}"
+    );
+}
+
 #[test]
 fn bad_settings_are_one_line_errors_and_write_nothing() {
     let d = scratch("bad");
@@ -264,6 +329,30 @@ fn bad_settings_are_one_line_errors_and_write_nothing() {
                 s(&out),
             ],
             "no-such-camera",
+        ),
+        (
+            vec![
+                "train",
+                "spc",
+                "--profile",
+                "sony-a7s2@0,nikon-d850",
+                "-o",
+                s(&out),
+            ],
+            "positive number",
+        ),
+        (
+            vec![
+                "train",
+                "spc",
+                "--profile",
+                "sony-a7s2,nikon-d850",
+                "--calib",
+                s(&cfg),
+                "-o",
+                s(&out),
+            ],
+            "mix of profiles",
         ),
     ];
     // A device is a typed flag (as in enhance): an unknown one is a usage

@@ -11,6 +11,7 @@
 
 pub mod dataset;
 mod metrics;
+pub mod npy;
 
 pub use metrics::cast;
 pub use metrics::{

@@ -123,7 +123,7 @@ pub fn describe(kind: DeviceKind) -> String {
 
 /// Run the training loop ([`crate::train`]) on the training backend of
 /// `kind`: `settings` says what to train, `source` gives the clean images,
-/// `spec` synthesises the noisy half of each pair, `val` (if any) is scored
+/// `mix` synthesises the noisy half of each pair (one camera's noise per capture), `val` (if any) is scored
 /// every `settings.val_every` steps and at the end, `progress` hears one unit
 /// per step, and setting `stop` ends the run cleanly after the current step
 /// (checkpoint and weight file written). Refuses `cuda` in a build without it.
@@ -131,7 +131,7 @@ pub fn train(
     kind: DeviceKind,
     settings: &crate::train::TrainSettings,
     source: std::sync::Arc<crate::data::Source>,
-    spec: std::sync::Arc<pgrf_noise::pair::PairSpec>,
+    mix: std::sync::Arc<pgrf_noise::mix::PairMix>,
     val: Option<&crate::data::validation::ValSet>,
     progress: &dyn pgrf_core::Progress,
     stop: &std::sync::atomic::AtomicBool,
@@ -139,7 +139,7 @@ pub fn train(
     struct Job<'a> {
         settings: &'a crate::train::TrainSettings,
         source: std::sync::Arc<crate::data::Source>,
-        spec: std::sync::Arc<pgrf_noise::pair::PairSpec>,
+        mix: std::sync::Arc<pgrf_noise::mix::PairMix>,
         val: Option<&'a crate::data::validation::ValSet>,
         progress: &'a dyn pgrf_core::Progress,
         stop: &'a std::sync::atomic::AtomicBool,
@@ -153,7 +153,7 @@ pub fn train(
             crate::train::train::<B>(
                 self.settings,
                 self.source,
-                self.spec,
+                self.mix,
                 self.val,
                 &device,
                 self.progress,
@@ -166,7 +166,7 @@ pub fn train(
         Job {
             settings,
             source,
-            spec,
+            mix,
             val,
             progress,
             stop,

@@ -71,7 +71,8 @@ pub struct TrainConfig {
     pub data: String,
     /// Validation images (default: 10% of `data`'s files held out).
     pub val_data: Option<String>,
-    /// Camera noise profile, built-in name or JSON path.
+    /// Camera noise profile, built-in name or JSON path, or a weighted mix
+    /// `NAME[@WEIGHT],...` (see `pgrf_noise::mix`).
     pub profile: String,
     /// Per-pixel calibration file for the pgrf noise model.
     pub calib: Option<PathBuf>,

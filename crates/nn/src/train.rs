@@ -21,7 +21,7 @@ use burn::optim::{GradientsParams, Optimizer};
 use burn::record::{BinBytesRecorder, FullPrecisionSettings, Recorder};
 use burn::tensor::{ElementConversion, Tensor, TensorData};
 use pgrf_core::Progress;
-use pgrf_noise::pair::PairSpec;
+use pgrf_noise::mix::PairMix;
 use std::io::Write;
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -204,7 +204,7 @@ impl Log {
 pub(crate) fn train<B: PgrfAutodiff>(
     s: &TrainSettings,
     source: Arc<Source>,
-    spec: Arc<PairSpec>,
+    mix: Arc<PairMix>,
     val: Option<&ValSet>,
     device: &B::Device,
     progress: &dyn Progress,
@@ -277,7 +277,7 @@ pub(crate) fn train<B: PgrfAutodiff>(
         augment: s.augment,
         extras,
     };
-    let mut loader = Loader::start(source, spec, sample, s.batch, start, s.workers, 2);
+    let mut loader = Loader::start(source, mix, sample, s.batch, start, s.workers, 2);
     let shape = [s.batch, 4, s.patch, s.patch];
     let clock = Instant::now();
     let mut losses = Vec::new();

@@ -73,6 +73,10 @@ pub struct NoiseSource {
     pub model: pgrf_noise::ModelKind,
     /// Fixed ISO, or None for ELD-sampled parameters.
     pub iso: Option<u32>,
+    /// The ISO range the gain was drawn from (first profile of a mix), when
+    /// training narrowed it; absent in files written before it was recorded.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub iso_range: Option<[u32; 2]>,
     /// Exposure-ratio range the pairs were drawn from.
     pub ratio: [f32; 2],
 }
@@ -357,6 +361,7 @@ mod tests {
             calibration: None,
             model: pgrf_noise::ModelKind::Pgrf,
             iso: None,
+            iso_range: None,
             ratio: [100.0, 300.0],
         }
     }

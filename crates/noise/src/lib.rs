@@ -14,6 +14,7 @@ mod components;
 mod error;
 pub mod mapfile;
 mod maps;
+pub mod mix;
 mod model;
 pub mod pair;
 mod params;

@@ -90,6 +90,10 @@ pub struct PairSpec {
     /// With no fixed ISO: draw the gain only between these ISOs' (inclusive)
     /// instead of over the profile's whole range.
     pub iso_range: Option<(u32, u32)>,
+    /// With neither ISO setting: draw the gain K (DN per electron) in this
+    /// range instead of the profile's whole one (how a [`crate::mix::PairMix`]
+    /// gives its other cameras the first one's ISO range).
+    pub gain_range: Option<(f64, f64)>,
     /// How the exposure ratio is chosen.
     pub ratio: RatioSpec,
     /// How the noisy capture's exposure time (dark current) is chosen.
@@ -140,6 +144,7 @@ impl PairSpec {
             measured: None,
             iso: None,
             iso_range: None,
+            gain_range: None,
             ratio: RatioSpec::default(),
             exposure: ExposureSpec::default(),
         }
@@ -149,7 +154,7 @@ impl PairSpec {
     pub(crate) fn model(&self, seed: u64) -> Result<(NoiseModel, CaptureParams)> {
         let mut params = match (self.iso, self.iso_range) {
             (Some(iso), _) => self.profile.params_at_iso(iso)?,
-            (None, None) => self.profile.sample_params(seed, None),
+            (None, None) => self.profile.sample_params(seed, self.gain_range),
             (None, Some((lo, hi))) => {
                 let range = self.k_range(lo, hi)?;
                 self.profile.sample_params(seed, Some(range))
@@ -176,6 +181,15 @@ impl PairSpec {
             ),
         };
         Ok((model, params))
+    }
+
+    /// white - black in DN of the captures this spec draws: the
+    /// calibration's when one was applied, else the profile's. Noise
+    /// parameters in DN refer to this scale.
+    pub fn dn_range(&self) -> f64 {
+        self.measured
+            .map(|m| m.dn_range)
+            .unwrap_or(self.profile.dn_range)
     }
 
     /// The gains of ISO `lo` and `hi`, checked: ordered, and both within

@@ -22,7 +22,7 @@ pub struct CaptureParams {
     /// Row-noise standard deviation, DN.
     pub sigma_row: f64,
     /// Per-plane (R, G1, B, G2) offset of the dark level, DN.
-    pub(crate) bias: [f64; 4],
+    pub bias: [f64; 4],
 }
 
 impl CameraProfile {
@@ -85,6 +85,11 @@ impl CameraProfile {
             sigma_row: self.eld.row_scale.mean_at(k),
             bias: [0.0; 4],
         })
+    }
+
+    /// The range of system gain K (DN per electron) the calibration covers.
+    pub fn gain_limits(&self) -> (f64, f64) {
+        (self.k_min, self.k_max)
     }
 
     /// ELD's sampling: ln K ~ U(ln k_min, ln k_max); each scale

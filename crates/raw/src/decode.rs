@@ -32,8 +32,30 @@ pub fn decode_file(path: &Path, overrides: &LevelOverrides) -> Result<RawFrame> 
     if meta.len() == 0 {
         return Err(RawError::decode(path, "file is empty"));
     }
+    decode_source(
+        path,
+        || RawSource::new(path).map_err(|e| e.to_string()),
+        overrides,
+    )
+}
+
+/// [`decode_file`] for a file already in memory (e.g. one built into the
+/// binary); `name` stands for it in messages.
+pub fn decode_bytes(name: &Path, bytes: &[u8], overrides: &LevelOverrides) -> Result<RawFrame> {
+    if bytes.is_empty() {
+        return Err(RawError::decode(name, "file is empty"));
+    }
+    decode_source(name, || Ok(RawSource::new_from_slice(bytes)), overrides)
+}
+
+/// Decode what `open` gives through rawler; `path` names it in errors.
+fn decode_source(
+    path: &Path,
+    open: impl FnOnce() -> std::result::Result<RawSource, String>,
+    overrides: &LevelOverrides,
+) -> Result<RawFrame> {
     let (image, exif) = quietly(|| -> std::result::Result<_, String> {
-        let source = RawSource::new(path).map_err(|e| e.to_string())?;
+        let source = open()?;
         let decoder = rawler::get_decoder(&source).map_err(|e| e.to_string())?;
         let params = RawDecodeParams::default();
         let image = decoder

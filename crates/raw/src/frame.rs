@@ -184,6 +184,42 @@ impl RawFrame {
         self.black[self.cfa.plane_at(row, col)]
     }
 
+    /// The `height` x `width` window at (`row`, `col`), levels and metadata
+    /// kept. Offsets and sizes must be even, so the window keeps the CFA's
+    /// phase and every 2x2 cell whole, and the window must lie inside.
+    pub fn crop(&self, row: usize, col: usize, height: usize, width: usize) -> Result<Self> {
+        if ![row, col, height, width]
+            .iter()
+            .all(|v| v.is_multiple_of(2))
+        {
+            return Err(RawError::Invalid(format!(
+                "crop {width}x{height} at ({row}, {col}): offsets and sizes must be even (whole CFA cells)"
+            )));
+        }
+        if height == 0
+            || width == 0
+            || row.checked_add(height).is_none_or(|e| e > self.height)
+            || col.checked_add(width).is_none_or(|e| e > self.width)
+        {
+            return Err(RawError::Invalid(format!(
+                "crop {width}x{height} at ({row}, {col}) is not inside the {}x{} frame",
+                self.width, self.height
+            )));
+        }
+        let mut mosaic = Vec::with_capacity(height * width);
+        for r in row..row + height {
+            mosaic.extend_from_slice(
+                &self.mosaic[r * self.width + col..r * self.width + col + width],
+            );
+        }
+        let mut f = self.clone();
+        f.mosaic = mosaic;
+        f.width = width;
+        f.height = height;
+        f.sensor_origin = (self.sensor_origin.0 + row, self.sensor_origin.1 + col);
+        Ok(f)
+    }
+
     /// The same frame with new pixel data (levels and metadata kept): what a
     /// denoiser or a noise synthesiser produces.
     pub(crate) fn with_mosaic(&self, mosaic: Vec<u16>) -> Result<Self> {
@@ -252,6 +288,35 @@ mod tests {
             white: None,
         };
         assert!(frame().apply_overrides(&three).is_err());
+    }
+
+    #[test]
+    fn crops_keep_the_cfa_phase_and_refuse_odd_or_outside_windows() {
+        let mosaic: Vec<u16> = (0..6 * 8).map(|v| v as u16).collect();
+        let f = RawFrame::from_mosaic(8, 6, mosaic, Cfa::Grbg, [1.0, 2.0, 3.0, 4.0], 4095).unwrap();
+        let c = f.crop(2, 4, 4, 4).unwrap();
+        assert_eq!(
+            (c.width, c.height, c.cfa, c.black),
+            (4, 4, Cfa::Grbg, f.black)
+        );
+        // Rows 2..6, columns 4..8 of a row-major 8-wide ramp.
+        assert_eq!(&c.mosaic[..4], &[20, 21, 22, 23]);
+        assert_eq!(c.at(3, 3), 5 * 8 + 7);
+        assert_eq!(
+            c.sensor_origin,
+            (f.sensor_origin.0 + 2, f.sensor_origin.1 + 4)
+        );
+        assert_eq!(f.crop(0, 0, 6, 8).unwrap().mosaic, f.mosaic);
+        for (r, c, h, w) in [
+            (1, 0, 2, 2),
+            (0, 2, 3, 2),
+            (4, 0, 4, 2),
+            (0, 6, 2, 4),
+            (0, 0, 0, 2),
+        ] {
+            assert!(f.crop(r, c, h, w).is_err(), "({r}, {c}, {h}, {w}) accepted");
+        }
+        assert!(f.crop(usize::MAX - 1, 0, 2, 2).is_err());
     }
 
     #[test]

@@ -29,7 +29,7 @@ pub mod unprocess;
 pub use ndarray;
 
 pub use cfa::Cfa;
-pub use decode::decode_file;
+pub use decode::{decode_bytes, decode_file};
 pub use demosaic::Demosaic;
 pub use dng::{encode_dng, write_dng, Compression, DngOptions};
 pub use error::{RawError, Result};

@@ -1,15 +1,16 @@
-//! `pgrf demo`: the whole product on data pgrf makes itself. A procedural
-//! scene (dead leaves, a ColorChecker, a ramp) is captured x100 and x200 too
-//! dark at ISO 1600 through the Sony A7S2 noise model, both captures are
-//! restored by the built-in SPC and PGRF models, and the result is a
-//! PSNR/SSIM table under the ELD protocol, the DNGs, and one picture with
-//! everything side by side.
+//! `pgrf demo`: the whole product on data built into the binary. A real
+//! photograph (the Canon 550D colour-chart DNG, `crates/cli/assets`) or a
+//! procedural scene (dead leaves, a ColorChecker, a ramp) is captured x100
+//! and x200 too dark at ISO 1600 through the Sony A7S2 noise model, both
+//! captures are restored by the built-in SPC and PGRF models, and the result
+//! is a PSNR/SSIM table under the ELD protocol, the DNGs, and one picture
+//! with everything side by side.
 
 use crate::output::require_parent_dir;
 use crate::progress::Bar;
 use crate::shipped;
 use anyhow::{bail, Context, Result};
-use clap::Args;
+use clap::{Args, ValueEnum};
 use pgrf_core::NoProgress;
 use pgrf_eval::dataset::table::{summarise, Row};
 use pgrf_eval::{evaluate, Protocol, Scores};
@@ -21,7 +22,8 @@ use pgrf_noise::capture::DarkCapture;
 use pgrf_noise::{CameraProfile, ModelKind};
 use pgrf_raw::scene::{render_demo, SceneLevels};
 use pgrf_raw::{
-    pack_normalized, render_preview, write_dng, Cfa, DngOptions, Preview, PreviewOptions, RawFrame,
+    decode_bytes, decode_file, pack_normalized, render_preview, write_dng, Cfa, DngOptions,
+    LevelOverrides, Preview, PreviewOptions, RawFrame,
 };
 use pgrf_report::{write_montage, Panel};
 use serde_json::json;
@@ -34,20 +36,44 @@ pub const RATIOS: [u32; 2] = [100, 200];
 pub const ISO: u32 = 1600;
 /// Exposure of the clean frame; the dark ones get this / ratio.
 const CLEAN_EXPOSURE_S: f64 = 1.0;
+/// The real photograph built into the binary (MIT, syoyo/tinydng; see
+/// `crates/cli/assets/README.md`).
+const PHOTO: &[u8] = include_bytes!("../../assets/canon550d_colorchart.dng");
+/// How the built-in photograph is named in messages and reports.
+const PHOTO_NAME: &str = "canon550d_colorchart.dng";
+/// The procedural scene's size when `--size` is not given.
+const PROCEDURAL_SIZE: &str = "1536x1024";
+
+/// What the demo starts from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum Scene {
+    /// A real RAW photograph: the built-in Canon 550D colour chart, or --photo FILE.
+    Photo,
+    /// pgrf's procedural scene: dead leaves, a ColorChecker and a ramp.
+    Procedural,
+}
 
 #[derive(Args, Debug)]
 #[command(
     after_help = "Writes DIR/demo.png (per ratio: clean, noisy, SPC, PGRF, whole frame \
 and a 2x crop), DIR/clean.dng, and DIR/noisy_x100.dng, spc_x100.dng, pgrf_x100.dng (and x200). \
-The models are built in; --spc and --pgrf take weight files from `pgrf train` instead."
+The models are built in; --spc and --pgrf take weight files from `pgrf train` instead. \
+The built-in photograph is a Canon EOS 550D capture of a colour chart from the tinydng project \
+(MIT licence, Syoyo Fujita and contributors)."
 )]
 pub struct DemoArgs {
     /// Output folder (created if its parent exists; demo files in it are replaced).
     #[arg(short, long, default_value = "pgrf-demo")]
     pub output: PathBuf,
-    /// Scene size in mosaic pixels, WxH (even, at least 64x64).
-    #[arg(long, default_value = "1536x1024")]
-    pub size: String,
+    /// What to start from: a real photograph or the procedural scene.
+    #[arg(long, value_enum, default_value = "photo")]
+    pub scene: Scene,
+    /// The photograph for --scene photo: any Bayer RAW pgrf reads, taken as the clean reference [default: the built-in Canon 550D chart].
+    #[arg(long)]
+    pub photo: Option<PathBuf>,
+    /// Size in mosaic pixels, WxH (even, at least 64x64): the procedural scene's [default: 1536x1024], or the centre window of the photograph [default: all of it].
+    #[arg(long)]
+    pub size: Option<String>,
     /// Seed of the scene and of the noise.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
@@ -93,12 +119,73 @@ struct Capture {
     restored: [RawFrame; 2],
 }
 
+/// The clean frame the demo starts from, and its description for the report.
+struct Clean {
+    frame: RawFrame,
+    what: String,
+}
+
+/// The even centre window of `frame` of `size` ("WxH"), or all of it.
+fn centre(frame: RawFrame, size: Option<&str>, name: &str) -> Result<RawFrame> {
+    let Some(size) = size else {
+        return Ok(frame);
+    };
+    let (w, h) = super::make_dataset::parse_size(size, 64)?;
+    if w > frame.width || h > frame.height {
+        bail!(
+            "--size {w}x{h} is larger than {name} ({}x{})",
+            frame.width,
+            frame.height
+        );
+    }
+    let (row, col) = ((frame.height - h) / 4 * 2, (frame.width - w) / 4 * 2);
+    Ok(frame.crop(row, col, h, w)?)
+}
+
+/// Load or render the clean frame (before any model is loaded or file written).
+fn clean_frame(a: &DemoArgs) -> Result<Clean> {
+    if a.photo.is_some() && a.scene != Scene::Photo {
+        bail!("--photo goes with --scene photo");
+    }
+    let (mut frame, what) = match a.scene {
+        Scene::Procedural => {
+            let size = a.size.as_deref().unwrap_or(PROCEDURAL_SIZE);
+            let (w, h) = super::make_dataset::parse_size(size, 64)?;
+            let f = render_demo(w, h, a.seed, Cfa::Rggb, &SceneLevels::default())?;
+            let what = format!(
+                "procedural scene {w}x{h} (dead leaves, ColorChecker, ramp; seed {})",
+                a.seed
+            );
+            (f, what)
+        }
+        Scene::Photo => {
+            let (frame, name) = match &a.photo {
+                Some(p) => (
+                    decode_file(p, &LevelOverrides::default())
+                        .with_context(|| format!("--photo {}", p.display()))?,
+                    p.display().to_string(),
+                ),
+                None => (
+                    decode_bytes(Path::new(PHOTO_NAME), PHOTO, &LevelOverrides::default())?,
+                    format!("{PHOTO_NAME} (built in; Canon EOS 550D, tinydng, MIT)"),
+                ),
+            };
+            let f = centre(frame, a.size.as_deref(), &name)?;
+            let what = format!("real photograph {name}, {}x{}", f.width, f.height);
+            (f, what)
+        }
+    };
+    frame.iso = Some(ISO);
+    frame.exposure_s = Some(CLEAN_EXPOSURE_S);
+    Ok(Clean { frame, what })
+}
+
 pub fn run(a: &DemoArgs) -> Result<()> {
     let t0 = Instant::now();
-    let (w, h) = super::make_dataset::parse_size(&a.size, 64)?;
     if !a.output.is_dir() {
         require_parent_dir(&a.output)?;
     }
+    let Clean { frame: clean, what } = clean_frame(a)?;
     let spc = model(a.spc.as_deref(), "builtin:spc", "spc", "--spc")?;
     let pgrf = model(a.pgrf.as_deref(), "builtin:pgrf", "pgrf", "--pgrf")?;
     let profile = CameraProfile::built_in("sony-a7s2").context("no sony-a7s2 profile")?;
@@ -107,15 +194,10 @@ pub fn run(a: &DemoArgs) -> Result<()> {
             .with_context(|| format!("creating output folder {}", a.output.display()))?;
     }
 
-    // Steps: render, then per ratio capture + 2 models, then pictures.
+    // Steps: the reference, then per ratio capture + 2 models, then pictures.
     let steps = Bar::new("demo", 2 + 3 * RATIOS.len() as u64, "steps", a.quiet);
     let bar = steps.bar();
     bar.enable_steady_tick(std::time::Duration::from_millis(200));
-
-    bar.set_message(format!("rendering a {w}x{h} scene"));
-    let mut clean = render_demo(w, h, a.seed, Cfa::Rggb, &SceneLevels::default())?;
-    clean.iso = Some(ISO);
-    clean.exposure_s = Some(CLEAN_EXPOSURE_S);
     let reference = pack_normalized(&clean, true)?;
     bar.inc(1);
 
@@ -173,13 +255,13 @@ pub fn run(a: &DemoArgs) -> Result<()> {
         dng(&c.restored[1], &format!("pgrf_x{}.dng", c.ratio))?;
     }
     let picture = a.output.join("demo.png");
-    write_picture(&picture, &clean, &captures)?;
+    write_picture(&picture, &clean, &captures, a.scene)?;
     bar.inc(1);
     bar.finish_and_clear();
     let seconds = t0.elapsed().as_secs_f64();
 
     print_report(
-        a, w, h, &*spc, &*pgrf, &captures, &protocol, &picture, seconds,
+        a, &what, &*spc, &*pgrf, &captures, &protocol, &picture, seconds,
     );
     if a.json {
         let mut obj = serde_json::Map::new();
@@ -199,8 +281,7 @@ pub fn run(a: &DemoArgs) -> Result<()> {
 #[allow(clippy::too_many_arguments)]
 fn print_report(
     a: &DemoArgs,
-    w: usize,
-    h: usize,
+    what: &str,
     spc: &dyn Restore,
     pgrf: &dyn Restore,
     captures: &[Capture],
@@ -239,9 +320,9 @@ fn print_report(
         }
     };
     out(&format!(
-        "pgrf demo: procedural scene {w}x{h} (dead leaves, ColorChecker, ramp; seed {}), \
-Sony A7S2 noise (pgrf model), ISO {ISO}, captures x{} and x{} too dark",
-        a.seed, RATIOS[0], RATIOS[1]
+        "pgrf demo: {what}; dark captures x{} and x{} simulated with the Sony A7S2's noise \
+(pgrf model, built-in profile) at ISO {ISO}, seed {}",
+        RATIOS[0], RATIOS[1], a.seed
     ));
     let model_line = |name: &str, r: &dyn Restore, file: &Option<PathBuf>| {
         let src = file
@@ -270,12 +351,16 @@ Sony A7S2 noise (pgrf model), ISO {ISO}, captures x{} and x{} too dark",
     ));
 }
 
-/// The crop shown at 2x: the lower left corner of the chart and the leaves
-/// around it, a quarter of the frame each way. Returns `(row, col, h, w)` in
-/// preview pixels.
-fn crop_box(width: usize, height: usize) -> (usize, usize, usize, usize) {
+/// The crop shown at 2x, a quarter of the frame each way: on the photograph
+/// the chart's middle patches and its printed lettering, on the procedural
+/// scene the lower left corner of the chart and the leaves around it.
+/// Returns `(row, col, h, w)` in preview pixels.
+fn crop_box(width: usize, height: usize, scene: Scene) -> (usize, usize, usize, usize) {
     let (ch, cw) = (height / 4, width / 4);
-    (height * 2 / 5, width / 2, ch, cw)
+    match scene {
+        Scene::Photo => (height / 2, width * 11 / 20, ch, cw),
+        Scene::Procedural => (height * 2 / 5, width / 2, ch, cw),
+    }
 }
 
 fn crop_zoom(p: &Preview, (r0, c0, ch, cw): (usize, usize, usize, usize)) -> Preview {
@@ -296,7 +381,7 @@ fn crop_zoom(p: &Preview, (r0, c0, ch, cw): (usize, usize, usize, usize)) -> Pre
 
 /// Per ratio two rows, the whole frame at half size and a crop at twice
 /// full size: clean, noisy (brightened by the ratio), SPC, PGRF.
-fn write_picture(path: &Path, clean: &RawFrame, captures: &[Capture]) -> Result<()> {
+fn write_picture(path: &Path, clean: &RawFrame, captures: &[Capture], scene: Scene) -> Result<()> {
     let half = PreviewOptions {
         half: true,
         ..PreviewOptions::default()
@@ -317,7 +402,7 @@ fn write_picture(path: &Path, clean: &RawFrame, captures: &[Capture]) -> Result<
                 ..full.clone()
             },
         )?;
-        let b = crop_box(detail.width, detail.height);
+        let b = crop_box(detail.width, detail.height, scene);
         Ok((whole, crop_zoom(&detail, b)))
     };
     let (clean_whole, clean_crop) = views(clean, 1.0)?;

@@ -18,7 +18,7 @@ use pgrf_nn::backend::DeviceKind;
 use pgrf_nn::infer::restorer::describe_sampler;
 use pgrf_nn::infer::{restore_packed, Restore, SamplerChoice, Tiling};
 use pgrf_noise::ModelKind;
-use pgrf_raw::ndarray::ArrayView3;
+use pgrf_raw::ndarray::{Array3, ArrayView3};
 use pgrf_raw::{render_preview, unpack_normalized, PreviewOptions};
 use pgrf_report::{write_montage, Panel};
 use std::path::{Path, PathBuf};
@@ -77,6 +77,16 @@ pub struct EvalArgs {
     /// Weight file from `pgrf train`; repeat for a comparison table.
     #[arg(long, short = 'm')]
     pub model: Vec<PathBuf>,
+    /// Restorations made outside pgrf, as a column NAME: NAME=DIR reads DIR/KEY.output.npy for
+    /// each case (KEY as `--dump` names it; packed (4, H, W) float32 or float64, the input's
+    /// shape). Repeatable.
+    #[arg(long, value_name = "NAME=DIR")]
+    pub outputs: Vec<String>,
+    /// Write each case's packed input and reference as DIR/KEY.input.npy and KEY.reference.npy,
+    /// and KEY.json (synthetic: also KEY.capture.npy, the capture before clamping, and the true
+    /// noise parameters), for methods outside pgrf (bench/vst_bm3d.py). The folder must exist.
+    #[arg(long, value_name = "DIR")]
+    pub dump: Option<PathBuf>,
     /// `input` adds the amplified noisy input as a "noisy input" column; `none` leaves it out.
     #[arg(long, default_value = "input")]
     pub noise_baseline: Baseline,
@@ -283,6 +293,46 @@ fn synthetic_recipe(a: &EvalArgs) -> Result<Synthetic> {
     )?)
 }
 
+/// `--outputs NAME=DIR` entries, each folder checked to exist.
+fn parse_outputs(items: &[String]) -> Result<Vec<(String, PathBuf)>> {
+    items
+        .iter()
+        .map(|item| {
+            let Some((name, dir)) = item.split_once('=') else {
+                bail!("--outputs {item:?}: expected NAME=DIR");
+            };
+            let (name, dir) = (name.trim(), PathBuf::from(dir));
+            if name.is_empty() {
+                bail!("--outputs {item:?}: the column name before = is empty");
+            }
+            if !dir.is_dir() {
+                bail!("--outputs {item:?}: {} is not a folder", dir.display());
+            }
+            Ok((name.to_string(), dir))
+        })
+        .collect()
+}
+
+/// The outside method's restoration of case `key`: DIR/KEY.output.npy, of
+/// the input's shape (a larger file is refused before it is read).
+fn read_output(
+    dir: &Path,
+    key: &str,
+    input: ArrayView3<f32>,
+) -> std::result::Result<Array3<f32>, String> {
+    let path = dir.join(format!("{key}.output.npy"));
+    let out = pgrf_eval::npy::read(&path, 8 * input.len() as u64 + 65_536)?;
+    if out.dim() != input.dim() {
+        return Err(format!(
+            "{}: shape {:?}, the input is {:?}",
+            path.display(),
+            out.dim(),
+            input.dim()
+        ));
+    }
+    Ok(out)
+}
+
 fn write_file(path: &Path, text: &str) -> Result<()> {
     pgrf_core::write_atomic(path, text.as_bytes()).with_context(|| format!("{}", path.display()))
 }
@@ -296,9 +346,15 @@ pub fn run(a: &EvalArgs) -> Result<()> {
         None => a.protocol.default_correct(),
     };
     let baseline = a.noise_baseline == Baseline::Input;
-    if a.model.is_empty() && !baseline {
+    if a.model.is_empty() && a.outputs.is_empty() && !baseline {
         bail!("nothing to evaluate: give --model (or keep the noisy-input baseline)");
     }
+    if let Some(d) = &a.dump {
+        if !d.is_dir() {
+            bail!("--dump {}: no such folder", d.display());
+        }
+    }
+    let outside = parse_outputs(&a.outputs)?;
     let synthetic = a.protocol == DatasetKind::Synthetic;
     if !synthetic {
         for (flag, given) in [
@@ -356,20 +412,28 @@ pub fn run(a: &EvalArgs) -> Result<()> {
         seed: a.seed,
         device: a.device,
     };
-    let closures: Vec<Box<MethodFn>> = models
+    let mut closures: Vec<(String, Box<MethodFn>)> = models
         .iter()
-        .map(|(_, r)| {
-            Box::new(move |x: ArrayView3<f32>| {
+        .map(|(name, r)| {
+            let f = Box::new(move |x: ArrayView3<f32>, _: &str| {
                 restore_packed(r.as_ref(), x, &tiling, &NoProgress)
                     .map(|o| o.output)
                     .map_err(|e| e.to_string())
-            }) as Box<MethodFn>
+            }) as Box<MethodFn>;
+            (name.clone(), f)
         })
         .collect();
-    let methods: Vec<(String, &MethodFn)> = models
+    for (name, dir) in outside {
+        if closures.iter().any(|(n, _)| *n == name) || name == NOISY {
+            bail!("--outputs {name}=...: the name is taken by another column");
+        }
+        let f = Box::new(move |x: ArrayView3<f32>, key: &str| read_output(&dir, key, x))
+            as Box<MethodFn>;
+        closures.push((name, f));
+    }
+    let methods: Vec<(String, &MethodFn)> = closures
         .iter()
-        .zip(&closures)
-        .map(|((name, _), f)| (name.clone(), f.as_ref()))
+        .map(|(name, f)| (name.clone(), f.as_ref()))
         .collect();
     let opts = RunOptions {
         crop,
@@ -378,6 +442,7 @@ pub fn run(a: &EvalArgs) -> Result<()> {
         baseline,
         worst_count: a.worst_count,
         cast: false,
+        dump: a.dump.clone(),
     };
     let Outcome { rows, worst, notes } = match &recipe {
         Some(r) => synthetic::run(&images, r, &methods, &opts, &bar)?,

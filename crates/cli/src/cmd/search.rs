@@ -14,8 +14,9 @@ use pgrf_nn::data::source::{Folder, Source};
 use pgrf_nn::data::validation::ValSet;
 use pgrf_nn::flow::search::{self, SearchOptions};
 use pgrf_nn::weights::{self, Architecture};
-use pgrf_noise::pair::{PairSpec, RatioSpec};
-use pgrf_noise::{CameraProfile, ModelKind};
+use pgrf_noise::mix::PairMix;
+use pgrf_noise::pair::RatioSpec;
+use pgrf_noise::ModelKind;
 use pgrf_raw::LevelOverrides;
 use pgrf_report::{write_search_plot, SearchCurve};
 use serde::Serialize;
@@ -118,13 +119,13 @@ pub fn run(a: &SearchArgs) -> Result<()> {
     crate::output::require_parent_dir(&plot).context("--plot")?;
     a.device.check_available().map_err(anyhow::Error::msg)?;
 
-    // Pairs made as the model's training pairs were (its record's noise source).
+    // Pairs made as the model's training pairs were (its record's noise
+    // source: profile or mix, ISO or ISO range, ratios); --iso and --ratio
+    // override.
     let noise = &meta.noise;
     let profile_name = noise.profile.clone().unwrap_or_else(|| "sony-a7s2".into());
     let model: ModelKind = noise.model;
-    let mut spec = PairSpec::new(CameraProfile::load(&profile_name)?, model);
-    spec.iso = a.iso.or(noise.iso);
-    spec.ratio = match a.ratio {
+    let ratio = match a.ratio {
         Some(r) if r.is_finite() && r > 0.0 => RatioSpec::Fixed(r),
         Some(r) => bail!("--ratio must be a positive number, got {r}"),
         None => RatioSpec::Uniform {
@@ -132,9 +133,22 @@ pub fn run(a: &SearchArgs) -> Result<()> {
             hi: noise.ratio[1],
         },
     };
+    let (iso, iso_range) = match a.iso {
+        Some(v) => (Some(v), None),
+        None => (noise.iso, noise.iso_range.map(|[lo, hi]| (lo, hi))),
+    };
+    let mut mix = PairMix::build(&profile_name, model, iso, iso_range, ratio)
+        .with_context(|| format!("--model {}: its noise record", a.model.display()))?;
     if let Some(p) = &a.calib {
+        let described = mix.describe();
+        let Some(spec) = mix.single_mut() else {
+            bail!(
+                "--calib {}: the model was trained on a mix of profiles ({described}); a calibration describes one sensor",
+                p.display(),
+            );
+        };
         let cal = Calibration::load(p)?;
-        cal.apply_to(&mut spec)
+        cal.apply_to(spec)
             .with_context(|| format!("--calib {}", p.display()))?;
     }
     let (source, count, what) = match (&a.val, a.procedural) {
@@ -154,7 +168,7 @@ pub fn run(a: &SearchArgs) -> Result<()> {
     if count == 0 {
         bail!("no validation pairs: --pairs/--procedural must be at least 1");
     }
-    let val = ValSet::build(&source, &spec, a.patch, count, a.seed)?;
+    let val = ValSet::build(&source, &mix, a.patch, count, a.seed)?;
 
     let bar = Bar::new("search", 0, "network evaluations", a.json);
     let out = search::run(&a.model, &val, &opts, &bar)?;
@@ -213,14 +227,23 @@ pub fn run(a: &SearchArgs) -> Result<()> {
         "sampling search: {} ({}), {count} pairs of {p}x{p} packed, ratio {}, seed {}",
         a.model.display(),
         meta.arch.describe(),
-        match spec.ratio {
+        match ratio {
             RatioSpec::Fixed(r) => format!("{r}"),
             RatioSpec::Uniform { lo, hi } => format!("U({lo}, {hi})"),
         },
         a.seed,
         p = a.patch
     );
-    println!("pairs: {what}; noise: {} {}", profile_name, noise.model);
+    let gains = match (iso, iso_range) {
+        (Some(v), _) => format!(" at ISO {v}"),
+        (None, Some((lo, hi))) => format!(", ISO {lo}..{hi}"),
+        (None, None) => String::new(),
+    };
+    println!(
+        "pairs: {what}; noise: {} {}{gains}",
+        mix.describe(),
+        noise.model
+    );
     println!("protocol: {}", protocol.describe());
     println!("{:>14}  {:>9}  {:>7}", "t", "PSNR (dB)", "SSIM");
     println!(

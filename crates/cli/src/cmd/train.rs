@@ -13,8 +13,9 @@ use pgrf_nn::schedule::Schedule;
 use pgrf_nn::train::{Outcome, TrainSettings};
 use pgrf_nn::weights::NoiseSource;
 use pgrf_nn::{Method, TrainConfig};
-use pgrf_noise::pair::{PairSpec, RatioSpec};
-use pgrf_noise::{CameraProfile, ModelKind};
+use pgrf_noise::mix::PairMix;
+use pgrf_noise::pair::RatioSpec;
+use pgrf_noise::ModelKind;
 use serde::Serialize;
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -40,7 +41,7 @@ pub struct Settings {
     /// Photos: invert a global S-shaped tone curve (Brooks et al.'s smoothstep) before the sRGB transfer.
     #[arg(long, num_args = 0..=1, default_missing_value = "true")]
     pub photo_inverse_tone: Option<bool>,
-    /// Camera noise profile (built-in name or JSON path) [default: sony-a7s2].
+    /// Camera noise profile (built-in name or JSON path), or a mix NAME[@WEIGHT],... where each crop draws one camera's noise, e.g. sony-a7s2@3,nikon-d850@1; --iso/--iso-range are the first profile's, and become a gain range the others share [default: sony-a7s2].
     #[arg(long)]
     pub profile: Option<String>,
     /// Per-pixel calibration file (from `pgrf calibrate`) for the pgrf noise model.
@@ -203,19 +204,27 @@ pub fn run(a: &TrainArgs) -> Result<()> {
     let schedule = s.schedule;
     let model = s.noise;
     let profile_name = s.profile.clone();
-    let profile = CameraProfile::load(&profile_name)?;
-    let mut spec = PairSpec::new(profile, model);
-    spec.iso = s.iso;
-    spec.iso_range = s.iso_range()?;
-    if let Some((lo, hi)) = spec.iso_range {
-        spec.k_range(lo, hi).context("--iso-range")?;
-    }
     let (lo, hi) = (s.ratio_min, s.ratio_max);
-    spec.ratio = RatioSpec::Uniform { lo, hi };
+    let iso_range = s.iso_range()?;
+    let mut mix = PairMix::build(
+        &profile_name,
+        model,
+        s.iso,
+        iso_range,
+        RatioSpec::Uniform { lo, hi },
+    )
+    .context("--profile")?;
     let mut calibration = None;
     if let Some(path) = &s.calib {
+        let described = mix.describe();
+        let Some(spec) = mix.single_mut() else {
+            bail!(
+                "--calib {} describes one sensor; it cannot go with a mix of profiles ({described})",
+                path.display(),
+            );
+        };
         let cal = Calibration::load(path)?;
-        cal.apply_to(&mut spec)
+        cal.apply_to(spec)
             .with_context(|| format!("--calib {}", path.display()))?;
         calibration = Some(cal.identity(path));
     }
@@ -226,9 +235,9 @@ pub fn run(a: &TrainArgs) -> Result<()> {
     let (train_src, val_src, data) = (built.train, built.val, s.data.clone());
     let val_pairs = s.val_pairs;
     let seed = s.seed;
-    let spec = Arc::new(spec);
+    let mix = Arc::new(mix);
     let val = if val_pairs > 0 {
-        Some(ValSet::build(&val_src, &spec, val_patch, val_pairs, seed)?)
+        Some(ValSet::build(&val_src, &mix, val_patch, val_pairs, seed)?)
     } else {
         None
     };
@@ -262,7 +271,8 @@ pub fn run(a: &TrainArgs) -> Result<()> {
             profile: Some(profile_name.clone()),
             calibration,
             model,
-            iso: spec.iso,
+            iso: s.iso,
+            iso_range: iso_range.map(|(a, b)| [a, b]),
             ratio: [lo, hi],
         },
         data: data.clone(),
@@ -286,7 +296,7 @@ pub fn run(a: &TrainArgs) -> Result<()> {
             patch,
             patch,
             settings.noise.model,
-            profile_name,
+            mix.describe(),
             settings.noise.calibration.as_ref().map(|c| format!(" + calibration {c}")).unwrap_or_default(),
             steps,
             settings.lr,
@@ -311,7 +321,7 @@ pub fn run(a: &TrainArgs) -> Result<()> {
         device,
         &settings,
         Arc::new(train_src),
-        spec,
+        mix,
         val.as_ref(),
         &progress,
         &stop,

@@ -64,6 +64,7 @@ pub fn tiny_model(dir: &Path, flow: bool, t2: Option<f32>, seed: u64) -> PathBuf
             calibration: None,
             model: pgrf_noise::ModelKind::Pgrf,
             iso: Some(1600),
+            iso_range: None,
             ratio: [100.0, 300.0],
         },
     );

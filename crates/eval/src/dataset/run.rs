@@ -20,8 +20,10 @@ pub const NOISY: &str = "noisy input";
 pub(crate) const THUMB: usize = 128;
 
 /// A method under evaluation: packed `(4, h, w)` amplified input in [0, 1]
-/// to its restoration, or a one-line reason.
-pub type MethodFn<'a> = dyn Fn(ArrayView3<f32>) -> std::result::Result<Array3<f32>, String> + 'a;
+/// and the case's key (what its `--dump` files are named after) to its
+/// restoration, or a one-line reason.
+pub type MethodFn<'a> =
+    dyn Fn(ArrayView3<f32>, &str) -> std::result::Result<Array3<f32>, String> + 'a;
 
 /// How a run measures.
 #[derive(Clone, Debug, Default)]
@@ -39,6 +41,10 @@ pub struct RunOptions {
     pub worst_count: usize,
     /// Measure the colour cast ([`crate::cast`]) of every output too.
     pub cast: bool,
+    /// Write every case's input and reference (and, when synthesised, the
+    /// unclamped capture and its true noise parameters) to this folder, for
+    /// methods outside pgrf ([`dump_case`]).
+    pub dump: Option<std::path::PathBuf>,
 }
 
 /// One of the worst images: its thumbnails, in column order.
@@ -81,6 +87,66 @@ pub(crate) struct Case {
     pub(crate) title: String,
     /// The case in the progress line, after `[i/n]`.
     pub(crate) line: String,
+    /// What the case's files are named after ([`case_key`]).
+    pub(crate) key: String,
+    /// A synthesised case's capture before clamping and the noise it was
+    /// drawn with, for `--dump`.
+    pub(crate) synthesis: Option<Synthesis>,
+}
+
+/// What a synthesised case adds to its dump: the amplified capture before
+/// clamping (a classical method wants the values below 0 and above 1) and
+/// the true noise parameters, as JSON.
+pub(crate) struct Synthesis {
+    pub(crate) capture: Array3<f32>,
+    pub(crate) noise: serde_json::Value,
+}
+
+/// A file-name-safe key for a case: its title with every character other
+/// than ASCII letters, digits, '.', '-' and '_' replaced by '_'.
+pub fn case_key(title: &str) -> String {
+    title
+        .chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || matches!(c, '.' | '-' | '_') {
+                c
+            } else {
+                '_'
+            }
+        })
+        .collect()
+}
+
+/// Write case `key`'s files into `dir`: `KEY.input.npy` (the methods'
+/// input), `KEY.reference.npy`, `KEY.json` (title, ratio and, when
+/// synthesised, the noise), and for a synthesised case `KEY.capture.npy`.
+/// Arrays are packed `(4, H, W)` float32 after any crop.
+fn dump_case(
+    dir: &std::path::Path,
+    case: &Case,
+    input: ArrayView3<f32>,
+    reference: ArrayView3<f32>,
+    crop: Option<usize>,
+) -> Result<()> {
+    let at = |e: String| DatasetError(format!("--dump: {e}"));
+    let key = &case.key;
+    crate::npy::write(&dir.join(format!("{key}.input.npy")), input).map_err(at)?;
+    crate::npy::write(&dir.join(format!("{key}.reference.npy")), reference).map_err(at)?;
+    let mut meta = serde_json::json!({
+        "case": case.title,
+        "ratio": case.pair.ratio,
+        "shape": input.shape(),
+        "input": "amplified capture clamped to [0, 1], normalised by the reference's levels",
+    });
+    if let Some(s) = &case.synthesis {
+        let capture = centre_crop(s.capture.view(), crop);
+        crate::npy::write(&dir.join(format!("{key}.capture.npy")), capture).map_err(at)?;
+        meta["noise"] = s.noise.clone();
+        meta["capture"] = "the same capture before clamping".into();
+    }
+    let text = serde_json::to_string_pretty(&meta).expect("JSON of plain values");
+    pgrf_core::write_atomic(&dir.join(format!("{key}.json")), text.as_bytes())
+        .map_err(|e| at(e.to_string()))
 }
 
 /// Run `methods` (name and closure, in column order) over `samples`.
@@ -114,6 +180,8 @@ pub fn run(
             source: smp.noisy.display().to_string(),
             title: smp.id.clone(),
             line: format!("{} x{:.1}", smp.id, pair.ratio),
+            key: case_key(&format!("{}_x{}", smp.id, pair.ratio)),
+            synthesis: None,
             pair,
         })
     };
@@ -142,12 +210,15 @@ pub(crate) fn run_cases(
         let input = centre_crop(pair.input.view(), opts.crop).to_owned();
         let reference = centre_crop(pair.reference.view(), opts.crop);
         let colour = opts.cast.then(|| CameraColour::of(&pair.reference_frame));
+        if let Some(dir) = &opts.dump {
+            dump_case(dir, &case, input.view(), reference, opts.crop)?;
+        }
         let mut outputs: Vec<(&str, Array3<f32>)> = Vec::new();
         if opts.baseline {
             outputs.push((NOISY, input.clone()));
         }
         for (name, f) in methods {
-            let out = f(input.view())
+            let out = f(input.view(), &case.key)
                 .map_err(|e| DatasetError(format!("{}: model {name}: {e}", case.source)))?;
             outputs.push((name, out));
         }

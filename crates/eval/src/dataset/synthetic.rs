@@ -30,7 +30,7 @@
 //! gives byte-identical numbers. Two clean files with the same name are
 //! refused.
 
-use super::run::{run_cases, Case, MethodFn, Outcome, RunOptions};
+use super::run::{case_key, run_cases, Case, MethodFn, Outcome, RunOptions, Synthesis};
 use super::table::Row;
 use super::{err, DatasetError, DatasetKind, LoadedPair, Result};
 use ndarray::{Array3, ArrayView3};
@@ -270,12 +270,54 @@ impl Synthetic {
         name: &str,
         k: usize,
     ) -> Result<(Array3<f32>, u64)> {
+        let (pair, seed) = self.synthesize(clean, plane_rows, name, k)?;
+        Ok((pair.noisy.mapv(|v| v.clamp(0.0, 1.0)), seed))
+    }
+
+    /// The whole synthesised pair behind [`Synthetic::capture`], and its seed.
+    fn synthesize(
+        &self,
+        clean: ArrayView3<f32>,
+        plane_rows: [usize; 4],
+        name: &str,
+        k: usize,
+    ) -> Result<(pgrf_noise::pair::Pair, u64)> {
         let c = &self.conditions[k];
         let seed = capture_seed(self.seed, name, c);
         let pair = self.specs[k]
             .synthesize(clean, plane_rows, seed)
             .map_err(|e| DatasetError(format!("{name} {}: {e}", c.label())))?;
-        Ok((pair.noisy.mapv(|v| v.clamp(0.0, 1.0)), seed))
+        Ok((pair, seed))
+    }
+
+    /// The true noise of a capture drawn with `params`, as the `--dump`
+    /// sidecar records it: the parameters in DN of the profile's scale, and
+    /// the Poisson-Gaussian approximation of the amplified, normalised
+    /// capture y (what a variance-stabilising transform needs):
+    /// E[y] = x + offset, Var[y] = alpha * x + sigma^2.
+    fn noise_record(&self, params: &pgrf_noise::CaptureParams, ratio: f32) -> serde_json::Value {
+        let dn = self.specs[0].dn_range();
+        let r = ratio as f64;
+        // Read (Gaussian in the pgrf model, Tukey-lambda in ELD's: its
+        // scale stands for the spread), row noise and 1-DN quantisation.
+        let read = match self.kind {
+            ModelKind::Eld => params.sigma_tukey,
+            _ => params.sigma_gauss,
+        };
+        let var_dn = read * read + params.sigma_row * params.sigma_row + 1.0 / 12.0;
+        serde_json::json!({
+            "profile": self.profile,
+            "model": self.kind.to_string(),
+            "k_dn_per_electron": params.k,
+            "sigma_read_dn": read,
+            "sigma_row_dn": params.sigma_row,
+            "quant_step_dn": 1.0,
+            "bias_dn": params.bias,
+            "dn_range": dn,
+            "alpha": r * params.k / dn,
+            "sigma": r * var_dn.sqrt() / dn,
+            "offset": params.bias.map(|b| r * b / dn),
+        })
     }
 
     /// One line: conditions, noise model and seeds.
@@ -340,7 +382,12 @@ pub fn run(
         };
         let c = synth.conditions[ci];
         let plane_rows = frame.cfa.offsets().map(|(r, _)| r);
-        let (input, seed) = synth.capture(clean.view(), plane_rows, &img.id, ci)?;
+        let (pair, seed) = synth.synthesize(clean.view(), plane_rows, &img.id, ci)?;
+        let input = pair.noisy.mapv(|v| v.clamp(0.0, 1.0));
+        let synthesis = opts.dump.is_some().then(|| Synthesis {
+            noise: synth.noise_record(&pair.params, c.ratio),
+            capture: pair.noisy,
+        });
         Ok(Case {
             pair: LoadedPair {
                 reference_frame: frame.clone(),
@@ -366,6 +413,8 @@ pub fn run(
             source: format!("{} ({})", img.path.display(), c.label()),
             title: format!("{} {}", img.id, c.label()),
             line: format!("{} {}", img.id, c.label()),
+            key: case_key(&format!("{}_iso{}_x{}", img.id, c.iso, c.ratio)),
+            synthesis,
         })
     };
     let mut out = run_cases(
@@ -578,7 +627,7 @@ mod tests {
         )
         .unwrap();
         // A 3x3 box blur per plane: a "denoiser" that must beat the input.
-        let blur = |x: ArrayView3<f32>| -> std::result::Result<Array3<f32>, String> {
+        let blur = |x: ArrayView3<f32>, _: &str| -> std::result::Result<Array3<f32>, String> {
             let (c, h, w) = x.dim();
             Ok(Array3::from_shape_fn((c, h, w), |(p, i, j)| {
                 let (mut s, mut n) = (0.0, 0.0);
@@ -625,7 +674,7 @@ mod tests {
         let b = run(&images, &synth, &methods, &opts, &NoProgress).unwrap();
         assert_eq!(a.rows, b.rows);
         // A failing method is an error naming the file and condition.
-        let fail = |_: ArrayView3<f32>| -> std::result::Result<Array3<f32>, String> {
+        let fail = |_: ArrayView3<f32>, _: &str| -> std::result::Result<Array3<f32>, String> {
             Err("out of memory".into())
         };
         let methods: Vec<(String, &MethodFn)> = vec![("bad".into(), &fail)];

@@ -70,7 +70,7 @@ pub struct Sources {
 }
 
 /// The camera photos are unprocessed into (see
-/// [`TrainConfig::camera_like`]).
+/// [`TrainConfig::camera_like`]); with a mix of profiles, the first one's.
 pub fn photo_camera(c: &TrainConfig) -> Result<CameraSpace> {
     match &c.camera_like {
         Some(path) => {
@@ -79,11 +79,20 @@ pub fn photo_camera(c: &TrainConfig) -> Result<CameraSpace> {
             CameraSpace::of(&frame)
                 .map_err(|e| NnError::Config(format!("--camera-like {}: {e}", path.display())))
         }
-        None if c.profile == "sony-a7s2" => Ok(CameraSpace::sony_a7s2()),
-        None => Err(NnError::Config(format!(
-            "the {} profile carries no colour matrix to unprocess photos with: give --camera-like FILE (any RAW of that camera)",
-            c.profile
-        ))),
+        None => {
+            // A mix unprocesses into its first camera.
+            let first = pgrf_noise::mix::parse_profiles(&c.profile)
+                .map_err(|e| NnError::Config(e.to_string()))?
+                .swap_remove(0)
+                .name;
+            if first == "sony-a7s2" {
+                Ok(CameraSpace::sony_a7s2())
+            } else {
+                Err(NnError::Config(format!(
+                    "the {first} profile carries no colour matrix to unprocess photos with: give --camera-like FILE (any RAW of that camera)"
+                )))
+            }
+        }
     }
 }
 

@@ -15,7 +15,7 @@ use crate::data::augment::Augment;
 use crate::data::source::Source;
 use crate::error::{NnError, Result};
 use pgrf_core::seed::mix64;
-use pgrf_noise::pair::PairSpec;
+use pgrf_noise::mix::PairMix;
 use rand::{Rng, SeedableRng};
 use rand_xoshiro::Xoshiro256PlusPlus;
 use std::sync::mpsc::{sync_channel, Receiver};
@@ -84,7 +84,7 @@ pub(crate) struct Sample {
 /// Sample `index` of the run: one (noisy, clean[, x0, t]) item.
 pub(crate) fn make_sample(
     source: &Source,
-    spec: &PairSpec,
+    mix: &PairMix,
     s: &SampleSpec,
     index: u64,
 ) -> Result<Sample> {
@@ -97,6 +97,9 @@ pub(crate) fn make_sample(
         Augment::IDENTITY
     };
     let scene_seed = mix64(mix64(s.seed ^ SCENE_DOMAIN) ^ index);
+    // The camera of a mix comes from the scene seed, so a single camera's
+    // draws are exactly what they were before mixes existed.
+    let spec = mix.pick(scene_seed);
     let crop = source.crop(s.patch, scene_seed, pick, fy, fx)?;
     let clean = aug.apply(crop.clean.view());
     let mut local = spec.clone();
@@ -141,7 +144,7 @@ pub(crate) fn make_sample(
 /// Batch `b` (items b*n .. b*n+n-1).
 pub(crate) fn make_batch(
     source: &Source,
-    spec: &PairSpec,
+    mix: &PairMix,
     s: &SampleSpec,
     n: usize,
     b: u64,
@@ -154,7 +157,7 @@ pub(crate) fn make_batch(
         ratios: Vec::new(),
     };
     for i in 0..n as u64 {
-        let item = make_sample(source, spec, s, b * n as u64 + i)?;
+        let item = make_sample(source, mix, s, b * n as u64 + i)?;
         batch.noisy.extend(item.noisy);
         batch.clean.extend(item.clean);
         batch.x0.extend(item.x0);
@@ -178,7 +181,7 @@ impl Loader {
     /// `workers` threads, each keeping up to `ahead` batches ready.
     pub(crate) fn start(
         source: Arc<Source>,
-        spec: Arc<PairSpec>,
+        mix: Arc<PairMix>,
         sample: SampleSpec,
         batch: usize,
         start: u64,
@@ -190,13 +193,13 @@ impl Loader {
         let mut handles = Vec::new();
         for w in 0..workers as u64 {
             let (tx, rx) = sync_channel(ahead.max(1));
-            let (source, spec, sample) = (source.clone(), spec.clone(), sample.clone());
+            let (source, mix, sample) = (source.clone(), mix.clone(), sample.clone());
             let h = std::thread::Builder::new()
                 .name(format!("pgrf-data-{w}"))
                 .spawn(move || {
                     let mut b = start + w;
                     loop {
-                        let r = make_batch(&source, &spec, &sample, batch, b);
+                        let r = make_batch(&source, &mix, &sample, batch, b);
                         let failed = r.is_err();
                         // The trainer hung up: stop quietly.
                         if tx.send(r).is_err() || failed {
@@ -233,7 +236,7 @@ impl Loader {
 /// items), timed after each worker's first batch (caches warm).
 pub fn loader_rate(
     source: Arc<Source>,
-    spec: Arc<PairSpec>,
+    mix: Arc<PairMix>,
     patch: usize,
     batch: usize,
     workers: usize,
@@ -245,7 +248,7 @@ pub fn loader_rate(
         augment: true,
         extras: Extras::None,
     };
-    let mut loader = Loader::start(source, spec, sample, batch, 0, workers, 2);
+    let mut loader = Loader::start(source, mix, sample, batch, 0, workers, 2);
     for _ in 0..workers.max(1) {
         loader.next_batch()?;
     }
@@ -269,6 +272,7 @@ impl Drop for Loader {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use pgrf_noise::pair::PairSpec;
     use pgrf_noise::{CameraProfile, ModelKind};
 
     fn spec() -> PairSpec {
@@ -289,7 +293,7 @@ mod tests {
             extras: Extras::Flow,
         };
         let src = Arc::new(Source::Procedural);
-        let sp = Arc::new(spec());
+        let sp = Arc::new(PairMix::from(spec()));
         let mut one = Loader::start(src.clone(), sp.clone(), sample.clone(), 2, 0, 1, 1);
         let mut three = Loader::start(src.clone(), sp.clone(), sample.clone(), 2, 0, 3, 2);
         let mut late = Loader::start(src, sp, sample, 2, 2, 2, 1);
@@ -328,7 +332,7 @@ mod tests {
             augment: false,
             extras: Extras::None,
         };
-        let b = make_batch(&Source::Procedural, &spec, &sample, 2, 0).unwrap();
+        let b = make_batch(&Source::Procedural, &spec.into(), &sample, 2, 0).unwrap();
         let (mut sn, mut sc, mut k) = (0.0f64, 0.0f64, 0usize);
         for (n, c) in b.noisy.iter().zip(&b.clean) {
             if (0.2..0.8).contains(c) {
@@ -382,7 +386,7 @@ mod tests {
             augment: true,
             extras: Extras::None,
         };
-        let sp = Arc::new(spec());
+        let sp = Arc::new(PairMix::from(spec()));
         let mut one = Loader::start(mix(open()), sp.clone(), sample.clone(), 4, 0, 1, 1);
         let mut three = Loader::start(mix(open()), sp, sample, 4, 0, 3, 2);
         let mut photo_like = 0;

@@ -6,7 +6,7 @@ use crate::data::loader::{make_sample, Extras, SampleSpec};
 use crate::data::source::Source;
 use crate::error::Result;
 use pgrf_core::seed::mix64;
-use pgrf_noise::pair::PairSpec;
+use pgrf_noise::mix::PairMix;
 
 const VAL_DOMAIN: u64 = 0x7661_6c69; // "vali"
 
@@ -38,11 +38,11 @@ pub struct ValSet {
 
 impl ValSet {
     /// `count` pairs of `patch` x `patch` crops from `source`, noise from
-    /// `spec`, no augmentation: pair i is a function of (`seed`, i) only,
+    /// `mix`, no augmentation: pair i is a function of (`seed`, i) only,
     /// drawn from streams apart from the training samples of the same seed.
     pub fn build(
         source: &Source,
-        spec: &PairSpec,
+        mix: &PairMix,
         patch: usize,
         count: usize,
         seed: u64,
@@ -55,7 +55,7 @@ impl ValSet {
         };
         let pairs = (0..count as u64)
             .map(|i| {
-                let item = make_sample(source, spec, &s, i)?;
+                let item = make_sample(source, mix, &s, i)?;
                 Ok(ValPair {
                     noisy: item.noisy,
                     clean: item.clean,
@@ -100,11 +100,12 @@ mod tests {
 
     #[test]
     fn the_validation_set_is_fixed_and_differs_from_training() {
-        let mut spec = PairSpec::new(
+        let mut spec = pgrf_noise::pair::PairSpec::new(
             CameraProfile::built_in("sony-a7s2").unwrap(),
             ModelKind::Eld,
         );
         spec.iso = Some(3200);
+        let spec = PairMix::from(spec);
         let a = ValSet::build(&Source::Procedural, &spec, 32, 2, 1).unwrap();
         let b = ValSet::build(&Source::Procedural, &spec, 32, 2, 1).unwrap();
         assert_eq!(a.pairs[1].noisy, b.pairs[1].noisy);

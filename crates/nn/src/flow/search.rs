@@ -382,7 +382,7 @@ mod tests {
             ModelKind::Pgrf,
         );
         spec.iso = Some(1600);
-        let val = ValSet::build(&Source::Procedural, &spec, 16, 2, 4).unwrap();
+        let val = ValSet::build(&Source::Procedural, &spec.into(), 16, 2, 4).unwrap();
         (net, val)
     }
 
