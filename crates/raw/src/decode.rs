@@ -54,8 +54,9 @@ fn decode_source(
     open: impl FnOnce() -> std::result::Result<RawSource, String>,
     overrides: &LevelOverrides,
 ) -> Result<RawFrame> {
+    let source = open().map_err(|reason| RawError::decode(path, reason))?;
+    crate::container::check(source.buf()).map_err(|reason| RawError::decode(path, reason))?;
     let (image, exif) = quietly(|| -> std::result::Result<_, String> {
-        let source = open()?;
         let decoder = rawler::get_decoder(&source).map_err(|e| e.to_string())?;
         let params = RawDecodeParams::default();
         let image = decoder

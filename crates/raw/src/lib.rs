@@ -10,6 +10,7 @@
 pub mod cfa;
 pub mod chart;
 pub mod color;
+pub mod container;
 mod decode;
 mod demosaic;
 mod dng;

@@ -44,13 +44,17 @@ pub(crate) fn quietly<T>(f: impl FnOnce() -> T) -> Result<T, String> {
     out.map_err(|payload| payload_message(payload.as_ref()))
 }
 
+/// What a user reads when the decoder gave up by panicking: the file is
+/// malformed (or a format variant the decoder gets wrong), and the
+/// decoder's own words are kept for a bug report.
 fn payload_message(p: &(dyn Any + Send)) -> String {
+    const LEAD: &str = "the RAW decoder failed on this file (malformed or truncated data?)";
     if let Some(s) = p.downcast_ref::<&str>() {
-        format!("decoder panicked: {s}")
+        format!("{LEAD}: {s}")
     } else if let Some(s) = p.downcast_ref::<String>() {
-        format!("decoder panicked: {s}")
+        format!("{LEAD}: {s}")
     } else {
-        "decoder panicked".to_string()
+        LEAD.to_string()
     }
 }
 
@@ -59,7 +63,10 @@ mod tests {
     #[test]
     fn panic_becomes_error() {
         let r: Result<(), String> = super::quietly(|| panic!("boom {}", 7));
-        assert_eq!(r.unwrap_err(), "decoder panicked: boom 7");
+        assert_eq!(
+            r.unwrap_err(),
+            "the RAW decoder failed on this file (malformed or truncated data?): boom 7"
+        );
         assert_eq!(super::quietly(|| 3).unwrap(), 3);
     }
 }

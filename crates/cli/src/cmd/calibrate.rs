@@ -42,13 +42,23 @@ pub fn run(a: &CalibrateArgs) -> Result<()> {
         Some(d) => list_files(d)?,
         None => Vec::new(),
     };
-    if let Some(dir) = a.output.parent().filter(|p| !p.as_os_str().is_empty()) {
-        anyhow::ensure!(
-            dir.is_dir(),
-            "{}: folder '{}' does not exist",
-            a.output.display(),
-            dir.display()
-        );
+    let inputs: Vec<&std::path::Path> = bias
+        .iter()
+        .chain(&flat)
+        .chain(&dark)
+        .map(|p| p.as_path())
+        .collect();
+    crate::output::check_outputs(&[("-o", &a.output)], &inputs)?;
+    if let Some(dir) = &a.report {
+        // The report goes into a folder: an existing file there would only
+        // fail after the whole calibration.
+        if dir.exists() && !dir.is_dir() {
+            anyhow::bail!(
+                "--report {} is a file; give a folder for the report",
+                dir.display()
+            );
+        }
+        crate::output::require_parent_dir(dir).context("--report")?;
     }
     let total = bias.len() + flat.len() + dark.len();
     let bar = Bar::new("calibrating", total as u64, "frames", false);

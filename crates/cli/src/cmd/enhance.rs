@@ -2,7 +2,7 @@
 //! previews) out, with either network, at full resolution in bounded memory.
 
 use crate::input::InputArgs;
-use crate::output::require_parent_dir;
+use crate::output::{require_parent_dir, same_file};
 use crate::progress::Bar;
 use anyhow::{bail, Context, Result};
 use clap::Args;
@@ -14,7 +14,7 @@ use pgrf_nn::infer::restorer::describe_sampler;
 use pgrf_nn::infer::{restore_frame, Restore, SamplerChoice, Tiling};
 use pgrf_raw::{render_preview, write_dng, DngOptions, PreviewOptions};
 use serde::Serialize;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::time::Instant;
 
 #[derive(Args, Debug)]
@@ -294,13 +294,6 @@ fn plan_jobs(a: &EnhanceArgs) -> Result<Vec<Job>> {
             Ok(Job { input, output, png })
         })
         .collect()
-}
-
-fn same_file(a: &Path, b: &Path) -> bool {
-    match (a.canonicalize(), b.canonicalize()) {
-        (Ok(x), Ok(y)) => x == y,
-        _ => false,
-    }
 }
 
 #[allow(clippy::too_many_arguments)]

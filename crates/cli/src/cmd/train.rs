@@ -41,7 +41,7 @@ pub struct Settings {
     /// Photos: invert a global S-shaped tone curve (Brooks et al.'s smoothstep) before the sRGB transfer.
     #[arg(long, num_args = 0..=1, default_missing_value = "true")]
     pub photo_inverse_tone: Option<bool>,
-    /// Camera noise profile (built-in name or JSON path), or a mix NAME[@WEIGHT],... where each crop draws one camera's noise, e.g. sony-a7s2@3,nikon-d850@1; --iso/--iso-range are the first profile's, and become a gain range the others share [default: sony-a7s2].
+    /// Camera noise profile (built-in name or JSON path), or a mix `NAME[@WEIGHT],...` where each crop draws one camera's noise, e.g. sony-a7s2@3,nikon-d850@1; --iso/--iso-range are the first profile's, and become a gain range the others share [default: sony-a7s2].
     #[arg(long)]
     pub profile: Option<String>,
     /// Per-pixel calibration file (from `pgrf calibrate`) for the pgrf noise model.
@@ -195,6 +195,30 @@ pub fn run(a: &TrainArgs) -> Result<()> {
     let Some(out) = s.output.clone() else {
         bail!("no output: give -o FILE.safetensors (or `output = ...` in the config)");
     };
+    // Every file the run writes, checked before any work: folders exist,
+    // none is a folder or one of the run's inputs, no two are the same.
+    let checkpoint_path = s
+        .checkpoint
+        .clone()
+        .unwrap_or_else(|| out.with_extension("ckpt"));
+    let log_path = s
+        .log
+        .clone()
+        .unwrap_or_else(|| out.with_extension("log.csv"));
+    let data_files: Vec<PathBuf> = pgrf_nn::data::build::parse_data(&s.data)
+        .map(|entries| entries.into_iter().filter_map(|e| e.path).collect())
+        .unwrap_or_default();
+    let mut inputs: Vec<&std::path::Path> = data_files.iter().map(|p| p.as_path()).collect();
+    inputs.extend(s.calib.as_deref());
+    inputs.extend(s.camera_like.as_deref());
+    crate::output::check_outputs(
+        &[
+            ("-o", &out),
+            ("--checkpoint", &checkpoint_path),
+            ("--log", &log_path),
+        ],
+        &inputs,
+    )?;
     let device = s.device;
     device.check_available().map_err(anyhow::Error::msg)?;
     let arch = s.architecture(a.method)?;
@@ -256,15 +280,8 @@ pub fn run(a: &TrainArgs) -> Result<()> {
         val_t2: s.val_t2,
         checkpoint_every: s.checkpoint_every,
         out: out.clone(),
-        checkpoint: s
-            .checkpoint
-            .clone()
-            .unwrap_or_else(|| out.with_extension("ckpt")),
-        log: Some(
-            s.log
-                .clone()
-                .unwrap_or_else(|| out.with_extension("log.csv")),
-        ),
+        checkpoint: checkpoint_path,
+        log: Some(log_path),
         log_every: s.log_every,
         resume: a.resume,
         noise: NoiseSource {
@@ -279,9 +296,6 @@ pub fn run(a: &TrainArgs) -> Result<()> {
         device: device.to_string(),
         config: Some(s.clone()),
     };
-    for p in [&out, &settings.checkpoint] {
-        crate::output::require_parent_dir(p)?;
-    }
     if a.resume && !settings.checkpoint.exists() {
         bail!(
             "--resume: no checkpoint at {}",

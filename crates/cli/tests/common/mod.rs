@@ -77,3 +77,14 @@ pub fn tiny_model(dir: &Path, flow: bool, t2: Option<f32>, seed: u64) -> PathBuf
     net.save(&path, &meta).unwrap();
     path
 }
+
+/// `pgrf chart -o path --width w --height h`, required to succeed.
+pub fn chart(path: &Path, width: u32, height: u32) {
+    let (w, h) = (width.to_string(), height.to_string());
+    let out = pgrf(&["chart", "-o", s(path), "--width", &w, "--height", &h]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}

@@ -43,7 +43,7 @@ pub struct RunOptions {
     pub cast: bool,
     /// Write every case's input and reference (and, when synthesised, the
     /// unclamped capture and its true noise parameters) to this folder, for
-    /// methods outside pgrf ([`dump_case`]).
+    /// methods outside pgrf (`KEY.input.npy`, `KEY.reference.npy`, `KEY.json`, `KEY.capture.npy`).
     pub dump: Option<std::path::PathBuf>,
 }
 

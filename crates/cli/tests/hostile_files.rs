@@ -1,0 +1,149 @@
+//! RAW files made hostile the ways issue 17's campaign found (a looping IFD
+//! chain, a 4-billion-row image, BitsPerSample that lies, strips at byte
+//! 0): each is one `pgrf: error:` line naming the problem, under a 2 GB
+//! address-space limit so a regression fails instead of eating the machine.
+
+mod common;
+use common::{one_line_error, s, scratch};
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+/// `pgrf ARGS` with its virtual memory capped at `mib` MiB.
+fn pgrf_limited(args: &[&str], mib: u64) -> Output {
+    let quoted: Vec<String> = args.iter().map(|a| format!("'{a}'")).collect();
+    Command::new("sh")
+        .arg("-c")
+        .arg(format!(
+            "ulimit -v {}; exec '{}' {}",
+            mib * 1024,
+            env!("CARGO_BIN_EXE_pgrf"),
+            quoted.join(" ")
+        ))
+        .output()
+        .expect("run pgrf under sh")
+}
+
+/// Little-endian TIFF: (entry offset, tag, type, value) of every IFD entry
+/// reachable through next-IFD and SubIFD pointers (no loops in the input).
+fn entries(b: &[u8]) -> Vec<(usize, u16, u16, u32)> {
+    let u16_at = |i: usize| u16::from_le_bytes([b[i], b[i + 1]]);
+    let u32_at = |i: usize| u32::from_le_bytes(b[i..i + 4].try_into().unwrap());
+    assert_eq!(&b[..4], b"II*\0");
+    let mut out = Vec::new();
+    let mut queue = vec![u32_at(4) as usize];
+    while let Some(off) = queue.pop() {
+        if off == 0 {
+            continue;
+        }
+        let n = u16_at(off) as usize;
+        for k in 0..n {
+            let e = off + 2 + 12 * k;
+            let (tag, kind, count) = (u16_at(e), u16_at(e + 2), u32_at(e + 4));
+            let value = if kind == 3 && count == 1 {
+                u16_at(e + 8) as u32
+            } else {
+                u32_at(e + 8)
+            };
+            if tag == 330 {
+                if count == 1 {
+                    queue.push(value as usize);
+                } else {
+                    queue.extend(
+                        (0..count as usize).map(|i| u32_at(value as usize + 4 * i) as usize),
+                    );
+                }
+            }
+            out.push((e, tag, kind, value));
+        }
+        queue.push(u32_at(off + 2 + 12 * n) as usize);
+    }
+    out
+}
+
+/// `bytes` with the value of every entry of `tag` for which `pick(value)`
+/// holds set to `to` (as a LONG), written to `dir/name`.
+fn patched(
+    dir: &Path,
+    name: &str,
+    bytes: &[u8],
+    tag: u16,
+    pick: impl Fn(u32) -> bool,
+    to: u32,
+) -> PathBuf {
+    let mut b = bytes.to_vec();
+    let mut hits = 0;
+    for (e, t, _, v) in entries(bytes) {
+        if t == tag && pick(v) {
+            b[e + 2..e + 4].copy_from_slice(&4u16.to_le_bytes());
+            b[e + 4..e + 8].copy_from_slice(&1u32.to_le_bytes());
+            b[e + 8..e + 12].copy_from_slice(&to.to_le_bytes());
+            hits += 1;
+        }
+    }
+    assert!(hits > 0, "{name}: tag {tag} not found");
+    let p = dir.join(name);
+    std::fs::write(&p, b).unwrap();
+    p
+}
+
+fn refused(file: &Path, needle: &str) {
+    for cmd in ["info", "preview"] {
+        let mut args = vec![cmd, s(file)];
+        let png = file.with_extension("png");
+        if cmd == "preview" {
+            args.extend_from_slice(&["-o", s(&png)]);
+        }
+        let out = pgrf_limited(&args, 2048);
+        let e = one_line_error(&out);
+        assert!(
+            e.starts_with("pgrf: error: ") && e.contains(needle),
+            "{cmd} {}: {e}",
+            file.display()
+        );
+        assert!(!png.exists());
+    }
+}
+
+#[test]
+fn a_looping_ifd_chain_is_refused_without_allocating() {
+    let d = scratch("hostile", "loop");
+    let chart = d.join("c.dng");
+    common::chart(&chart, 256, 192);
+    let mut b = std::fs::read(&chart).unwrap();
+    // The first IFD's next-IFD offset set to the IFD's own offset.
+    let first = u32::from_le_bytes(b[4..8].try_into().unwrap()) as usize;
+    let n = u16::from_le_bytes([b[first], b[first + 1]]) as usize;
+    let next = first + 2 + 12 * n;
+    b[next..next + 4].copy_from_slice(&(first as u32).to_le_bytes());
+    let looped = d.join("loop.dng");
+    std::fs::write(&looped, &b).unwrap();
+    refused(&looped, "loop in the IFD chain");
+    std::fs::remove_dir_all(&d).unwrap();
+}
+
+#[test]
+#[cfg_attr(not(shared_data), ignore = "needs ../shared/data")]
+fn lying_sizes_and_offsets_in_the_550d_dng_are_refused() {
+    let src = pgrf_core::shared_data_dir()
+        .expect("../shared/data (the test is ignored without it)")
+        .join("raw/canon550d_colorchart.dng");
+    let b = std::fs::read(&src).unwrap();
+    let d = scratch("hostile", "550d");
+    // The raw image is 1888 x 1182, 14 bits, one uncompressed strip.
+    let tall = patched(&d, "tall.dng", &b, 257, |v| v == 1182, u32::MAX);
+    refused(&tall, "more than any camera makes");
+    let bits8 = patched(&d, "bits8.dng", &b, 258, |v| v == 14, 8);
+    refused(&bits8, "BitsPerSample says 8");
+    let bits1 = patched(&d, "bits1.dng", &b, 258, |v| v == 14, 1);
+    refused(&bits1, "BitsPerSample says 1");
+    let at0 = patched(&d, "at0.dng", &b, 273, |_| true, 0);
+    refused(&at0, "inside the file header");
+    // The untouched file still decodes within the same limit.
+    let ok = pgrf_limited(&["info", s(&src)], 2048);
+    assert!(
+        ok.status.success(),
+        "{}",
+        String::from_utf8_lossy(&ok.stderr)
+    );
+    std::fs::remove_dir_all(&d).unwrap();
+}
