@@ -147,3 +147,57 @@ fn lying_sizes_and_offsets_in_the_550d_dng_are_refused() {
     );
     std::fs::remove_dir_all(&d).unwrap();
 }
+
+/// A weight file whose record describes a network pgrf cannot run (no input
+/// planes; an odd flow width) is one line, not an internal error.
+#[test]
+fn weight_records_that_cannot_run_are_refused() {
+    let d = scratch("hostile", "record");
+    let chart = d.join("c.dng");
+    common::chart(&chart, 128, 96);
+    for (flow, key, value, needle) in [
+        (false, "in_channels", 0, "4 planes in and out"),
+        (true, "inner_channels", 3, "must be even"),
+        (true, "channel_mults", -1, "at least 1"),
+    ] {
+        let model = common::tiny_model(&d, flow, Some(0.5), 1);
+        let bytes = std::fs::read(&model).unwrap();
+        let n = u64::from_le_bytes(bytes[..8].try_into().unwrap()) as usize;
+        let mut header: serde_json::Value = serde_json::from_slice(&bytes[8..8 + n]).unwrap();
+        let mut meta: serde_json::Value =
+            serde_json::from_str(header["__metadata__"]["pgrf"].as_str().unwrap()).unwrap();
+        meta["config"][key] = if value < 0 {
+            serde_json::json!([1, 0])
+        } else {
+            serde_json::json!(value)
+        };
+        header["__metadata__"]["pgrf"] = serde_json::Value::String(meta.to_string());
+        let text = header.to_string();
+        let mut out = (text.len() as u64).to_le_bytes().to_vec();
+        out.extend_from_slice(text.as_bytes());
+        out.extend_from_slice(&bytes[8 + n..]);
+        let bad = d.join(format!("bad_{key}.safetensors"));
+        std::fs::write(&bad, out).unwrap();
+        let dst = d.join("out.dng");
+        let e = one_line_error(&common::pgrf(&[
+            "enhance",
+            s(&chart),
+            "--model",
+            s(&bad),
+            "--ratio",
+            "10",
+            "-o",
+            s(&dst),
+        ]));
+        assert!(e.contains(needle), "{key}: {e}");
+        assert!(!dst.exists());
+    }
+    std::fs::remove_dir_all(&d).unwrap();
+}
+
+#[test]
+fn a_missing_file_is_named_once() {
+    let e = one_line_error(&common::pgrf(&["info", "no_such_file_here.dng"]));
+    assert_eq!(e.matches("No such file").count(), 1, "{e}");
+    assert!(e.starts_with("pgrf: error: no_such_file_here.dng: "), "{e}");
+}

@@ -344,6 +344,31 @@ fn bad_settings_are_one_line_errors_and_write_nothing() {
         (
             vec![
                 "train",
+                "flow",
+                "--channel-mults",
+                "1,0",
+                "--attn-levels",
+                "0",
+                "-o",
+                s(&out),
+            ],
+            "at least 1",
+        ),
+        (
+            vec!["train", "flow", "--inner-channels", "3", "-o", s(&out)],
+            "must be even",
+        ),
+        (
+            vec!["train", "spc", "--clip-grad", "0", "-o", s(&out)],
+            "--clip-grad",
+        ),
+        (
+            vec!["train", "spc", "--clip-grad", "NaN", "-o", s(&out)],
+            "--clip-grad",
+        ),
+        (
+            vec![
+                "train",
                 "spc",
                 "--profile",
                 "sony-a7s2,nikon-d850",

@@ -313,6 +313,13 @@ impl TrainConfig {
                 "ratio range {lo}..{hi} must be positive and ordered"
             )));
         }
+        if let Some(c) = self.clip_grad {
+            if !(c.is_finite() && c > 0.0) {
+                return Err(invalid(format!(
+                    "--clip-grad must be a positive number (the largest gradient norm), got {c}"
+                )));
+            }
+        }
         if self.photo_downscale == 0 {
             return Err(invalid("--photo-downscale must be at least 1"));
         }

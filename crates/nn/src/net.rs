@@ -31,6 +31,14 @@ impl Architecture {
     pub fn init<B: Backend>(&self, device: &B::Device) -> Result<Net<B>> {
         Ok(match self {
             Architecture::SidUnet(c) => {
+                // Records come from files: refuse what pgrf's 4-plane
+                // pipeline cannot run before building anything.
+                if c.width == 0 || c.in_channels != 4 || c.out_channels != 4 {
+                    return Err(NnError::Config(format!(
+                        "the SID U-Net needs a width of at least 1 and 4 planes in and out (got width {}, {} in, {} out)",
+                        c.width, c.in_channels, c.out_channels
+                    )));
+                }
                 if c.residual && c.in_channels != c.out_channels {
                     return Err(NnError::Config(format!(
                         "a residual SID U-Net needs as many output channels as input ({} vs {})",

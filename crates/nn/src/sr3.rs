@@ -83,6 +83,34 @@ impl Sr3Config {
                 "SR3 needs at least one level, one residual block and some channels".into(),
             );
         }
+        if self.in_channels != 8 || self.out_channels != 4 {
+            return Err(format!(
+                "pgrf's flow network takes 8 planes (T and Xt, packed) and gives 4, not {} and {}",
+                self.in_channels, self.out_channels
+            ));
+        }
+        if !self.inner_channels.is_multiple_of(2) {
+            return Err(format!(
+                "inner channels must be even (the time embedding is sin/cos pairs), got {}",
+                self.inner_channels
+            ));
+        }
+        if self.channel_mults.contains(&0) {
+            return Err(format!(
+                "every channel multiplier must be at least 1, got {:?}",
+                self.channel_mults
+            ));
+        }
+        if let Some(l) = self
+            .attn_levels
+            .iter()
+            .find(|&&l| l >= self.channel_mults.len())
+        {
+            return Err(format!(
+                "attention level {l} does not exist: the network has {} levels",
+                self.channel_mults.len()
+            ));
+        }
         if self.norm_groups == 0 {
             return Err("norm_groups must be at least 1".into());
         }

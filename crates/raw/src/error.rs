@@ -9,14 +9,15 @@ use std::path::{Path, PathBuf};
 /// Why a RAW file could not be read, packed or written.
 #[derive(Debug, thiserror::Error)]
 pub enum RawError {
-    /// The file could not be opened or read.
-    #[error("{path}: {source}")]
+    /// The file could not be opened or read. The operating system's error
+    /// is part of the message and not a separate `source`, so that error
+    /// chains print it once.
+    #[error("{path}: {error}")]
     Io {
         /// The file.
         path: PathBuf,
         /// The operating system's error.
-        #[source]
-        source: std::io::Error,
+        error: std::io::Error,
     },
     /// The file is damaged, truncated, not a RAW file, or its metadata gives
     /// unusable levels.
@@ -57,7 +58,7 @@ impl RawError {
     pub(crate) fn io(path: &Path, source: std::io::Error) -> Self {
         RawError::Io {
             path: path.to_path_buf(),
-            source,
+            error: source,
         }
     }
 

@@ -3,7 +3,7 @@
 //! packed input) through the tiled network to the result in the input's own
 //! mosaic and levels.
 
-use super::image::{overlap_for, plan_for, restore_image, ImageOptions};
+use super::image::{overlap_for, plan_for, restore_image, round_tile, ImageOptions};
 use super::memory::auto_tile;
 use super::prepare::network_input;
 use super::restorer::Restore;
@@ -36,7 +36,11 @@ impl Tiling {
             .unwrap_or_else(|| auto_tile(self.device, r, ph, pw));
         ImageOptions {
             tile,
-            overlap: self.overlap.unwrap_or_else(|| overlap_for(tile)),
+            // The default overlap follows the tile as it will run (rounded
+            // to the network's multiple), so any tile of 4x that is accepted.
+            overlap: self.overlap.unwrap_or_else(|| {
+                overlap_for(round_tile(tile, ph.max(pw), r.side_multiple().max(1)))
+            }),
             seed: self.seed,
         }
     }

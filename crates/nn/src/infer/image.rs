@@ -69,6 +69,17 @@ pub fn restore_image(
     Ok(out)
 }
 
+/// The tile side actually run for a requested `tile` on a frame whose
+/// longer side is `longest`: the request when the whole frame fits, else
+/// rounded down to the network's side multiple `m` (at least `m`).
+pub(crate) fn round_tile(tile: usize, longest: usize, m: usize) -> usize {
+    if tile >= longest {
+        tile
+    } else {
+        (tile / m * m).max(m)
+    }
+}
+
 /// Tiles of `opts.tile` rounded down to the network's side multiple (so no
 /// tile is padded inside the network), unless the whole frame fits. Along
 /// each axis the tiles are then shrunk to the smallest multiple that still
@@ -79,15 +90,24 @@ pub fn restore_image(
 pub fn plan_for(h: usize, w: usize, opts: &ImageOptions, multiple: usize) -> Result<TilePlan> {
     let m = multiple.max(1);
     let o = opts.overlap;
-    let tile = if opts.tile >= h.max(w) {
-        opts.tile
-    } else {
-        (opts.tile / m * m).max(m)
-    };
-    if tile < 4 * o && tile < h.max(w) {
+    if opts.tile < m.max(4) && opts.tile < h.max(w) {
         return Err(NnError::Invalid(format!(
-            "tile {} is too small for overlap {} (needs at least 4x the overlap)",
-            opts.tile, o
+            "tile {} is too small: tiles are at least {} packed pixels (and a multiple of the network's {m})",
+            opts.tile,
+            m.max(4)
+        )));
+    }
+    let tile = round_tile(opts.tile, h.max(w), m);
+    if tile < 4 * o && tile < h.max(w) {
+        let rounded = if tile == opts.tile {
+            String::new()
+        } else {
+            format!(" (rounded down to {tile}, a multiple of the network's {m})")
+        };
+        return Err(NnError::Invalid(format!(
+            "tile {}{rounded} is too small for overlap {o}: a tile must be at least 4x its overlap; give a tile of at least {} or a smaller overlap",
+            opts.tile,
+            (4 * o).div_ceil(m) * m
         )));
     }
     let balanced = |len: usize| -> usize {
@@ -143,5 +163,45 @@ mod tests {
         };
         let p = plan_for(1000, 1000, &fitted, 8).unwrap();
         assert_eq!((p.rows.count(), p.cols.count()), (11, 11));
+    }
+
+    /// Every tile a user may ask for plans with the default overlap of the
+    /// tile as it runs (issue 17: 100 = 4 x 25 was refused), and the ones
+    /// that cannot run say why with the numbers that would.
+    #[test]
+    fn every_reasonable_tile_plans_and_the_rest_say_what_would() {
+        for tile in [16, 31, 63, 64, 72, 100, 101, 104, 120, 127, 128, 300] {
+            let o = overlap_for(round_tile(tile, 1000, 16));
+            let opts = ImageOptions {
+                tile,
+                overlap: o,
+                seed: 0,
+            };
+            let p = plan_for(1000, 800, &opts, 16);
+            assert!(p.is_ok(), "tile {tile}, overlap {o}: {:?}", p.err());
+        }
+        for tile in [0, 3, 15] {
+            let opts = ImageOptions {
+                tile,
+                overlap: overlap_for(round_tile(tile, 1000, 16)),
+                seed: 0,
+            };
+            let e = plan_for(1000, 800, &opts, 16).unwrap_err().to_string();
+            assert!(
+                e.contains("too small: tiles are at least 16"),
+                "{tile}: {e}"
+            );
+        }
+        // An explicit overlap too large for the tile names the tile needed.
+        let opts = ImageOptions {
+            tile: 100,
+            overlap: 32,
+            seed: 0,
+        };
+        let e = plan_for(1000, 800, &opts, 16).unwrap_err().to_string();
+        assert!(
+            e.contains("rounded down to 96") && e.contains("at least 128"),
+            "{e}"
+        );
     }
 }
