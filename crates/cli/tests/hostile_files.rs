@@ -201,3 +201,73 @@ fn a_missing_file_is_named_once() {
     assert_eq!(e.matches("No such file").count(), 1, "{e}");
     assert!(e.starts_with("pgrf: error: no_such_file_here.dng: "), "{e}");
 }
+
+/// Sizes no machine could honour are refused before any work with what
+/// they would need, instead of aborting on a failed allocation.
+#[test]
+fn impossible_sizes_are_refused_before_work() {
+    let d = scratch("hostile", "sizes");
+    let t = d.join("t.safetensors");
+    let cases: Vec<Vec<&str>> = vec![
+        vec![
+            "simulate-sensor",
+            "--width",
+            "2000000",
+            "--height",
+            "2000000",
+            "-o",
+            s(&d),
+        ],
+        vec![
+            "make-dataset",
+            "--layout",
+            "eld",
+            "--size",
+            "2000000x2000000",
+            "-o",
+            s(&d),
+        ],
+        vec![
+            "train",
+            "spc",
+            "--patch",
+            "1000000",
+            "--steps",
+            "1",
+            "-o",
+            s(&t),
+        ],
+        vec![
+            "train",
+            "spc",
+            "--batch",
+            "100000000",
+            "--steps",
+            "1",
+            "-o",
+            s(&t),
+        ],
+        vec![
+            "demo",
+            "--scene",
+            "procedural",
+            "--size",
+            "2000000x2000000",
+            "-o",
+            s(&d),
+        ],
+    ];
+    for args in cases {
+        let out = pgrf_limited(&args, 2048);
+        let e = one_line_error(&out);
+        assert!(
+            e.contains("GiB of memory") && e.contains("is available"),
+            "{args:?}: {e}"
+        );
+    }
+    assert!(
+        std::fs::read_dir(&d).unwrap().next().is_none(),
+        "something was written"
+    );
+    std::fs::remove_dir_all(&d).unwrap();
+}

@@ -17,6 +17,23 @@ pub fn available_memory() -> Option<u64> {
     kib_field("/proc/meminfo", "MemAvailable:")
 }
 
+/// Refuse work whose memory cannot be had: `need` bytes against what the
+/// OS says is available (no limit where that cannot be read). The message
+/// starts with `what` and gives both figures, so the caller can add what
+/// would fit.
+pub fn check_fits(what: &str, need: f64) -> Result<(), String> {
+    let avail = available_memory().map_or(f64::INFINITY, |b| b as f64);
+    if need.is_finite() && need <= avail {
+        return Ok(());
+    }
+    const GIB: f64 = 1024.0 * 1024.0 * 1024.0;
+    Err(format!(
+        "{what} needs about {:.1} GiB of memory, {:.1} GiB is available",
+        need / GIB,
+        avail / GIB
+    ))
+}
+
 /// Peak resident memory of this process so far, in bytes (Linux's `VmHWM`);
 /// None where it cannot be read.
 pub(crate) fn peak_rss() -> Option<u64> {

@@ -45,10 +45,20 @@ pub fn parse_size(s: &str, min: usize) -> Result<(usize, usize)> {
     });
     match parsed {
         Some((w, h)) if w >= min && h >= min && w.is_multiple_of(2) && h.is_multiple_of(2) => {
+            check_frame_memory(&format!("--size {w}x{h}"), w, h, 40.0)?;
             Ok((w, h))
         }
         _ => bail!("--size {s}: expected WxH, even and at least {min}x{min}, e.g. 256x256"),
     }
+}
+
+/// Refuse a `w` x `h` frame the machine's memory cannot hold, before work:
+/// `bytes_per_pixel` is the command's peak per mosaic pixel, rounded up
+/// from a measurement (peak RSS of a 2048 x 2048 run on the 2-core VM:
+/// make-dataset 27 B/px, simulate-sensor 98 B/px with 2 or 8 frames).
+pub fn check_frame_memory(what: &str, w: usize, h: usize, bytes_per_pixel: f64) -> Result<()> {
+    pgrf_core::mem::check_fits(what, w as f64 * h as f64 * bytes_per_pixel)
+        .map_err(|e| anyhow::anyhow!("{e}; give a smaller size"))
 }
 
 /// The clean long exposure of scene `k`: a dead-leaves scene, dimmed so a

@@ -168,6 +168,10 @@ pub fn run(a: &SearchArgs) -> Result<()> {
     if count == 0 {
         bail!("no validation pairs: --pairs/--procedural must be at least 1");
     }
+    let need = pgrf_nn::infer::memory::tile_bytes(&meta.arch, a.patch, a.patch)
+        + (count * 3 * 4 * a.patch * a.patch * 4) as f64;
+    pgrf_core::mem::check_fits(&format!("--patch {} with {count} pairs", a.patch), need)
+        .map_err(|e| anyhow::anyhow!("{e}; give a smaller --patch or fewer pairs"))?;
     let val = ValSet::build(&source, &mix, a.patch, count, a.seed)?;
 
     let bar = Bar::new("search", 0, "network evaluations", a.json);

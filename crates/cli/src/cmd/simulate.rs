@@ -45,6 +45,12 @@ pub fn run(a: &SimulateArgs) -> Result<()> {
     if a.frames < 2 {
         bail!("--frames must be at least 2 (per-pixel variance needs two frames)");
     }
+    super::make_dataset::check_frame_memory(
+        &format!("--width {} --height {}", a.width, a.height),
+        a.width,
+        a.height,
+        128.0,
+    )?;
     let mut spec = SensorSpec::preset(&a.preset)?;
     spec.width = a.width;
     spec.height = a.height;

@@ -222,6 +222,16 @@ pub fn run(a: &TrainArgs) -> Result<()> {
     let device = s.device;
     device.check_available().map_err(anyhow::Error::msg)?;
     let arch = s.architecture(a.method)?;
+    {
+        use pgrf_nn::infer::memory::{tile_bytes, training_bytes};
+        let (p, b, v) = (s.patch, s.batch, s.val_patch());
+        let need = training_bytes(&arch, p, b).max(tile_bytes(&arch, v, v));
+        pgrf_core::mem::check_fits(
+            &format!("training with --patch {p} --batch {b} (validation crops {v})"),
+            need,
+        )
+        .map_err(|e| anyhow::anyhow!("{e}; give a smaller --patch, --batch or --val-patch"))?;
+    }
     let (patch, batch) = (s.patch, s.batch);
     let val_patch = s.val_patch();
     let steps = s.steps;

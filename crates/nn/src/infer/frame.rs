@@ -9,7 +9,7 @@ use super::prepare::network_input;
 use super::restorer::Restore;
 use super::tiles::TilePlan;
 use crate::backend::DeviceKind;
-use crate::error::Result;
+use crate::error::{NnError, Result};
 use ndarray::{Array3, ArrayView3};
 use pgrf_core::Progress;
 use pgrf_raw::{unpack_normalized, RawFrame};
@@ -74,6 +74,18 @@ pub fn restore_packed(
     let (_, ph, pw) = input.dim();
     let opts = tiling.options(r, ph, pw);
     let plan = plan_for(ph, pw, &opts, r.side_multiple())?;
+    if tiling.tile.is_some() && tiling.device == DeviceKind::Cpu {
+        // A tile the user chose is checked against the memory there is
+        // (the automatic one is sized from it).
+        let need = super::memory::tile_bytes(&r.meta().arch, plan.rows.len, plan.cols.len)
+            + super::memory::fixed_bytes(r, ph, pw) as f64;
+        pgrf_core::mem::check_fits(&format!("--tile {}", opts.tile), need).map_err(|e| {
+            NnError::Invalid(format!(
+                "{e}; leave --tile out (pgrf would use {}) or give a smaller one",
+                auto_tile(DeviceKind::Cpu, r, ph, pw)
+            ))
+        })?;
+    }
     progress.start(plan.count() as u64, "tiles");
     let output = restore_image(r, input, &opts, progress)?;
     progress.finish();

@@ -90,6 +90,14 @@ pub(crate) fn tile_cap(meta: &crate::weights::WeightMeta) -> usize {
     }
 }
 
+/// Estimated peak bytes of a training step on `batch` crops of `patch` x
+/// `patch`: the forward activations of every crop kept for the backward
+/// pass, their gradients and the kernels' scratch, about three times a
+/// forward pass's peak.
+pub fn training_bytes(arch: &Architecture, patch: usize, batch: usize) -> f64 {
+    3.0 * batch as f64 * tile_bytes(arch, patch, patch)
+}
+
 /// Bytes held for the whole run besides the tiles: the frame's input,
 /// output and blend buffers, one start field per flow sample, and the
 /// network's weights.
