@@ -15,6 +15,7 @@ mod progress;
 pub mod record;
 pub mod seed;
 pub mod stats;
+pub mod weighted;
 
 pub use atomic::{write_atomic, WriteError};
 pub use progress::{NoProgress, Progress};

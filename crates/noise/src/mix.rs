@@ -20,6 +20,7 @@ use crate::model::ModelKind;
 use crate::pair::{PairSpec, RatioSpec};
 use crate::profile::CameraProfile;
 use pgrf_core::seed::mix64;
+use pgrf_core::weighted::{parse_weighted, WeightedError};
 
 /// Domain constant of the per-capture profile choice ("prof").
 const PICK_DOMAIN: u64 = 0x7072_6f66;
@@ -36,35 +37,31 @@ pub struct ProfileEntry {
 /// Parse `NAME[@WEIGHT],...`; refuses empty entries and weights that are
 /// not positive numbers.
 pub fn parse_profiles(text: &str) -> Result<Vec<ProfileEntry>> {
-    let mut out = Vec::new();
-    for raw in text.split(',') {
-        let item = raw.trim();
-        let bad = |why: &str| NoiseError::Invalid(format!("profile list {text:?}: {why}"));
-        if item.is_empty() {
-            return Err(bad(
-                "an empty entry (entries are NAME[@WEIGHT], comma-separated)",
-            ));
-        }
-        let (name, weight) = match item.rsplit_once('@') {
-            Some((n, w)) => match w.trim().parse::<f64>() {
-                Ok(v) if v.is_finite() && v > 0.0 => (n.trim(), v),
-                _ => {
-                    return Err(bad(&format!(
-                        "{item:?}: the weight after @ must be a positive number"
-                    )))
-                }
-            },
-            None => (item, 1.0),
-        };
-        if name.is_empty() {
-            return Err(bad(&format!("{item:?}: no profile name before @")));
-        }
-        out.push(ProfileEntry {
-            name: name.to_string(),
-            weight,
-        });
-    }
-    Ok(out)
+    let bad = |why: String| NoiseError::Invalid(format!("profile list {text:?}: {why}"));
+    let entries = parse_weighted(text).map_err(|e| {
+        bad(match e {
+            WeightedError::Empty => {
+                "an empty entry (entries are NAME[@WEIGHT], comma-separated)".into()
+            }
+            WeightedError::BadWeight(item) => {
+                format!("{item:?}: the weight after @ must be a positive number")
+            }
+        })
+    })?;
+    entries
+        .into_iter()
+        .map(|(name, weight)| {
+            if name.is_empty() {
+                return Err(bad(format!(
+                    "an entry of weight {weight} has no profile name before @"
+                )));
+            }
+            Ok(ProfileEntry {
+                name: name.to_string(),
+                weight,
+            })
+        })
+        .collect()
 }
 
 /// The noise of one or several cameras, each capture drawing one of them.

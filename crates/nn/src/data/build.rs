@@ -17,6 +17,7 @@ use crate::config::TrainConfig;
 use crate::data::photos::{is_photo, PhotoFolder, PhotoOptions};
 use crate::data::source::{Folder, Source};
 use crate::error::{NnError, Result};
+use pgrf_core::weighted::{parse_weighted, WeightedError};
 use pgrf_raw::unprocess::CameraSpace;
 use pgrf_raw::{decode_file, LevelOverrides};
 use std::path::{Path, PathBuf};
@@ -33,29 +34,23 @@ pub struct DataEntry {
 /// Parse `data` (see the module documentation); refuses empty entries and
 /// weights that are not positive numbers.
 pub fn parse_data(text: &str) -> Result<Vec<DataEntry>> {
-    let mut out = Vec::new();
-    for raw in text.split(',') {
-        let item = raw.trim();
-        if item.is_empty() {
-            return Err(NnError::Config(format!(
+    let entries = parse_weighted(text).map_err(|e| {
+        NnError::Config(match e {
+            WeightedError::Empty => format!(
                 "--data {text:?}: an empty entry (entries are SOURCE[@WEIGHT], comma-separated)"
-            )));
-        }
-        let (source, weight) = match item.rsplit_once('@') {
-            Some((s, w)) => match w.trim().parse::<f64>() {
-                Ok(v) if v.is_finite() && v > 0.0 => (s.trim(), v),
-                _ => {
-                    return Err(NnError::Config(format!(
-                        "--data {item:?}: the weight after @ must be a positive number"
-                    )))
-                }
-            },
-            None => (item, 1.0),
-        };
-        let path = (source != "procedural").then(|| PathBuf::from(source));
-        out.push(DataEntry { path, weight });
-    }
-    Ok(out)
+            ),
+            WeightedError::BadWeight(item) => {
+                format!("--data {item:?}: the weight after @ must be a positive number")
+            }
+        })
+    })?;
+    Ok(entries
+        .into_iter()
+        .map(|(source, weight)| DataEntry {
+            path: (source != "procedural").then(|| PathBuf::from(source)),
+            weight,
+        })
+        .collect())
 }
 
 /// The training and validation sources of a configuration, and one line for
