@@ -3,7 +3,8 @@
 
 use crate::error::{invalid, Result};
 use ndarray::Array3;
-use pgrf_noise::mapfile::{read_maps, write_maps};
+use pgrf_core::number::shown;
+use pgrf_noise::mapfile::write_maps;
 use pgrf_noise::{DarkLaw, Map, PixelMaps};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
@@ -71,6 +72,89 @@ pub struct CalibMeta {
     /// Number of pixels flagged dead (2 in the `defects` map).
     pub dead_pixels: usize,
     pub(crate) units: String,
+}
+
+impl CalibMeta {
+    /// The record's values that synthesis and restoration rely on: a frame
+    /// size that packs, levels with room between black and white, a positive
+    /// finite gain, non-negative finite noise figures, a CFA pgrf knows and
+    /// exposures that are times. A record failing any of these would write
+    /// saturated or black frames (white 0, black 1e9) or divide by zero
+    /// (K 0), so it is refused with the field named.
+    pub(crate) fn check(&self) -> std::result::Result<(), String> {
+        const MAX_SIDE: usize = 1 << 16;
+        if self.width < 2
+            || self.height < 2
+            || !self.width.is_multiple_of(2)
+            || !self.height.is_multiple_of(2)
+            || self.width > MAX_SIDE
+            || self.height > MAX_SIDE
+        {
+            return Err(format!(
+                "frame size {}x{} (must be even, 2..{MAX_SIDE} on each side)",
+                self.width, self.height
+            ));
+        }
+        self.cfa
+            .parse::<pgrf_raw::Cfa>()
+            .map_err(|_| format!("unknown CFA '{}'", self.cfa))?;
+        if !(1..=65535).contains(&self.white) {
+            return Err(format!("white level {} (must be 1..65535)", self.white));
+        }
+        for &b in &self.black {
+            if !(b.is_finite() && b >= 0.0 && (b as f64) < self.white as f64) {
+                return Err(format!(
+                    "black level {} (must be at least 0 and below the white level {})",
+                    shown(b as f64),
+                    self.white
+                ));
+            }
+        }
+        let max_k = pgrf_noise::profile::MAX_GAIN;
+        if !(self.k.is_finite() && self.k > 0.0 && self.k <= max_k) {
+            return Err(format!(
+                "gain K {} DN/e- (must be positive and at most {max_k}, more than any sensor)",
+                shown(self.k)
+            ));
+        }
+        for (name, v) in [
+            ("row_sigma", self.row_sigma),
+            ("read_sigma_median", self.read_sigma_median),
+            ("dsnu", self.dsnu),
+            ("bias_exposure_s", self.bias_exposure_s),
+        ] {
+            // A noise figure or exposure beyond the DN range (or a day) is
+            // no sensor's: 1e300 would overflow once squared or scaled.
+            if !(v.is_finite() && (0.0..=65535.0).contains(&v)) {
+                return Err(format!(
+                    "{name} {} (must be a number in 0..=65535)",
+                    shown(v)
+                ));
+            }
+        }
+        if let Some(iso) = self.iso {
+            if iso == 0 {
+                return Err("ISO 0".into());
+            }
+        }
+        for &t in self.dark_exposures_s.iter().chain(&self.flat_exposures_s) {
+            if !(t.is_finite() && (0.0..=1e6).contains(&t)) {
+                return Err(format!(
+                    "exposure {} s (must be a number in 0..=1e6)",
+                    shown(t)
+                ));
+            }
+        }
+        if let Some(r) = self.dark_rate_mean {
+            if !(r.is_finite() && r.abs() <= 1e9) {
+                return Err(format!(
+                    "dark_rate_mean {} (must be a finite rate)",
+                    shown(r)
+                ));
+            }
+        }
+        Ok(())
+    }
 }
 
 /// How the system gain K was estimated.
@@ -224,30 +308,39 @@ impl Calibration {
     /// calibrations, maps whose shape disagrees with the record, unknown maps
     /// and invalid values.
     pub fn load(path: &Path) -> Result<Calibration> {
-        let (meta, maps) = read_maps(path)?;
+        let bytes = std::fs::read(path).map_err(|e| invalid(format!("{}: {e}", path.display())))?;
+        Calibration::from_bytes(&bytes, path)
+    }
+
+    /// [`Calibration::load`] on bytes in memory; `path` only names the source
+    /// in messages. Every record value a later step divides by, scales with or
+    /// allocates from is checked here, where the file enters, so a hostile
+    /// file is one error and never a panic or a silently wrong frame.
+    pub fn from_bytes(bytes: &[u8], path: &Path) -> Result<Calibration> {
+        let at = |e: String| invalid(format!("{}: {e}", path.display()));
+        let (meta, maps) = pgrf_noise::mapfile::decode_maps(bytes, path)?;
         if meta.get("kind").and_then(|k| k.as_str()) != Some("pgrf-calibration") {
-            return Err(invalid(format!(
-                "{}: not a pgrf calibration file",
-                path.display()
-            )));
+            return Err(at("not a pgrf calibration file".into()));
         }
-        let meta: CalibMeta = serde_json::from_value(meta)
-            .map_err(|e| invalid(format!("{}: bad calibration record: {e}", path.display())))?;
+        let meta: CalibMeta =
+            serde_json::from_value(meta).map_err(|e| at(format!("bad calibration record: {e}")))?;
+        meta.check()
+            .map_err(|e| at(format!("bad calibration record: {e}")))?;
         let shape = [4, meta.height / 2, meta.width / 2];
         for (name, a) in &maps {
             if a.shape() != shape {
-                return Err(invalid(format!(
-                    "{}: map '{name}' has shape {:?}, the record says {:?}",
-                    path.display(),
+                return Err(at(format!(
+                    "map '{name}' has shape {:?}, the record says {:?}",
                     a.shape(),
                     shape
                 )));
             }
         }
-        let maps =
-            CalibMaps::from_named(maps).map_err(|e| invalid(format!("{}: {e}", path.display())))?;
+        let maps = CalibMaps::from_named(maps).map_err(at)?;
         let c = Calibration { meta, maps };
-        c.to_pixel_maps()?.check_values()?;
+        c.to_pixel_maps()?
+            .check_values()
+            .map_err(|e| at(e.to_string()))?;
         Ok(c)
     }
 

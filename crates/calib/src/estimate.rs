@@ -171,6 +171,21 @@ pub(crate) fn photon_transfer(levels: &[PtcLevel]) -> Option<(f64, f64)> {
     }
 }
 
+/// The largest share of a flat level's pixels that may touch the white
+/// level: hot pixels and a few bright defects do, a clipped flat does not.
+const MAX_CLIPPED: f64 = 0.01;
+
+/// Share of pixels whose mean plus three temporal sigma reaches `white` (DN):
+/// those frames clip part of the distribution, so their variance, and the
+/// gain from it, is too small.
+fn clipped_fraction(mean: &Array3<f64>, var: &Array3<f64>, white: u32) -> f64 {
+    let white = white as f64;
+    let n = Zip::from(mean).and(var).fold(0usize, |acc, &m, &v| {
+        acc + (m + 3.0 * v.max(0.0).sqrt() >= white) as usize
+    });
+    n as f64 / mean.len().max(1) as f64
+}
+
 /// Flat-field estimates: K by photon transfer ([`photon_transfer`]) or
 /// eq. 3.15 ([`gain_var_mean`]), the per-pixel gain map, PRNU.
 pub(crate) fn estimate_gain(flat: &Stack, bias: &BiasEstimate) -> Result<GainEstimate> {
@@ -193,6 +208,15 @@ pub(crate) fn estimate_gain(flat: &Stack, bias: &BiasEstimate) -> Result<GainEst
             return Err(invalid(format!(
                 "flat frames at {} s are not brighter than the bias frames (mean {mean_dn:.2} DN above bias)",
                 g.exposure_s
+            )));
+        }
+        let clipped = clipped_fraction(&m, &v, flat.key.white);
+        if clipped > MAX_CLIPPED {
+            return Err(invalid(format!(
+                "flat frames at {} s are saturated: {:.1} % of pixels reach the white level {} within 3 sigma (a clipped flat has too little variance, and the gain comes out wrong or negative); lower the light or the exposure",
+                g.exposure_s,
+                100.0 * clipped,
+                flat.key.white
             )));
         }
         if bright

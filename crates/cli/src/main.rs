@@ -55,7 +55,10 @@ enum Command {
 
 fn main() -> ExitCode {
     pgrf_core::exit::one_line_panics("pgrf");
-    let cli = Cli::parse();
+    let cli = match Cli::try_parse() {
+        Ok(cli) => cli,
+        Err(e) => return usage_error(e),
+    };
     pgrf_nn::ops::set_kernels(cli.kernels);
     pgrf_core::mem::keep_freed_buffers();
     let result = match &cli.command {
@@ -75,4 +78,24 @@ fn main() -> ExitCode {
         Command::MakeDataset(a) => cmd::make_dataset::run(a),
     };
     pgrf_core::exit::finish("pgrf", result)
+}
+
+/// Help and version go to stdout with exit 0, as clap prints them; a usage
+/// error keeps clap's text (the usage line and the `--help` hint), but its
+/// first line names the program like every other pgrf error, and the exit
+/// code is clap's 2.
+fn usage_error(e: clap::Error) -> ExitCode {
+    use clap::error::ErrorKind;
+    if matches!(
+        e.kind(),
+        ErrorKind::DisplayHelp
+            | ErrorKind::DisplayVersion
+            | ErrorKind::DisplayHelpOnMissingArgumentOrSubcommand
+    ) {
+        e.exit();
+    }
+    let text = e.render().to_string();
+    let text = text.strip_prefix("error: ").unwrap_or(&text);
+    eprint!("pgrf: error: {text}");
+    ExitCode::from(2)
 }

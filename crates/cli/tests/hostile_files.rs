@@ -271,3 +271,91 @@ fn impossible_sizes_are_refused_before_work() {
     );
     std::fs::remove_dir_all(&d).unwrap();
 }
+
+/// A usage error keeps clap's text (the `--help` hint) and exit
+/// code 2, but its first line names the program like every pgrf error.
+#[test]
+fn usage_errors_name_pgrf_on_their_first_line() {
+    for args in [
+        vec!["enhance", "--no-such-flag"],
+        vec!["train", "spc", "--steps", "many"],
+        vec!["frobnicate"],
+    ] {
+        let out = common::pgrf(&args);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{args:?}: {err}");
+        let first = err.lines().next().unwrap_or("");
+        assert!(first.starts_with("pgrf: error: "), "{args:?}: {err}");
+        assert!(err.contains("--help"), "{args:?}: {err}");
+    }
+    // Help is not an error: stdout, exit 0.
+    let out = common::pgrf(&["enhance", "--help"]);
+    assert_eq!(out.status.code(), Some(0));
+    assert!(String::from_utf8_lossy(&out.stdout).contains("Usage:"));
+}
+
+/// The high-ISO presets used to write flats at fixed electron counts that
+/// clipped every pixel (ISO 6400: 8000 e- x 6.12 DN/e- is 3x the range),
+/// and `calibrate` reported a negative gain. The flats now stay below 80 %
+/// of the range, and the gain comes back within 5 % of the preset's.
+#[test]
+fn high_iso_presets_write_flats_that_calibrate() {
+    let d = scratch("hostile", "iso6400");
+    let vs = d.join("vs");
+    let out = common::pgrf(&[
+        "simulate-sensor",
+        "--preset",
+        "a7s2-iso6400",
+        "--frames",
+        "8",
+        "--width",
+        "128",
+        "--height",
+        "96",
+        "--stacks",
+        "bias,flat",
+        "-o",
+        s(&vs),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let cal = d.join("c.safetensors");
+    let out = common::pgrf(&[
+        "calibrate",
+        "--bias",
+        s(&vs.join("bias")),
+        "--flat",
+        s(&vs.join("flat")),
+        "-o",
+        s(&cal),
+        "--json",
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let text = String::from_utf8_lossy(&out.stdout);
+    let v: serde_json::Value =
+        serde_json::from_str(text.trim_end().lines().last().unwrap()).unwrap();
+    let k = v["K"].as_f64().unwrap();
+    assert!((k / (9.563e-4 * 6400.0) - 1.0).abs() < 0.05, "K {k}");
+    // Writing a second set into the same folder is refused before any frame
+    // is written (old frames would join the new stacks).
+    let again = common::pgrf(&[
+        "simulate-sensor",
+        "--frames",
+        "2",
+        "--width",
+        "16",
+        "--height",
+        "16",
+        "-o",
+        s(&vs),
+    ]);
+    assert!(one_line_error(&again).contains("already holds frames"));
+    std::fs::remove_dir_all(&d).unwrap();
+}

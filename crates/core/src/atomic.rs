@@ -48,6 +48,7 @@ pub(crate) fn write_atomic_with(
     if path.is_dir() {
         return Err(WriteError::new(path, "is a directory"));
     }
+    remove_stale_parts(&dir);
     let tmp = temp_sibling(path);
     let result = (|| -> std::io::Result<()> {
         let file = std::fs::File::create(&tmp)?;
@@ -68,6 +69,63 @@ fn parent_dir(path: &Path) -> PathBuf {
     match path.parent() {
         Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
         _ => PathBuf::from("."),
+    }
+}
+
+/// When this process first wrote (an upper bound on its start): a part file
+/// last modified before it belongs to a run that ended before this one.
+fn first_write() -> std::time::SystemTime {
+    static T: std::sync::OnceLock<std::time::SystemTime> = std::sync::OnceLock::new();
+    *T.get_or_init(std::time::SystemTime::now)
+}
+
+/// The process id in a name of [`temp_sibling`]'s form `.NAME.PID.N.part`,
+/// or None for any other name (a user's own hidden files are never touched).
+fn part_owner(name: &str) -> Option<u32> {
+    let inner = name.strip_prefix('.')?.strip_suffix(".part")?;
+    let mut fields = inner.rsplitn(3, '.');
+    fields.next()?.parse::<u64>().ok()?;
+    let pid = fields.next()?.parse::<u32>().ok()?;
+    fields.next().filter(|n| !n.is_empty())?;
+    Some(pid)
+}
+
+/// Whether process `pid` is running. Where that cannot be known (no /proc)
+/// the answer is "yes", so only the age rule applies.
+fn alive(pid: u32) -> bool {
+    let proc = Path::new("/proc");
+    !proc.is_dir() || proc.join(pid.to_string()).exists()
+}
+
+/// Remove the temporary files that killed pgrf runs left in `dir`: names of
+/// pgrf's own form whose writer is no longer running and that were last
+/// modified before this process started writing. A SIGKILL between create
+/// and rename leaves such a file (up to a checkpoint's size); nothing else
+/// would ever remove it. Failures are ignored: cleaning is a courtesy, never
+/// a reason for a write to fail.
+fn remove_stale_parts(dir: &Path) {
+    let started = first_write();
+    let me = std::process::id();
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return;
+    };
+    for entry in entries.flatten() {
+        let name = entry.file_name();
+        let Some(pid) = name.to_str().and_then(part_owner) else {
+            continue;
+        };
+        if pid == me || alive(pid) {
+            continue;
+        }
+        let old = entry
+            .metadata()
+            .ok()
+            .filter(|m| m.is_file())
+            .and_then(|m| m.modified().ok())
+            .is_some_and(|t| t < started);
+        if old {
+            let _ = std::fs::remove_file(entry.path());
+        }
     }
 }
 
@@ -126,6 +184,45 @@ mod tests {
         assert!(err.to_string().contains("interrupted"));
         assert_eq!(std::fs::read(&p).unwrap(), b"old");
         assert_eq!(std::fs::read_dir(&d).unwrap().count(), 1);
+    }
+
+    #[test]
+    fn stale_parts_of_dead_runs_are_removed_and_nothing_else() {
+        let d = scratch("stale");
+        first_write();
+        // A pid above Linux's maximum (2^22) is never a running process.
+        let dead = d.join(".x.dng.4194999.0.part");
+        let mine = d.join(format!(".y.dng.{}.7.part", std::process::id()));
+        let user = [
+            ".notes.part",
+            ".a.b.part",
+            "x.4194999.0.part",
+            ".4194999.0.part",
+        ];
+        std::fs::write(&dead, b"half a file").unwrap();
+        std::fs::write(&mine, b"being written").unwrap();
+        for u in user {
+            std::fs::write(d.join(u), b"keep").unwrap();
+        }
+        // Modified before this process's first write: set the clock back.
+        let past = std::time::SystemTime::now() - std::time::Duration::from_secs(3600);
+        for p in [&dead, &mine] {
+            std::fs::File::options()
+                .write(true)
+                .open(p)
+                .unwrap()
+                .set_modified(past)
+                .unwrap();
+        }
+        write_atomic(&d.join("out.bin"), b"x").unwrap();
+        assert!(!dead.exists(), "a dead run's part file is removed");
+        assert!(mine.exists(), "this process's own part file stays");
+        for u in user {
+            assert!(d.join(u).exists(), "{u} is not pgrf's and stays");
+        }
+        assert_eq!(part_owner(".x.dng.12.3.part"), Some(12));
+        assert_eq!(part_owner(".x.12.3.part"), Some(12));
+        assert_eq!(part_owner(".12.3.part"), None);
     }
 
     #[test]

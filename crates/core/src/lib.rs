@@ -11,6 +11,7 @@
 mod atomic;
 pub mod exit;
 pub mod mem;
+pub mod number;
 mod progress;
 pub mod record;
 pub mod seed;

@@ -11,10 +11,34 @@ fn kib_field(file: &str, key: &str) -> Option<u64> {
         .map(|kb| kb * 1024)
 }
 
-/// Memory the OS says is available for new allocations, in bytes (Linux's
-/// `MemAvailable`); None where it cannot be read.
+/// Memory available for new allocations, in bytes: Linux's `MemAvailable`,
+/// or less where the process's address space is capped (`ulimit -v`,
+/// RLIMIT_AS) and the cap minus what it has mapped is smaller, since an
+/// allocation past the cap aborts the process however much RAM is free.
+/// None where neither can be read.
 pub fn available_memory() -> Option<u64> {
-    kib_field("/proc/meminfo", "MemAvailable:")
+    let ram = kib_field("/proc/meminfo", "MemAvailable:");
+    let capped = address_space_left();
+    match (ram, capped) {
+        (Some(a), Some(b)) => Some(a.min(b)),
+        (a, b) => a.or(b),
+    }
+}
+
+/// The soft RLIMIT_AS minus the process's mapped size (`VmSize`), in bytes;
+/// None when unlimited or unreadable (read from /proc, no system call).
+fn address_space_left() -> Option<u64> {
+    let limits = std::fs::read_to_string("/proc/self/limits").ok()?;
+    let soft = limits
+        .lines()
+        .find(|l| l.starts_with("Max address space"))?
+        .trim_start_matches("Max address space")
+        .split_whitespace()
+        .next()?
+        .parse::<u64>()
+        .ok()?;
+    let mapped = kib_field("/proc/self/status", "VmSize:")?;
+    Some(soft.saturating_sub(mapped))
 }
 
 /// Refuse work whose memory cannot be had: `need` bytes against what the

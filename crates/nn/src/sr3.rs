@@ -606,6 +606,11 @@ mod tests {
             let layers = net.layers(20, 36);
             let params: usize = layers.iter().map(Layer::params).sum();
             assert_eq!(params, net.num_params(), "{cfg:?}");
+            // The record-only lower bound weight files are checked against
+            // holds, and is not vacuous (most parameters are those convs).
+            let bound = Architecture::Sr3(cfg.clone()).min_params();
+            let ratio = bound / net.num_params() as f64;
+            assert!((0.3..=1.0).contains(&ratio), "{cfg:?}: {ratio}");
             let m = cfg.side_multiple();
             let (h, w) = (20usize.div_ceil(m) * m, 36usize.div_ceil(m) * m);
             let Layer::Conv { h: h0, w: w0, .. } = layers[0] else {

@@ -240,22 +240,15 @@ mod tests {
         assert!(d > 1e-3);
     }
 
-    /// Parameters of the architecture, counted by hand: a k x k conv from a
-    /// to b channels has k*k*a*b weights and b biases.
+    /// Parameters of the architecture, counted by hand in
+    /// [`crate::weights::Architecture::min_params`] (exact for this network):
+    /// a k x k conv from a to b channels has k*k*a*b weights and b biases.
     fn expected_params(w: usize, cin: usize, cout: usize) -> usize {
-        let conv = |k: usize, a: usize, b: usize| k * k * a * b + b;
-        let widths = [w, 2 * w, 4 * w, 8 * w, 16 * w];
-        let mut total = 0;
-        let mut a = cin;
-        for &c in &widths {
-            total += conv(3, a, c) + conv(3, c, c);
-            a = c;
-        }
-        for level in 0..4 {
-            let (hi, lo) = (widths[level + 1], widths[level]);
-            total += conv(2, hi, lo) + conv(3, 2 * lo, lo) + conv(3, lo, lo);
-        }
-        total + conv(1, w, cout)
+        let c = SidUnetConfig::new()
+            .with_width(w)
+            .with_in_channels(cin)
+            .with_out_channels(cout);
+        crate::weights::Architecture::SidUnet(c).min_params() as usize
     }
 
     #[test]

@@ -60,6 +60,50 @@ impl Architecture {
             ),
         }
     }
+
+    /// A lower bound on the parameters of the network this describes,
+    /// computed from the record alone (in f64: absurd records give huge
+    /// values, never an overflow). Exact for the SID U-Net; for SR3 it
+    /// counts only 3x3 convolutions of a level's width C taken as C to C:
+    /// the second of every down block, both of every up block (the first
+    /// reads at least C channels) and both of the two middle blocks, which
+    /// every such network has. A file holding fewer values
+    /// cannot be this network, and is refused before anything is built:
+    /// building materialises every parameter, and a 336-byte record of
+    /// width 512 would otherwise cost gigabytes before failing.
+    pub fn min_params(&self) -> f64 {
+        let conv = |k: f64, a: f64, b: f64| k * k * a * b + b;
+        match self {
+            Architecture::SidUnet(c) => {
+                let w = c.width as f64;
+                let widths = [w, 2.0 * w, 4.0 * w, 8.0 * w, 16.0 * w];
+                let mut total = conv(1.0, w, c.out_channels as f64);
+                let mut a = c.in_channels as f64;
+                for &ch in &widths {
+                    total += conv(3.0, a, ch) + conv(3.0, ch, ch);
+                    a = ch;
+                }
+                for level in 0..4 {
+                    let (hi, lo) = (widths[level + 1], widths[level]);
+                    total += conv(2.0, hi, lo) + conv(3.0, 2.0 * lo, lo) + conv(3.0, lo, lo);
+                }
+                total
+            }
+            Architecture::Sr3(c) => {
+                let inner = c.inner_channels as f64;
+                let per_level: f64 = c
+                    .channel_mults
+                    .iter()
+                    .map(|&m| {
+                        let convs = c.res_blocks as f64 + 2.0 * (c.res_blocks as f64 + 1.0);
+                        convs * conv(3.0, inner * m as f64, inner * m as f64)
+                    })
+                    .sum();
+                let last = inner * c.channel_mults.last().copied().unwrap_or(0) as f64;
+                per_level + 4.0 * conv(3.0, last, last)
+            }
+        }
+    }
 }
 
 /// Which noise the network learned to remove.
@@ -190,8 +234,15 @@ pub(crate) fn save<B: Backend, M: Module<B>>(
     Ok(pgrf_core::write_atomic(path, &bytes)?)
 }
 
-/// Parse weight-file bytes into the record and the tensors.
-fn decode(path: &Path, bytes: &[u8]) -> Result<(WeightMeta, BTreeMap<String, NamedTensor>)> {
+/// Parse weight-file bytes into the record (checked to be a weight file
+/// this pgrf reads) and the named tensors (checked to be finite); `path`
+/// names them in errors. What [`read`] and [`load`] do with a file's
+/// bytes, without building a network: the byte-level entry point for
+/// weights built into the binary and for fuzzing.
+pub fn from_bytes(
+    bytes: &[u8],
+    path: &Path,
+) -> Result<(WeightMeta, BTreeMap<String, NamedTensor>)> {
     let meta = decode_meta(path, bytes)?;
     let rec = record::decode(bytes).map_err(|e| err(path, e))?;
     for (name, t) in &rec.tensors {
@@ -246,7 +297,7 @@ pub fn read_meta(path: &Path) -> Result<WeightMeta> {
 /// Read a weight file: its record and its named tensors, checked to be
 /// finite (a damaged file is refused with the tensor's name).
 pub fn read(path: &Path) -> Result<(WeightMeta, BTreeMap<String, NamedTensor>)> {
-    decode(path, &read_bytes(path)?)
+    from_bytes(&read_bytes(path)?, path)
 }
 
 /// A weight file's bytes, with the path in the error.
@@ -267,7 +318,16 @@ pub(crate) fn load_bytes<B: Backend>(
     bytes: &[u8],
     device: &B::Device,
 ) -> Result<(Net<B>, WeightMeta)> {
-    let (meta, tensors) = decode(path, bytes)?;
+    let (meta, tensors) = from_bytes(bytes, path)?;
+    let held: u64 = tensors.values().map(|t| t.values.len() as u64).sum();
+    let needed = meta.arch.min_params();
+    if needed > held as f64 {
+        return Err(NnError::SizeMismatch(format!(
+            "{}: weights do not fit {}: it has at least {needed:.0} parameters, the file holds {held} values",
+            path.display(),
+            meta.arch.describe()
+        )));
+    }
     let fit = |e: String| {
         NnError::SizeMismatch(format!(
             "{}: weights do not fit {}: {e}",
@@ -412,7 +472,7 @@ mod tests {
         assert!(load_flow::<Cpu>(&p, &device).is_ok());
         // The record says one width, the tensors are of another network.
         let bytes = std::fs::read(&p).unwrap();
-        let (_, tensors) = decode(&p, &bytes).unwrap();
+        let (_, tensors) = from_bytes(&bytes, &p).unwrap();
         let wrong = WeightMeta::new(
             Architecture::Sr3(Sr3Config::new().with_inner_channels(16).with_norm_groups(4)),
             noise(),

@@ -36,7 +36,16 @@ pub fn write_maps(
 /// rank 3 with 4 planes.
 pub fn read_maps(path: &Path) -> Result<(serde_json::Value, BTreeMap<String, Array3<f32>>)> {
     let bytes = std::fs::read(path).map_err(|e| err(path, e))?;
-    let rec = record::decode(&bytes).map_err(|e| match e {
+    decode_maps(&bytes, path)
+}
+
+/// [`read_maps`] on bytes already in memory; `path` only names the source in
+/// messages. Any bytes give a map set or one error, never a panic (fuzzed).
+pub fn decode_maps(
+    bytes: &[u8],
+    path: &Path,
+) -> Result<(serde_json::Value, BTreeMap<String, Array3<f32>>)> {
+    let rec = record::decode(bytes).map_err(|e| match e {
         RecordError::NoRecord => err(path, "no pgrf metadata record (not a pgrf maps file)"),
         e => err(path, e),
     })?;

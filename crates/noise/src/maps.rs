@@ -163,22 +163,26 @@ impl PixelMaps {
         check_fp(min_fp)
     }
 
-    /// Every per-pixel value: finite, non-negative where it must be, and
+    /// Every per-pixel value: finite, inside what a sensor can have (so
+    /// that scaling by a gain and an exposure stays finite: a dark rate of
+    /// 3e38 passed "finite" and made the dark shading infinite), and
     /// 1 + N_FP >= 0 (or the dark signal would turn negative).
     pub fn check_values(&self) -> Result<()> {
-        for (name, m, nonneg) in [
-            ("bias", &self.bias, false),
-            ("sigma_read", &self.sigma_read, true),
-            ("dark_rate", &self.dark_rate, true),
-            ("n_fp", &self.n_fp, false),
+        // Bias and read noise in DN are within a 16-bit range; a dark rate
+        // (electrons per s or per sqrt(s)) of a million saturates any pixel
+        // in a millisecond; N_FP is a relative deviation.
+        const DN: f32 = 65535.0;
+        for (name, m, lo, hi) in [
+            ("bias", &self.bias, -DN, DN),
+            ("sigma_read", &self.sigma_read, 0.0, DN),
+            ("dark_rate", &self.dark_rate, 0.0, 1e6),
+            ("n_fp", &self.n_fp, -1e3, 1e3),
         ] {
             if let Map::Pixel(a) = m {
-                if let Some(pos) = a
-                    .iter()
-                    .position(|v| !v.is_finite() || (nonneg && *v < 0.0))
-                {
+                if let Some(pos) = a.iter().position(|v| !(lo..=hi).contains(v)) {
                     return Err(NoiseError::Invalid(format!(
-                        "{name} map has an invalid value at flat index {pos}"
+                        "{name} map has an invalid value {} at flat index {pos} (must be in {lo}..={hi})",
+                        pgrf_core::number::shown(a.iter().nth(pos).copied().unwrap_or(0.0) as f64)
                     )));
                 }
             }

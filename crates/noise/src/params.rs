@@ -3,7 +3,7 @@
 //! training uses, so a network sees the whole gain range of the camera).
 
 use crate::error::{NoiseError, Result};
-use crate::profile::CameraProfile;
+use crate::profile::{CameraProfile, MAX_GAIN, MAX_SIGMA_DN};
 use pgrf_core::seed::{open01, stream, Domain};
 use rand::Rng;
 use rand_distr::StandardNormal;
@@ -30,6 +30,30 @@ impl CameraProfile {
     /// (interpolated linearly in log ISO between neighbouring entries), else
     /// K from `k_per_iso` and the scales at the centre of ELD's fits.
     pub fn params_at_iso(&self, iso: u32) -> Result<CaptureParams> {
+        let p = self.params_at_iso_unchecked(iso)?;
+        // A validated profile bounds its table and fits, but K = k_per_iso x
+        // ISO can still leave every sensor's range at an ISO nobody shoots.
+        if !(p.k.is_finite() && p.k > 0.0 && p.k <= MAX_GAIN) {
+            return Err(NoiseError::Invalid(format!(
+                "ISO {iso} gives a gain of {} DN/e- with the {} profile, beyond any sensor (at most {MAX_GAIN})",
+                pgrf_core::number::shown(p.k),
+                self.name
+            )));
+        }
+        let scales = [p.sigma_tukey, p.sigma_gauss, p.sigma_row];
+        if scales
+            .iter()
+            .any(|v| !(v.is_finite() && (0.0..=MAX_SIGMA_DN).contains(v)))
+        {
+            return Err(NoiseError::Invalid(format!(
+                "ISO {iso} gives noise scales {scales:?} DN with the {} profile, beyond {MAX_SIGMA_DN}",
+                self.name
+            )));
+        }
+        Ok(p)
+    }
+
+    fn params_at_iso_unchecked(&self, iso: u32) -> Result<CaptureParams> {
         if iso == 0 {
             return Err(NoiseError::Invalid("ISO must be positive".into()));
         }

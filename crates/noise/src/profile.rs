@@ -8,6 +8,7 @@
 //! the same keys (see README "Camera profiles").
 
 use crate::error::{NoiseError, Result};
+use pgrf_core::number::shown;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
@@ -25,7 +26,29 @@ impl LogFit {
     pub(crate) fn mean_at(&self, k: f64) -> f64 {
         (self.slope * k.ln() + self.bias).exp()
     }
+
+    /// Whether every scale this fit can give over gains `k_lo..=k_hi`, up to
+    /// 8 of its standard deviations above the mean (ELD's sampling draws
+    /// beyond that with probability ~1e-15), stays below [`MAX_SIGMA_DN`]:
+    /// ln(sigma) is linear in ln K, so the ends of the range bound it.
+    fn bounded_over(&self, k_lo: f64, k_hi: f64) -> bool {
+        let top = [k_lo, k_hi]
+            .map(|k| self.slope * k.ln() + self.bias)
+            .into_iter()
+            .fold(f64::NEG_INFINITY, f64::max);
+        self.sigma <= 10.0 && top + 8.0 * self.sigma <= MAX_SIGMA_DN.ln()
+    }
 }
+
+/// The largest system gain pgrf accepts, in DN per electron. Real sensors
+/// lie between ~0.01 and a few hundred (the A7S2 at ISO 409600 is ~390);
+/// a profile or calibration claiming more is damaged, and a gain of 1e300
+/// turns every frame into infinities.
+pub const MAX_GAIN: f64 = 1e4;
+
+/// The largest noise standard deviation a profile may give, in DN: more
+/// than a 16-bit range many times over, so only damaged files reach it.
+pub const MAX_SIGMA_DN: f64 = 1e6;
 
 /// ELD's parameter distribution for one camera.
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
@@ -189,8 +212,9 @@ impl CameraProfile {
         Self::from_json(name_or_path, &text)
     }
 
-    /// Parse and validate.
-    pub(crate) fn from_json(name: &str, text: &str) -> Result<CameraProfile> {
+    /// Parse and validate a profile's JSON text (what [`CameraProfile::load`]
+    /// does with a file); `name` names it in errors.
+    pub fn from_json(name: &str, text: &str) -> Result<CameraProfile> {
         let p: CameraProfile = serde_json::from_str(text).map_err(|e| NoiseError::Profile {
             name: name.to_string(),
             reason: e.to_string(),
@@ -213,12 +237,27 @@ impl CameraProfile {
             if v.is_finite() && v > 0.0 {
                 Ok(())
             } else {
-                Err(format!("{what} must be a positive number, got {v}"))
+                Err(format!(
+                    "{what} must be a positive number, got {}",
+                    shown(v)
+                ))
             }
         };
         pos(self.dn_range, "dn_range")?;
+        if self.dn_range > 65535.0 {
+            return Err(format!(
+                "dn_range must be at most 65535 (a 16-bit scale), got {}",
+                shown(self.dn_range)
+            ));
+        }
         pos(self.k_min, "k_min")?;
         pos(self.k_max, "k_max")?;
+        if self.k_max > MAX_GAIN {
+            return Err(format!(
+                "k_max {} DN/e- is beyond any sensor (at most {MAX_GAIN})",
+                shown(self.k_max)
+            ));
+        }
         if self.k_max < self.k_min {
             return Err(format!(
                 "k_max {} is below k_min {}",
@@ -227,6 +266,12 @@ impl CameraProfile {
         }
         if let Some(k) = self.k_per_iso {
             pos(k, "k_per_iso")?;
+            if k > MAX_GAIN {
+                return Err(format!(
+                    "k_per_iso {} DN/e- per ISO unit is beyond any sensor (at most {MAX_GAIN})",
+                    shown(k)
+                ));
+            }
         }
         if let Some(b) = self.black {
             if !(b.is_finite() && b >= 0.0) {
@@ -246,6 +291,12 @@ impl CameraProfile {
             {
                 return Err(format!(
                     "eld.{name} has a non-finite value or a negative sigma"
+                ));
+            }
+            if !f.bounded_over(self.k_min, self.k_max) {
+                return Err(format!(
+                    "eld.{name} gives noise scales above {MAX_SIGMA_DN} DN (or a fit sigma above 10) over the gain range {}..{}",
+                    self.k_min, self.k_max
                 ));
             }
         }
@@ -269,15 +320,23 @@ impl CameraProfile {
             }
             last = p.iso;
             pos(p.k, &format!("per_iso[{}].k", p.iso))?;
+            if p.k > MAX_GAIN {
+                return Err(format!(
+                    "per_iso[{}].k {} DN/e- is beyond any sensor (at most {MAX_GAIN})",
+                    p.iso,
+                    shown(p.k)
+                ));
+            }
             for (what, v) in [
                 ("sigma_tukey", p.sigma_tukey),
                 ("sigma_gauss", p.sigma_gauss),
                 ("sigma_row", p.sigma_row),
             ] {
-                if !(v.is_finite() && v >= 0.0) {
+                if !(v.is_finite() && (0.0..=MAX_SIGMA_DN).contains(&v)) {
                     return Err(format!(
-                        "per_iso[{}].{what} must be >= 0 (a standard deviation), got {v}",
-                        p.iso
+                        "per_iso[{}].{what} must be a standard deviation in 0..={MAX_SIGMA_DN} DN, got {}",
+                        p.iso,
+                        shown(v)
                     ));
                 }
             }
@@ -341,7 +400,7 @@ mod tests {
         let e = CameraProfile::from_json("x", &negative)
             .unwrap_err()
             .to_string();
-        assert!(e.contains("sigma_gauss") && e.contains(">= 0"), "{e}");
+        assert!(e.contains("sigma_gauss") && e.contains("0..="), "{e}");
         let swapped = json_with(|v| v["k_max"] = serde_json::json!(0.01));
         assert!(CameraProfile::from_json("x", &swapped).is_err());
         let neg_fit = json_with(|v| v["eld"]["row_scale"]["sigma"] = serde_json::json!(-0.2));
@@ -351,6 +410,48 @@ mod tests {
             .unwrap_err()
             .to_string()
             .contains("frobnicate"));
+        // Values that are numbers but no sensor's (the fuzzer's k_per_iso of
+        // 1e300 made K infinite at ISO 1600): refused where they enter.
+        for (edit, field) in [
+            (
+                json_with(|v| v["k_per_iso"] = serde_json::json!(1e300)),
+                "k_per_iso",
+            ),
+            (json_with(|v| v["k_max"] = serde_json::json!(2e4)), "k_max"),
+            (
+                json_with(|v| v["per_iso"][2]["k"] = serde_json::json!(1e5)),
+                "per_iso",
+            ),
+            (
+                json_with(|v| v["dn_range"] = serde_json::json!(1e9)),
+                "dn_range",
+            ),
+            (
+                json_with(|v| v["eld"]["gauss_scale"]["bias"] = serde_json::json!(400.0)),
+                "gauss_scale",
+            ),
+            (
+                json_with(|v| v["eld"]["row_scale"]["sigma"] = serde_json::json!(50.0)),
+                "row_scale",
+            ),
+        ] {
+            let e = CameraProfile::from_json("x", &edit)
+                .unwrap_err()
+                .to_string();
+            assert!(e.contains(field), "{field}: {e}");
+        }
+        // A K-per-ISO relation that is fine at real ISOs but not at 2^32 - 1.
+        let p = CameraProfile::from_json(
+            "x",
+            &json_with(|v| {
+                v["k_per_iso"] = serde_json::json!(0.01);
+                v.as_object_mut().unwrap().remove("per_iso");
+            }),
+        )
+        .unwrap();
+        assert!((p.params_at_iso(1600).unwrap().k - 16.0).abs() < 1e-9);
+        let e = p.params_at_iso(u32::MAX).unwrap_err().to_string();
+        assert!(e.contains("beyond any sensor"), "{e}");
         let e = CameraProfile::load("no-such-camera")
             .unwrap_err()
             .to_string();

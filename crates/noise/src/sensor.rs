@@ -68,6 +68,12 @@ pub struct SensorSpec {
 }
 
 impl SensorSpec {
+    /// White level minus black level, DN: the signal range a frame holds
+    /// before it clips (what flat-field levels must stay inside).
+    pub fn dn_range(&self) -> f32 {
+        self.white as f32 - self.black
+    }
+
     /// `a7s2-iso<N>`: an A7S2-like sensor at ISO N (any ISO of the PMN table).
     pub fn preset(name: &str) -> Result<SensorSpec> {
         let iso: u32 = name

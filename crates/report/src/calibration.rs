@@ -63,6 +63,17 @@ const FIXED_PATTERN_PNG: &str = "fixed_pattern.png";
 const SIGMA_MAP_PNG: &str = "sigma_map.png";
 const SUMMARY_MD: &str = "summary.md";
 
+/// Every file [`write_report`] may write into its folder, so a caller can
+/// check them all before hours of work (none may be a folder or an input).
+pub const REPORT_FILES: [&str; 6] = [
+    PTC_PNG,
+    SIGMA_HIST_PNG,
+    DARK_R2_HIST_PNG,
+    FIXED_PATTERN_PNG,
+    SIGMA_MAP_PNG,
+    SUMMARY_MD,
+];
+
 /// Plot size: tick labels stay legible when a Markdown preview scales the
 /// plot down to page width, and the PNGs stay well under a megabyte.
 const PLOT_W: u32 = 1100;
@@ -1024,14 +1035,9 @@ mod tests {
             summary: summary_rows(),
         };
         let written = write_report(&dir, &data).unwrap();
-        let names = [
-            PTC_PNG,
-            SIGMA_HIST_PNG,
-            DARK_R2_HIST_PNG,
-            FIXED_PATTERN_PNG,
-            SIGMA_MAP_PNG,
-            SUMMARY_MD,
-        ];
+        // Exactly the files REPORT_FILES promises callers (who check them
+        // before a calibration runs): no more, no fewer.
+        let names = REPORT_FILES;
         assert_eq!(written.len(), names.len());
         for n in names {
             let p = dir.join(n);

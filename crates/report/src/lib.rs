@@ -14,7 +14,7 @@ mod montage;
 mod png;
 mod search_plot;
 
-pub use calibration::{write_report, PtcPoint, ReportData};
+pub use calibration::{write_report, PtcPoint, ReportData, REPORT_FILES};
 pub use error::ReportError;
 pub use montage::{write_montage, Panel};
 pub use search_plot::{write_search_plot, SearchCurve};

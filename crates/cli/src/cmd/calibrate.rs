@@ -7,7 +7,7 @@ use clap::Args;
 use pgrf_calib::{calibrate, CalibrateInput, CalibrationRun};
 use pgrf_core::Progress;
 use pgrf_raw::files::list_files;
-use pgrf_report::{write_report, PtcPoint, ReportData};
+use pgrf_report::{write_report, PtcPoint, ReportData, REPORT_FILES};
 use std::path::PathBuf;
 
 #[derive(Args, Debug)]
@@ -48,18 +48,31 @@ pub fn run(a: &CalibrateArgs) -> Result<()> {
         .chain(&dark)
         .map(|p| p.as_path())
         .collect();
-    crate::output::check_outputs(&[("-o", &a.output)], &inputs)?;
-    if let Some(dir) = &a.report {
-        // The report goes into a folder: an existing file there would only
-        // fail after the whole calibration.
-        if dir.exists() && !dir.is_dir() {
-            anyhow::bail!(
-                "--report {} is a file; give a folder for the report",
-                dir.display()
-            );
+    // The report goes into a folder (created if missing); every file it will
+    // hold is checked with the calibration file, so nothing fails after the
+    // whole calibration has run.
+    let report_files: Vec<PathBuf> = match &a.report {
+        Some(dir) => {
+            if dir.exists() && !dir.is_dir() {
+                anyhow::bail!(
+                    "--report {} is a file; give a folder for the report",
+                    dir.display()
+                );
+            }
+            crate::output::require_parent_dir(dir).context("--report")?;
+            // A folder that does not exist yet holds no input and no folder
+            // in a report file's way; it is made after the calibration.
+            if dir.is_dir() {
+                REPORT_FILES.iter().map(|f| dir.join(f)).collect()
+            } else {
+                Vec::new()
+            }
         }
-        crate::output::require_parent_dir(dir).context("--report")?;
-    }
+        None => Vec::new(),
+    };
+    let mut outputs = vec![("-o", a.output.as_path())];
+    outputs.extend(report_files.iter().map(|p| ("--report", p.as_path())));
+    crate::output::check_outputs(&outputs, &inputs)?;
     let total = bias.len() + flat.len() + dark.len();
     let bar = Bar::new("calibrating", total as u64, "frames", false);
     let run = calibrate(
@@ -73,6 +86,14 @@ pub fn run(a: &CalibrateArgs) -> Result<()> {
         &bar,
     )?;
     bar.finish();
+    // The report first: the calibration file is the run's result, and it
+    // appears only when everything else has been written.
+    if let Some(dir) = &a.report {
+        std::fs::create_dir_all(dir)
+            .with_context(|| format!("{}: cannot create report folder", dir.display()))?;
+        let files = write_report(dir, &report_data(&run))?;
+        eprintln!("wrote report: {} files in {}", files.len(), dir.display());
+    }
     run.calibration.save(&a.output)?;
     let m = &run.calibration.meta;
     eprintln!(
@@ -87,12 +108,6 @@ pub fn run(a: &CalibrateArgs) -> Result<()> {
         m.hot_pixels,
         m.dead_pixels
     );
-    if let Some(dir) = &a.report {
-        std::fs::create_dir_all(dir)
-            .with_context(|| format!("{}: cannot create report folder", dir.display()))?;
-        let files = write_report(dir, &report_data(&run))?;
-        eprintln!("wrote report: {} files in {}", files.len(), dir.display());
-    }
     if a.json {
         println!(
             "{}",

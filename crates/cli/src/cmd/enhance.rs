@@ -54,7 +54,7 @@ pub struct EnhanceArgs {
     /// Tile side in packed pixels (default: from available memory on the CPU, 1024 on CUDA).
     #[arg(long)]
     pub tile: Option<usize>,
-    /// Minimum overlap of neighbouring tiles, packed pixels [default: 64, or a quarter of a smaller tile].
+    /// Minimum overlap of neighbouring tiles, packed pixels [default: 64, or half of a smaller tile].
     #[arg(long)]
     pub overlap: Option<usize>,
     /// cpu, or cuda (needs a build with `--features cuda`).
@@ -124,7 +124,7 @@ pub fn run(a: &EnhanceArgs) -> Result<()> {
     let jobs = plan_jobs(a)?;
     a.device.check_available().map_err(anyhow::Error::msg)?;
     let calib = match &a.calib {
-        Some(p) => Some(Calibration::load(p).with_context(|| format!("--calib {}", p.display()))?),
+        Some(p) => Some(Calibration::load(p).context("--calib")?),
         None => None,
     };
     let choice = SamplerChoice {

@@ -15,6 +15,18 @@ pub const DARK_EXPOSURES: [f32; 3] = [1.0, 4.0, 16.0];
 pub const FLAT_LEVELS: [(f32, f32); 2] = [(2000.0, 0.01), (8000.0, 0.04)];
 pub const BIAS_EXPOSURE: f32 = 1.0 / 8000.0;
 
+/// The flat levels for this sensor: [`FLAT_LEVELS`] where the brighter one
+/// stays below 80 % of the DN range (ISO 1600 and below on the A7S2), else
+/// both scaled down by one factor so it does. At ISO 3200 and above the
+/// fixed electron counts would clip every pixel, and a clipped flat gives a
+/// wrong (even negative) gain.
+pub fn flat_levels(spec: &SensorSpec) -> [(f32, f32); 2] {
+    let range = spec.dn_range();
+    let brightest = FLAT_LEVELS[1].0 * spec.k;
+    let scale = (0.8 * range / brightest).min(1.0);
+    FLAT_LEVELS.map(|(e, t)| (e * scale, t))
+}
+
 #[derive(Args, Debug)]
 pub struct SimulateArgs {
     /// Sensor preset: `a7s2-iso<ISO>` (published A7S2 gain, read and row noise at that ISO).
@@ -51,6 +63,23 @@ pub fn run(a: &SimulateArgs) -> Result<()> {
         a.height,
         128.0,
     )?;
+    // Before any work: the output folder's parent exists, the output is not
+    // a file, and no stack folder already holds frames (old frames would
+    // join the new stacks and calibrate a sensor that never existed).
+    if a.output.exists() && !a.output.is_dir() {
+        bail!("-o {} is a file; give a folder", a.output.display());
+    }
+    crate::output::require_parent_dir(&a.output).map_err(|e| anyhow::anyhow!("-o {e}"))?;
+    for sub in ["bias", "dark", "flat"] {
+        let dir = a.output.join(sub);
+        if std::fs::read_dir(&dir).is_ok_and(|mut d| d.next().is_some()) {
+            bail!(
+                "-o {}: {} already holds frames; give a new folder",
+                a.output.display(),
+                dir.display()
+            );
+        }
+    }
     let mut spec = SensorSpec::preset(&a.preset)?;
     spec.width = a.width;
     spec.height = a.height;
@@ -104,8 +133,8 @@ pub fn run(a: &SimulateArgs) -> Result<()> {
         }
     }
     if want("flat") {
-        for (e, t) in FLAT_LEVELS {
-            write("flat", &format!("flat_{e}e"), e, t)?;
+        for (e, t) in flat_levels(&sensor.spec) {
+            write("flat", &format!("flat_{e:.0}e"), e, t)?;
         }
     }
     bar.finish_and_clear();

@@ -37,7 +37,7 @@ impl Tiling {
         ImageOptions {
             tile,
             // The default overlap follows the tile as it will run (rounded
-            // to the network's multiple), so any tile of 4x that is accepted.
+            // to the network's multiple), so any tile of 2x that is accepted.
             overlap: self.overlap.unwrap_or_else(|| {
                 overlap_for(round_tile(tile, ph.max(pw), r.side_multiple().max(1)))
             }),

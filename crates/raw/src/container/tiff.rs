@@ -1,33 +1,13 @@
-//! A cheap look at a TIFF-based RAW container (DNG, ARW, NEF, CR2, KDC,
-//! ...) before rawler decodes it, so that a malformed or hostile file is
-//! refused with one line instead of costing the user their memory.
-//!
-//! rawler follows IFD chains without remembering where it has been (an IFD
-//! whose next-IFD offset points back at itself makes it allocate without
-//! limit) and trusts the dimensions a file claims. This walk reads only the
-//! IFD entries, in bounded steps, and checks:
-//!
-//! - every IFD (the root chain, SubIFDs, EXIF, GPS and interoperability IFDs)
-//!   lies inside the file and is visited once: a cycle is refused;
-//! - at most [`MAX_IFDS`] IFDs and [`MAX_ENTRIES`] entries per IFD;
-//! - every image's claimed width x height is at most [`MAX_PIXELS`], so a
-//!   decode can never ask for more than a few GB;
-//! - strip and tile extents lie inside the file and past the 8-byte header;
-//! - in a DNG, an uncompressed image's strips hold the bits per sample it
-//!   claims (BitsPerSample 8 over 14-bit data would decode to black).
-//!
-//! Files that are not TIFF (CR3, RAF's own header, ...) are not looked at
-//! here; rawler's panics stay caught either way.
+//! The TIFF structure walk: IFD entries, the depth-first walk over the IFD
+//! graph ([`Walk`]) and the checks of each image it finds. Every TIFF-based
+//! format (and the TIFF structures inside RAF, MRW and CR3 files) goes
+//! through it, so it lives apart from the containers that only locate those
+//! structures; the MakerNotes it collects are walked by `makernote`.
 
-/// More pixels than any camera sensor (the largest pixel-shift modes give
-/// ~400 MP); at 2 bytes per sample a decode of this many is 1.2 GB.
-pub const MAX_PIXELS: u64 = 600_000_000;
-/// More IFDs than any camera writes.
-pub const MAX_IFDS: usize = 1024;
-/// More entries than any IFD has.
-pub const MAX_ENTRIES: usize = 4096;
+use super::makernote::{check_makernote, NoteLayout, Notes};
+use super::{too_many_pixels, Order, MAX_ENTRIES, MAX_IFDS, MAX_LISTED};
 
-const SUB_IFD_TAGS: [u16; 4] = [330, 34665, 34853, 40965];
+pub(super) const SUB_IFD_TAGS: [u16; 4] = [330, 34665, 34853, 40965];
 const TAG_WIDTH: u16 = 256;
 const TAG_LENGTH: u16 = 257;
 const TAG_BITS: u16 = 258;
@@ -40,45 +20,27 @@ const TAG_TILE_LENGTH: u16 = 323;
 const TAG_TILE_OFFSETS: u16 = 324;
 const TAG_TILE_COUNTS: u16 = 325;
 const TAG_DNG_VERSION: u16 = 50706;
-
-/// Byte order of the file.
-#[derive(Clone, Copy)]
-struct Order(bool);
-
-impl Order {
-    fn u16(self, b: &[u8], at: usize) -> Option<u16> {
-        let s: [u8; 2] = b.get(at..at + 2)?.try_into().ok()?;
-        Some(if self.0 {
-            u16::from_le_bytes(s)
-        } else {
-            u16::from_be_bytes(s)
-        })
-    }
-    fn u32(self, b: &[u8], at: usize) -> Option<u32> {
-        let s: [u8; 4] = b.get(at..at + 4)?.try_into().ok()?;
-        Some(if self.0 {
-            u32::from_le_bytes(s)
-        } else {
-            u32::from_be_bytes(s)
-        })
-    }
-}
+const TAG_MAKE: u16 = 271;
+const TAG_MODEL: u16 = 272;
+const TAG_MAKERNOTE: u16 = 37500;
 
 /// One IFD entry's values: type, count and where they are.
-struct Entry {
-    kind: u16,
-    count: u64,
+pub(super) struct Entry {
+    pub(super) kind: u16,
+    pub(super) count: u64,
     /// Offset of the values (inline ones: inside the entry).
-    at: usize,
+    pub(super) at: usize,
 }
 
+/// Bytes per value of a TIFF type. rawler reads a type it does not know
+/// (0, or above 13) as bytes, so it is counted as one byte here: its values
+/// lie inline or must lie inside the file like any other's.
 fn type_size(kind: u16) -> u64 {
     match kind {
-        1 | 2 | 6 | 7 => 1,
         3 | 8 => 2,
         4 | 9 | 11 | 13 => 4,
         5 | 10 | 12 => 8,
-        _ => 0,
+        _ => 1,
     }
 }
 
@@ -102,6 +64,21 @@ impl Entry {
             .filter_map(|i| self.value(b, o, i))
             .collect()
     }
+
+    /// An ASCII value as rawler reads it (`TiffAscii::new_from_raw`): up to
+    /// the first NUL; `None` for another type (rawler's `as_string`).
+    fn ascii(&self, b: &[u8]) -> Option<String> {
+        if self.kind != 2 {
+            return None;
+        }
+        let raw = b.get(self.at..self.at.saturating_add(self.count as usize))?;
+        let s = raw.split(|&c| c == 0).next().unwrap_or_default();
+        Some(
+            std::str::from_utf8(s)
+                .unwrap_or("!!!INVALID UTF8!!!")
+                .to_string(),
+        )
+    }
 }
 
 /// The image-describing entries of one IFD.
@@ -119,9 +96,17 @@ struct Image {
     tile_counts: Vec<u64>,
 }
 
-/// Check the container of `bytes` (see the module documentation); `Ok` for
-/// files that are not TIFF. The message names the problem, for one line.
-pub fn check(bytes: &[u8]) -> Result<(), String> {
+/// Walk the TIFF structure `bytes` starts with (offsets relative to its
+/// first byte), following `sub_tags` to sub-IFDs, then the MakerNotes as
+/// `notes` says; `Ok` if it is not TIFF. With `chain` false only the first
+/// IFD of the root chain (and its sub-IFDs) is read, as rawler reads a CR3's
+/// CTMD blocks.
+pub(super) fn check_tiff(
+    bytes: &[u8],
+    sub_tags: &'static [u16],
+    notes: Notes,
+    chain: bool,
+) -> Result<(), String> {
     let order = match bytes.get(..2) {
         Some(b"II") => Order(true),
         Some(b"MM") => Order(false),
@@ -136,42 +121,126 @@ pub fn check(bytes: &[u8]) -> Result<(), String> {
         return Ok(());
     }
     let first = order.u32(bytes, 4).ok_or("truncated TIFF header")? as u64;
-    let mut walk = Walk {
-        bytes,
-        order,
-        images: Vec::new(),
-        dng: false,
-        visits: 0,
-        path: Vec::new(),
+    let walk = walk_ifds(bytes, order, first, sub_tags, chain)?;
+    let layout = match notes {
+        Notes::Skip => None,
+        Notes::Raf => Some(NoteLayout::Prefixed { relative: false }),
+        Notes::ByMake => walk.note_layout(),
     };
-    walk.ifd(first)?;
+    if let Some(layout) = layout {
+        // rawler parses one MakerNote; a file that has many gets them walked
+        // within the budget of one walk.
+        let mut spent = (0, 0);
+        for note in &walk.notes {
+            check_makernote(bytes, order, note, layout, &mut spent)?;
+        }
+    }
+    Ok(())
+}
+
+/// The last entry with `tag` (rawler keeps the last of a tag) of the IFD at
+/// `ifd`, which a walk has found well-formed.
+pub(super) fn find_entry(bytes: &[u8], order: Order, ifd: u64, tag: u16) -> Option<Entry> {
+    let ifd = usize::try_from(ifd).ok()?;
+    let n = order.u16(bytes, ifd)? as usize;
+    (0..n.min(MAX_ENTRIES)).rev().find_map(|k| {
+        let e_at = ifd + 2 + 12 * k;
+        if order.u16(bytes, e_at)? != tag {
+            return None;
+        }
+        let kind = order.u16(bytes, e_at + 2)?;
+        let count = order.u32(bytes, e_at + 4)? as u64;
+        let at = if type_size(kind).saturating_mul(count) <= 4 {
+            e_at + 8
+        } else {
+            order.u32(bytes, e_at + 8)? as usize
+        };
+        Some(Entry { kind, count, at })
+    })
+}
+
+/// Walk the IFDs of a TIFF structure whose offsets are relative to the
+/// first byte of `bytes`, from the IFD at `first` (and the IFDs after it if
+/// `chain`), and check its images.
+pub(super) fn walk_ifds<'a>(
+    bytes: &'a [u8],
+    order: Order,
+    first: u64,
+    sub_tags: &'static [u16],
+    chain: bool,
+) -> Result<Walk<'a>, String> {
+    let mut walk = Walk::new(bytes, order, sub_tags, false);
+    walk.follow_next = chain;
+    if first != 0 {
+        walk.ifd(first, true)?;
+    }
     for img in &walk.images {
         check_image(img, bytes.len() as u64, walk.dng)?;
     }
-    Ok(())
+    Ok(walk)
 }
 
 /// A depth-first walk over the IFD graph: every IFD's sub-IFDs and its next
 /// IFD are its children. An IFD on the current path reached again is a
 /// loop (rawler would follow it forever); one shared by two paths is only
 /// counted against [`MAX_IFDS`].
-struct Walk<'a> {
+pub(super) struct Walk<'a> {
     bytes: &'a [u8],
     order: Order,
     images: Vec<Image>,
     dng: bool,
-    visits: usize,
+    pub(super) visits: usize,
     path: Vec<u64>,
+    /// Tags whose values are offsets of sub-IFDs.
+    sub_tags: &'static [u16],
+    /// Strip, tile and sub-IFD offsets and counts read so far.
+    pub(super) listed: u64,
+    /// A MakerNote's IFDs: their tags are the vendor's, so only the entries'
+    /// extents (and `sub_tags`) are looked at, and rawler reads no next IFD
+    /// after a MakerNote's.
+    note: bool,
+    /// The first Make and Model entries of the root chain (`None` inside:
+    /// not ASCII) and whether the chain has a DNGVersion: what rawler picks
+    /// the decoder by (`TiffReader::get_entry` reads the chain only).
+    pub(super) make: Option<Option<String>>,
+    pub(super) model: Option<Option<String>>,
+    pub(super) dng_chain: bool,
+    /// The MakerNote entries seen.
+    notes: Vec<Entry>,
+    /// Whether next-IFD offsets are followed (rawler reads only the first
+    /// IFD of some structures).
+    follow_next: bool,
 }
 
 /// Deeper than any camera's IFD nesting plus chain.
 const MAX_DEPTH: usize = 64;
 
-impl Walk<'_> {
-    fn ifd(&mut self, off: u64) -> Result<(), String> {
-        if off == 0 {
-            return Ok(());
+impl<'a> Walk<'a> {
+    pub(super) fn new(bytes: &'a [u8], order: Order, sub_tags: &'static [u16], note: bool) -> Self {
+        Walk {
+            bytes,
+            order,
+            images: Vec::new(),
+            dng: false,
+            visits: 0,
+            path: Vec::new(),
+            sub_tags,
+            listed: 0,
+            note,
+            make: None,
+            model: None,
+            dng_chain: false,
+            notes: Vec::new(),
+            follow_next: !note,
         }
+    }
+
+    /// Walk the IFD at `off`, one of the root chain if `chain`. Offset 0
+    /// ends a chain of next-IFD pointers (and a root offset of 0 is refused
+    /// by rawler itself), but a sub-IFD pointer of 0 is followed by rawler:
+    /// to the file header, read as an IFD, so it is walked (and refused: the
+    /// header is no IFD).
+    pub(super) fn ifd(&mut self, off: u64, chain: bool) -> Result<(), String> {
         if self.path.contains(&off) {
             return Err(format!(
                 "malformed TIFF structure: the IFD at byte {off} is reached twice (a loop in the IFD chain)"
@@ -197,7 +266,7 @@ impl Walk<'_> {
             ));
         }
         let end = off + 2 + 12 * n as u64;
-        if end + 4 > len {
+        if end > len {
             return Err(format!(
                 "malformed TIFF structure: the IFD at byte {off} ({n} entries) runs past the end of the file"
             ));
@@ -222,9 +291,45 @@ impl Walk<'_> {
                 v as usize
             };
             let e = Entry { kind, count, at };
+            let listed = !self.note
+                && matches!(
+                    tag,
+                    TAG_STRIP_OFFSETS | TAG_STRIP_COUNTS | TAG_TILE_OFFSETS | TAG_TILE_COUNTS
+                )
+                || self.sub_tags.contains(&tag);
+            if listed {
+                // Each list is read in full: bound the sum, or one IFD
+                // repeating a long list's tag thousands of times would be
+                // billions of reads.
+                self.listed = self.listed.saturating_add(count);
+                if self.listed > MAX_LISTED {
+                    return Err(format!(
+                        "malformed TIFF structure: more than {MAX_LISTED} strip, tile and IFD offsets"
+                    ));
+                }
+            }
+            if self.sub_tags.contains(&tag) {
+                children.extend(e.values(bytes, order).into_iter().map(|c| (c, false)));
+                continue;
+            }
+            if self.note {
+                continue;
+            }
+            match tag {
+                TAG_MAKE if chain && self.make.is_none() => self.make = Some(e.ascii(bytes)),
+                TAG_MODEL if chain && self.model.is_none() => self.model = Some(e.ascii(bytes)),
+                TAG_DNG_VERSION => {
+                    self.dng = true;
+                    self.dng_chain |= chain;
+                }
+                TAG_MAKERNOTE => {
+                    self.notes.push(e);
+                    continue;
+                }
+                _ => {}
+            }
             let one = || e.value(bytes, order, 0);
             match tag {
-                t if SUB_IFD_TAGS.contains(&t) => children.extend(e.values(bytes, order)),
                 TAG_WIDTH => img.width = one(),
                 TAG_LENGTH => img.length = one(),
                 TAG_BITS => img.bits = one(),
@@ -235,15 +340,24 @@ impl Walk<'_> {
                 TAG_TILE_WIDTH | TAG_TILE_LENGTH => img.tiled = true,
                 TAG_TILE_OFFSETS => img.tiles = e.values(bytes, order),
                 TAG_TILE_COUNTS => img.tile_counts = e.values(bytes, order),
-                TAG_DNG_VERSION => self.dng = true,
                 _ => {}
             }
         }
-        children.push(order.u32(bytes, end as usize).expect("inside") as u64);
-        self.images.push(img);
+        if self.follow_next {
+            // "Some TIFF writers skip the next ifd pointer": rawler reads a
+            // missing one as 0 (formats/tiff/ifd.rs, line 192), and Canon's
+            // CR3 metadata does skip it.
+            let next = order.u32(bytes, end as usize).unwrap_or(0) as u64;
+            if next != 0 {
+                children.push((next, chain));
+            }
+        }
+        if !self.note {
+            self.images.push(img);
+        }
         self.path.push(off);
-        for c in children {
-            self.ifd(c)?;
+        for (c, chain) in children {
+            self.ifd(c, chain)?;
         }
         self.path.pop();
         Ok(())
@@ -254,13 +368,8 @@ fn check_image(img: &Image, len: u64, dng: bool) -> Result<(), String> {
     let (Some(w), Some(h)) = (img.width, img.length) else {
         return Ok(());
     };
-    let pixels = w.saturating_mul(h);
-    if pixels > MAX_PIXELS {
-        return Err(format!(
-            "the file claims a {w} x {h} image ({:.0} megapixels), more than any camera makes ({} MP): its header is damaged",
-            pixels as f64 / 1e6,
-            MAX_PIXELS / 1_000_000
-        ));
+    if let Some(what) = too_many_pixels(w, h) {
+        return Err(format!("the file claims {what}: its header is damaged"));
     }
     for (what, offsets, counts) in [
         ("strip", &img.strips, &img.strip_counts),
@@ -301,23 +410,8 @@ fn check_image(img: &Image, len: u64, dng: bool) -> Result<(), String> {
 
 #[cfg(test)]
 mod tests {
-    use super::*;
-
-    /// A little-endian TIFF: header, one IFD at byte 8 with `entries`
-    /// (tag, type, count, value), next-IFD offset `next`, then `tail`.
-    fn tiff(entries: &[(u16, u16, u32, u32)], next: u32, tail: &[u8]) -> Vec<u8> {
-        let mut b = b"II*\0\x08\0\0\0".to_vec();
-        b.extend_from_slice(&(entries.len() as u16).to_le_bytes());
-        for &(t, k, c, v) in entries {
-            b.extend_from_slice(&t.to_le_bytes());
-            b.extend_from_slice(&k.to_le_bytes());
-            b.extend_from_slice(&c.to_le_bytes());
-            b.extend_from_slice(&v.to_le_bytes());
-        }
-        b.extend_from_slice(&next.to_le_bytes());
-        b.extend_from_slice(tail);
-        b
-    }
+    use crate::container::check;
+    use crate::container::testutil::tiff;
 
     /// 64 x 32 image, `bits` per sample, one strip of `strip_bytes` right
     /// after the IFD (4096 bytes hold it at 16 bits).
@@ -394,5 +488,37 @@ mod tests {
         let mut past = image(16, 4096, false);
         past.truncate(past.len() - 4);
         assert!(check(&past).unwrap_err().contains("truncated"));
+    }
+
+    #[test]
+    fn values_of_unknown_types_must_lie_inside_the_file() {
+        // rawler reads an unknown type as bytes: 2^32 - 1 of them here.
+        let e = check(&tiff(&[(256, 3, 1, 4), (700, 0, u32::MAX, 8)], 0, &[])).unwrap_err();
+        assert!(e.contains("past the end"), "{e}");
+        let e = check(&tiff(&[(700, 99, 50, 8)], 0, &[])).unwrap_err();
+        assert!(e.contains("past the end"), "{e}");
+        // Four bytes or fewer sit inline, as for any type.
+        assert_eq!(check(&tiff(&[(700, 0, 4, 0)], 0, &[])), Ok(()));
+    }
+
+    #[test]
+    fn the_offset_lists_read_are_bounded() {
+        // `n` StripOffsets entries of 1100 LONGs each, all over the same
+        // bytes after the IFD.
+        let lists = |n: u32| {
+            let values_at = 8 + 2 + 12 * n + 4;
+            tiff(
+                &vec![(273, 4, 1100, values_at); n as usize],
+                0,
+                &[0u8; 4400],
+            )
+        };
+        // 4000 of them: 4.4 million values.
+        let e = check(&lists(4000)).unwrap_err();
+        assert!(
+            e.contains("more than 4194304 strip, tile and IFD offsets"),
+            "{e}"
+        );
+        assert_eq!(check(&lists(3)), Ok(()));
     }
 }

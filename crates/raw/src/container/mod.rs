@@ -1,0 +1,155 @@
+//! A cheap look at a RAW container (TIFF-based: DNG, ARW, NEF, CR2, KDC,
+//! ...; RAF, MRW, CR3, QuickTake) before rawler decodes it, so that a
+//! malformed or hostile file is refused with one line instead of costing the
+//! user their memory.
+//!
+//! rawler follows IFD chains without remembering where it has been (an IFD
+//! whose next-IFD offset points back at itself makes it allocate without
+//! limit) and trusts the dimensions a file claims. This walk reads only the
+//! IFD entries, in bounded steps, and checks:
+//!
+//! - every IFD (the root chain, SubIFDs, EXIF, GPS and interoperability IFDs)
+//!   lies inside the file and is visited once: a cycle is refused (a missing
+//!   next-IFD offset reads as 0, as in rawler: Canon's CR3 metadata omits
+//!   it);
+//! - at most [`MAX_IFDS`] IFDs and [`MAX_ENTRIES`] entries per IFD;
+//! - every image's claimed width x height is at most [`MAX_PIXELS`], so a
+//!   decode can never ask for more than a few GB;
+//! - strip and tile extents lie inside the file and past the 8-byte header;
+//! - in a DNG, an uncompressed image's strips hold the bits per sample it
+//!   claims (BitsPerSample 8 over 14-bit data would decode to black);
+//! - every entry's values lie inside the file, whatever their type: rawler
+//!   allocates an entry's values (up to 4 GB for a count of 2^32 - 1) before
+//!   reading them, and reads a type it does not know as bytes;
+//! - the MakerNote, where the decoder rawler picks (by the Make tag) parses
+//!   it as an IFD, is walked the way that decoder finds it (vendor prefix,
+//!   byte order and the base its offsets count from), for the same reason.
+//!
+//! RAF files start with Fujifilm's own header, which points at two TIFF
+//! structures rawler parses (the preview JPEG's EXIF and the raw IFDs with
+//! their FujiIFD); both are walked the same way, and the MakerNote with
+//! them. MRW's block chain and its IFD are checked too.
+//!
+//! rawler tries every file it does not recognise by its magic as ISO BMFF
+//! (boxes) before it tries TIFF, and allocates from the sizes and counts its
+//! boxes claim: CR3 files (and any file whose first bytes read as boxes rawler
+//! would loop over) get their boxes walked (`check_bmff`). QuickTake
+//! files get their claimed dimensions checked. rawler's panics stay caught
+//! either way.
+//!
+//! Each format has its own submodule: `tiff` walks a TIFF structure's IFDs
+//! and checks its images, `makernote` finds and walks the vendors'
+//! MakerNotes the way each of rawler's decoders does, `raf` and `mrw` find
+//! the TIFF structures inside Fujifilm's and Minolta's containers, `bmff`
+//! walks ISO BMFF boxes and a CR3's metadata, and `qtk` bounds QuickTake
+//! dimensions. This module holds what they share: the public limits, the
+//! byte-order reader, the pixel bound, and [`check`], which picks the
+//! checks by the file's magic.
+
+mod bmff;
+mod makernote;
+mod mrw;
+mod qtk;
+mod raf;
+mod tiff;
+
+use bmff::check_bmff;
+use makernote::Notes;
+use mrw::check_mrw;
+use qtk::check_qtk;
+use raf::check_raf;
+use tiff::{check_tiff, SUB_IFD_TAGS};
+
+/// More pixels than any camera sensor (the largest pixel-shift modes give
+/// ~400 MP); at 2 bytes per sample a decode of this many is 1.2 GB.
+pub const MAX_PIXELS: u64 = 600_000_000;
+/// More IFDs than any camera writes.
+pub const MAX_IFDS: usize = 1024;
+/// More entries than any IFD has.
+pub const MAX_ENTRIES: usize = 4096;
+/// More strip and tile offsets and counts (and sub-IFD offsets), summed
+/// over the file, than any camera writes (a 400 MP image in 256 x 256 tiles
+/// has 6,100 tiles).
+pub const MAX_LISTED: u64 = 1 << 22;
+/// More boxes than a CR3 (about 70 of them) or a Canon RAW movie has.
+pub const MAX_BOXES: usize = 1 << 16;
+
+/// Byte order of the file.
+#[derive(Clone, Copy)]
+struct Order(bool);
+
+impl Order {
+    fn u16(self, b: &[u8], at: usize) -> Option<u16> {
+        let s: [u8; 2] = b.get(at..at + 2)?.try_into().ok()?;
+        Some(if self.0 {
+            u16::from_le_bytes(s)
+        } else {
+            u16::from_be_bytes(s)
+        })
+    }
+    fn u32(self, b: &[u8], at: usize) -> Option<u32> {
+        let s: [u8; 4] = b.get(at..at + 4)?.try_into().ok()?;
+        Some(if self.0 {
+            u32::from_le_bytes(s)
+        } else {
+            u32::from_be_bytes(s)
+        })
+    }
+}
+
+/// Check the container of `bytes` (see the module documentation); `Ok` for
+/// files of no format checked here. The message names the problem, for one
+/// line.
+pub fn check(bytes: &[u8]) -> Result<(), String> {
+    if bytes.starts_with(b"FUJIFILM") {
+        return check_raf(bytes);
+    }
+    if bytes.starts_with(b"\0MRM") {
+        return check_mrw(bytes);
+    }
+    if bytes.starts_with(b"qktk") || bytes.starts_with(b"qktn") {
+        return check_qtk(bytes);
+    }
+    // rawler's `get_decoder` (decoders/mod.rs) claims ARRI, CRW (CIFF) and
+    // X3F files by their magic before it tries BMFF; every other file it
+    // parses as BMFF boxes first, TIFF files included, then as TIFF.
+    let claimed = bytes.starts_with(b"ARRI")
+        || bytes.starts_with(b"FOVb")
+        || bytes.get(6..14) == Some(&b"HEAPCCDR"[..]);
+    if !claimed {
+        check_bmff(bytes)?;
+    }
+    check_tiff(bytes, &SUB_IFD_TAGS, Notes::ByMake, true)
+}
+
+/// The megapixels of a `w` x `h` image, when more than [`MAX_PIXELS`].
+fn too_many_pixels(w: u64, h: u64) -> Option<String> {
+    let pixels = w.saturating_mul(h);
+    (pixels > MAX_PIXELS).then(|| {
+        format!(
+            "a {w} x {h} image ({:.0} megapixels), more than any camera makes ({} MP)",
+            pixels as f64 / 1e6,
+            MAX_PIXELS / 1_000_000
+        )
+    })
+}
+
+/// Builders of test files that the tests of several formats share.
+#[cfg(test)]
+mod testutil {
+    /// A little-endian TIFF: header, one IFD at byte 8 with `entries`
+    /// (tag, type, count, value), next-IFD offset `next`, then `tail`.
+    pub(super) fn tiff(entries: &[(u16, u16, u32, u32)], next: u32, tail: &[u8]) -> Vec<u8> {
+        let mut b = b"II*\0\x08\0\0\0".to_vec();
+        b.extend_from_slice(&(entries.len() as u16).to_le_bytes());
+        for &(t, k, c, v) in entries {
+            b.extend_from_slice(&t.to_le_bytes());
+            b.extend_from_slice(&k.to_le_bytes());
+            b.extend_from_slice(&c.to_le_bytes());
+            b.extend_from_slice(&v.to_le_bytes());
+        }
+        b.extend_from_slice(&next.to_le_bytes());
+        b.extend_from_slice(tail);
+        b
+    }
+}
