@@ -39,7 +39,7 @@ run() {
     shift
     echo "size_curve: $name for ${seconds}s" >&2
     set +e
-    RAYON_NUM_THREADS=$threads timeout -s INT --kill-after=120 "$seconds" \
+    RAYON_NUM_THREADS=$threads timeout --foreground -s INT --kill-after=120 "$seconds" \
         "$pgrf" train "$@" "${common[@]}" --quiet \
         -o "$out/$name.safetensors" --log "$out/$name.log.csv" > "$out/$name.out" 2>&1
     set -e

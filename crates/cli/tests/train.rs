@@ -452,6 +452,12 @@ fn ctrl_c_checkpoints_and_exits_130_and_the_run_resumes() {
         .status()
         .unwrap()
         .success());
+    // A supervisor such as `timeout -s INT` delivers one request twice (to
+    // the process and to its group): a second SIGINT right after the first
+    // must not turn the clean stop into an exit without saving. (The run
+    // may already have finished saving; then this kill finds no process.)
+    std::thread::sleep(std::time::Duration::from_millis(50));
+    let _ = Command::new("kill").args(["-INT", &pid]).status();
     let res = child.wait_with_output().unwrap();
     let err = String::from_utf8_lossy(&res.stderr);
     assert_eq!(res.status.code(), Some(130), "{err}");

@@ -333,9 +333,15 @@ pub fn run(a: &TrainArgs) -> Result<()> {
     let stop = Arc::new(AtomicBool::new(false));
     {
         let stop = stop.clone();
-        // A second Ctrl-C kills at once (the first asks for a clean stop).
+        let first: std::sync::OnceLock<std::time::Instant> = std::sync::OnceLock::new();
+        // A second Ctrl-C kills at once (the first asks for a clean stop),
+        // but only a second request: one that comes a second or more after
+        // the first. `timeout -s INT` and other supervisors signal both the
+        // process and its process group, so one request can arrive twice
+        // within microseconds, and it must still save.
         let _ = ctrlc::set_handler(move || {
-            if stop.swap(true, Ordering::SeqCst) {
+            let t0 = *first.get_or_init(std::time::Instant::now);
+            if stop.swap(true, Ordering::SeqCst) && t0.elapsed().as_secs_f64() >= 1.0 {
                 std::process::exit(130);
             }
         });
