@@ -103,7 +103,21 @@ fn alive(pid: u32) -> bool {
 /// and rename leaves such a file (up to a checkpoint's size); nothing else
 /// would ever remove it. Failures are ignored: cleaning is a courtesy, never
 /// a reason for a write to fail.
+///
+/// Once per folder and process: only files older than this process's first
+/// write qualify, and none can appear later, so a second look at the same
+/// folder (a batch writing hundreds of outputs, a run checkpointing every
+/// few minutes) would only list it again for nothing.
 fn remove_stale_parts(dir: &Path) {
+    static CLEANED: std::sync::Mutex<Vec<PathBuf>> = std::sync::Mutex::new(Vec::new());
+    let key = std::fs::canonicalize(dir).unwrap_or_else(|_| dir.to_path_buf());
+    {
+        let mut cleaned = CLEANED.lock().unwrap_or_else(|e| e.into_inner());
+        if cleaned.contains(&key) {
+            return;
+        }
+        cleaned.push(key);
+    }
     let started = first_write();
     let me = std::process::id();
     let Ok(entries) = std::fs::read_dir(dir) else {

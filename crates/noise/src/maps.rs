@@ -179,10 +179,11 @@ impl PixelMaps {
             ("n_fp", &self.n_fp, -1e3, 1e3),
         ] {
             if let Map::Pixel(a) = m {
-                if let Some(pos) = a.iter().position(|v| !(lo..=hi).contains(v)) {
+                if let Some((pos, v)) = a.iter().enumerate().find(|(_, v)| !(lo..=hi).contains(*v))
+                {
                     return Err(NoiseError::Invalid(format!(
                         "{name} map has an invalid value {} at flat index {pos} (must be in {lo}..={hi})",
-                        pgrf_core::number::shown(a.iter().nth(pos).copied().unwrap_or(0.0) as f64)
+                        pgrf_core::number::shown(*v as f64)
                     )));
                 }
             }

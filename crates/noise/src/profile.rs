@@ -243,6 +243,17 @@ impl CameraProfile {
                 ))
             }
         };
+        // A gain is positive and no more than any sensor's.
+        let gain = |v: f64, what: &str| -> std::result::Result<(), String> {
+            pos(v, what)?;
+            if v > MAX_GAIN {
+                return Err(format!(
+                    "{what} {} DN/e- is beyond any sensor (at most {MAX_GAIN})",
+                    shown(v)
+                ));
+            }
+            Ok(())
+        };
         pos(self.dn_range, "dn_range")?;
         if self.dn_range > 65535.0 {
             return Err(format!(
@@ -251,13 +262,7 @@ impl CameraProfile {
             ));
         }
         pos(self.k_min, "k_min")?;
-        pos(self.k_max, "k_max")?;
-        if self.k_max > MAX_GAIN {
-            return Err(format!(
-                "k_max {} DN/e- is beyond any sensor (at most {MAX_GAIN})",
-                shown(self.k_max)
-            ));
-        }
+        gain(self.k_max, "k_max")?;
         if self.k_max < self.k_min {
             return Err(format!(
                 "k_max {} is below k_min {}",
@@ -265,13 +270,7 @@ impl CameraProfile {
             ));
         }
         if let Some(k) = self.k_per_iso {
-            pos(k, "k_per_iso")?;
-            if k > MAX_GAIN {
-                return Err(format!(
-                    "k_per_iso {} DN/e- per ISO unit is beyond any sensor (at most {MAX_GAIN})",
-                    shown(k)
-                ));
-            }
+            gain(k, "k_per_iso")?;
         }
         if let Some(b) = self.black {
             if !(b.is_finite() && b >= 0.0) {
@@ -319,14 +318,7 @@ impl CameraProfile {
                 ));
             }
             last = p.iso;
-            pos(p.k, &format!("per_iso[{}].k", p.iso))?;
-            if p.k > MAX_GAIN {
-                return Err(format!(
-                    "per_iso[{}].k {} DN/e- is beyond any sensor (at most {MAX_GAIN})",
-                    p.iso,
-                    shown(p.k)
-                ));
-            }
+            gain(p.k, &format!("per_iso[{}].k", p.iso))?;
             for (what, v) in [
                 ("sigma_tukey", p.sigma_tukey),
                 ("sigma_gauss", p.sigma_gauss),
