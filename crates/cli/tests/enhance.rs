@@ -63,8 +63,9 @@ fn dark_dng(path: &Path, w: usize, h: usize, cfa: Cfa, seed: u64) -> RawFrame {
 fn the_dng_keeps_the_input_and_holds_the_model_output() {
     let d = scratch("dng");
     let noisy = d.join("noisy.dng");
-    // GBRG, 144x80 packed: 3 x 2 tiles of 64 packed pixels.
-    let input = dark_dng(&noisy, 288, 160, Cfa::Gbrg, 3);
+    // GBRG, 304x224 packed: 3 x 2 tiles of 144 packed pixels (the smallest
+    // a user may ask for) with overlap 64.
+    let input = dark_dng(&noisy, 608, 448, Cfa::Gbrg, 3);
     for flow in [false, true] {
         let m = model(&d, flow, Some(0.3));
         let out = d.join(format!("out-{flow}.dng"));
@@ -81,9 +82,9 @@ fn the_dng_keeps_the_input_and_holds_the_model_output() {
             "--png",
             s(&png),
             "--tile",
-            "64",
+            "144",
             "--overlap",
-            "16",
+            "64",
             "--json",
             "--quiet",
         ]);
@@ -110,8 +111,8 @@ fn the_dng_keeps_the_input_and_holds_the_model_output() {
             restorer.as_ref(),
             x.view(),
             &ImageOptions {
-                tile: 64,
-                overlap: 16,
+                tile: 144,
+                overlap: 64,
                 seed: 0,
             },
             &pgrf_core::NoProgress,
@@ -128,7 +129,7 @@ fn the_dng_keeps_the_input_and_holds_the_model_output() {
         // The output is not the input: the network did something.
         assert_ne!(pack_normalized(&got, true).unwrap(), x);
         let img = image::open(&png).unwrap();
-        assert_eq!((img.width(), img.height()), (288, 160));
+        assert_eq!((img.width(), img.height()), (608, 448));
     }
 }
 
@@ -244,6 +245,9 @@ fn bad_input_gives_one_line_and_writes_nothing() {
     let d = scratch("bad");
     let noisy = d.join("noisy.dng");
     dark_dng(&noisy, 48, 32, Cfa::Rggb, 1);
+    // 200 x 32 packed: wider than the smallest tile a user may ask for.
+    let wide = d.join("wide.dng");
+    dark_dng(&wide, 400, 64, Cfa::Rggb, 2);
     let m = model(&d, false, None);
     let xtrans = d.join("xtrans.dng");
     xtrans_dng(&xtrans);
@@ -352,6 +356,38 @@ fn bad_input_gives_one_line_and_writes_nothing() {
                 s(&out),
             ],
             &["CUDA"],
+        ),
+        // Tiles and overlaps that would make the result depend on the
+        // tiling (issue 17), refused with the bound.
+        (
+            vec![
+                s(&wide),
+                "--model",
+                s(&m),
+                "--ratio",
+                "100",
+                "--tile",
+                "128",
+                "-o",
+                s(&out),
+            ],
+            &["--tile 128 is below 144", "give --tile 144 or more"],
+        ),
+        (
+            vec![
+                s(&wide),
+                "--model",
+                s(&m),
+                "--ratio",
+                "100",
+                "--tile",
+                "144",
+                "--overlap",
+                "16",
+                "-o",
+                s(&out),
+            ],
+            &["--overlap 16 is below 64"],
         ),
     ];
     for (args, expect) in cases {

@@ -182,6 +182,7 @@ fn clean_frame(a: &DemoArgs) -> Result<Clean> {
 
 pub fn run(a: &DemoArgs) -> Result<()> {
     let t0 = Instant::now();
+    pgrf_nn::infer::check_tiling_args(a.tile, None)?;
     if !a.output.is_dir() {
         require_parent_dir(&a.output)?;
     }
@@ -203,7 +204,7 @@ pub fn run(a: &DemoArgs) -> Result<()> {
 
     let protocol = Protocol::eld(false);
     // Tiles as `pgrf enhance` chooses them (memory, and the flow model's
-    // cap at twice its training crop); the overlap shrinks with small tiles.
+    // cap at twice its training crop).
     let tiling = Tiling {
         tile: a.tile,
         overlap: None,

@@ -51,10 +51,10 @@ pub struct EnhanceArgs {
     #[arg(long, num_args = 0..=1)]
     #[allow(clippy::option_option)]
     pub png: Option<Option<PathBuf>>,
-    /// Tile side in packed pixels (default: from available memory on the CPU, 1024 on CUDA).
+    /// Tile side in packed pixels, at least 144 when the frame is tiled (default: from available memory on the CPU, 1024 on CUDA).
     #[arg(long)]
     pub tile: Option<usize>,
-    /// Minimum overlap of neighbouring tiles, packed pixels [default: 64, or half of a smaller tile].
+    /// Minimum overlap of neighbouring tiles, packed pixels, at least 64 [default: 64].
     #[arg(long)]
     pub overlap: Option<usize>,
     /// cpu, or cuda (needs a build with `--features cuda`).
@@ -121,6 +121,7 @@ pub fn run(a: &EnhanceArgs) -> Result<()> {
             bail!("--t2 must be in [0, 1], got {t}");
         }
     }
+    pgrf_nn::infer::check_tiling_args(a.tile, a.overlap)?;
     let jobs = plan_jobs(a)?;
     a.device.check_available().map_err(anyhow::Error::msg)?;
     let calib = match &a.calib {

@@ -338,6 +338,7 @@ fn write_file(path: &Path, text: &str) -> Result<()> {
 }
 
 pub fn run(a: &EvalArgs) -> Result<()> {
+    pgrf_nn::infer::check_tiling_args(a.tile, None)?;
     let crop = parse_crop(a)?;
     let white = parse_white(a)?;
     let levels = pgrf_raw::LevelOverrides { black: None, white };

@@ -3,7 +3,9 @@
 //! packed input) through the tiled network to the result in the input's own
 //! mosaic and levels.
 
-use super::image::{overlap_for, plan_for, restore_image, round_tile, ImageOptions};
+use super::image::{
+    check_tiling_args, overlap_for, plan_for, restore_image, round_tile, ImageOptions,
+};
 use super::memory::auto_tile;
 use super::prepare::network_input;
 use super::restorer::Restore;
@@ -72,6 +74,7 @@ pub fn restore_packed(
     progress: &dyn Progress,
 ) -> Result<RestoredPacked> {
     let (_, ph, pw) = input.dim();
+    check_tiling_args(tiling.tile, tiling.overlap)?;
     let opts = tiling.options(r, ph, pw);
     let plan = plan_for(ph, pw, &opts, r.side_multiple())?;
     if tiling.tile.is_some() && tiling.device == DeviceKind::Cpu {

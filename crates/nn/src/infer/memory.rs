@@ -53,8 +53,8 @@ pub fn tile_bytes(arch: &Architecture, h: usize, w: usize) -> f64 {
     bytes_per_pixel(arch) * (h * w) as f64 + 2.0 * 4.0 * tokens * tokens
 }
 
-/// The largest square tile, a multiple of `multiple` between 128 (or
-/// 8 x `multiple`) and `cap`, whose estimated peak fits in `budget` bytes.
+/// The largest square tile, a multiple of `multiple` between
+/// [`super::image::MIN_TILE`] (or 8 x `multiple`) and `cap`, whose estimated peak fits in `budget` bytes.
 pub(crate) fn tile_for_budget(
     arch: &Architecture,
     multiple: usize,
@@ -62,7 +62,7 @@ pub(crate) fn tile_for_budget(
     cap: usize,
 ) -> usize {
     let m = multiple.max(1);
-    let lo = (8 * m).max(128);
+    let lo = (8 * m).max(super::image::MIN_TILE).div_ceil(m) * m;
     let by_pixels = (budget as f64 / bytes_per_pixel(arch)).sqrt() as usize;
     let mut side = (by_pixels.min(cap).max(lo) / m) * m;
     while side > lo && tile_bytes(arch, side, side) > budget as f64 {
@@ -150,7 +150,7 @@ mod tests {
         assert_eq!(small % 16, 0);
         assert_eq!(big % 16, 0);
         assert!(big <= 2048);
-        assert_eq!(tile_for_budget(&a, 16, 1, 2048), 128);
+        assert_eq!(tile_for_budget(&a, 16, 1, 2048), 144);
         assert_eq!(tile_for_budget(&a, 16, 8 << 30, 512), 512);
         let f = Architecture::Sr3(Sr3Config::new());
         assert!(tile_for_budget(&f, 16, 1 << 30, 2048) < tile_for_budget(&a, 16, 1 << 30, 2048));

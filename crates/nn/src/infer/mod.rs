@@ -19,5 +19,7 @@ pub mod start;
 pub mod tiles;
 
 pub use frame::{restore_frame, restore_packed, RestoredFrame, RestoredPacked, Tiling};
-pub use image::{restore_image, ImageOptions, DEFAULT_OVERLAP};
+pub use image::{
+    check_tiling_args, restore_image, ImageOptions, DEFAULT_OVERLAP, MIN_OVERLAP, MIN_TILE,
+};
 pub use restorer::{load, Restore, Restorer, SamplerChoice};
