@@ -121,6 +121,83 @@ fn a_looping_ifd_chain_is_refused_without_allocating() {
     std::fs::remove_dir_all(&d).unwrap();
 }
 
+/// A chart DNG whose Software entry is replaced by `(tag, kind, count)`
+/// pointing at `tail`, appended to the file (or, for `inline`, holding
+/// `tail`'s offset as its value).
+fn with_structure(dir: &Path, name: &str, entry: (u16, u16, u32), tail: &[u8]) -> PathBuf {
+    let chart = dir.join("c.dng");
+    if !chart.exists() {
+        common::chart(&chart, 256, 192);
+    }
+    let mut b = std::fs::read(&chart).unwrap();
+    let end = b.len() as u32;
+    let (e, ..) = entries(&b)
+        .into_iter()
+        .find(|&(_, t, _, _)| t == 305)
+        .expect("the chart has a Software entry");
+    let (tag, kind, count) = entry;
+    b[e..e + 2].copy_from_slice(&tag.to_le_bytes());
+    b[e + 2..e + 4].copy_from_slice(&kind.to_le_bytes());
+    b[e + 4..e + 8].copy_from_slice(&count.to_le_bytes());
+    b[e + 8..e + 12].copy_from_slice(&end.to_le_bytes());
+    b.extend_from_slice(tail);
+    let p = dir.join(name);
+    std::fs::write(&p, b).unwrap();
+    p
+}
+
+/// Structures rawler reads as IFDs without their being IFDs (issue 17): the
+/// ICC profile's data, an UNDEFINED SubIFDs entry's data, a Kodak IFD and
+/// Panasonic's CameraIFD, each holding an entry of 2^32 - 256 doubles
+/// (rawler asked the allocator for 32 GB and aborted on the first two).
+#[test]
+fn structures_rawler_reads_as_ifds_cannot_make_it_allocate() {
+    let d = scratch("hostile", "structures");
+    let mut bad = 1u16.to_le_bytes().to_vec();
+    for v in [1u16, 12] {
+        bad.extend_from_slice(&v.to_le_bytes());
+    }
+    bad.extend_from_slice(&0xFFFF_FF00u32.to_le_bytes());
+    bad.extend_from_slice(&8u32.to_le_bytes());
+    bad.extend_from_slice(&0u32.to_le_bytes());
+    let mut tiff = b"II*\0\x08\0\0\0".to_vec();
+    tiff.extend_from_slice(&bad);
+    let n = bad.len() as u32;
+    let cases = [
+        ("icc.dng", (34675, 7, n), &bad, "in ICC"),
+        ("undefined_subifd.dng", (330, 7, n), &bad, "undefined"),
+        ("kodak_ifd.dng", (33424, 4, 1), &bad, "Kodak"),
+        (
+            "camera_ifd.dng",
+            (0x0120, 7, tiff.len() as u32),
+            &tiff,
+            "Panasonic's CameraIFD",
+        ),
+    ];
+    for (name, entry, tail, what) in cases {
+        let f = with_structure(&d, name, entry, tail);
+        let out = pgrf_limited(&["info", s(&f)], 2048);
+        let e = one_line_error(&out);
+        assert!(
+            e.contains("claims 4294967040 values (32768 MiB), more than the file could hold"),
+            "{what}: {e}"
+        );
+    }
+    // The chart itself, with the Software entry made an ICC profile that is
+    // no IFD (its first bytes, a size below 64 KiB, read as 0 entries), still
+    // reads.
+    let mut icc = vec![0u8, 0, 2, 0];
+    icc.extend_from_slice(b"lcmsmntrRGB XYZ ");
+    let ok = with_structure(&d, "icc_ok.dng", (34675, 7, icc.len() as u32), &icc);
+    let out = pgrf_limited(&["info", s(&ok)], 2048);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    std::fs::remove_dir_all(&d).unwrap();
+}
+
 #[test]
 #[cfg_attr(not(shared_data), ignore = "needs ../shared/data")]
 fn lying_sizes_and_offsets_in_the_550d_dng_are_refused() {

@@ -30,17 +30,19 @@ const CASES: [(&str, &str); 11] = [
     ("mrw_block_length_wraps.mrw", "claims 4294967288 bytes"),
     // raw_decode, minimised: a 38-byte TIFF whose EXIF IFD pointer is 0.
     // The walk took 0 as "no IFD"; rawler reads the file header as an IFD of
-    // 0x4949 entries, one of them of ~2^32 bytes.
+    // 0x4949 entries, one of them of ~2^32 bytes: refused where rawler's
+    // own reading of that IFD would allocate it.
     (
         "tiff_exif_ifd_at_offset_0.tif",
-        "an IFD at byte 0 claims 18761 entries",
+        "tag 0 claims 4294966389 values (4096 MiB), more than the file could hold",
     ),
     // Triage: one IFD reached 1,000 times through a SubIFDs list, each time
     // reading 4,000 strip-offset lists of 15,000 values (6e10 reads, most
-    // of an hour) before anything was refused.
+    // of an hour) before anything was refused. rawler itself would hold
+    // every copy of the lists it read, which is what refuses it first.
     (
         "tiff_revisited_ifd_long_strip_lists.dng",
-        "strip, tile and IFD offsets",
+        "its entries' values add up to more than 512 MiB",
     ),
     // raw_decode: a NEF whose MakerNote ("Nikon\0\x02", then a big-endian
     // TIFF its offsets count from) has an entry of count ~2^32 (rawler

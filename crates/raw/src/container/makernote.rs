@@ -5,6 +5,7 @@
 //! MakerNote is walked with `tiff`'s walker, from where that decoder finds
 //! it; the layouts are kept here, apart from the generic IFD walk.
 
+use super::lenient::Values;
 use super::tiff::{find_entry, Entry, Walk};
 use super::Order;
 
@@ -46,7 +47,7 @@ pub(super) enum NoteLayout {
 /// (a MakerNote too short for the prefixes it compares) or read nothing,
 /// there is nothing to walk. `spent` carries the IFDs visited and offsets
 /// listed by earlier MakerNote walks, counted against [`MAX_IFDS`] and
-/// [`MAX_LISTED`].
+/// [`MAX_LISTED`], and the entry values rawler would hold so far.
 ///
 /// [`MAX_IFDS`]: super::MAX_IFDS
 /// [`MAX_LISTED`]: super::MAX_LISTED
@@ -55,7 +56,7 @@ pub(super) fn check_makernote(
     order: Order,
     note: &Entry,
     layout: NoteLayout,
-    spent: &mut (usize, u64),
+    spent: &mut (usize, u64, Values),
 ) -> Result<(), String> {
     let at = note.at;
     // The IFD at `ifd` of the structure whose offsets count from `base`.
@@ -64,9 +65,9 @@ pub(super) fn check_makernote(
             return Ok(());
         };
         let mut walk = Walk::new(b, o, sub_tags, true);
-        (walk.visits, walk.listed) = *spent;
+        (walk.visits, walk.listed, walk.values) = *spent;
         let walked = walk.ifd(ifd, false);
-        *spent = (walk.visits, walk.listed);
+        *spent = (walk.visits, walk.listed, walk.values);
         walked.map_err(|e| {
             if base == 0 {
                 format!("{e} (in the MakerNote at byte {at})")

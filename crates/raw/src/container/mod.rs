@@ -23,7 +23,14 @@
 //!   reading them, and reads a type it does not know as bytes;
 //! - the MakerNote, where the decoder rawler picks (by the Make tag) parses
 //!   it as an IFD, is walked the way that decoder finds it (vendor prefix,
-//!   byte order and the base its offsets count from), for the same reason.
+//!   byte order and the base its offsets count from), for the same reason;
+//! - what rawler reads as an IFD although it need not be one (an ICC
+//!   profile's data, UNDEFINED or unknown-typed SubIFD entries, a Kodak
+//!   IFD, Panasonic's CameraIFD, Sony's encrypted SR2 block, which is
+//!   decrypted for the purpose) is read as rawler reads it, tolerating what
+//!   it tolerates, and refused only where an entry would make it allocate
+//!   more than the file could hold; and all the entry values rawler would
+//!   keep add up to at most twice the file (512 MiB for small files).
 //!
 //! RAF files start with Fujifilm's own header, which points at two TIFF
 //! structures rawler parses (the preview JPEG's EXIF and the raw IFDs with
@@ -38,7 +45,8 @@
 //! either way.
 //!
 //! Each format has its own submodule: `tiff` walks a TIFF structure's IFDs
-//! and checks its images, `makernote` finds and walks the vendors'
+//! and checks its images, `lenient` follows rawler's own tolerant reading of
+//! an IFD and what it allocates, `makernote` finds and walks the vendors'
 //! MakerNotes the way each of rawler's decoders does, `raf` and `mrw` find
 //! the TIFF structures inside Fujifilm's and Minolta's containers, `bmff`
 //! walks ISO BMFF boxes and a CR3's metadata, and `qtk` bounds QuickTake
@@ -47,6 +55,7 @@
 //! checks by the file's magic.
 
 mod bmff;
+mod lenient;
 mod makernote;
 mod mrw;
 mod qtk;

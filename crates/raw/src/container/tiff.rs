@@ -4,10 +4,16 @@
 //! through it, so it lives apart from the containers that only locate those
 //! structures; the MakerNotes it collects are walked by `makernote`.
 
+use super::lenient::{self, Blob, Values};
 use super::makernote::{check_makernote, NoteLayout, Notes};
 use super::{too_many_pixels, Order, MAX_ENTRIES, MAX_IFDS, MAX_LISTED};
 
 pub(super) const SUB_IFD_TAGS: [u16; 4] = [330, 34665, 34853, 40965];
+/// The tags rawler's TIFF reader parses as sub-IFDs of the root chain's
+/// IFDs (`wellknown_sub_ifd_tags`: SubIFDs, EXIF, GPS and the ICC profile),
+/// with the Kodak IFD its CR2 and DCR decoders add: read the way rawler
+/// reads them (`lenient`), whatever their type.
+const RAWLER_SUB_TAGS: [u16; 5] = [330, 34665, 34853, 34675, 33424];
 const TAG_WIDTH: u16 = 256;
 const TAG_LENGTH: u16 = 257;
 const TAG_BITS: u16 = 258;
@@ -127,13 +133,16 @@ pub(super) fn check_tiff(
         Notes::Raf => Some(NoteLayout::Prefixed { relative: false }),
         Notes::ByMake => walk.note_layout(),
     };
+    let mut spent = (0, 0, walk.values);
     if let Some(layout) = layout {
         // rawler parses one MakerNote; a file that has many gets them walked
         // within the budget of one walk.
-        let mut spent = (0, 0);
         for note in &walk.notes {
             check_makernote(bytes, order, note, layout, &mut spent)?;
         }
+    }
+    if matches!(notes, Notes::ByMake) {
+        lenient::check_decoder_ifds(bytes, order, &walk.chain, &mut spent.2)?;
     }
     Ok(())
 }
@@ -210,6 +219,11 @@ pub(super) struct Walk<'a> {
     /// Whether next-IFD offsets are followed (rawler reads only the first
     /// IFD of some structures).
     follow_next: bool,
+    /// What rawler's reading of the IFDs walked (and of the structures it
+    /// reads as IFDs from them) would allocate.
+    pub(super) values: Values,
+    /// The root chain's IFD offsets, in order.
+    pub(super) chain: Vec<u64>,
 }
 
 /// Deeper than any camera's IFD nesting plus chain.
@@ -232,6 +246,8 @@ impl<'a> Walk<'a> {
             dng_chain: false,
             notes: Vec::new(),
             follow_next: !note,
+            values: Values::new(bytes.len()),
+            chain: Vec::new(),
         }
     }
 
@@ -270,6 +286,9 @@ impl<'a> Walk<'a> {
             return Err(format!(
                 "malformed TIFF structure: the IFD at byte {off} ({n} entries) runs past the end of the file"
             ));
+        }
+        if chain {
+            self.chain.push(off);
         }
         let mut img = Image::default();
         let mut children = Vec::new();
@@ -343,6 +362,22 @@ impl<'a> Walk<'a> {
                 _ => {}
             }
         }
+        // What rawler allocates for this IFD's entries (each lies inside the
+        // file, but together they may not fit), and the structures
+        // it reads as IFDs from its sub-IFD tags whatever their type (an
+        // ICC profile, an UNDEFINED SubIFDs entry): read its way.
+        let blob = Blob {
+            bytes,
+            order,
+            base: 0,
+            corr: 0,
+        };
+        let rawler_subs: &[u16] = if self.note {
+            self.sub_tags
+        } else {
+            &RAWLER_SUB_TAGS
+        };
+        lenient::check_ifd(&blob, off as u32, rawler_subs, &mut self.values)?;
         if self.follow_next {
             // "Some TIFF writers skip the next ifd pointer": rawler reads a
             // missing one as 0 (formats/tiff/ifd.rs, line 192), and Canon's
