@@ -183,6 +183,7 @@ mod tests {
             1,
             "no temp file left behind"
         );
+        std::fs::remove_dir_all(&d).unwrap();
     }
 
     #[test]
@@ -198,6 +199,7 @@ mod tests {
         assert!(err.to_string().contains("interrupted"));
         assert_eq!(std::fs::read(&p).unwrap(), b"old");
         assert_eq!(std::fs::read_dir(&d).unwrap().count(), 1);
+        std::fs::remove_dir_all(&d).unwrap();
     }
 
     #[test]
@@ -237,6 +239,7 @@ mod tests {
         assert_eq!(part_owner(".x.dng.12.3.part"), Some(12));
         assert_eq!(part_owner(".x.12.3.part"), Some(12));
         assert_eq!(part_owner(".12.3.part"), None);
+        std::fs::remove_dir_all(&d).unwrap();
     }
 
     #[test]
@@ -246,5 +249,6 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(err.contains("does not exist"), "{err}");
+        std::fs::remove_dir_all(&d).unwrap();
     }
 }
