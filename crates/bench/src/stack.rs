@@ -34,6 +34,7 @@ pub fn run(a: &StackArgs) -> Result<()> {
             expect: None,
             single_exposure: true,
             need_exposure: false,
+            per_exposure: 2,
             tap_pixels: 0,
             progress: &pgrf_core::NoProgress,
         },

@@ -48,6 +48,12 @@ pub fn law_name(law: Option<DarkLaw>) -> &'static str {
     }
 }
 
+/// The dark law as people read it: "linear", "sqrt + c", ...
+pub fn law_label(law: Option<DarkLaw>, offset: bool) -> String {
+    let plus = if offset && law.is_some() { " + c" } else { "" };
+    format!("{}{plus}", law_name(law))
+}
+
 impl CalibrationRun {
     /// The run's figures as (quantity, value, unit) rows in EMVA 1288's
     /// vocabulary (system gain, temporal dark noise, DSNU, PRNU, dark
@@ -101,13 +107,24 @@ impl CalibrationRun {
                 } else {
                     "e-/sqrt(s)"
                 };
+                let plus = if m.dark_offset { " + c" } else { "" };
                 summary.push(row(
-                    &format!("Dark current (mean, {} law)", law_name(m.dark_law)),
+                    &format!(
+                        "Dark current (mean, {} law)",
+                        law_label(m.dark_law, m.dark_offset)
+                    ),
                     format!("{rate:.4}"),
                     unit,
                 ));
+                if let Some(c) = m.dark_offset_mean {
+                    summary.push(row(
+                        "Dark signal offset c (mean)",
+                        format!("{c:.3} ({:.2} e-)", c / m.k),
+                        "DN",
+                    ));
+                }
                 summary.push(row(
-                    "Dark signal fit R^2, a*sqrt(t) / a*t",
+                    &format!("Dark signal fit R^2, a*sqrt(t){plus} / a*t{plus}"),
                     format!("{rs:.5} / {rl:.5}"),
                     "",
                 ));
@@ -165,6 +182,7 @@ pub fn calibrate(input: &CalibrateInput, progress: &dyn Progress) -> Result<Cali
             expect: None,
             single_exposure: true,
             need_exposure: false,
+            per_exposure: 2,
             tap_pixels: input.tap_pixels,
             progress,
         },
@@ -182,20 +200,21 @@ pub fn calibrate(input: &CalibrateInput, progress: &dyn Progress) -> Result<Cali
         key.iso = input.iso;
     }
     let bias = estimate_bias(&bias_stack, key.black)?;
-    let opts = |kind| ReadOptions {
+    let opts = |kind, per_exposure| ReadOptions {
         kind,
         expect: Some(&bias_stack.key),
         single_exposure: false,
         need_exposure: true,
+        per_exposure,
         tap_pixels: 0,
         progress,
     };
-    let flat_stack = read_stack(&input.flat, &opts("flat"))?;
+    let flat_stack = read_stack(&input.flat, &opts("flat", 2))?;
     let gain = estimate_gain(&flat_stack, &bias)?;
     let (dark, dark_frames) = if input.dark.is_empty() {
         (None, Vec::new())
     } else {
-        let dark_stack = read_stack(&input.dark, &opts("dark"))?;
+        let dark_stack = read_stack(&input.dark, &opts("dark", 1))?;
         let frames = dark_stack.groups.iter().map(|g| g.files.len()).collect();
         (Some(estimate_dark(&dark_stack, &bias, gain.k)?), frames)
     };
@@ -211,6 +230,7 @@ pub fn calibrate(input: &CalibrateInput, progress: &dyn Progress) -> Result<Cali
         response: Some(gain.response.clone()),
         r2_sqrt: dark.as_ref().map(|d| d.r2_sqrt.clone()),
         r2_linear: dark.as_ref().map(|d| d.r2_linear.clone()),
+        dark_offset: dark.as_ref().and_then(|d| d.offset_dn.clone()),
     };
     let mut pp = bias.ppcc_pixels.clone();
     pp.sort_by(|a, b| a.total_cmp(b));
@@ -242,11 +262,16 @@ pub fn calibrate(input: &CalibrateInput, progress: &dyn Progress) -> Result<Cali
         dark_r2_sqrt: dark.as_ref().map(|d| d.r2_sqrt_global),
         dark_r2_linear: dark.as_ref().map(|d| d.r2_linear_global),
         dark_rate_mean: dark.as_ref().map(|d| d.rate_mean),
+        dark_offset: dark.as_ref().is_some_and(|d| d.offset),
+        dark_offset_mean: dark
+            .as_ref()
+            .filter(|d| d.offset)
+            .map(|d| d.offset_mean_dn),
         ppcc_pixel_median: pp.get(pp.len() / 2).copied(),
         ppcc_pooled: bias.ppcc_pooled.is_finite().then_some(bias.ppcc_pooled),
         hot_pixels: defect_map.iter().filter(|&&d| d == 1.0).count(),
         dead_pixels: defect_map.iter().filter(|&&d| d == 2.0).count(),
-        units: "maps packed (4, H/2, W/2) in R,G1,B,G2 order; fixed_pattern (bias mean - black), sigma_read, response: DN; gain: DN per electron (eq. 3.15 per pixel); dark_rate: electrons per sqrt(s) (sqrt law) or per s (linear law), N_FP absorbed; defects: 0 good, 1 hot, 2 dead; r2_*: R^2 of the per-pixel dark fits; K, row_sigma, read_sigma_median, dsnu: DN (K: DN/e-)".into(),
+        units: "maps packed (4, H/2, W/2) in R,G1,B,G2 order; fixed_pattern (bias mean - black), sigma_read, response: DN; gain: DN per electron (eq. 3.15 per pixel); dark_rate: electrons per sqrt(s) (sqrt law) or per s (linear law), N_FP absorbed; defects: 0 good, 1 hot, 2 dead; r2_*: R^2 of the per-pixel dark fits (with the offset term when dark_offset); dark_offset: the dark law's offset c, DN; K, row_sigma, read_sigma_median, dsnu: DN (K: DN/e-)".into(),
     };
     Ok(CalibrationRun {
         calibration: Calibration { meta, maps },

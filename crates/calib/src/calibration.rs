@@ -32,8 +32,10 @@ pub struct CalibMeta {
     pub(crate) white: u32,
     pub(crate) bias_frames: usize,
     pub(crate) bias_exposure_s: f64,
-    pub(crate) dark_exposures_s: Vec<f64>,
-    pub(crate) dark_frames: Vec<usize>,
+    /// Exposure times of the dark stack, s (empty without darks).
+    pub dark_exposures_s: Vec<f64>,
+    /// Dark frames averaged at each of those exposures.
+    pub dark_frames: Vec<usize>,
     pub(crate) flat_exposures_s: Vec<f64>,
     pub(crate) flat_frames: Vec<usize>,
     /// System gain K, DN per electron.
@@ -63,6 +65,14 @@ pub struct CalibMeta {
     /// Mean dark rate, electrons per sqrt(s) (sqrt law) or per s (linear
     /// law); None without dark frames.
     pub dark_rate_mean: Option<f64>,
+    /// Whether the dark law has an offset term c (y = a g(t) + c, chosen
+    /// per sensor); false in records older than the term.
+    #[serde(default)]
+    pub dark_offset: bool,
+    /// Mean dark offset c, DN (present with `dark_offset`; the per-pixel
+    /// values are the `dark_offset` map).
+    #[serde(default)]
+    pub dark_offset_mean: Option<f64>,
     /// Median over the tapped pixels of the read noise's probability-plot
     /// correlation coefficient with a normal (1 is perfectly Gaussian).
     pub ppcc_pixel_median: Option<f64>,
@@ -153,6 +163,14 @@ impl CalibMeta {
                 ));
             }
         }
+        if let Some(c) = self.dark_offset_mean {
+            if !(c.is_finite() && c.abs() <= self.white as f64) {
+                return Err(format!(
+                    "dark_offset_mean {} DN (must be finite and within the white level)",
+                    shown(c)
+                ));
+            }
+        }
         Ok(())
     }
 }
@@ -237,6 +255,10 @@ pub struct CalibMaps {
     pub r2_sqrt: Option<Array3<f32>>,
     /// R^2 of the per-pixel dark fit a*t.
     pub r2_linear: Option<Array3<f32>>,
+    /// Per-pixel offset c of the dark law y = a g(t) + c, DN, when the
+    /// record's law has one: dark charge every exposed frame has and a
+    /// zero-length bias frame lacks.
+    pub dark_offset: Option<Array3<f32>>,
 }
 
 impl CalibMaps {
@@ -249,6 +271,7 @@ impl CalibMaps {
             ("sigma_read", &self.sigma_read),
         ];
         for (name, m) in [
+            ("dark_offset", &self.dark_offset),
             ("gain", &self.gain),
             ("r2_linear", &self.r2_linear),
             ("r2_sqrt", &self.r2_sqrt),
@@ -280,6 +303,7 @@ impl CalibMaps {
             response: maps.remove("response"),
             r2_sqrt: maps.remove("r2_sqrt"),
             r2_linear: maps.remove("r2_linear"),
+            dark_offset: maps.remove("dark_offset"),
         };
         if let Some(n) = maps.keys().next() {
             return Err(format!("unknown map '{n}' in a calibration file"));
@@ -373,12 +397,18 @@ impl Calibration {
     }
 
     /// The noise model's per-pixel maps. N_FP is not separated from the dark
-    /// rate by this calibration (it is absorbed in it), so it is zero.
+    /// rate by this calibration (it is absorbed in it), so it is zero. A
+    /// dark law's offset c is in every exposed frame, so it joins the fixed
+    /// pattern: synthesis always simulates an exposure.
     pub fn to_pixel_maps(&self) -> Result<PixelMaps> {
         let pixel = |a: &Array3<f32>| Map::Pixel(Arc::new(a.clone()));
         let law = self.meta.dark_law.unwrap_or(DarkLaw::Sqrt);
+        let bias = match &self.maps.dark_offset {
+            Some(c) => &self.maps.fixed_pattern + c,
+            None => self.maps.fixed_pattern.clone(),
+        };
         Ok(PixelMaps {
-            bias: pixel(&self.maps.fixed_pattern),
+            bias: pixel(&bias),
             sigma_read: pixel(&self.maps.sigma_read),
             dark_rate: pixel(&self.maps.dark_rate),
             n_fp: Map::Scalar(0.0),
@@ -413,7 +443,8 @@ impl Calibration {
 
     /// Expected dark level above black in DN per packed pixel for an exposure
     /// of `exposure_s`: the fixed pattern plus the mean dark current
-    /// (rate x law(t) electrons x K DN per electron). This is what dark-frame
+    /// (rate x law(t) electrons x K DN per electron, plus the law's offset
+    /// for an exposed frame, t > 0). This is what dark-frame
     /// subtraction removes before a photo is amplified; the random part of
     /// the dark signal stays for the denoiser.
     pub fn dark_shading_dn(&self, exposure_s: f64) -> Result<Array3<f32>> {
@@ -428,6 +459,9 @@ impl Calibration {
         ndarray::Zip::from(&mut out)
             .and(&self.maps.dark_rate)
             .for_each(|o, &r| *o += (r as f64 * dn_per_rate) as f32);
+        if let (Some(c), true) = (&self.maps.dark_offset, exposure_s > 0.0) {
+            out += c;
+        }
         Ok(out)
     }
 

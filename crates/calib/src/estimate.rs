@@ -10,8 +10,9 @@
 //! - system gain K = Var / mean (eq. 3.15): `gain_var_mean`, and its
 //!   regression over light levels (photon transfer): `photon_transfer`;
 //! - dark signal, dark mean minus bias mean: `dark_signal`; its fit
-//!   y = a g(t), g(t) = sqrt(t) or t: `fit_origin`; E(N) = K2 E(N_RS),
-//!   K2 = 1 + N_FP, as a rate in electrons: `dark_rate`.
+//!   y = a g(t) (+ c), g(t) = sqrt(t) or t: `fit_dark_law`, the law chosen
+//!   by `choose_dark_law`; E(N) = K2 E(N_RS), K2 = 1 + N_FP, as a rate in
+//!   electrons: `dark_rate`.
 
 use crate::calibration::GainMethod;
 use crate::error::{invalid, Result};
@@ -282,44 +283,158 @@ pub(crate) fn estimate_gain(flat: &Stack, bias: &BiasEstimate) -> Result<GainEst
     })
 }
 
-/// From dark frames (two or more exposure times): the dark-current law and
-/// per-pixel dark rate.
+/// From dark frames (two or more exposure times, any number of frames at
+/// each): the dark-current law and per-pixel dark rate.
 #[derive(Clone, Debug)]
 pub struct DarkEstimate {
     pub(crate) exposures: Vec<f64>,
-    /// The law with the better fit of the pixel-averaged dark signal.
+    /// The law with the better fit of the pixel-averaged dark signal
+    /// ([`choose_dark_law`]).
     pub(crate) law: DarkLaw,
-    /// R^2 of the pixel-averaged dark signal under the law a sqrt(t).
+    /// Whether the law has an offset term c (y = a g(t) + c).
+    pub offset: bool,
+    /// R^2 of the pixel-averaged dark signal under a sqrt(t) (+ c when
+    /// `offset`).
     pub r2_sqrt_global: f64,
-    /// R^2 of the pixel-averaged dark signal under the law a t.
+    /// R^2 of the pixel-averaged dark signal under a t (+ c when `offset`).
     pub r2_linear_global: f64,
-    /// Per-pixel R^2 of each law (NaN where the pixel has no dark signal variation).
+    /// Per-pixel R^2 of each law, in the chosen offset form (NaN where the
+    /// pixel's dark signal does not vary).
     pub(crate) r2_sqrt: Array3<f32>,
     pub(crate) r2_linear: Array3<f32>,
     /// Per-pixel dark rate in electrons per sqrt(s) or per s (chosen law),
-    /// N_FP absorbed (mean dark DN = K rate g(t)).
+    /// N_FP absorbed (mean dark DN = K rate g(t) + c).
     pub(crate) rate: Array3<f32>,
     /// Mean dark rate, electrons per unit of g(t) (sqrt(s) or s, after the chosen law).
     pub rate_mean: f64,
+    /// Per-pixel offset c of the dark signal, DN, when `offset`.
+    pub(crate) offset_dn: Option<Array3<f32>>,
+    /// Mean offset c, DN (0 without an offset term).
+    pub offset_mean_dn: f64,
 }
 
-/// The dark-current law fit: least squares through the origin, y = a g,
-/// and its R^2 against the mean of y. With g = sqrt(t) it is the paper's
-/// y = a sqrt(t), with g = t the linear y = a t ([`DarkLaw`]); `y` is the
-/// dark signal ([`dark_signal`]) at the exposure times t.
-pub(crate) fn fit_origin(g: &[f64], y: &[f64]) -> (f64, f64) {
-    let sgg: f64 = g.iter().map(|v| v * v).sum();
-    let a = g.iter().zip(y).map(|(g, y)| g * y).sum::<f64>() / sgg;
-    let my = y.iter().sum::<f64>() / y.len() as f64;
-    let ss_tot: f64 = y.iter().map(|v| (v - my).powi(2)).sum();
-    let ss_res: f64 = g.iter().zip(y).map(|(g, y)| (y - a * g).powi(2)).sum();
-    (
+/// One dark-current law fitted to a dark signal: y = a g(t) + c (c = 0
+/// for the laws through the origin).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LawFit {
+    /// Slope, DN per unit of g(t).
+    pub a: f64,
+    /// Offset, DN (0 through the origin).
+    pub c: f64,
+    /// Weighted sum of squared residuals.
+    pub ss_res: f64,
+    /// 1 - SS_res / SS_tot, SS_tot about the weighted mean of y (NaN when y
+    /// does not vary).
+    pub r2: f64,
+}
+
+/// The dark-current law fit: weighted least squares of y = a g (through the
+/// origin, the paper's y = a sqrt(t) with g = sqrt(t), or y = a t), or with
+/// `offset` of y = a g + c, and its R^2. `y` is the dark signal
+/// ([`dark_signal`]) at the exposure times' g(t); the weights `w` are the
+/// frames averaged at each exposure (a mean of n frames has 1/n of the
+/// noise variance), so one frame per exposure is fine and simply weighs
+/// less.
+pub(crate) fn fit_dark_law(g: &[f64], y: &[f64], w: &[f64], offset: bool) -> LawFit {
+    let sw: f64 = w.iter().sum();
+    let wsum = |f: &dyn Fn(usize) -> f64| (0..y.len()).map(|i| w[i] * f(i)).sum::<f64>();
+    let my = wsum(&|i| y[i]) / sw;
+    let ss_tot = wsum(&|i| (y[i] - my).powi(2));
+    let (a, c) = if offset {
+        let mg = wsum(&|i| g[i]) / sw;
+        let sgg = wsum(&|i| (g[i] - mg).powi(2));
+        let sgy = wsum(&|i| (g[i] - mg) * (y[i] - my));
+        if sgg > 0.0 {
+            let a = sgy / sgg;
+            (a, my - a * mg)
+        } else {
+            (0.0, my)
+        }
+    } else {
+        let sgg = wsum(&|i| g[i] * g[i]);
+        (
+            if sgg > 0.0 {
+                wsum(&|i| g[i] * y[i]) / sgg
+            } else {
+                0.0
+            },
+            0.0,
+        )
+    };
+    let ss_res = wsum(&|i| (y[i] - a * g[i] - c).powi(2));
+    LawFit {
         a,
-        if ss_tot > 0.0 {
+        c,
+        ss_res,
+        r2: if ss_tot > 0.0 {
             1.0 - ss_res / ss_tot
         } else {
             f64::NAN
         },
+    }
+}
+
+/// F(1, nu) at the 99th percentile (the square of Student's t at 0.995), for
+/// the test of an offset term with nu = exposures - 2 degrees of freedom.
+fn f_crit_99(nu: usize) -> f64 {
+    // Student's t quantiles t(0.995, nu), nu = 1..=30, then 40, 60, 120.
+    const T: [f64; 30] = [
+        63.657, 9.925, 5.841, 4.604, 4.032, 3.707, 3.499, 3.355, 3.250, 3.169, 3.106, 3.055, 3.012,
+        2.977, 2.947, 2.921, 2.898, 2.878, 2.861, 2.845, 2.831, 2.819, 2.807, 2.797, 2.787, 2.779,
+        2.771, 2.763, 2.756, 2.750,
+    ];
+    let t = match nu {
+        0 => f64::INFINITY,
+        1..=30 => T[nu - 1],
+        31..=40 => 2.704,
+        41..=60 => 2.660,
+        61..=120 => 2.617,
+        _ => 2.576,
+    };
+    t * t
+}
+
+/// The dark-current law of a sensor, from its pixel-averaged dark signal `y`
+/// at exposure times `t` (weights `w`, see [`fit_dark_law`]): for each of
+/// g = sqrt(t) and g = t the offset c is kept when it improves the fit
+/// significantly (F-test at 1 %: F = (SS_0 - SS_c) / (SS_c / (n - 2)) above
+/// the 99th percentile of F(1, n - 2); it needs three exposures or more),
+/// then the g whose kept fit has the smaller residual variance SS / (n - p)
+/// (p parameters) wins. The paper's sqrt(t) is a CMOS finding; CCDs are
+/// linear, often with an offset. Returns the law, whether it has the offset,
+/// and the sqrt(t) and t fits in that offset form.
+pub(crate) fn choose_dark_law(t: &[f64], y: &[f64], w: &[f64]) -> (DarkLaw, bool, LawFit, LawFit) {
+    let n = t.len();
+    let gs: Vec<f64> = t.iter().map(|v| v.sqrt()).collect();
+    let candidates = [(DarkLaw::Sqrt, &gs[..]), (DarkLaw::Linear, t)];
+    let kept: Vec<(DarkLaw, bool, f64)> = candidates
+        .iter()
+        .map(|&(law, g)| {
+            let origin = fit_dark_law(g, y, w, false);
+            if n < 3 {
+                return (law, false, origin.ss_res / (n - 1).max(1) as f64);
+            }
+            let with = fit_dark_law(g, y, w, true);
+            let f = (origin.ss_res - with.ss_res)
+                / (with.ss_res / (n - 2) as f64).max(f64::MIN_POSITIVE);
+            if f > f_crit_99(n - 2) {
+                (law, true, with.ss_res / (n - 2) as f64)
+            } else {
+                (law, false, origin.ss_res / (n - 1) as f64)
+            }
+        })
+        .collect();
+    let best = if kept[1].2 < kept[0].2 {
+        kept[1]
+    } else {
+        kept[0]
+    };
+    let (law, offset) = (best.0, best.1);
+    (
+        law,
+        offset,
+        fit_dark_law(&gs, y, w, offset),
+        fit_dark_law(t, y, w, offset),
     )
 }
 
@@ -343,17 +458,18 @@ pub(crate) fn dark_rate(a: f64, k: f64) -> f32 {
     (a / k).max(0.0) as f32
 }
 
-/// Dark-frame estimates: dark signal ([`dark_signal`]) per exposure, the
-/// better law of y = a sqrt(t) and y = a t ([`fit_origin`]) on the
-/// pixel-averaged signal, per-pixel rates ([`dark_rate`]) and R^2 maps.
+/// Dark-frame estimates: dark signal ([`dark_signal`]) per exposure, the law
+/// ([`choose_dark_law`]) on the pixel-averaged signal, per-pixel rates
+/// ([`dark_rate`]), offsets and R^2 maps ([`fit_dark_law`]).
 pub(crate) fn estimate_dark(dark: &Stack, bias: &BiasEstimate, k: f64) -> Result<DarkEstimate> {
     let exposures: Vec<f64> = dark.groups.iter().map(|g| g.exposure_s).collect();
     if exposures.len() < 2 {
         return Err(invalid(format!(
-            "dark stack has one exposure time ({} s); fitting a*sqrt(t) vs a*t needs at least 2",
+            "dark stack has one exposure time ({} s); fitting a dark-current law needs at least 2",
             exposures.first().copied().unwrap_or(0.0)
         )));
     }
+    let w: Vec<f64> = dark.groups.iter().map(|g| g.files.len() as f64).collect();
     // Per group, the dark signal of every pixel: mean minus the bias mean.
     let sig: Vec<Vec<f64>> = dark
         .groups
@@ -366,40 +482,44 @@ pub(crate) fn estimate_dark(dark: &Stack, bias: &BiasEstimate, k: f64) -> Result
         .iter()
         .map(|s| s.iter().sum::<f64>() / s.len() as f64)
         .collect();
-    let (_, r2s) = fit_origin(&gs, &avg);
-    let (_, r2l) = fit_origin(&gl, &avg);
-    let law = if r2l > r2s {
-        DarkLaw::Linear
-    } else {
-        DarkLaw::Sqrt
-    };
+    let (law, offset, fs, fl) = choose_dark_law(&exposures, &avg, &w);
     let shape = bias.mean.raw_dim();
     let npx = sig[0].len();
     let mut r2_sqrt = vec![0f32; npx];
     let mut r2_linear = vec![0f32; npx];
     let mut rate = vec![0f32; npx];
+    let mut c_map = vec![0f32; npx];
     let mut y = vec![0.0; exposures.len()];
     for x in 0..npx {
         for (t, s) in y.iter_mut().zip(&sig) {
             *t = s[x];
         }
-        let (as_, r2a) = fit_origin(&gs, &y);
-        let (al, r2b) = fit_origin(&gl, &y);
-        r2_sqrt[x] = r2a as f32;
-        r2_linear[x] = r2b as f32;
-        let a = if law == DarkLaw::Sqrt { as_ } else { al };
-        rate[x] = dark_rate(a, k);
+        let a = fit_dark_law(&gs, &y, &w, offset);
+        let b = fit_dark_law(&gl, &y, &w, offset);
+        r2_sqrt[x] = a.r2 as f32;
+        r2_linear[x] = b.r2 as f32;
+        let chosen = if law == DarkLaw::Sqrt { a } else { b };
+        rate[x] = dark_rate(chosen.a, k);
+        c_map[x] = chosen.c as f32;
     }
     let rate = Array3::from_shape_vec(shape, rate).expect("shape");
+    let offset_mean_dn = if offset {
+        c_map.iter().map(|&v| v as f64).sum::<f64>() / npx as f64
+    } else {
+        0.0
+    };
     Ok(DarkEstimate {
         exposures,
         law,
-        r2_sqrt_global: r2s,
-        r2_linear_global: r2l,
+        offset,
+        r2_sqrt_global: fs.r2,
+        r2_linear_global: fl.r2,
         r2_sqrt: Array3::from_shape_vec(shape, r2_sqrt).expect("shape"),
         r2_linear: Array3::from_shape_vec(shape, r2_linear).expect("shape"),
         rate_mean: rate.mean().unwrap_or(0.0) as f64,
         rate,
+        offset_dn: offset.then(|| Array3::from_shape_vec(shape, c_map).expect("shape")),
+        offset_mean_dn,
     })
 }
 

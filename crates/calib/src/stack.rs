@@ -106,6 +106,10 @@ pub struct ReadOptions<'a> {
     pub single_exposure: bool,
     /// Exposure time must be in the metadata (dark, flat).
     pub need_exposure: bool,
+    /// Frames each exposure needs: 2 where a per-pixel variance is taken
+    /// (bias, flat), 1 where only the mean is (a dark ladder of one frame
+    /// per exposure time is how people shoot them).
+    pub per_exposure: usize,
     /// How many pixels to keep temporal samples of (0 for none).
     pub tap_pixels: usize,
     /// Called once per frame accumulated.
@@ -114,7 +118,7 @@ pub struct ReadOptions<'a> {
 
 /// Decode and accumulate `files`.
 pub fn read_stack(files: &[PathBuf], opt: &ReadOptions) -> Result<Stack> {
-    if files.len() < 2 {
+    if files.len() < 2 && opt.per_exposure >= 2 {
         return Err(invalid(format!(
             "{} stack has {} frame{}; per-pixel variance needs at least 2",
             opt.kind,
@@ -243,18 +247,19 @@ pub fn read_stack(files: &[PathBuf], opt: &ReadOptions) -> Result<Stack> {
             opt.progress.advance(1);
         }
         for g in &groups {
-            if g.files.len() < 2 {
+            if g.files.len() < opt.per_exposure {
                 return Err(invalid(format!(
-                    "{} stack: only one frame at exposure {} s ({}); each exposure needs at least 2",
+                    "{} stack: only one frame at exposure {} s ({}); each exposure needs at least {} (its per-pixel variance is measured)",
                     opt.kind,
                     g.exposure_s,
-                    g.files[0].display()
+                    g.files[0].display(),
+                    opt.per_exposure
                 )));
             }
         }
         groups.sort_by(|a, b| a.exposure_s.total_cmp(&b.exposure_s));
         Ok(Stack {
-            key: key.expect("at least two frames were read"),
+            key: key.ok_or_else(|| invalid(format!("{} stack is empty", opt.kind)))?,
             groups,
             tap,
         })

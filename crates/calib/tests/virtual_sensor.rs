@@ -23,6 +23,18 @@ struct Stacks {
 
 /// Write bias (64 frames), dark (3 exposures x 16) and flat (2 levels x 16) stacks.
 fn write_stacks(v: &VirtualSensor, dir: &Path, bias_frames: usize) -> Stacks {
+    write_ladder(v, dir, bias_frames, &[1.0, 4.0, 16.0], 16)
+}
+
+/// Bias and flat stacks as [`write_stacks`], and `per` dark frames at each
+/// of `exposures`.
+fn write_ladder(
+    v: &VirtualSensor,
+    dir: &Path,
+    bias_frames: usize,
+    exposures: &[f32],
+    per: usize,
+) -> Stacks {
     let mut seed = 1000u64;
     let mut write = |sub: &str, n: usize, electrons: f32, t: f32| -> Vec<PathBuf> {
         let d = dir.join(sub);
@@ -43,8 +55,8 @@ fn write_stacks(v: &VirtualSensor, dir: &Path, bias_frames: usize) -> Stacks {
     };
     let bias = write("bias", bias_frames, 0.0, 1.0 / 8000.0);
     let mut dark = Vec::new();
-    for t in [1.0, 4.0, 16.0] {
-        dark.extend(write("dark", 16, 0.0, t));
+    for &t in exposures {
+        dark.extend(write("dark", per, 0.0, t));
     }
     let mut flat = write("flat", 16, 2000.0, 0.01);
     flat.extend(write("flat", 16, 8000.0, 0.04));
@@ -261,6 +273,80 @@ fn linear_dark_current_is_recognised() {
         d.rate_mean,
         want
     );
+}
+
+/// A dark ladder as people shoot it, one frame at each of six exposures
+/// (10 to 300 s): the estimator takes it, picks the true law among a t,
+/// a sqrt(t) and each with an offset c, and recovers the mean rate and the
+/// offset K c within 5 % (the issue asks 10 %; seen: within 1 %).
+#[test]
+fn one_dark_frame_per_exposure_recovers_the_law_and_rate() {
+    let ladder = [10.0, 20.0, 30.0, 60.0, 150.0, 300.0];
+    for (law, rate, offset_e, name) in [
+        (DarkLaw::Linear, 3.0, 0.0, "linear"),
+        (DarkLaw::Linear, 3.0, 300.0, "linear + c"),
+        (DarkLaw::Sqrt, 10.0, 0.0, "sqrt"),
+        (DarkLaw::Sqrt, 10.0, 300.0, "sqrt + c"),
+    ] {
+        let mut spec = SensorSpec::preset("a7s2-iso1600").unwrap();
+        spec.width = 128;
+        spec.height = 96;
+        spec.dark_law = law;
+        spec.dark_rate = rate;
+        spec.dark_offset = offset_e;
+        let v = VirtualSensor::new(spec).unwrap();
+        let dir = scratch(&format!("ladder-{}", name.replace([' ', '+'], "")));
+        let s = write_ladder(&v, &dir, 16, &ladder, 1);
+        let run = calibrate(
+            &CalibrateInput {
+                bias: s.bias,
+                dark: s.dark,
+                flat: s.flat,
+                iso: None,
+                tap_pixels: 0,
+            },
+            &pgrf_core::NoProgress,
+        )
+        .unwrap_or_else(|e| panic!("{name}: {e}"));
+        let m = &run.calibration.meta;
+        assert_eq!(
+            (m.dark_law, m.dark_offset),
+            (Some(law), offset_e > 0.0),
+            "{name}"
+        );
+        assert_eq!(m.dark_frames, vec![1; 6], "{name}");
+        let d = run.dark.as_ref().unwrap();
+        let want = v.dark_rate.mean().unwrap() as f64;
+        assert!(
+            (d.rate_mean / want - 1.0).abs() < 0.05,
+            "{name}: rate {} vs {want}",
+            d.rate_mean
+        );
+        if offset_e > 0.0 {
+            let want_c = v.spec.k as f64 * offset_e as f64;
+            let got = m.dark_offset_mean.unwrap();
+            assert!(
+                (got / want_c - 1.0).abs() < 0.05,
+                "{name}: offset {got} DN vs {want_c}"
+            );
+            assert!(run.calibration.maps.dark_offset.is_some());
+            // What enhance subtracts from a 60 s exposure: K rate g(60) + c
+            // above the fixed pattern; a zero-length frame has no offset.
+            let c = &run.calibration;
+            let mean = |t: f64| c.dark_shading_dn(t).unwrap().mean().unwrap() as f64;
+            let fp = c.maps.fixed_pattern.mean().unwrap() as f64;
+            let expect = m.k * d.rate_mean * law.electrons(1.0, 60.0) + got;
+            assert!(
+                ((mean(60.0) - fp) / expect - 1.0).abs() < 0.01,
+                "{name}: shading {} vs {expect}",
+                mean(60.0) - fp
+            );
+            assert!((mean(0.0) - fp).abs() < 1e-3, "{name}");
+        } else {
+            assert!(m.dark_offset_mean.is_none() && run.calibration.maps.dark_offset.is_none());
+        }
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
 }
 
 #[test]

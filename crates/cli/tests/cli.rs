@@ -3,7 +3,7 @@
 
 use rand::{RngCore, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use serde_json::Value;
+use serde_json::{json, Value};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
@@ -379,6 +379,65 @@ fn synth_refuses_bad_arguments_cleanly() {
         assert!(err.contains(needle), "{extra:?}: {err}");
         assert!(!out.exists());
     }
+}
+
+/// A dark ladder of one frame per exposure with a linear law and an offset
+/// (a CCD's), from `simulate-sensor` to `calibrate`: the offset law is
+/// found and reported, and the report's summary names it.
+#[test]
+fn a_one_frame_dark_ladder_with_an_offset_calibrates() {
+    let dir = scratch("ladder");
+    let vs = dir.join("vs");
+    let r = pgrf(&[
+        "simulate-sensor",
+        "--frames",
+        "8",
+        "--width",
+        "128",
+        "--height",
+        "96",
+        "--dark-law",
+        "linear",
+        "--dark-offset",
+        "300",
+        "--dark-exposures",
+        "10,20,30,60,150,300",
+        "--dark-frames",
+        "1",
+        "-o",
+        s(&vs),
+    ]);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    assert_eq!(std::fs::read_dir(vs.join("dark")).unwrap().count(), 6);
+    let report = dir.join("report");
+    let r = pgrf(&[
+        "calibrate",
+        "--bias",
+        s(&vs.join("bias")),
+        "--dark",
+        s(&vs.join("dark")),
+        "--flat",
+        s(&vs.join("flat")),
+        "-o",
+        s(&dir.join("c.safetensors")),
+        "--report",
+        s(&report),
+        "--json",
+    ]);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    let out = String::from_utf8_lossy(&r.stdout);
+    let v: Value = serde_json::from_str(out.trim_end().lines().last().unwrap()).unwrap();
+    assert_eq!(
+        (&v["dark_law"], &v["dark_offset"]),
+        (&json!("linear"), &json!(true))
+    );
+    // c = K x 300 e- = 459 DN at ISO 1600.
+    let c = v["dark_offset_mean"].as_f64().unwrap();
+    assert!((c / 459.0 - 1.0).abs() < 0.05, "offset {c} DN");
+    let summary = std::fs::read_to_string(report.join("summary.md")).unwrap();
+    assert!(summary.contains("linear + c law"), "{summary}");
+    assert!(String::from_utf8_lossy(&r.stderr).contains("dark law linear + c"));
+    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 #[test]

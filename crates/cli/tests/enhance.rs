@@ -561,6 +561,7 @@ fn the_calibrated_fixed_pattern_is_subtracted() {
             response: None,
             r2_sqrt: None,
             r2_linear: None,
+            dark_offset: None,
         };
         Calibration { meta, maps }.save(path).unwrap();
     };

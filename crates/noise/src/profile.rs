@@ -98,7 +98,7 @@ impl DarkLaw {
     /// The dark-current law: the dark signal after `t` seconds, in
     /// electrons, for a pixel's `rate` (the paper's y = a sqrt(t), or
     /// y = a t). Its mean times K is the dark level N_RS adds; calibration
-    /// fits `a` per pixel with `pgrf_calib::estimate::fit_origin`.
+    /// fits `a` per pixel with `pgrf_calib::estimate::fit_dark_law`.
     pub fn electrons(self, rate: f64, t: f64) -> f64 {
         match self {
             DarkLaw::Sqrt => rate * t.max(0.0).sqrt(),

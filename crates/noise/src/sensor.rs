@@ -7,10 +7,11 @@
 //! exposure t is, in DN (each random term drawn by the noise model's own
 //! function: `photon_shot`, `dark_shot`, `read_noise`, `row_noise`):
 //!
-//!   black + bias(x) + K prnu(x) Poisson(e) + K Poisson(d(x) g(t)) (1 + n_fp(x))
+//!   black + bias(x) + K prnu(x) Poisson(e) + K Poisson(d(x) g(t) + c(t)) (1 + n_fp(x))
 //!         + N(0, sigma_r(x)) + row(frame, sensor row),   rounded and clipped to 0..white.
 //!
-//! Rounding to integers is the quantisation. Hot pixels have a dark rate far
+//! with c(t) the dark offset (`SensorSpec::dark_offset`, reached within a
+//! fraction of a second). Rounding to integers is the quantisation. Hot pixels have a dark rate far
 //! above the rest.
 
 use crate::error::{NoiseError, Result};
@@ -22,6 +23,9 @@ use pgrf_raw::{Cfa, RawFrame};
 use rand::Rng;
 use rand_distr::StandardNormal;
 use rayon::prelude::*;
+
+/// Time constant of the virtual sensor's dark offset, s.
+pub const DARK_OFFSET_TAU_S: f64 = 0.05;
 
 /// Design of a virtual sensor. The gain, read and row noise of the presets are
 /// the published A7S2 numbers (PMN: K = 9.563e-4 x ISO; sigma_read, sigma_row
@@ -58,6 +62,12 @@ pub struct SensorSpec {
     pub(crate) dark_spread: f32,
     /// How the dark signal grows with exposure time.
     pub dark_law: DarkLaw,
+    /// Dark charge every exposed frame has on top of the law, electrons
+    /// (the offset c of y = a g(t) + c, as CCDs show): it builds up over
+    /// the first [`DARK_OFFSET_TAU_S`] of an exposure (amp glow and
+    /// clock-induced charge at the start of a readout cycle), so a bias
+    /// frame of 1/8000 s has none of it and a dark of a second all of it.
+    pub dark_offset: f32,
     /// Standard deviation of N_FP.
     pub(crate) n_fp: f32,
     /// Share of hot pixels and their dark rate multiplier.
@@ -103,6 +113,7 @@ impl SensorSpec {
             dark_rate: 1.0,
             dark_spread: 0.3,
             dark_law: DarkLaw::Sqrt,
+            dark_offset: 0.0,
             n_fp: 0.05,
             hot_fraction: 1e-4,
             hot_factor: 50.0,
@@ -179,6 +190,7 @@ impl VirtualSensor {
         let plane_rows = sp.cfa.offsets().map(|(r, _)| r);
         let rows = row_noise(seed, sp.height, sp.row_sigma, 1);
         let g = sp.dark_law.electrons(1.0, t as f64);
+        let offset = sp.dark_offset as f64 * (1.0 - (-(t as f64) / DARK_OFFSET_TAU_S).exp());
         let white = sp.white as f32;
         let mut packed = Array3::<u16>::zeros((4, ph, pw));
         let gain = self.gain.as_slice().expect("standard");
@@ -202,7 +214,7 @@ impl VirtualSensor {
                     if electrons > 0.0 {
                         v += photon_shot(&mut rng, gain[x], electrons as f64);
                     }
-                    let de = dark[x] as f64 * g;
+                    let de = dark[x] as f64 * g + offset;
                     if de > 0.0 {
                         v += dark_shot(&mut rng, sp.k, de, Some(nfp[x]));
                     }
@@ -254,6 +266,7 @@ impl VirtualSensor {
             "row_sigma": sp.row_sigma,
             "dark_rate_mean": self.dark_rate.mean().unwrap_or(0.0),
             "dark_law": match sp.dark_law { DarkLaw::Sqrt => "sqrt", DarkLaw::Linear => "linear" },
+            "dark_offset_e": sp.dark_offset,
             "n_fp_sigma": sp.n_fp,
             "hot_pixels": self.hot.iter().filter(|&&h| h > 0.0).count(),
             "units": "gain DN/e-; bias, sigma_read DN; dark_rate e- per sqrt(s) (sqrt law) or per s (linear law); maps packed (4, H/2, W/2) R,G1,B,G2",

@@ -50,6 +50,8 @@ pub struct ReportData<'a> {
     pub r2_sqrt: Option<ArrayView3<'a, f32>>,
     /// Per-pixel R^2 of the dark-current fit y = a*t (None when no dark frames).
     pub r2_linear: Option<ArrayView3<'a, f32>>,
+    /// Whether both fits carry the offset term c (y = a g(t) + c).
+    pub dark_offset: bool,
     /// Rows of the summary table: (quantity, value, unit), EMVA 1288 vocabulary
     /// (system gain, temporal dark noise, DSNU, PRNU, dark current ...), already formatted.
     pub summary: Vec<(String, String, String)>,
@@ -701,9 +703,14 @@ fn sigma_hist_section(dir: &Path, data: &ReportData, title: &str) -> Result<Sect
 /// law explains the dark signal of more pixels, which needs a shared axis.
 fn dark_r2_section(dir: &Path, data: &ReportData, title: &str) -> Result<Section, ReportError> {
     const HEADING: &str = "Dark-current fit quality";
+    let (sqrt, linear) = if data.dark_offset {
+        ("sqrt-law: y = a·√t + c", "linear: y = a·t + c")
+    } else {
+        ("sqrt-law: y = a·√t", "linear: y = a·t")
+    };
     let laws: Vec<(&str, RGBColor, &ArrayView3<f32>)> = [
-        ("sqrt-law: y = a·√t", RGBColor(30, 110, 200), &data.r2_sqrt),
-        ("linear: y = a·t", RGBColor(230, 120, 20), &data.r2_linear),
+        (sqrt, RGBColor(30, 110, 200), &data.r2_sqrt),
+        (linear, RGBColor(230, 120, 20), &data.r2_linear),
     ]
     .into_iter()
     .filter_map(|(l, c, a)| a.as_ref().map(|a| (l, c, a)))
@@ -1032,6 +1039,7 @@ mod tests {
             fixed_pattern: fixed.view(),
             r2_sqrt: Some(r2s.view()),
             r2_linear: Some(r2l.view()),
+            dark_offset: false,
             summary: summary_rows(),
         };
         let written = write_report(&dir, &data).unwrap();
@@ -1102,6 +1110,7 @@ mod tests {
             fixed_pattern: empty.view(),
             r2_sqrt: None,
             r2_linear: None,
+            dark_offset: false,
             summary: vec![],
         };
         let written = write_report(&dir, &data).unwrap();
@@ -1136,6 +1145,7 @@ mod tests {
             fixed_pattern: z.view(),
             r2_sqrt: None,
             r2_linear: None,
+            dark_offset: false,
             summary: vec![],
         };
         let written = write_report(&dir, &data).unwrap();
@@ -1164,6 +1174,7 @@ mod tests {
             fixed_pattern: one.view(),
             r2_sqrt: Some(bad_r2.view()),
             r2_linear: None,
+            dark_offset: false,
             summary: vec![],
         };
         let written = write_report(&dir, &data).unwrap();
@@ -1184,6 +1195,7 @@ mod tests {
             fixed_pattern: z.view(),
             r2_sqrt: None,
             r2_linear: None,
+            dark_offset: false,
             summary: vec![],
         };
         let err = write_report(&dir, &data).unwrap_err();
@@ -1210,6 +1222,7 @@ mod tests {
             fixed_pattern: z.view(),
             r2_sqrt: None,
             r2_linear: None,
+            dark_offset: false,
             summary: vec![],
         };
         let err = write_report(&dir, &data).unwrap_err().to_string();

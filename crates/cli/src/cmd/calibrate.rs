@@ -15,7 +15,7 @@ pub struct CalibrateArgs {
     /// Folder of bias frames (shortest exposure, lens capped).
     #[arg(long)]
     pub bias: PathBuf,
-    /// Folder of dark frames (lens capped, two or more exposure times, read from EXIF).
+    /// Folder of dark frames (lens capped, two or more exposure times read from EXIF; any number of frames at each, one is fine).
     #[arg(long)]
     pub dark: Option<PathBuf>,
     /// Folder of flat-field frames (uniform light; two or more levels, told apart by exposure time).
@@ -104,7 +104,7 @@ pub fn run(a: &CalibrateArgs) -> Result<()> {
         m.read_sigma_median,
         m.row_sigma,
         m.dsnu,
-        pgrf_calib::calibrate::law_name(m.dark_law),
+        pgrf_calib::calibrate::law_label(m.dark_law, m.dark_offset),
         m.hot_pixels,
         m.dead_pixels
     );
@@ -122,6 +122,8 @@ pub fn run(a: &CalibrateArgs) -> Result<()> {
                 "dark_r2_sqrt": m.dark_r2_sqrt,
                 "dark_r2_linear": m.dark_r2_linear,
                 "dark_rate_mean": m.dark_rate_mean,
+                "dark_offset": m.dark_offset,
+                "dark_offset_mean": m.dark_offset_mean,
                 "hot_pixels": m.hot_pixels,
                 "dead_pixels": m.dead_pixels,
                 "output": a.output.display().to_string(),
@@ -151,6 +153,7 @@ fn report_data(run: &CalibrationRun) -> ReportData<'_> {
         fixed_pattern: maps.fixed_pattern.view(),
         r2_sqrt: maps.r2_sqrt.as_ref().map(|a| a.view()),
         r2_linear: maps.r2_linear.as_ref().map(|a| a.view()),
+        dark_offset: m.dark_offset,
         summary: run.summary(),
     }
 }

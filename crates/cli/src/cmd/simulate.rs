@@ -45,6 +45,15 @@ pub struct SimulateArgs {
     /// Time law of the simulated dark current.
     #[arg(long, default_value = "sqrt")]
     pub dark_law: DarkLaw,
+    /// Dark offset c in electrons: charge every exposed frame has on top of the law (y = a g(t) + c), absent from the bias frames.
+    #[arg(long, default_value_t = 0.0)]
+    pub dark_offset: f32,
+    /// Exposure times of the dark stack, seconds (comma separated).
+    #[arg(long, value_delimiter = ',', default_values_t = DARK_EXPOSURES)]
+    pub dark_exposures: Vec<f32>,
+    /// Frames per dark exposure (default: --frames); one is how dark ladders are usually shot.
+    #[arg(long)]
+    pub dark_frames: Option<usize>,
     /// Which stacks to write (comma separated): bias, dark, flat.
     #[arg(long, value_delimiter = ',', default_value = "bias,dark,flat")]
     pub stacks: Vec<String>,
@@ -56,6 +65,23 @@ pub struct SimulateArgs {
 pub fn run(a: &SimulateArgs) -> Result<()> {
     if a.frames < 2 {
         bail!("--frames must be at least 2 (per-pixel variance needs two frames)");
+    }
+    let dark_frames = a.dark_frames.unwrap_or(a.frames);
+    if dark_frames == 0 || dark_frames > 100_000 {
+        bail!("--dark-frames must be between 1 and 100000, got {dark_frames}");
+    }
+    if !(a.dark_offset.is_finite() && (0.0..=1e6).contains(&a.dark_offset)) {
+        bail!(
+            "--dark-offset must be between 0 and 1e6 electrons, got {}",
+            a.dark_offset
+        );
+    }
+    if a.dark_exposures.is_empty()
+        || a.dark_exposures
+            .iter()
+            .any(|t| !(t.is_finite() && *t > 0.0 && *t <= 1e5))
+    {
+        bail!("--dark-exposures must be times in (0, 1e5] seconds");
     }
     super::make_dataset::check_frame_memory(
         &format!("--width {} --height {}", a.width, a.height),
@@ -84,6 +110,7 @@ pub fn run(a: &SimulateArgs) -> Result<()> {
     spec.width = a.width;
     spec.height = a.height;
     spec.dark_law = a.dark_law;
+    spec.dark_offset = a.dark_offset;
     let sensor = VirtualSensor::new(spec)?;
     for s in &a.stacks {
         if !["bias", "dark", "flat"].contains(&s.as_str()) {
@@ -99,10 +126,8 @@ pub fn run(a: &SimulateArgs) -> Result<()> {
             )
         })?;
     }
-    let total = a.frames
-        * (want("bias") as usize
-            + want("dark") as usize * DARK_EXPOSURES.len()
-            + want("flat") as usize * FLAT_LEVELS.len());
+    let total = a.frames * (want("bias") as usize + want("flat") as usize * FLAT_LEVELS.len())
+        + want("dark") as usize * dark_frames * a.dark_exposures.len();
     let bar = ProgressBar::new(total as u64).with_style(
         ProgressStyle::with_template(
             "{spinner} simulating {pos}/{len} frames [{bar:30}] {per_sec} eta {eta}",
@@ -111,8 +136,8 @@ pub fn run(a: &SimulateArgs) -> Result<()> {
         .progress_chars("=> "),
     );
     let mut seed = a.seed.wrapping_mul(1_000_003);
-    let mut write = |sub: &str, tag: &str, electrons: f32, t: f32| -> Result<()> {
-        for i in 0..a.frames {
+    let mut write = |sub: &str, tag: &str, n: usize, electrons: f32, t: f32| -> Result<()> {
+        for i in 0..n {
             seed = seed.wrapping_add(1);
             let f = sensor.frame(electrons, t, seed)?;
             write_dng(
@@ -125,16 +150,16 @@ pub fn run(a: &SimulateArgs) -> Result<()> {
         Ok(())
     };
     if want("bias") {
-        write("bias", "bias", 0.0, BIAS_EXPOSURE)?;
+        write("bias", "bias", a.frames, 0.0, BIAS_EXPOSURE)?;
     }
     if want("dark") {
-        for t in DARK_EXPOSURES {
-            write("dark", &format!("dark_{t}s"), 0.0, t)?;
+        for &t in &a.dark_exposures {
+            write("dark", &format!("dark_{t}s"), dark_frames, 0.0, t)?;
         }
     }
     if want("flat") {
         for (e, t) in flat_levels(&sensor.spec) {
-            write("flat", &format!("flat_{e:.0}e"), e, t)?;
+            write("flat", &format!("flat_{e:.0}e"), a.frames, e, t)?;
         }
     }
     bar.finish_and_clear();
