@@ -36,6 +36,7 @@ pub fn run(a: &StackArgs) -> Result<()> {
             need_exposure: false,
             per_exposure: 2,
             tap_pixels: 0,
+            pairs: false,
             progress: &pgrf_core::NoProgress,
         },
     )?;

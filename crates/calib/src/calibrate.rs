@@ -78,6 +78,15 @@ impl CalibrationRun {
                 "DN/e-",
             ),
             row(
+                "System gain from each pixel's variance over the stack (light drift not removed)",
+                format!(
+                    "{:.4} (light drift {:.2} % over the brightest level)",
+                    self.gain.k_without_pairs,
+                    100.0 * self.gain.levels.iter().map(|l| l.drift).fold(0.0, f64::max)
+                ),
+                "DN/e-",
+            ),
+            row(
                 "Temporal dark noise (median per-pixel read sigma)",
                 format!(
                     "{:.3} ({:.3} e-)",
@@ -87,6 +96,13 @@ impl CalibrationRun {
                 "DN",
             ),
             row("Row noise sigma", format!("{:.3}", m.row_sigma), "DN"),
+            row(
+                "Whole-frame offset drift sigma (frame to frame, apart from row noise)",
+                m.frame_offset_sigma
+                    .map(|s| format!("{s:.3}"))
+                    .unwrap_or_else(|| "-".into()),
+                "DN",
+            ),
             row(
                 "DSNU (spatial sd of the dark offset)",
                 format!("{:.3} ({:.3} e-)", m.dsnu, m.dsnu / m.k),
@@ -134,6 +150,9 @@ impl CalibrationRun {
                 "not measured (no dark frames)".into(),
                 "",
             )),
+        }
+        for w in &m.warnings {
+            summary.push(row("Warning", w.clone(), ""));
         }
         summary.push(row(
             "Hot / dead pixels",
@@ -184,6 +203,7 @@ pub fn calibrate(input: &CalibrateInput, progress: &dyn Progress) -> Result<Cali
             need_exposure: false,
             per_exposure: 2,
             tap_pixels: input.tap_pixels,
+            pairs: false,
             progress,
         },
     )?;
@@ -200,21 +220,22 @@ pub fn calibrate(input: &CalibrateInput, progress: &dyn Progress) -> Result<Cali
         key.iso = input.iso;
     }
     let bias = estimate_bias(&bias_stack, key.black)?;
-    let opts = |kind, per_exposure| ReadOptions {
+    let opts = |kind, per_exposure, pairs| ReadOptions {
         kind,
         expect: Some(&bias_stack.key),
         single_exposure: false,
         need_exposure: true,
         per_exposure,
         tap_pixels: 0,
+        pairs,
         progress,
     };
-    let flat_stack = read_stack(&input.flat, &opts("flat", 2))?;
+    let flat_stack = read_stack(&input.flat, &opts("flat", 2, true))?;
     let gain = estimate_gain(&flat_stack, &bias)?;
     let (dark, dark_frames) = if input.dark.is_empty() {
         (None, Vec::new())
     } else {
-        let dark_stack = read_stack(&input.dark, &opts("dark", 1))?;
+        let dark_stack = read_stack(&input.dark, &opts("dark", 1, false))?;
         let frames = dark_stack.groups.iter().map(|g| g.files.len()).collect();
         (Some(estimate_dark(&dark_stack, &bias, gain.k)?), frames)
     };
@@ -255,6 +276,7 @@ pub fn calibrate(input: &CalibrateInput, progress: &dyn Progress) -> Result<Cali
         k: gain.k,
         k_method: gain.method,
         row_sigma: bias.row_sigma,
+        frame_offset_sigma: Some(bias.frame_offset_sigma),
         read_sigma_median: pgrf_core::stats::median_finite(&bias.sigma_read),
         dsnu: bias.dsnu,
         prnu: Some(gain.prnu),
@@ -267,6 +289,7 @@ pub fn calibrate(input: &CalibrateInput, progress: &dyn Progress) -> Result<Cali
             .as_ref()
             .filter(|d| d.offset)
             .map(|d| d.offset_mean_dn),
+        warnings: gain.warnings.clone(),
         ppcc_pixel_median: pp.get(pp.len() / 2).copied(),
         ppcc_pooled: bias.ppcc_pooled.is_finite().then_some(bias.ppcc_pooled),
         hot_pixels: defect_map.iter().filter(|&&d| d == 1.0).count(),

@@ -45,6 +45,11 @@ pub struct CalibMeta {
     pub k_method: GainMethod,
     /// Row-noise standard deviation sigma_H, DN.
     pub row_sigma: f64,
+    /// Standard deviation of the whole-frame offset from frame to frame, DN
+    /// (measured on the bias frames, apart from row noise); None in records
+    /// older than the measurement.
+    #[serde(default)]
+    pub frame_offset_sigma: Option<f64>,
     /// Median over pixels of the read-noise sigma (row noise removed), DN.
     pub read_sigma_median: f64,
     /// DSNU: spatial standard deviation of the bias offset, DN.
@@ -77,6 +82,10 @@ pub struct CalibMeta {
     /// correlation coefficient with a normal (1 is perfectly Gaussian).
     pub ppcc_pixel_median: Option<f64>,
     pub(crate) ppcc_pooled: Option<f64>,
+    /// What the estimates could not check (one flat level: no linearity
+    /// check of K), as the run printed them.
+    #[serde(default)]
+    pub warnings: Vec<String>,
     /// Number of pixels flagged hot (1 in the `defects` map).
     pub hot_pixels: usize,
     /// Number of pixels flagged dead (2 in the `defects` map).

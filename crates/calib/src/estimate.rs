@@ -6,7 +6,8 @@
 //!
 //! - fixed pattern, per-pixel bias mean minus black: `fixed_pattern`;
 //! - source-follower (read) sigma, sqrt(var - sigma_H^2): `read_sigma`;
-//! - row noise sigma_H: `PixelStats::row_variance` (`crate::stats`);
+//! - row noise sigma_H, apart from whole-frame offset drift:
+//!   `PixelStats::row_and_frame_variance` (`crate::stats`);
 //! - system gain K = Var / mean (eq. 3.15): `gain_var_mean`, and its
 //!   regression over light levels (photon transfer): `photon_transfer`;
 //! - dark signal, dark mean minus bias mean: `dark_signal`; its fit
@@ -34,6 +35,8 @@ pub struct BiasEstimate {
     /// Source-follower sigma: sqrt(var - row variance).
     pub sigma_read: Array3<f32>,
     pub(crate) row_sigma: f64,
+    /// Standard deviation of the whole-frame offset from frame to frame, DN.
+    pub(crate) frame_offset_sigma: f64,
     /// DSNU: spatial sd of the fixed pattern, temporal noise of the mean removed.
     pub(crate) dsnu: f64,
     pub(crate) frames: usize,
@@ -59,23 +62,25 @@ pub(crate) fn fixed_pattern(mean: &Array3<f64>, black: [f32; 4]) -> Array3<f32> 
 
 /// The source-follower (read) noise sigma_r of N_r per pixel (inferred
 /// eq. 3.13): sqrt(Var(bias) - sigma_H^2), the per-pixel temporal variance
-/// of the bias frames with the row-noise variance `row_var` removed
-/// (clamped at 0), in DN.
-pub(crate) fn read_sigma(var: &Array3<f64>, row_var: f64) -> Array3<f32> {
-    var.mapv(|v| (v - row_var).max(0.0).sqrt() as f32)
+/// of the bias frames with the row-noise variance removed (and the
+/// whole-frame offset drift's, which moves every pixel alike): `shared` is
+/// their sum, DN^2; clamped at 0; in DN.
+pub(crate) fn read_sigma(var: &Array3<f64>, shared: f64) -> Array3<f32> {
+    var.mapv(|v| (v - shared).max(0.0).sqrt() as f32)
 }
 
 /// Bias-frame estimates: fixed pattern (`fixed_pattern`), read sigma
-/// (`read_sigma`), row noise (`PixelStats::row_variance`), DSNU, PPCC.
+/// (`read_sigma`), row noise and frame offset drift
+/// (`PixelStats::row_and_frame_variance`), DSNU, PPCC.
 pub fn estimate_bias(stack: &Stack, black: [f32; 4]) -> Result<BiasEstimate> {
     let g = stack
         .groups
         .first()
         .ok_or_else(|| invalid("bias stack is empty"))?;
     let (mean, var) = (g.stats.mean(), g.stats.var());
-    let row_var = g.stats.row_variance();
+    let (row_var, frame_var) = g.stats.row_and_frame_variance();
     let fixed_pattern = fixed_pattern(&mean, black);
-    let sigma_read = read_sigma(&var, row_var);
+    let sigma_read = read_sigma(&var, row_var + frame_var);
     let n = g.files.len() as f64;
     let fp_mean = fixed_pattern.iter().map(|&v| v as f64).sum::<f64>() / fixed_pattern.len() as f64;
     let fp_var = fixed_pattern
@@ -98,6 +103,7 @@ pub fn estimate_bias(stack: &Stack, black: [f32; 4]) -> Result<BiasEstimate> {
         var,
         sigma_read,
         row_sigma: row_var.sqrt(),
+        frame_offset_sigma: frame_var.sqrt(),
         dsnu,
         frames: g.files.len(),
         ppcc_pixels,
@@ -111,8 +117,17 @@ pub struct PtcLevel {
     pub(crate) exposure_s: f64,
     /// Spatial mean of (flat mean - bias mean), DN.
     pub mean_dn: f64,
-    /// Spatial mean of (flat variance - bias variance), DN^2: the shot-noise variance.
+    /// The shot-noise variance, DN^2: the frame pairs' temporal variance
+    /// ([`crate::stack::pair_variance`], light drift removed) minus the bias
+    /// frames' temporal variance.
     pub var_dn2: f64,
+    /// The same from every pixel's temporal variance over the whole level
+    /// minus the bias's, DN^2: what the light's drift between frames adds
+    /// to the noise is in it (the estimate before EMVA's pair method).
+    pub var_dn2_stack: f64,
+    /// Relative standard deviation of the frames' mean signal: the light's
+    /// drift over the level's frames.
+    pub drift: f64,
     pub(crate) frames: usize,
 }
 
@@ -128,6 +143,13 @@ pub struct GainEstimate {
     pub(crate) k_map: Array3<f32>,
     /// Eq. 3.15 globally at the brightest level.
     pub(crate) k_var_mean: f64,
+    /// K the same way (`method`) from the per-pixel temporal variance over
+    /// each level's stack ([`PtcLevel::var_dn2_stack`]), the light's drift
+    /// included: how far a drifting lamp would have moved it.
+    pub k_without_pairs: f64,
+    /// What the estimate could not check, for the output and the report
+    /// (one flat level: no linearity check).
+    pub warnings: Vec<String>,
     /// Per-pixel signal at the brightest level (flat mean - bias mean), DN.
     pub(crate) response: Array3<f32>,
     /// The photon-transfer curve's points, one per flat level, by exposure.
@@ -194,6 +216,7 @@ pub(crate) fn estimate_gain(flat: &Stack, bias: &BiasEstimate) -> Result<GainEst
     // Mean and variance of the brightest level so far: each is a full-frame
     // f64 copy, so they are kept from the loop rather than recomputed.
     let mut bright: Option<(Array3<f64>, Array3<f64>, usize)> = None;
+    let bias_var = bias.var.mean().unwrap_or(0.0);
     for g in &flat.groups {
         let (m, v) = (g.stats.mean(), g.stats.var());
         let n = m.len() as f64;
@@ -201,10 +224,24 @@ pub(crate) fn estimate_gain(flat: &Stack, bias: &BiasEstimate) -> Result<GainEst
             .and(&bias.mean)
             .fold(0.0, |acc, a, b| acc + (a - b))
             / n;
-        let var_dn2 = Zip::from(&v)
+        let var_dn2_stack = Zip::from(&v)
             .and(&bias.var)
             .fold(0.0, |acc, a, b| acc + (a - b))
             / n;
+        if g.pair_vars.is_empty() {
+            return Err(invalid(format!(
+                "flat frames at {} s: no pair of frames (the gain needs two frames per level)",
+                g.exposure_s
+            )));
+        }
+        let var_dn2 = g.pair_vars.iter().sum::<f64>() / g.pair_vars.len() as f64 - bias_var;
+        let black = bias.mean.mean().unwrap_or(0.0);
+        let signal: Vec<f64> = g.frame_means.iter().map(|m| m - black).collect();
+        let sm = signal.iter().sum::<f64>() / signal.len() as f64;
+        let drift = (signal.iter().map(|s| (s - sm).powi(2)).sum::<f64>()
+            / (signal.len() as f64 - 1.0).max(1.0))
+        .sqrt()
+            / sm.abs().max(f64::MIN_POSITIVE);
         if mean_dn <= 0.0 {
             return Err(invalid(format!(
                 "flat frames at {} s are not brighter than the bias frames (mean {mean_dn:.2} DN above bias)",
@@ -230,11 +267,19 @@ pub(crate) fn estimate_gain(flat: &Stack, bias: &BiasEstimate) -> Result<GainEst
             exposure_s: g.exposure_s,
             mean_dn,
             var_dn2,
+            var_dn2_stack,
+            drift,
             frames: g.files.len(),
         });
     }
     let (bm, bv, bi) = bright.ok_or_else(|| invalid("flat stack is empty"))?;
     let bright_level = levels[bi];
+    // Per-frame normalisation of the per-pixel variance: a change of the
+    // light by a factor (1 + e_f) moves pixel x by s(x) e_f, adding
+    // s(x)^2 var(e) to its temporal variance, where s is its signal; the
+    // level's drift (the frames' relative spread of mean signal) gives
+    // var(e), and it is taken out pixel by pixel.
+    let drift2 = bright_level.drift.powi(2);
     let mut k_map = Array3::<f32>::zeros(bm.raw_dim());
     Zip::from(&mut k_map)
         .and(&bm)
@@ -244,7 +289,7 @@ pub(crate) fn estimate_gain(flat: &Stack, bias: &BiasEstimate) -> Result<GainEst
         .for_each(|k, &fm, &fv, &m0, &v0| {
             let s = fm - m0;
             *k = if s > 0.0 {
-                gain_var_mean(fv - v0, s) as f32
+                gain_var_mean(fv - v0 - s * s * drift2, s) as f32
             } else {
                 f32::NAN
             };
@@ -266,6 +311,24 @@ pub(crate) fn estimate_gain(flat: &Stack, bias: &BiasEstimate) -> Result<GainEst
         Some((slope, _)) if slope > 0.0 => (slope, GainMethod::PhotonTransfer),
         _ => (k_var_mean, GainMethod::VarOverMean),
     };
+    let stacked: Vec<PtcLevel> = levels
+        .iter()
+        .map(|l| PtcLevel {
+            var_dn2: l.var_dn2_stack,
+            ..*l
+        })
+        .collect();
+    let k_without_pairs = match (method, photon_transfer(&stacked)) {
+        (GainMethod::PhotonTransfer, Some((slope, _))) => slope,
+        _ => gain_var_mean(bright_level.var_dn2_stack, bright_level.mean_dn),
+    };
+    let mut warnings = Vec::new();
+    if levels.len() < 2 {
+        warnings.push(format!(
+            "one flat level ({} s): K is eq. 3.15 at that level alone, with no photon-transfer fit to check the sensor's linearity; give flats at two or more exposure times",
+            bright_level.exposure_s
+        ));
+    }
     if !(k.is_finite() && k > 0.0) {
         return Err(invalid(format!(
             "system gain estimate {k} is not positive: are the flat frames lit and unsaturated?"
@@ -276,6 +339,8 @@ pub(crate) fn estimate_gain(flat: &Stack, bias: &BiasEstimate) -> Result<GainEst
         method,
         k_map,
         k_var_mean,
+        k_without_pairs,
+        warnings,
         response,
         levels,
         ptc_fit,

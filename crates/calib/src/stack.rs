@@ -2,9 +2,10 @@
 //!
 //! Frames are decoded on worker threads while the main thread accumulates,
 //! through a channel of capacity two, so memory holds a few frames however
-//! long the stack. Every frame must agree with the first in size, CFA, ISO
-//! and (within an exposure group) exposure; the first that does not is named
-//! in the error, and nothing is written.
+//! long the stack (flats: one more per exposure, the first of a pair).
+//! Every frame must agree with the first in size, CFA, ISO and (within an
+//! exposure group) exposure; the first that does not is named in the error,
+//! and nothing is written.
 
 use crate::error::{invalid, Result};
 use crate::stats::PixelStats;
@@ -83,6 +84,29 @@ pub(crate) struct Group {
     pub(crate) exposure_s: f64,
     pub(crate) stats: PixelStats,
     pub(crate) files: Vec<PathBuf>,
+    /// Each frame's spatial mean, DN (black included), in file order.
+    pub(crate) frame_means: Vec<f64>,
+    /// Frames 1 and 2, 3 and 4, ... of the group: the temporal variance of
+    /// each pair ([`pair_variance`]), DN^2.
+    pub(crate) pair_vars: Vec<f64>,
+    /// The first frame of a pair, waiting for its second (flats only).
+    held: Option<Vec<u16>>,
+}
+
+/// EMVA 1288's temporal variance from two frames A and B of the same scene:
+/// half the spatial variance of A - B, where the spatial mean of A - B is
+/// removed, so a change of the light (or of the offset) between the two
+/// frames, which moves every pixel alike, does not count as noise, while a
+/// per-pixel temporal variance over a stack adds the light's drift to
+/// every pixel's noise. DN^2.
+pub(crate) fn pair_variance(a: &[u16], b: &[u16]) -> f64 {
+    let n = a.len() as f64;
+    let (s, ss) = a.iter().zip(b).fold((0.0f64, 0.0f64), |(s, ss), (&x, &y)| {
+        let d = x as f64 - y as f64;
+        (s + d, ss + d * d)
+    });
+    let m = s / n;
+    (ss / n - m * m) * n / (n - 1.0) / 2.0
 }
 
 /// A decoded stack: groups by exposure, sorted by exposure time.
@@ -112,6 +136,9 @@ pub struct ReadOptions<'a> {
     pub per_exposure: usize,
     /// How many pixels to keep temporal samples of (0 for none).
     pub tap_pixels: usize,
+    /// Pair the frames of each exposure for [`pair_variance`] (flats: one
+    /// more frame held per exposure while its pair is read).
+    pub pairs: bool,
     /// Called once per frame accumulated.
     pub progress: &'a dyn pgrf_core::Progress,
 }
@@ -224,6 +251,9 @@ pub fn read_stack(files: &[PathBuf], opt: &ReadOptions) -> Result<Stack> {
                         exposure_s: t,
                         stats: PixelStats::new(ph, pw, frame.cfa.offsets().map(|(r, _)| r)),
                         files: Vec::new(),
+                        frame_means: Vec::new(),
+                        pair_vars: Vec::new(),
+                        held: None,
                     });
                     groups.len() - 1
                 }
@@ -242,8 +272,17 @@ pub fn read_stack(files: &[PathBuf], opt: &ReadOptions) -> Result<Stack> {
                     t.push(data[ix] as f32);
                 }
             }
-            groups[slot].stats.push(data);
-            groups[slot].files.push(file.clone());
+            let g = &mut groups[slot];
+            g.stats.push(data);
+            g.files.push(file.clone());
+            g.frame_means
+                .push(data.iter().map(|&v| v as f64).sum::<f64>() / data.len() as f64);
+            if opt.pairs {
+                match g.held.take() {
+                    Some(first) => g.pair_vars.push(pair_variance(&first, data)),
+                    None => g.held = Some(data.to_vec()),
+                }
+            }
             opt.progress.advance(1);
         }
         for g in &groups {
@@ -256,6 +295,9 @@ pub fn read_stack(files: &[PathBuf], opt: &ReadOptions) -> Result<Stack> {
                     opt.per_exposure
                 )));
             }
+        }
+        for g in &mut groups {
+            g.held = None;
         }
         groups.sort_by(|a, b| a.exposure_s.total_cmp(&b.exposure_s));
         Ok(Stack {

@@ -93,32 +93,50 @@ impl PixelStats {
         .expect("shape")
     }
 
-    /// Row-noise variance, separated from the per-pixel noise that also moves
-    /// row means. With x = mu + h(frame,row) + e(pixel) over F frames of rows
-    /// of W samples, the row means' deviations from their temporal mean have
-    /// variance (sigma_H^2 + mean(sigma_e^2)/W)(F-1)/F, and each pixel's
-    /// temporal variance is v = sigma_e^2 + sigma_H^2. Solving both:
-    /// sigma_H^2 = (var_o F/(F-1) - mean(v)/W) / (1 - 1/W).
-    pub(crate) fn row_variance(&self) -> f64 {
+    /// Row noise and whole-frame offset drift, separated from each other and
+    /// from the per-pixel noise that also moves row means: (sigma_H^2,
+    /// sigma_O^2), DN^2. With x = mu + o(frame) + h(frame, row) + e(pixel)
+    /// over F frames of R rows of W samples, let D be a row mean's
+    /// deviation from its temporal mean, O a frame's average D over its
+    /// rows and Z = D - O. Then, from the expectations,
+    ///
+    ///   A = var(Z) F/(F-1) / (1 - 1/R) = sigma_H^2 + sigma_e^2 / W,
+    ///   B = var(O) F/(F-1)             = sigma_O^2 + A / R,
+    ///
+    /// and each pixel's temporal variance is v = sigma_e^2 + sigma_H^2 +
+    /// sigma_O^2, so sigma_O^2 = B - A / R and sigma_H^2 =
+    /// (A - (mean(v) - sigma_O^2) / W) / (1 - 1/W). An offset that moves
+    /// the whole frame (readout drift, a cooler's cycle) is not row noise.
+    pub(crate) fn row_and_frame_variance(&self) -> (f64, f64) {
         let f = self.row_means.len();
         if f < 2 {
-            return 0.0;
+            return (0.0, 0.0);
         }
         let rows = self.row_means[0].len();
-        let mut ss = 0.0;
-        for r in 0..rows {
-            let m = self.row_means.iter().map(|v| v[r]).sum::<f64>() / f as f64;
-            ss += self
-                .row_means
-                .iter()
-                .map(|v| (v[r] - m).powi(2))
-                .sum::<f64>();
+        let ff = f as f64;
+        let col_mean: Vec<f64> = (0..rows)
+            .map(|r| self.row_means.iter().map(|v| v[r]).sum::<f64>() / ff)
+            .collect();
+        let mut ss_z = 0.0;
+        let mut offsets = Vec::with_capacity(f);
+        for v in &self.row_means {
+            let d: Vec<f64> = v.iter().zip(&col_mean).map(|(x, m)| x - m).collect();
+            let o = d.iter().sum::<f64>() / rows as f64;
+            ss_z += d.iter().map(|x| (x - o).powi(2)).sum::<f64>();
+            offsets.push(o);
         }
-        // Pooled over rows, unbiased per row: ss / (rows (F-1)).
-        let var_o = ss / (rows as f64 * (f as f64 - 1.0));
+        let rr = rows as f64;
+        // Z has (F - 1)(R - 1) degrees of freedom over F R values.
+        let var_z = ss_z / (rr * ff);
+        let a = var_z * ff / (ff - 1.0) / (1.0 - 1.0 / rr);
+        let om = offsets.iter().sum::<f64>() / ff;
+        let var_o = offsets.iter().map(|o| (o - om).powi(2)).sum::<f64>() / ff;
+        let b = var_o * ff / (ff - 1.0);
+        let frame = (b - a / rr).max(0.0);
         let w = (2 * self.pw) as f64;
-        let mean_v = self.m2.iter().sum::<f64>() / self.m2.len() as f64 / (f as f64 - 1.0);
-        ((var_o - mean_v / w) / (1.0 - 1.0 / w)).max(0.0)
+        let mean_v = self.m2.iter().sum::<f64>() / self.m2.len() as f64 / (ff - 1.0);
+        let row = ((a - (mean_v - frame) / w) / (1.0 - 1.0 / w)).max(0.0);
+        (row, frame)
     }
 }
 

@@ -8,9 +8,10 @@
 //! function: `photon_shot`, `dark_shot`, `read_noise`, `row_noise`):
 //!
 //!   black + bias(x) + K prnu(x) Poisson(e) + K Poisson(d(x) g(t) + c(t)) (1 + n_fp(x))
-//!         + N(0, sigma_r(x)) + row(frame, sensor row),   rounded and clipped to 0..white.
+//!         + N(0, sigma_r(x)) + row(frame, sensor row) + o(frame),   rounded and clipped to 0..white,
 //!
-//! with c(t) the dark offset (`SensorSpec::dark_offset`, reached within a
+//! with o(frame) a whole-frame offset drift (`SensorSpec::frame_offset_sigma`)
+//! and c(t) the dark offset (`SensorSpec::dark_offset`, reached within a
 //! fraction of a second). Rounding to integers is the quantisation. Hot pixels have a dark rate far
 //! above the rest.
 
@@ -68,6 +69,10 @@ pub struct SensorSpec {
     /// clock-induced charge at the start of a readout cycle), so a bias
     /// frame of 1/8000 s has none of it and a dark of a second all of it.
     pub dark_offset: f32,
+    /// Standard deviation of a whole-frame offset drawn anew for every
+    /// frame, DN: the offset drift of a sensor's readout (or its cooling)
+    /// from frame to frame, which moves every row alike and is not row noise.
+    pub frame_offset_sigma: f32,
     /// Standard deviation of N_FP.
     pub(crate) n_fp: f32,
     /// Share of hot pixels and their dark rate multiplier.
@@ -114,6 +119,7 @@ impl SensorSpec {
             dark_spread: 0.3,
             dark_law: DarkLaw::Sqrt,
             dark_offset: 0.0,
+            frame_offset_sigma: 0.0,
             n_fp: 0.05,
             hot_fraction: 1e-4,
             hot_factor: 50.0,
@@ -188,7 +194,12 @@ impl VirtualSensor {
         let sp = &self.spec;
         let (ph, pw) = (sp.height / 2, sp.width / 2);
         let plane_rows = sp.cfa.offsets().map(|(r, _)| r);
-        let rows = row_noise(seed, sp.height, sp.row_sigma, 1);
+        let mut rows = row_noise(seed, sp.height, sp.row_sigma, 1);
+        if sp.frame_offset_sigma > 0.0 {
+            let mut r = stream(seed, Domain::Params, 0x0ff5e7, 0);
+            let o = sp.frame_offset_sigma * r.sample::<f32, _>(StandardNormal);
+            rows.iter_mut().for_each(|v| *v += o);
+        }
         let g = sp.dark_law.electrons(1.0, t as f64);
         let offset = sp.dark_offset as f64 * (1.0 - (-(t as f64) / DARK_OFFSET_TAU_S).exp());
         let white = sp.white as f32;
@@ -267,6 +278,7 @@ impl VirtualSensor {
             "dark_rate_mean": self.dark_rate.mean().unwrap_or(0.0),
             "dark_law": match sp.dark_law { DarkLaw::Sqrt => "sqrt", DarkLaw::Linear => "linear" },
             "dark_offset_e": sp.dark_offset,
+            "frame_offset_sigma": sp.frame_offset_sigma,
             "n_fp_sigma": sp.n_fp,
             "hot_pixels": self.hot.iter().filter(|&&h| h > 0.0).count(),
             "units": "gain DN/e-; bias, sigma_read DN; dark_rate e- per sqrt(s) (sqrt law) or per s (linear law); maps packed (4, H/2, W/2) R,G1,B,G2",

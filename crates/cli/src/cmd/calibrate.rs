@@ -96,6 +96,9 @@ pub fn run(a: &CalibrateArgs) -> Result<()> {
     }
     run.calibration.save(&a.output)?;
     let m = &run.calibration.meta;
+    for w in &m.warnings {
+        eprintln!("pgrf: warning: {w}");
+    }
     eprintln!(
         "wrote {}: K {:.4} DN/e- ({}), read sigma median {:.3} DN, row sigma {:.3} DN, DSNU {:.3} DN, dark law {}, {} hot / {} dead pixels",
         a.output.display(),
@@ -124,6 +127,8 @@ pub fn run(a: &CalibrateArgs) -> Result<()> {
                 "dark_rate_mean": m.dark_rate_mean,
                 "dark_offset": m.dark_offset,
                 "dark_offset_mean": m.dark_offset_mean,
+                "K_without_pairs": run.gain.k_without_pairs,
+                "warnings": m.warnings,
                 "hot_pixels": m.hot_pixels,
                 "dead_pixels": m.dead_pixels,
                 "output": a.output.display().to_string(),

@@ -54,6 +54,12 @@ pub struct SimulateArgs {
     /// Frames per dark exposure (default: --frames); one is how dark ladders are usually shot.
     #[arg(long)]
     pub dark_frames: Option<usize>,
+    /// Flat lamp drift: each flat frame of a level is this fraction brighter than the one before (0.003 = 0.3 % per frame).
+    #[arg(long, default_value_t = 0.0)]
+    pub lamp_drift: f32,
+    /// Whole-frame offset drift: each frame's offset is drawn with this standard deviation, DN.
+    #[arg(long, default_value_t = 0.0)]
+    pub frame_offset: f32,
     /// Which stacks to write (comma separated): bias, dark, flat.
     #[arg(long, value_delimiter = ',', default_value = "bias,dark,flat")]
     pub stacks: Vec<String>,
@@ -74,6 +80,18 @@ pub fn run(a: &SimulateArgs) -> Result<()> {
         bail!(
             "--dark-offset must be between 0 and 1e6 electrons, got {}",
             a.dark_offset
+        );
+    }
+    if !(a.lamp_drift.is_finite() && a.lamp_drift.abs() <= 0.1) {
+        bail!(
+            "--lamp-drift must be a fraction between -0.1 and 0.1 per frame, got {}",
+            a.lamp_drift
+        );
+    }
+    if !(a.frame_offset.is_finite() && (0.0..=1000.0).contains(&a.frame_offset)) {
+        bail!(
+            "--frame-offset must be between 0 and 1000 DN, got {}",
+            a.frame_offset
         );
     }
     if a.dark_exposures.is_empty()
@@ -111,6 +129,7 @@ pub fn run(a: &SimulateArgs) -> Result<()> {
     spec.height = a.height;
     spec.dark_law = a.dark_law;
     spec.dark_offset = a.dark_offset;
+    spec.frame_offset_sigma = a.frame_offset;
     let sensor = VirtualSensor::new(spec)?;
     for s in &a.stacks {
         if !["bias", "dark", "flat"].contains(&s.as_str()) {
@@ -139,7 +158,12 @@ pub fn run(a: &SimulateArgs) -> Result<()> {
     let mut write = |sub: &str, tag: &str, n: usize, electrons: f32, t: f32| -> Result<()> {
         for i in 0..n {
             seed = seed.wrapping_add(1);
-            let f = sensor.frame(electrons, t, seed)?;
+            let lamp = if electrons > 0.0 {
+                (1.0 + a.lamp_drift * i as f32).max(0.0)
+            } else {
+                1.0
+            };
+            let f = sensor.frame(electrons * lamp, t, seed)?;
             write_dng(
                 &f,
                 &a.output.join(sub).join(format!("{tag}_{i:04}.dng")),
