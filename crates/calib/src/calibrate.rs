@@ -5,12 +5,13 @@ use crate::error::{invalid, Result};
 use crate::estimate::{
     defects, estimate_bias, estimate_dark, estimate_gain, BiasEstimate, DarkEstimate, GainEstimate,
 };
-use crate::stack::{read_stack, ReadOptions};
+use crate::stack::{read_stack, ReadOptions, Stack};
 use pgrf_core::Progress;
 use pgrf_noise::DarkLaw;
 use std::path::PathBuf;
 
 /// The frames of one calibration run, all of one camera at one ISO.
+#[derive(Clone, Debug, Default)]
 pub struct CalibrateInput {
     /// Bias frames: shortest exposure, lens capped (one exposure time).
     pub bias: Vec<PathBuf>,
@@ -24,6 +25,10 @@ pub struct CalibrateInput {
     pub iso: Option<u32>,
     /// Pixels whose temporal samples are kept for the normality check.
     pub tap_pixels: usize,
+    /// Drop the frames that stand out from their stack
+    /// ([`crate::stack::Stack::odd_frames`]) and read the stack again
+    /// without them; without it they are kept and named in warnings.
+    pub reject: bool,
 }
 
 /// What [`calibrate()`] returns: the calibration to save, and the estimates it
@@ -154,6 +159,9 @@ impl CalibrationRun {
         for w in &m.warnings {
             summary.push(row("Warning", w.clone(), ""));
         }
+        for r in &m.rejected_frames {
+            summary.push(row("Rejected", r.clone(), ""));
+        }
         summary.push(row(
             "Hot / dead pixels",
             format!("{} / {}", m.hot_pixels, m.dead_pixels),
@@ -188,13 +196,45 @@ impl CalibrationRun {
     }
 }
 
+/// Read a stack, then deal with the frames that stand out from it
+/// ([`Stack::odd_frames`]): named in `notes`, or with `reject` dropped (the
+/// stack read again without them) and listed in `rejected`.
+fn read_checked(
+    files: &[PathBuf],
+    opt: &ReadOptions,
+    reject: bool,
+    notes: &mut Vec<String>,
+    rejected: &mut Vec<String>,
+) -> Result<Stack> {
+    let stack = read_stack(files, opt)?;
+    let odd = stack.odd_frames(opt.kind);
+    if odd.is_empty() {
+        return Ok(stack);
+    }
+    if !reject {
+        notes.extend(
+            odd.iter()
+                .map(|o| format!("{}; kept (--reject drops such frames)", o.why)),
+        );
+        return Ok(stack);
+    }
+    let keep: Vec<PathBuf> = files
+        .iter()
+        .filter(|f| !odd.iter().any(|o| &o.file == *f))
+        .cloned()
+        .collect();
+    rejected.extend(odd.into_iter().map(|o| o.why));
+    read_stack(&keep, opt)
+}
+
 /// Calibrate a sensor from its bias, flat and (optional) dark stacks: read
 /// each stack with streaming statistics (frames must match the first bias
 /// frame), estimate bias, gain and dark current, flag defects, and assemble
 /// the per-pixel maps (packed `(4, H/2, W/2)`, R, G1, B, G2) and the record.
 /// Reports frames read to `progress`.
 pub fn calibrate(input: &CalibrateInput, progress: &dyn Progress) -> Result<CalibrationRun> {
-    let bias_stack = read_stack(
+    let (mut notes, mut rejected) = (Vec::new(), Vec::new());
+    let bias_stack = read_checked(
         &input.bias,
         &ReadOptions {
             kind: "bias",
@@ -206,6 +246,9 @@ pub fn calibrate(input: &CalibrateInput, progress: &dyn Progress) -> Result<Cali
             pairs: false,
             progress,
         },
+        input.reject,
+        &mut notes,
+        &mut rejected,
     )?;
     let mut key = bias_stack.key.clone();
     if let (Some(want), Some(got)) = (input.iso, key.iso) {
@@ -230,12 +273,24 @@ pub fn calibrate(input: &CalibrateInput, progress: &dyn Progress) -> Result<Cali
         pairs,
         progress,
     };
-    let flat_stack = read_stack(&input.flat, &opts("flat", 2, true))?;
+    let flat_stack = read_checked(
+        &input.flat,
+        &opts("flat", 2, true),
+        input.reject,
+        &mut notes,
+        &mut rejected,
+    )?;
     let gain = estimate_gain(&flat_stack, &bias)?;
     let (dark, dark_frames) = if input.dark.is_empty() {
         (None, Vec::new())
     } else {
-        let dark_stack = read_stack(&input.dark, &opts("dark", 1, false))?;
+        let dark_stack = read_checked(
+            &input.dark,
+            &opts("dark", 1, false),
+            input.reject,
+            &mut notes,
+            &mut rejected,
+        )?;
         let frames = dark_stack.groups.iter().map(|g| g.files.len()).collect();
         (Some(estimate_dark(&dark_stack, &bias, gain.k)?), frames)
     };
@@ -289,7 +344,8 @@ pub fn calibrate(input: &CalibrateInput, progress: &dyn Progress) -> Result<Cali
             .as_ref()
             .filter(|d| d.offset)
             .map(|d| d.offset_mean_dn),
-        warnings: gain.warnings.clone(),
+        warnings: gain.warnings.iter().cloned().chain(notes).collect(),
+        rejected_frames: rejected,
         ppcc_pixel_median: pp.get(pp.len() / 2).copied(),
         ppcc_pooled: bias.ppcc_pooled.is_finite().then_some(bias.ppcc_pooled),
         hot_pixels: defect_map.iter().filter(|&&d| d == 1.0).count(),

@@ -30,7 +30,8 @@ pub struct CalibMeta {
     pub(crate) cfa: String,
     pub(crate) black: [f32; 4],
     pub(crate) white: u32,
-    pub(crate) bias_frames: usize,
+    /// Bias frames averaged.
+    pub bias_frames: usize,
     pub(crate) bias_exposure_s: f64,
     /// Exposure times of the dark stack, s (empty without darks).
     pub dark_exposures_s: Vec<f64>,
@@ -86,6 +87,10 @@ pub struct CalibMeta {
     /// check of K), as the run printed them.
     #[serde(default)]
     pub warnings: Vec<String>,
+    /// Frames dropped with `reject` ([`crate::CalibrateInput::reject`]),
+    /// each with why.
+    #[serde(default)]
+    pub rejected_frames: Vec<String>,
     /// Number of pixels flagged hot (1 in the `defects` map).
     pub hot_pixels: usize,
     /// Number of pixels flagged dead (2 in the `defects` map).

@@ -86,11 +86,91 @@ pub(crate) struct Group {
     pub(crate) files: Vec<PathBuf>,
     /// Each frame's spatial mean, DN (black included), in file order.
     pub(crate) frame_means: Vec<f64>,
+    /// Each frame's noise proxy ([`frame_noise`]), DN.
+    pub(crate) frame_noise: Vec<f64>,
     /// Frames 1 and 2, 3 and 4, ... of the group: the temporal variance of
     /// each pair ([`pair_variance`]), DN^2.
     pub(crate) pair_vars: Vec<f64>,
     /// The first frame of a pair, waiting for its second (flats only).
     held: Option<Vec<u16>>,
+}
+
+/// A frame's noise, from itself alone: the standard deviation of the
+/// differences of horizontally neighbouring pixels of a plane over sqrt(2),
+/// DN. The fixed pattern's part of it is the same in every frame, so across
+/// a stack it moves with the temporal noise only: a frame read with more
+/// noise than the others stands out. `pw`: the packed planes' width.
+pub(crate) fn frame_noise(data: &[u16], pw: usize) -> f64 {
+    let (mut s, mut ss, mut n) = (0.0f64, 0.0f64, 0usize);
+    for row in data.chunks_exact(pw) {
+        for w in row.windows(2) {
+            let d = w[1] as f64 - w[0] as f64;
+            s += d;
+            ss += d * d;
+            n += 1;
+        }
+    }
+    if n < 2 {
+        return 0.0;
+    }
+    let m = s / n as f64;
+    ((ss / n as f64 - m * m).max(0.0) / 2.0).sqrt()
+}
+
+/// A frame whose mean or noise stands out from its exposure's frames.
+#[derive(Clone, Debug, PartialEq)]
+pub struct OddFrame {
+    /// The frame's file.
+    pub file: PathBuf,
+    /// What stands out, with its robust z-score, for one line.
+    pub why: String,
+}
+
+/// How far (in robust standard deviations) a frame's mean or noise may lie
+/// from its stack's median before it is named: 5, so that among a thousand
+/// well-behaved frames none is (a normal's 5-sigma tail is 6e-7).
+pub const ODD_Z: f64 = 5.0;
+
+/// Robust z-scores: (x - median) / (1.4826 MAD), the MAD floored at 1e-9 of
+/// the median's size so that identical values do not divide by zero.
+pub(crate) fn robust_z(x: &[f64]) -> Vec<f64> {
+    let mut v = x.to_vec();
+    let med = pgrf_core::stats::median(&mut v);
+    let mut dev: Vec<f64> = x.iter().map(|a| (a - med).abs()).collect();
+    let mad = pgrf_core::stats::median(&mut dev) * 1.4826;
+    let scale = mad.max(1e-9 * med.abs().max(1.0));
+    x.iter().map(|a| (a - med) / scale).collect()
+}
+
+impl Stack {
+    /// The frames whose mean or noise lies more than [`ODD_Z`] robust
+    /// standard deviations from the rest of their exposure (groups of four
+    /// frames or more; with fewer a median says little). A bias frame
+    /// read 4 DN above the others, or one with twice the read noise, is
+    /// named; a flat lamp's slow drift is not (its frames spread evenly).
+    pub fn odd_frames(&self, kind: &str) -> Vec<OddFrame> {
+        let mut odd: std::collections::BTreeMap<PathBuf, Vec<String>> = Default::default();
+        for g in self.groups.iter().filter(|g| g.files.len() >= 4) {
+            for (what, values) in [("mean", &g.frame_means), ("noise", &g.frame_noise)] {
+                let mut sorted = values.clone();
+                let med = pgrf_core::stats::median(&mut sorted);
+                for (i, z) in robust_z(values).into_iter().enumerate() {
+                    if z.abs() > ODD_Z {
+                        odd.entry(g.files[i].clone()).or_default().push(format!(
+                            "{what} {:.2} DN against the {} s frames' median {med:.2} (robust z {z:.1})",
+                            values[i], g.exposure_s
+                        ));
+                    }
+                }
+            }
+        }
+        odd.into_iter()
+            .map(|(file, why)| OddFrame {
+                why: format!("{kind} frame {}: {}", file.display(), why.join("; ")),
+                file,
+            })
+            .collect()
+    }
 }
 
 /// EMVA 1288's temporal variance from two frames A and B of the same scene:
@@ -252,6 +332,7 @@ pub fn read_stack(files: &[PathBuf], opt: &ReadOptions) -> Result<Stack> {
                         stats: PixelStats::new(ph, pw, frame.cfa.offsets().map(|(r, _)| r)),
                         files: Vec::new(),
                         frame_means: Vec::new(),
+                        frame_noise: Vec::new(),
                         pair_vars: Vec::new(),
                         held: None,
                     });
@@ -277,6 +358,7 @@ pub fn read_stack(files: &[PathBuf], opt: &ReadOptions) -> Result<Stack> {
             g.files.push(file.clone());
             g.frame_means
                 .push(data.iter().map(|&v| v as f64).sum::<f64>() / data.len() as f64);
+            g.frame_noise.push(frame_noise(data, pw));
             if opt.pairs {
                 match g.held.take() {
                     Some(first) => g.pair_vars.push(pair_variance(&first, data)),

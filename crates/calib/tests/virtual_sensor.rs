@@ -100,6 +100,7 @@ fn calibration_recovers_the_virtual_sensor() {
             flat: s.flat.clone(),
             iso: Some(1600),
             tap_pixels: 256,
+            reject: false,
         },
         &pgrf_core::NoProgress,
     )
@@ -258,6 +259,7 @@ fn linear_dark_current_is_recognised() {
             flat: s.flat,
             iso: None,
             tap_pixels: 0,
+            reject: false,
         },
         &pgrf_core::NoProgress,
     )
@@ -304,6 +306,7 @@ fn one_dark_frame_per_exposure_recovers_the_law_and_rate() {
                 flat: s.flat,
                 iso: None,
                 tap_pixels: 0,
+                reject: false,
             },
             &pgrf_core::NoProgress,
         )
@@ -381,6 +384,7 @@ fn lamp_drift_does_not_bias_the_gain() {
             flat,
             iso: None,
             tap_pixels: 0,
+            reject: false,
         },
         &pgrf_core::NoProgress,
     )
@@ -389,6 +393,12 @@ fn lamp_drift_does_not_bias_the_gain() {
     let k = run.calibration.meta.k;
     let stacked = run.gain.k_without_pairs;
     assert!((k / truth - 1.0).abs() < 0.02, "K {k} vs {truth}");
+    // A lamp's slow drift spreads the frames evenly: none is named odd.
+    assert!(
+        run.calibration.meta.warnings.is_empty(),
+        "{:?}",
+        run.calibration.meta.warnings
+    );
     assert!(
         stacked / truth - 1.0 > 0.5,
         "K without pairs {stacked} vs {truth}"
@@ -458,6 +468,7 @@ fn frame_offset_drift_is_not_row_noise() {
             flat,
             iso: None,
             tap_pixels: 0,
+            reject: false,
         },
         &pgrf_core::NoProgress,
     )
@@ -479,6 +490,52 @@ fn frame_offset_drift_is_not_row_noise() {
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
+/// A bias frame read 4 DN above the others is named (and kept) by default,
+/// and dropped with `reject`, which brings the read noise back to the
+/// clean stack's.
+#[test]
+fn an_odd_frame_is_named_and_can_be_rejected() {
+    let v = sensor(DarkLaw::Sqrt);
+    let dir = scratch("odd");
+    let s = write_stacks(&v, &dir, 16);
+    // Bias frame 5 shifted by 4 DN.
+    let odd = &s.bias[5];
+    let mut f = pgrf_raw::decode_file(odd, &Default::default()).unwrap();
+    f.mosaic.iter_mut().for_each(|x| *x += 4);
+    write_dng(&f, odd, &DngOptions::default()).unwrap();
+    let input = CalibrateInput {
+        bias: s.bias.clone(),
+        flat: s.flat.clone(),
+        ..Default::default()
+    };
+    let kept = calibrate(&input, &pgrf_core::NoProgress).unwrap();
+    let w = &kept.calibration.meta.warnings;
+    assert_eq!(w.len(), 1, "{w:?}");
+    assert!(
+        w[0].contains(&odd.display().to_string()) && w[0].contains("mean") && w[0].contains("kept"),
+        "{w:?}"
+    );
+    let dropped = calibrate(
+        &CalibrateInput {
+            reject: true,
+            ..input
+        },
+        &pgrf_core::NoProgress,
+    )
+    .unwrap();
+    let m = &dropped.calibration.meta;
+    assert!(m.warnings.is_empty(), "{:?}", m.warnings);
+    assert_eq!(m.rejected_frames.len(), 1);
+    assert_eq!(m.bias_frames, 15);
+    // The odd frame adds (4 - 4/16)^2 / 16 ~ 0.9 DN^2 to every pixel's
+    // variance while kept.
+    let read = pgrf_core::stats::median_finite(&v.sigma_read);
+    let (with, without) = (kept.calibration.meta.read_sigma_median, m.read_sigma_median);
+    assert!(with > without, "{with} vs {without}");
+    assert!((without / read - 1.0).abs() < 0.05, "{without} vs {read}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
 /// One flat level: K from eq. 3.15 with a warning that nothing checks the
 /// sensor's linearity, in the record (and so in the report).
 #[test]
@@ -494,6 +551,7 @@ fn one_flat_level_warns() {
             flat: one,
             iso: None,
             tap_pixels: 0,
+            reject: false,
         },
         &pgrf_core::NoProgress,
     )
@@ -527,6 +585,7 @@ fn bad_stacks_are_refused_with_the_file_named() {
                 flat: s.flat.clone(),
                 iso,
                 tap_pixels: 0,
+                reject: false,
             },
             &pgrf_core::NoProgress,
         )
@@ -587,6 +646,7 @@ fn calibration_is_bit_identical_from_run_to_run() {
         flat: s.flat.clone(),
         iso: Some(1600),
         tap_pixels: 64,
+        reject: false,
     };
     let run_with = |threads: usize| {
         rayon::ThreadPoolBuilder::new()

@@ -33,6 +33,9 @@ pub struct CalibrateArgs {
     /// End with one JSON line of the global results.
     #[arg(long)]
     pub json: bool,
+    /// Drop frames whose mean or noise stands out from their stack (robust z-score above 5) instead of only naming them.
+    #[arg(long)]
+    pub reject: bool,
 }
 
 pub fn run(a: &CalibrateArgs) -> Result<()> {
@@ -82,6 +85,7 @@ pub fn run(a: &CalibrateArgs) -> Result<()> {
             flat,
             iso: a.iso,
             tap_pixels: 4096,
+            reject: a.reject,
         },
         &bar,
     )?;
@@ -98,6 +102,9 @@ pub fn run(a: &CalibrateArgs) -> Result<()> {
     let m = &run.calibration.meta;
     for w in &m.warnings {
         eprintln!("pgrf: warning: {w}");
+    }
+    for r in &m.rejected_frames {
+        eprintln!("pgrf: note: dropped {r}");
     }
     eprintln!(
         "wrote {}: K {:.4} DN/e- ({}), read sigma median {:.3} DN, row sigma {:.3} DN, DSNU {:.3} DN, dark law {}, {} hot / {} dead pixels",
@@ -129,6 +136,7 @@ pub fn run(a: &CalibrateArgs) -> Result<()> {
                 "dark_offset_mean": m.dark_offset_mean,
                 "K_without_pairs": run.gain.k_without_pairs,
                 "warnings": m.warnings,
+                "rejected_frames": m.rejected_frames,
                 "hot_pixels": m.hot_pixels,
                 "dead_pixels": m.dead_pixels,
                 "output": a.output.display().to_string(),
