@@ -69,7 +69,10 @@ impl CalibrationRun {
         let mut summary = vec![
             row(
                 "System gain K",
-                format!("{:.4} ({})", m.k, m.k_method),
+                match m.k_sigma {
+                    Some(e) => format!("{:.4} ± {e:.4} ({})", m.k, m.k_method),
+                    None => format!("{:.4} ({})", m.k, m.k_method),
+                },
                 "DN/e-",
             ),
             row(
@@ -114,8 +117,22 @@ impl CalibrationRun {
                 "DN",
             ),
             row(
+                "DSNU, EMVA 1288 (5x5 high-pass, outliers such as hot pixels excluded)",
+                m.dsnu_highpass
+                    .map(|d| format!("{d:.3} ({:.3} e-)", d / m.k))
+                    .unwrap_or_else(|| "-".into()),
+                "DN",
+            ),
+            row(
                 "PRNU (spatial sd of the response / mean)",
                 m.prnu
+                    .map(|p| format!("{:.3}", 100.0 * p))
+                    .unwrap_or_else(|| "-".into()),
+                "%",
+            ),
+            row(
+                "PRNU, EMVA 1288 (5x5 high-pass: the flat's shading removed; outliers excluded)",
+                m.prnu_highpass
                     .map(|p| format!("{:.3}", 100.0 * p))
                     .unwrap_or_else(|| "-".into()),
                 "%",
@@ -335,6 +352,9 @@ pub fn calibrate(input: &CalibrateInput, progress: &dyn Progress) -> Result<Cali
         read_sigma_median: pgrf_core::stats::median_finite(&bias.sigma_read),
         dsnu: bias.dsnu,
         prnu: Some(gain.prnu),
+        dsnu_highpass: Some(bias.dsnu_highpass).filter(|v| v.is_finite()),
+        prnu_highpass: Some(gain.prnu_highpass).filter(|v| v.is_finite()),
+        k_sigma: Some(gain.k_sigma).filter(|v| v.is_finite()),
         dark_law: dark.as_ref().map(|d| d.law),
         dark_r2_sqrt: dark.as_ref().map(|d| d.r2_sqrt_global),
         dark_r2_linear: dark.as_ref().map(|d| d.r2_linear_global),

@@ -58,6 +58,16 @@ pub struct CalibMeta {
     /// PRNU: spatial standard deviation of the response divided by its mean
     /// (a fraction, not %); None when not measured.
     pub prnu: Option<f64>,
+    /// DSNU the EMVA 1288 way: high-pass filtered (5 x 5 box), outliers
+    /// such as hot pixels excluded, DN; None in older records.
+    #[serde(default)]
+    pub dsnu_highpass: Option<f64>,
+    /// PRNU the EMVA 1288 way (high-pass, outliers excluded), a fraction.
+    #[serde(default)]
+    pub prnu_highpass: Option<f64>,
+    /// Standard error of K, DN/e- (statistical only).
+    #[serde(default)]
+    pub k_sigma: Option<f64>,
     /// The dark-signal law chosen by the better R^2 of the pixel-averaged
     /// dark signal; "none" in the record without dark frames.
     #[serde(with = "law_or_none")]

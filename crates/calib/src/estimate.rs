@@ -39,6 +39,10 @@ pub struct BiasEstimate {
     pub(crate) frame_offset_sigma: f64,
     /// DSNU: spatial sd of the fixed pattern, temporal noise of the mean removed.
     pub(crate) dsnu: f64,
+    /// DSNU as EMVA 1288 (release 4) computes it: from the fixed pattern
+    /// high-pass filtered ([`highpass_variance`]), outliers (hot pixels)
+    /// excluded, DN.
+    pub(crate) dsnu_highpass: f64,
     pub(crate) frames: usize,
     /// PPCC of sampled pixels' temporal samples vs a Gaussian (paper Fig. 2),
     /// and of all those samples pooled without per-pixel centring/scaling.
@@ -58,6 +62,50 @@ pub(crate) fn fixed_pattern(mean: &Array3<f64>, black: [f32; 4]) -> Array3<f32> 
             .for_each(|f, &x| *f = (x - black[p] as f64) as f32);
     }
     out
+}
+
+/// The spatial variance of a packed map's fine structure, as EMVA 1288
+/// (release 4) measures non-uniformity: each plane minus its 5 x 5 box mean
+/// (interior pixels, where the box fits), which removes shading such as a
+/// flat's vignetting; values further than 5 robust standard deviations
+/// (1.4826 MAD) from the median left out, which removes hot pixels and
+/// other outliers; the variance times 25/24, the factor by which the
+/// filter shrinks white noise's variance (1 - 2/25 + 1/25). DN^2 (or the
+/// map's unit squared).
+pub(crate) fn highpass_variance(map: &Array3<f32>) -> f64 {
+    let (planes, h, w) = map.dim();
+    let mut hp = Vec::new();
+    for p in 0..planes {
+        let a = map.index_axis(ndarray::Axis(0), p);
+        for i in 2..h.saturating_sub(2) {
+            for j in 2..w.saturating_sub(2) {
+                let mut box_sum = 0.0f64;
+                for di in 0..5 {
+                    for dj in 0..5 {
+                        box_sum += a[[i + di - 2, j + dj - 2]] as f64;
+                    }
+                }
+                let v = a[[i, j]] as f64 - box_sum / 25.0;
+                if v.is_finite() {
+                    hp.push(v);
+                }
+            }
+        }
+    }
+    if hp.len() < 2 {
+        return f64::NAN;
+    }
+    let mut sorted = hp.clone();
+    let med = median(&mut sorted);
+    let mut dev: Vec<f64> = hp.iter().map(|v| (v - med).abs()).collect();
+    let mad = median(&mut dev) * 1.4826;
+    let kept: Vec<f64> = hp
+        .into_iter()
+        .filter(|v| (v - med).abs() <= 5.0 * mad)
+        .collect();
+    let n = kept.len() as f64;
+    let m = kept.iter().sum::<f64>() / n;
+    kept.iter().map(|v| (v - m).powi(2)).sum::<f64>() / (n - 1.0).max(1.0) * 25.0 / 24.0
 }
 
 /// The source-follower (read) noise sigma_r of N_r per pixel (inferred
@@ -90,6 +138,11 @@ pub fn estimate_bias(stack: &Stack, black: [f32; 4]) -> Result<BiasEstimate> {
         / fixed_pattern.len() as f64;
     let mean_var = var.iter().sum::<f64>() / var.len() as f64;
     let dsnu = (fp_var - mean_var / n).max(0.0).sqrt();
+    // The temporal noise left in a mean of n frames is white, so the
+    // high-pass keeps all of it (after its correction factor).
+    let dsnu_highpass = (highpass_variance(&fixed_pattern) - mean_var / n)
+        .max(0.0)
+        .sqrt();
     let ppcc_pixels: Vec<f64> = stack
         .tap
         .iter()
@@ -105,6 +158,7 @@ pub fn estimate_bias(stack: &Stack, black: [f32; 4]) -> Result<BiasEstimate> {
         row_sigma: row_var.sqrt(),
         frame_offset_sigma: frame_var.sqrt(),
         dsnu,
+        dsnu_highpass,
         frames: g.files.len(),
         ppcc_pixels,
         ppcc_pooled: ppcc(&pooled),
@@ -159,6 +213,14 @@ pub struct GainEstimate {
     /// PRNU: spatial sd of the per-pixel response at the brightest level,
     /// relative to its mean, temporal noise removed.
     pub(crate) prnu: f64,
+    /// PRNU as EMVA 1288 (release 4) computes it: the response high-pass
+    /// filtered, outliers excluded ([`highpass_variance`]): the flat's
+    /// shading (vignetting, an uneven lamp) is not the sensor's.
+    pub(crate) prnu_highpass: f64,
+    /// Standard error of K, DN/e- (statistical: from the photon-transfer
+    /// fit's residuals with three levels or more, else from the pairs'
+    /// sampling error).
+    pub k_sigma: f64,
 }
 
 /// The system gain from one flat level, eq. 3.15: K = Var(D) / E(D) with
@@ -191,6 +253,40 @@ pub(crate) fn photon_transfer(levels: &[PtcLevel]) -> Option<(f64, f64)> {
         }
     } else {
         None
+    }
+}
+
+/// The statistical standard error of K (DN/e-) from `levels` (with
+/// `pairs[i]` frame pairs each over `pixels` pixels): with three levels or
+/// more, the photon-transfer slope's standard error from its residuals;
+/// with fewer, propagated from each level's variance estimate, whose
+/// relative standard error is sqrt(2 / (pairs x pixels)) (a variance over
+/// that many independent differences).
+pub(crate) fn gain_sigma(levels: &[PtcLevel], pairs: &[usize], pixels: usize, k: f64) -> f64 {
+    let rel = |i: usize| (2.0 / (pairs[i].max(1) * pixels.max(1)) as f64).sqrt();
+    match levels.len() {
+        0 => f64::NAN,
+        1 => k * rel(0),
+        2 => {
+            let dm = levels[1].mean_dn - levels[0].mean_dn;
+            let sv = (levels[0].var_dn2 * rel(0)).hypot(levels[1].var_dn2 * rel(1));
+            sv / dm.abs()
+        }
+        n => {
+            let nf = n as f64;
+            let mx = levels.iter().map(|l| l.mean_dn).sum::<f64>() / nf;
+            let sxx: f64 = levels.iter().map(|l| (l.mean_dn - mx).powi(2)).sum();
+            match photon_transfer(levels) {
+                Some((slope, icpt)) if sxx > 0.0 => {
+                    let ss: f64 = levels
+                        .iter()
+                        .map(|l| (l.var_dn2 - slope * l.mean_dn - icpt).powi(2))
+                        .sum();
+                    (ss / (nf - 2.0) / sxx).sqrt()
+                }
+                _ => f64::NAN,
+            }
+        }
     }
 }
 
@@ -302,9 +398,12 @@ pub(crate) fn estimate_gain(flat: &Stack, bias: &BiasEstimate) -> Result<GainEst
     let sig: Vec<f64> = response.iter().map(|&v| v as f64).collect();
     let sm = sig.iter().sum::<f64>() / sig.len() as f64;
     let sv = sig.iter().map(|s| (s - sm).powi(2)).sum::<f64>() / sig.len() as f64;
-    let temporal =
-        (bright_level.var_dn2 + bias.var.mean().unwrap_or(0.0)) / bright_level.frames as f64;
-    let prnu = (sv - temporal - bias.dsnu.powi(2)).max(0.0).sqrt() / sm;
+    // The response is flat mean minus bias mean: the fixed pattern cancels,
+    // and the temporal noise of both means is left in it.
+    let temporal = (bright_level.var_dn2 + bias_var) / bright_level.frames as f64
+        + bias_var / bias.frames as f64;
+    let prnu = (sv - temporal).max(0.0).sqrt() / sm;
+    let prnu_highpass = (highpass_variance(&response) - temporal).max(0.0).sqrt() / sm;
 
     let ptc_fit = photon_transfer(&levels);
     let (k, method) = match ptc_fit {
@@ -322,6 +421,8 @@ pub(crate) fn estimate_gain(flat: &Stack, bias: &BiasEstimate) -> Result<GainEst
         (GainMethod::PhotonTransfer, Some((slope, _))) => slope,
         _ => gain_var_mean(bright_level.var_dn2_stack, bright_level.mean_dn),
     };
+    let pairs: Vec<usize> = flat.groups.iter().map(|g| g.pair_vars.len()).collect();
+    let k_sigma = gain_sigma(&levels, &pairs, bm.len(), k);
     let mut warnings = Vec::new();
     if levels.len() < 2 {
         warnings.push(format!(
@@ -341,6 +442,8 @@ pub(crate) fn estimate_gain(flat: &Stack, bias: &BiasEstimate) -> Result<GainEst
         k_var_mean,
         k_without_pairs,
         warnings,
+        prnu_highpass,
+        k_sigma,
         response,
         levels,
         ptc_fit,

@@ -381,6 +381,30 @@ fn synth_refuses_bad_arguments_cleanly() {
     }
 }
 
+/// `pgrf calibrate --json` on a `simulate-sensor` folder's three stacks,
+/// writing `cal` and the report in `report`: the JSON line and stderr.
+fn calibrate_vs(vs: &Path, cal: &Path, report: &Path) -> (Value, String) {
+    let r = pgrf(&[
+        "calibrate",
+        "--bias",
+        s(&vs.join("bias")),
+        "--dark",
+        s(&vs.join("dark")),
+        "--flat",
+        s(&vs.join("flat")),
+        "-o",
+        s(cal),
+        "--report",
+        s(report),
+        "--json",
+    ]);
+    let stderr = String::from_utf8_lossy(&r.stderr).into_owned();
+    assert!(r.status.success(), "{stderr}");
+    let out = String::from_utf8_lossy(&r.stdout);
+    let v = serde_json::from_str(out.trim_end().lines().last().unwrap()).unwrap();
+    (v, stderr)
+}
+
 /// A dark ladder of one frame per exposure with a linear law and an offset
 /// (a CCD's), from `simulate-sensor` to `calibrate`: the offset law is
 /// found and reported, and the report's summary names it.
@@ -410,23 +434,7 @@ fn a_one_frame_dark_ladder_with_an_offset_calibrates() {
     assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
     assert_eq!(std::fs::read_dir(vs.join("dark")).unwrap().count(), 6);
     let report = dir.join("report");
-    let r = pgrf(&[
-        "calibrate",
-        "--bias",
-        s(&vs.join("bias")),
-        "--dark",
-        s(&vs.join("dark")),
-        "--flat",
-        s(&vs.join("flat")),
-        "-o",
-        s(&dir.join("c.safetensors")),
-        "--report",
-        s(&report),
-        "--json",
-    ]);
-    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
-    let out = String::from_utf8_lossy(&r.stdout);
-    let v: Value = serde_json::from_str(out.trim_end().lines().last().unwrap()).unwrap();
+    let (v, stderr) = calibrate_vs(&vs, &dir.join("c.safetensors"), &report);
     assert_eq!(
         (&v["dark_law"], &v["dark_offset"]),
         (&json!("linear"), &json!(true))
@@ -436,7 +444,7 @@ fn a_one_frame_dark_ladder_with_an_offset_calibrates() {
     assert!((c / 459.0 - 1.0).abs() < 0.05, "offset {c} DN");
     let summary = std::fs::read_to_string(report.join("summary.md")).unwrap();
     assert!(summary.contains("linear + c law"), "{summary}");
-    assert!(String::from_utf8_lossy(&r.stderr).contains("dark law linear + c"));
+    assert!(stderr.contains("dark law linear + c"), "{stderr}");
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
@@ -469,23 +477,7 @@ fn simulate_calibrate_and_synthesise_with_the_calibration() {
 
     let cal = dir.join("calib.safetensors");
     let report = dir.join("report");
-    let r = pgrf(&[
-        "calibrate",
-        "--bias",
-        s(&vs.join("bias")),
-        "--dark",
-        s(&vs.join("dark")),
-        "--flat",
-        s(&vs.join("flat")),
-        "-o",
-        s(&cal),
-        "--report",
-        s(&report),
-        "--json",
-    ]);
-    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
-    let out = String::from_utf8_lossy(&r.stdout);
-    let v: Value = serde_json::from_str(out.trim_end().lines().last().unwrap()).unwrap();
+    let (v, _) = calibrate_vs(&vs, &cal, &report);
     let k = v["K"].as_f64().unwrap();
     assert!((k / (9.563e-4 * 1600.0) - 1.0).abs() < 0.05, "K {k}");
     assert!(v["row_sigma"].as_f64().unwrap() > 0.0);

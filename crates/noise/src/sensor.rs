@@ -69,6 +69,11 @@ pub struct SensorSpec {
     /// clock-induced charge at the start of a readout cycle), so a bias
     /// frame of 1/8000 s has none of it and a dark of a second all of it.
     pub dark_offset: f32,
+    /// Light lost towards the corners of a flat (lens vignetting or an uneven
+    /// lamp): the light falls off as 1 - v r^2, r the distance from the
+    /// centre over the half-diagonal. A flat's shading, not the sensor's
+    /// PRNU; EMVA 1288's high-pass non-uniformity leaves it out.
+    pub vignetting: f32,
     /// Standard deviation of a whole-frame offset drawn anew for every
     /// frame, DN: the offset drift of a sensor's readout (or its cooling)
     /// from frame to frame, which moves every row alike and is not row noise.
@@ -120,6 +125,7 @@ impl SensorSpec {
             dark_law: DarkLaw::Sqrt,
             dark_offset: 0.0,
             frame_offset_sigma: 0.0,
+            vignetting: 0.0,
             n_fp: 0.05,
             hot_fraction: 1e-4,
             hot_factor: 50.0,
@@ -203,6 +209,8 @@ impl VirtualSensor {
         let g = sp.dark_law.electrons(1.0, t as f64);
         let offset = sp.dark_offset as f64 * (1.0 - (-(t as f64) / DARK_OFFSET_TAU_S).exp());
         let white = sp.white as f32;
+        let (cy, cx) = (sp.height as f64 / 2.0, sp.width as f64 / 2.0);
+        let r2 = cy * cy + cx * cx;
         let mut packed = Array3::<u16>::zeros((4, ph, pw));
         let gain = self.gain.as_slice().expect("standard");
         let bias = self.bias.as_slice().expect("standard");
@@ -223,7 +231,14 @@ impl VirtualSensor {
                     let x = block * pw + j;
                     let mut v = sp.black + bias[x] + row;
                     if electrons > 0.0 {
-                        v += photon_shot(&mut rng, gain[x], electrons as f64);
+                        let light = if sp.vignetting > 0.0 {
+                            // Packed (i, j) sits at sensor (2i, 2j) + the plane's offset.
+                            let (y, xx) = (2.0 * i as f64 - cy, 2.0 * j as f64 - cx);
+                            1.0 - sp.vignetting as f64 * (y * y + xx * xx) / r2
+                        } else {
+                            1.0
+                        };
+                        v += photon_shot(&mut rng, gain[x], electrons as f64 * light);
                     }
                     let de = dark[x] as f64 * g + offset;
                     if de > 0.0 {
@@ -279,6 +294,7 @@ impl VirtualSensor {
             "dark_law": match sp.dark_law { DarkLaw::Sqrt => "sqrt", DarkLaw::Linear => "linear" },
             "dark_offset_e": sp.dark_offset,
             "frame_offset_sigma": sp.frame_offset_sigma,
+            "vignetting": sp.vignetting,
             "n_fp_sigma": sp.n_fp,
             "hot_pixels": self.hot.iter().filter(|&&h| h > 0.0).count(),
             "units": "gain DN/e-; bias, sigma_read DN; dark_rate e- per sqrt(s) (sqrt law) or per s (linear law); maps packed (4, H/2, W/2) R,G1,B,G2",

@@ -60,6 +60,9 @@ pub struct SimulateArgs {
     /// Whole-frame offset drift: each frame's offset is drawn with this standard deviation, DN.
     #[arg(long, default_value_t = 0.0)]
     pub frame_offset: f32,
+    /// Flat shading: the light lost at the corners (0.2 = 20 %), as a lens's vignetting.
+    #[arg(long, default_value_t = 0.0)]
+    pub vignetting: f32,
     /// Which stacks to write (comma separated): bias, dark, flat.
     #[arg(long, value_delimiter = ',', default_value = "bias,dark,flat")]
     pub stacks: Vec<String>,
@@ -92,6 +95,12 @@ pub fn run(a: &SimulateArgs) -> Result<()> {
         bail!(
             "--frame-offset must be between 0 and 1000 DN, got {}",
             a.frame_offset
+        );
+    }
+    if !(a.vignetting.is_finite() && (0.0..0.9).contains(&a.vignetting)) {
+        bail!(
+            "--vignetting must be a fraction between 0 and 0.9, got {}",
+            a.vignetting
         );
     }
     if a.dark_exposures.is_empty()
@@ -130,6 +139,7 @@ pub fn run(a: &SimulateArgs) -> Result<()> {
     spec.dark_law = a.dark_law;
     spec.dark_offset = a.dark_offset;
     spec.frame_offset_sigma = a.frame_offset;
+    spec.vignetting = a.vignetting;
     let sensor = VirtualSensor::new(spec)?;
     for s in &a.stacks {
         if !["bias", "dark", "flat"].contains(&s.as_str()) {

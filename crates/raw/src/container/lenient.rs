@@ -417,19 +417,8 @@ pub(super) fn check_decoder_ifds(
 
 #[cfg(test)]
 mod tests {
+    use super::super::testutil::le_ifd;
     use super::*;
-
-    fn le_ifd(entries: &[(u16, u16, u32, u32)], next: u32) -> Vec<u8> {
-        let mut b = (entries.len() as u16).to_le_bytes().to_vec();
-        for &(t, k, c, v) in entries {
-            b.extend_from_slice(&t.to_le_bytes());
-            b.extend_from_slice(&k.to_le_bytes());
-            b.extend_from_slice(&c.to_le_bytes());
-            b.extend_from_slice(&v.to_le_bytes());
-        }
-        b.extend_from_slice(&next.to_le_bytes());
-        b
-    }
 
     fn blob(b: &[u8]) -> Blob<'_> {
         Blob {

@@ -150,7 +150,15 @@ mod testutil {
     /// (tag, type, count, value), next-IFD offset `next`, then `tail`.
     pub(super) fn tiff(entries: &[(u16, u16, u32, u32)], next: u32, tail: &[u8]) -> Vec<u8> {
         let mut b = b"II*\0\x08\0\0\0".to_vec();
-        b.extend_from_slice(&(entries.len() as u16).to_le_bytes());
+        b.extend_from_slice(&le_ifd(entries, next));
+        b.extend_from_slice(tail);
+        b
+    }
+
+    /// A little-endian IFD: the entry count, `entries` (tag, type, count,
+    /// value) and the next-IFD offset `next`.
+    pub(super) fn le_ifd(entries: &[(u16, u16, u32, u32)], next: u32) -> Vec<u8> {
+        let mut b = (entries.len() as u16).to_le_bytes().to_vec();
         for &(t, k, c, v) in entries {
             b.extend_from_slice(&t.to_le_bytes());
             b.extend_from_slice(&k.to_le_bytes());
@@ -158,7 +166,6 @@ mod testutil {
             b.extend_from_slice(&v.to_le_bytes());
         }
         b.extend_from_slice(&next.to_le_bytes());
-        b.extend_from_slice(tail);
         b
     }
 }
