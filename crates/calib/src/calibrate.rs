@@ -138,6 +138,35 @@ impl CalibrationRun {
                 "%",
             ),
         ];
+        summary.push(row(
+            "Saturation capacity (EMVA 1288: the level of largest variance)",
+            match m.saturation_capacity_e {
+                Some(e) => format!("{e:.0} e- ({:.0} DN)", e * m.k),
+                None => "not measured (no flat level reached saturation)".into(),
+            },
+            "",
+        ));
+        summary.push(row(
+            "Linearity error (EMVA 1288, levels at 5-95 % of saturation)",
+            m.linearity_error
+                .map(|l| format!("{:.2}", 100.0 * l))
+                .unwrap_or_else(|| "not measured (fewer than three levels there)".into()),
+            "%",
+        ));
+        let bias_var = self.bias.var.mean().unwrap_or(0.0);
+        let snr: Vec<String> = self
+            .gain
+            .levels
+            .iter()
+            .map(|l| {
+                format!(
+                    "{:.1} at {:.0} DN",
+                    l.mean_dn / (l.var_dn2 + bias_var).max(f64::MIN_POSITIVE).sqrt(),
+                    l.mean_dn
+                )
+            })
+            .collect();
+        summary.push(row("SNR by flat level", snr.join(", "), ""));
         match (m.dark_rate_mean, m.dark_r2_sqrt, m.dark_r2_linear) {
             (Some(rate), Some(rs), Some(rl)) => {
                 let unit = if m.dark_law == Some(DarkLaw::Linear) {
@@ -355,6 +384,8 @@ pub fn calibrate(input: &CalibrateInput, progress: &dyn Progress) -> Result<Cali
         dsnu_highpass: Some(bias.dsnu_highpass).filter(|v| v.is_finite()),
         prnu_highpass: Some(gain.prnu_highpass).filter(|v| v.is_finite()),
         k_sigma: Some(gain.k_sigma).filter(|v| v.is_finite()),
+        saturation_capacity_e: gain.saturation_dn.map(|d| d / gain.k),
+        linearity_error: gain.linearity_error,
         dark_law: dark.as_ref().map(|d| d.law),
         dark_r2_sqrt: dark.as_ref().map(|d| d.r2_sqrt_global),
         dark_r2_linear: dark.as_ref().map(|d| d.r2_linear_global),

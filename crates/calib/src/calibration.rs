@@ -68,6 +68,14 @@ pub struct CalibMeta {
     /// Standard error of K, DN/e- (statistical only).
     #[serde(default)]
     pub k_sigma: Option<f64>,
+    /// EMVA 1288 saturation capacity, electrons (with flats that reach
+    /// saturation).
+    #[serde(default)]
+    pub saturation_capacity_e: Option<f64>,
+    /// EMVA 1288 linearity error, a fraction (three flat levels or more
+    /// between 5 and 95 % of saturation).
+    #[serde(default)]
+    pub linearity_error: Option<f64>,
     /// The dark-signal law chosen by the better R^2 of the pixel-averaged
     /// dark signal; "none" in the record without dark frames.
     #[serde(with = "law_or_none")]

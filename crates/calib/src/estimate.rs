@@ -217,6 +217,14 @@ pub struct GainEstimate {
     /// filtered, outliers excluded ([`highpass_variance`]): the flat's
     /// shading (vignetting, an uneven lamp) is not the sensor's.
     pub(crate) prnu_highpass: f64,
+    /// The flat levels that clipped (left out of K), by exposure.
+    pub saturated: Vec<PtcLevel>,
+    /// EMVA 1288's saturation capacity, DN above bias: the mean signal of
+    /// the level of largest temporal variance among all levels, when some
+    /// level clipped ([`saturation_dn`]).
+    pub saturation_dn: Option<f64>,
+    /// EMVA 1288's linearity error, a fraction ([`linearity_error`]).
+    pub linearity_error: Option<f64>,
     /// Standard error of K, DN/e- (statistical: from the photon-transfer
     /// fit's residuals with three levels or more, else from the pairs'
     /// sampling error).
@@ -290,6 +298,58 @@ pub(crate) fn gain_sigma(levels: &[PtcLevel], pairs: &[usize], pixels: usize, k:
     }
 }
 
+/// EMVA 1288's saturation point: the mean signal (DN above bias) of the
+/// level whose temporal variance is largest, among the unclipped `levels`
+/// and the `saturated` ones: past it the clipping eats the variance. `None`
+/// when no level clipped (the flats never reached saturation, so the
+/// largest variance is only the brightest level's).
+pub(crate) fn saturation_dn(levels: &[PtcLevel], saturated: &[PtcLevel]) -> Option<f64> {
+    if saturated.is_empty() {
+        return None;
+    }
+    levels
+        .iter()
+        .chain(saturated)
+        .max_by(|a, b| a.var_dn2.total_cmp(&b.var_dn2))
+        .map(|l| l.mean_dn)
+}
+
+/// EMVA 1288's linearity error: the line mean = a t + b fitted by least
+/// squares to the levels whose mean signal lies between 5 % and 95 % of
+/// `full` (the saturation point, or the range to white), exposure time t
+/// standing for the irradiation; the error is half the spread of the
+/// relative deviations (mean - line) / line, as a fraction. `None` with
+/// fewer than three such levels (two always lie on their line).
+pub(crate) fn linearity_error(levels: &[PtcLevel], full: f64) -> Option<f64> {
+    let pts: Vec<(f64, f64)> = levels
+        .iter()
+        .filter(|l| l.mean_dn >= 0.05 * full && l.mean_dn <= 0.95 * full)
+        .map(|l| (l.exposure_s, l.mean_dn))
+        .collect();
+    if pts.len() < 3 {
+        return None;
+    }
+    let n = pts.len() as f64;
+    let mt = pts.iter().map(|p| p.0).sum::<f64>() / n;
+    let mm = pts.iter().map(|p| p.1).sum::<f64>() / n;
+    let stt: f64 = pts.iter().map(|p| (p.0 - mt).powi(2)).sum();
+    if stt <= 0.0 {
+        return None;
+    }
+    let a = pts.iter().map(|p| (p.0 - mt) * (p.1 - mm)).sum::<f64>() / stt;
+    let b = mm - a * mt;
+    let dev: Vec<f64> = pts
+        .iter()
+        .map(|p| (p.1 - (a * p.0 + b)) / (a * p.0 + b))
+        .collect();
+    let (lo, hi) = dev
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &d| {
+            (l.min(d), h.max(d))
+        });
+    Some((hi - lo) / 2.0)
+}
+
 /// The largest share of a flat level's pixels that may touch the white
 /// level: hot pixels and a few bright defects do, a clipped flat does not.
 const MAX_CLIPPED: f64 = 0.01;
@@ -313,6 +373,8 @@ pub(crate) fn estimate_gain(flat: &Stack, bias: &BiasEstimate) -> Result<GainEst
     // f64 copy, so they are kept from the loop rather than recomputed.
     let mut bright: Option<(Array3<f64>, Array3<f64>, usize)> = None;
     let bias_var = bias.var.mean().unwrap_or(0.0);
+    let mut saturated: Vec<PtcLevel> = Vec::new();
+    let mut clipped_note = None;
     for g in &flat.groups {
         let (m, v) = (g.stats.mean(), g.stats.var());
         let n = m.len() as f64;
@@ -346,12 +408,19 @@ pub(crate) fn estimate_gain(flat: &Stack, bias: &BiasEstimate) -> Result<GainEst
         }
         let clipped = clipped_fraction(&m, &v, flat.key.white);
         if clipped > MAX_CLIPPED {
-            return Err(invalid(format!(
-                "flat frames at {} s are saturated: {:.1} % of pixels reach the white level {} within 3 sigma (a clipped flat has too little variance, and the gain comes out wrong or negative); lower the light or the exposure",
-                g.exposure_s,
-                100.0 * clipped,
-                flat.key.white
-            )));
+            // A clipped level has too little variance for the gain, but it
+            // is where the saturation capacity shows (EMVA 1288 runs its
+            // flats up to saturation).
+            saturated.push(PtcLevel {
+                exposure_s: g.exposure_s,
+                mean_dn,
+                var_dn2,
+                var_dn2_stack,
+                drift,
+                frames: g.files.len(),
+            });
+            clipped_note = Some((g.exposure_s, clipped));
+            continue;
         }
         if bright
             .as_ref()
@@ -368,7 +437,17 @@ pub(crate) fn estimate_gain(flat: &Stack, bias: &BiasEstimate) -> Result<GainEst
             frames: g.files.len(),
         });
     }
-    let (bm, bv, bi) = bright.ok_or_else(|| invalid("flat stack is empty"))?;
+    let (bm, bv, bi) = match (bright, clipped_note) {
+        (Some(b), _) => b,
+        (None, Some((t, clipped))) => {
+            return Err(invalid(format!(
+                "flat frames at {t} s are saturated: {:.1} % of pixels reach the white level {} within 3 sigma (a clipped flat has too little variance, and the gain comes out wrong or negative); every flat level is, so lower the light or the exposure",
+                100.0 * clipped,
+                flat.key.white
+            )))
+        }
+        (None, None) => return Err(invalid("flat stack is empty")),
+    };
     let bright_level = levels[bi];
     // Per-frame normalisation of the per-pixel variance: a change of the
     // light by a factor (1 + e_f) moves pixel x by s(x) e_f, adding
@@ -421,7 +500,15 @@ pub(crate) fn estimate_gain(flat: &Stack, bias: &BiasEstimate) -> Result<GainEst
         (GainMethod::PhotonTransfer, Some((slope, _))) => slope,
         _ => gain_var_mean(bright_level.var_dn2_stack, bright_level.mean_dn),
     };
-    let pairs: Vec<usize> = flat.groups.iter().map(|g| g.pair_vars.len()).collect();
+    let saturation = saturation_dn(&levels, &saturated);
+    let range = flat.key.white as f64 - bias.mean.mean().unwrap_or(0.0);
+    let linearity = linearity_error(&levels, saturation.unwrap_or(range));
+    let pairs: Vec<usize> = flat
+        .groups
+        .iter()
+        .filter(|g| levels.iter().any(|l| l.exposure_s == g.exposure_s))
+        .map(|g| g.pair_vars.len())
+        .collect();
     let k_sigma = gain_sigma(&levels, &pairs, bm.len(), k);
     let mut warnings = Vec::new();
     if levels.len() < 2 {
@@ -444,6 +531,9 @@ pub(crate) fn estimate_gain(flat: &Stack, bias: &BiasEstimate) -> Result<GainEst
         warnings,
         prnu_highpass,
         k_sigma,
+        saturated,
+        saturation_dn: saturation,
+        linearity_error: linearity,
         response,
         levels,
         ptc_fit,
@@ -729,4 +819,53 @@ pub(crate) fn defects(
         });
     }
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn level(exposure_s: f64, mean_dn: f64, var_dn2: f64) -> PtcLevel {
+        PtcLevel {
+            exposure_s,
+            mean_dn,
+            var_dn2,
+            var_dn2_stack: var_dn2,
+            drift: 0.0,
+            frames: 8,
+        }
+    }
+
+    /// Three points, the middle one 3 % high: the line through them by
+    /// hand is 100 t + 2, the deviations -1.961 %, +1.980 %, -0.662 %.
+    #[test]
+    fn linearity_error_by_hand() {
+        let l = [
+            level(1.0, 100.0, 1.0),
+            level(2.0, 206.0, 1.0),
+            level(3.0, 300.0, 1.0),
+        ];
+        let le = linearity_error(&l, 320.0).unwrap();
+        let want = (4.0 / 202.0 + 2.0 / 102.0) / 2.0;
+        assert!((le - want).abs() < 1e-12, "{le} vs {want}");
+        // A level above 95 % of full is left out, and two are not enough.
+        assert_eq!(linearity_error(&l, 300.0), None);
+        // A straight line has none.
+        let straight = [
+            level(1.0, 100.0, 1.0),
+            level(2.0, 200.0, 1.0),
+            level(4.0, 400.0, 1.0),
+        ];
+        assert!(linearity_error(&straight, 1000.0).unwrap() < 1e-12);
+    }
+
+    #[test]
+    fn saturation_is_the_level_of_largest_variance_once_flats_clip() {
+        let unclipped = [level(1.0, 1000.0, 1500.0), level(2.0, 2000.0, 3000.0)];
+        assert_eq!(saturation_dn(&unclipped, &[]), None);
+        let clipped = [level(3.0, 2900.0, 2000.0), level(4.0, 3000.0, 10.0)];
+        assert_eq!(saturation_dn(&unclipped, &clipped), Some(2000.0));
+        let higher = [level(3.0, 2900.0, 3500.0)];
+        assert_eq!(saturation_dn(&unclipped, &higher), Some(2900.0));
+    }
 }

@@ -583,6 +583,55 @@ fn highpass_non_uniformity_leaves_out_shading_and_hot_pixels() {
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
+/// Flats run up to saturation, as EMVA 1288 has them: the clipped level is
+/// left out of K and marks the saturation capacity, and the levels below
+/// give the linearity error (the virtual sensor is linear).
+#[test]
+fn flats_up_to_saturation_give_capacity_and_linearity() {
+    let v = sensor(DarkLaw::Sqrt);
+    let dir = scratch("saturation");
+    let mut seed = 9000u64;
+    let mut frames = |n: usize, e: f32, t: f32| -> Vec<PathBuf> {
+        (0..n)
+            .map(|i| {
+                seed += 1;
+                let p = dir.join(format!("f_{e}_{i}.dng"));
+                write_dng(&v.frame(e, t, seed).unwrap(), &p, &DngOptions::default()).unwrap();
+                p
+            })
+            .collect()
+    };
+    let bias = frames(16, 0.0, 1.0 / 8000.0);
+    let mut flat = Vec::new();
+    for e in [1000.0f32, 3000.0, 6000.0, 9000.0, 14000.0] {
+        flat.extend(frames(8, e, e / 1e5));
+    }
+    let run = calibrate(
+        &CalibrateInput {
+            bias,
+            flat,
+            ..Default::default()
+        },
+        &pgrf_core::NoProgress,
+    )
+    .unwrap();
+    let m = &run.calibration.meta;
+    let truth = v.spec.k as f64;
+    assert_eq!(run.gain.saturated.len(), 1);
+    assert_eq!(run.gain.levels.len(), 4);
+    assert!((m.k / truth - 1.0).abs() < 0.02, "K {} vs {truth}", m.k);
+    // Between the brightest unclipped level and the range over K.
+    let full = v.spec.dn_range() as f64 / truth;
+    let sat = m.saturation_capacity_e.unwrap();
+    assert!(
+        sat > 0.97 * 9000.0 && sat < 1.02 * full,
+        "saturation {sat} e- (range {full})"
+    );
+    let le = m.linearity_error.unwrap();
+    assert!(le < 0.005, "linearity error {le}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
 /// One flat level: K from eq. 3.15 with a warning that nothing checks the
 /// sensor's linearity, in the record (and so in the report).
 #[test]
