@@ -3,7 +3,12 @@
 # choice): train each size for the same wall-clock budget on the same data,
 # noise and validation set, and print validation PSNR against seconds.
 #
-#   bench/size_curve.sh PHOTOS_DIR OUT_DIR [SECONDS] [THREADS]
+#   bench/size_curve.sh PHOTOS_DIR OUT_DIR [SECONDS] [THREADS] [NETS]
+#
+# NETS: spc (default), pgrf, or spc,pgrf: SID U-Net widths 8, 16, 32, or
+# SR3 inner channels 8, 16, 32 (x [1, 2, 2, 4], attention at level 3, GroupNorm
+# groups min(16, channels), 64 x 64
+# crops, lr 5e-4, as models/next/pgrf.toml).
 #
 # PHOTOS_DIR is tools/fetch_photos.sh's folder. Each run is
 # `pgrf train spc|pgrf` with the settings of models/next/*.toml except the
@@ -16,13 +21,21 @@
 # validation step with the seconds it was reached, and the crops/s.
 set -euo pipefail
 if [ $# -lt 2 ]; then
-    echo "usage: bench/size_curve.sh PHOTOS_DIR OUT_DIR [SECONDS] [THREADS]" >&2
+    echo "usage: bench/size_curve.sh PHOTOS_DIR OUT_DIR [SECONDS] [THREADS] [NETS]" >&2
     exit 2
 fi
 photos=$1
 out=$2
 seconds=${3:-900}
 threads=${4:-2}
+nets=${5:-spc}
+case ",$nets," in
+    *,spc,* | *,pgrf,*) ;;
+    *)
+        echo "size_curve: NETS must be spc, pgrf or spc,pgrf (got '$nets')" >&2
+        exit 2
+        ;;
+esac
 root=$(cd "$(dirname "$0")/.." && pwd)
 pgrf=${PGRF:-$root/target/release/pgrf}
 mkdir -p "$out"
@@ -45,9 +58,18 @@ run() {
     set -e
 }
 
-run spc_w8 spc --width 8 --patch 128 --val-patch 256 --lr 3e-4 --seed 16
-run spc_w16 spc --width 16 --patch 128 --val-patch 256 --lr 3e-4 --seed 16
-run spc_w32 spc --width 32 --patch 128 --val-patch 256 --lr 3e-4 --seed 16
+if [[ ",$nets," == *,spc,* ]]; then
+    for w in 8 16 32; do
+        run "spc_w$w" spc --width "$w" --patch 128 --val-patch 256 --lr 3e-4 --seed 16
+    done
+fi
+if [[ ",$nets," == *,pgrf,* ]]; then
+    for c in 8 16 32; do
+        run "pgrf_c$c" pgrf --inner-channels "$c" --channel-mults 1,2,2,4 --res-blocks 1 \
+            --attn-levels 3 --norm-groups "$((c < 16 ? c : 16))" --patch 64 --val-patch 128 --val-t2 0.5 \
+            --lr 5e-4 --seed 17
+    done
+fi
 
 for log in "$out"/*.log.csv; do
     name=$(basename "$log" .log.csv)
