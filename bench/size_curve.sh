@@ -6,9 +6,9 @@
 #   bench/size_curve.sh PHOTOS_DIR OUT_DIR [SECONDS] [THREADS] [NETS]
 #
 # NETS: spc (default), pgrf, or spc,pgrf: SID U-Net widths 8, 16, 32, or
-# SR3 inner channels 8, 16, 32 (x [1, 2, 2, 4], attention at level 3, GroupNorm
-# groups min(16, channels), 64 x 64
-# crops, lr 5e-4, as models/next/pgrf.toml).
+# SR3 inner channels 8, 16, 32 (x [1, 2, 2, 4], attention at level 3,
+# GroupNorm groups min(16, channels), 64 x 64 crops, lr 5e-4, as
+# models/next/pgrf.toml).
 #
 # PHOTOS_DIR is tools/fetch_photos.sh's folder. Each run is
 # `pgrf train spc|pgrf` with the settings of models/next/*.toml except the
