@@ -3,7 +3,8 @@
 use crate::calibration::{CalibMaps, CalibMeta, Calibration};
 use crate::error::{invalid, Result};
 use crate::estimate::{
-    defects, estimate_bias, estimate_dark, estimate_gain, BiasEstimate, DarkEstimate, GainEstimate,
+    defect, defects, estimate_bias, estimate_dark, estimate_gain, odd_columns, BiasEstimate,
+    DarkEstimate, GainEstimate,
 };
 use crate::stack::{read_stack, ReadOptions, Stack};
 use pgrf_core::Progress;
@@ -209,8 +210,11 @@ impl CalibrationRun {
             summary.push(row("Rejected", r.clone(), ""));
         }
         summary.push(row(
-            "Hot / dead pixels",
-            format!("{} / {}", m.hot_pixels, m.dead_pixels),
+            "Hot / dead / cold pixels",
+            format!(
+                "{} / {} / {}; {} defective columns",
+                m.hot_pixels, m.dead_pixels, m.cold_pixels, m.defect_columns
+            ),
             "pixels",
         ));
         if let (Some(p), Some(g)) = (m.ppcc_pixel_median, m.ppcc_pooled) {
@@ -354,6 +358,7 @@ pub fn calibrate(input: &CalibrateInput, progress: &dyn Progress) -> Result<Cali
         r2_linear: dark.as_ref().map(|d| d.r2_linear.clone()),
         dark_offset: dark.as_ref().and_then(|d| d.offset_dn.clone()),
     };
+    let count = |code: f32| defect_map.iter().filter(|&&d| d == code).count();
     let mut pp = bias.ppcc_pixels.clone();
     pp.sort_by(|a, b| a.total_cmp(b));
     let meta = CalibMeta {
@@ -399,9 +404,17 @@ pub fn calibrate(input: &CalibrateInput, progress: &dyn Progress) -> Result<Cali
         rejected_frames: rejected,
         ppcc_pixel_median: pp.get(pp.len() / 2).copied(),
         ppcc_pooled: bias.ppcc_pooled.is_finite().then_some(bias.ppcc_pooled),
-        hot_pixels: defect_map.iter().filter(|&&d| d == 1.0).count(),
-        dead_pixels: defect_map.iter().filter(|&&d| d == 2.0).count(),
-        units: "maps packed (4, H/2, W/2) in R,G1,B,G2 order; fixed_pattern (bias mean - black), sigma_read, response: DN; gain: DN per electron (eq. 3.15 per pixel); dark_rate: electrons per sqrt(s) (sqrt law) or per s (linear law), N_FP absorbed; defects: 0 good, 1 hot, 2 dead; r2_*: R^2 of the per-pixel dark fits (with the offset term when dark_offset); dark_offset: the dark law's offset c, DN; K, row_sigma, read_sigma_median, dsnu: DN (K: DN/e-)".into(),
+        hot_pixels: count(defect::HOT),
+        dead_pixels: count(defect::DEAD),
+        cold_pixels: count(defect::COLD),
+        defect_columns: {
+            let mut cols: Vec<(usize, usize)> = odd_columns(&bias.fixed_pattern);
+            cols.extend(odd_columns(&gain.response));
+            cols.sort_unstable();
+            cols.dedup();
+            cols.len()
+        },
+        units: "maps packed (4, H/2, W/2) in R,G1,B,G2 order; fixed_pattern (bias mean - black), sigma_read, response: DN; gain: DN per electron (eq. 3.15 per pixel); dark_rate: electrons per sqrt(s) (sqrt law) or per s (linear law), N_FP absorbed; defects: 0 good, 1 hot, 2 dead, 3 cold, 4 defective column; r2_*: R^2 of the per-pixel dark fits (with the offset term when dark_offset); dark_offset: the dark law's offset c, DN; K, row_sigma, read_sigma_median, dsnu: DN (K: DN/e-)".into(),
     };
     Ok(CalibrationRun {
         calibration: Calibration { meta, maps },

@@ -113,6 +113,13 @@ pub struct CalibMeta {
     pub hot_pixels: usize,
     /// Number of pixels flagged dead (2 in the `defects` map).
     pub dead_pixels: usize,
+    /// Number of pixels flagged cold (3 in the `defects` map).
+    #[serde(default)]
+    pub cold_pixels: usize,
+    /// Number of defective columns (of the packed planes; their pixels are
+    /// 4 in the `defects` map where not flagged otherwise).
+    #[serde(default)]
+    pub defect_columns: usize,
     pub(crate) units: String,
 }
 
@@ -277,7 +284,8 @@ pub struct CalibMaps {
     /// Dark-current rate, electrons per second or per sqrt(second) after the
     /// record's law (N_FP absorbed); zero without dark frames.
     pub dark_rate: Array3<f32>,
-    /// 0 good, 1 hot, 2 dead.
+    /// 0 good, 1 hot, 2 dead, 3 cold, 4 in a defective column
+    /// (`crate::estimate::defect`).
     pub defects: Array3<f32>,
     /// Per-pixel system gain, DN per electron (eq. 3.15).
     pub gain: Option<Array3<f32>>,

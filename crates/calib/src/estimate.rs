@@ -781,40 +781,112 @@ pub(crate) fn estimate_dark(dark: &Stack, bias: &BiasEstimate, k: f64) -> Result
     })
 }
 
-/// Defect map: 1 hot (dark rate or bias offset far above the rest), 2 dead
-/// (response to light far below the rest), 0 good. Thresholds are robust:
-/// median + 10 MAD (scaled to sigma) for hot, below half the median response for dead.
+/// Codes of the defect map.
+pub mod defect {
+    /// A good pixel.
+    pub const GOOD: f32 = 0.0;
+    /// Dark rate (or bias offset) far above the rest.
+    pub const HOT: f32 = 1.0;
+    /// Response to light below half the median.
+    pub const DEAD: f32 = 2.0;
+    /// Bias offset far below the rest.
+    pub const COLD: f32 = 3.0;
+    /// In a column whose mean offset or response stands out from the
+    /// other columns of its plane.
+    pub const COLUMN: f32 = 4.0;
+}
+
+/// Median and robust standard deviation (1.4826 MAD, floored at 1e-6) of
+/// the finite values of a map.
+fn robust_stats<'a>(values: impl IntoIterator<Item = &'a f32>) -> (f64, f64) {
+    let mut v: Vec<f64> = values
+        .into_iter()
+        .filter(|x| x.is_finite())
+        .map(|&x| x as f64)
+        .collect();
+    let m = median(&mut v);
+    let mut dev: Vec<f64> = v.iter().map(|x| (x - m).abs()).collect();
+    (m, (median(&mut dev) * 1.4826).max(1e-6))
+}
+
+/// The columns (per plane) whose median of `map` over the plane's rows lies
+/// more than 5 robust standard deviations from the plane's other columns:
+/// a column amplifier's offset or gain, which a pixel-by-pixel threshold
+/// misses because each of its pixels is only a little off (the median, so
+/// that one hot or cold pixel does not make its column look defective).
+pub(crate) fn odd_columns(map: &Array3<f32>) -> Vec<(usize, usize)> {
+    let mut out = Vec::new();
+    for (p, plane) in map.outer_iter().enumerate() {
+        let means: Vec<f32> = plane
+            .columns()
+            .into_iter()
+            .map(|c| {
+                let mut f: Vec<f64> = c
+                    .iter()
+                    .filter(|v| v.is_finite())
+                    .map(|&v| v as f64)
+                    .collect();
+                median(&mut f) as f32
+            })
+            .collect();
+        let (m, sd) = robust_stats(&means);
+        out.extend(
+            means
+                .iter()
+                .enumerate()
+                .filter(|(_, &c)| ((c as f64 - m) / sd).abs() > 5.0)
+                .map(|(j, _)| (p, j)),
+        );
+    }
+    out
+}
+
+/// Defect map ([`defect`] codes): hot (dark rate, or the bias offset
+/// without darks, above median + 10 robust sd), cold (bias offset below
+/// median - 10 robust sd), dead (mean response below half the median), and
+/// the pixels of defective columns ([`odd_columns`] of the bias offset and
+/// of the response) that are not flagged otherwise.
 pub(crate) fn defects(
     bias: &BiasEstimate,
     gain: Option<&GainEstimate>,
     dark: Option<&DarkEstimate>,
 ) -> Array3<f32> {
-    let robust_hi = |a: &Array3<f32>| {
-        let mut v: Vec<f64> = a
-            .iter()
-            .filter(|x| x.is_finite())
-            .map(|&x| x as f64)
-            .collect();
-        let m = median(&mut v);
-        let mut dev: Vec<f64> = v.iter().map(|x| (x - m).abs()).collect();
-        let mad = median(&mut dev) * 1.4826;
-        m + 10.0 * mad.max(1e-6)
-    };
     let mut out = Array3::<f32>::zeros(bias.fixed_pattern.raw_dim());
     let hot_src = dark.map(|d| &d.rate).unwrap_or(&bias.fixed_pattern);
-    let thr = robust_hi(hot_src);
+    let (m, sd) = robust_stats(hot_src);
     Zip::from(&mut out).and(hot_src).for_each(|o, &v| {
-        if v as f64 > thr {
-            *o = 1.0;
+        if v as f64 > m + 10.0 * sd {
+            *o = defect::HOT;
         }
     });
+    let (mb, sdb) = robust_stats(&bias.fixed_pattern);
+    Zip::from(&mut out)
+        .and(&bias.fixed_pattern)
+        .for_each(|o, &v| {
+            if *o == defect::GOOD && (v as f64) < mb - 10.0 * sdb {
+                *o = defect::COLD;
+            }
+        });
     // Dead: the mean response, not the per-pixel gain, which is too noisy
     // (its variance term has a relative error of sqrt(2/(F-1))).
     if let Some(g) = gain {
         let mr = median_finite(&g.response);
         Zip::from(&mut out).and(&g.response).for_each(|o, &v| {
             if (v as f64) < 0.5 * mr || !v.is_finite() {
-                *o = 2.0;
+                *o = defect::DEAD;
+            }
+        });
+    }
+    let mut columns = odd_columns(&bias.fixed_pattern);
+    if let Some(g) = gain {
+        columns.extend(odd_columns(&g.response));
+    }
+    for (p, j) in columns {
+        out.slice_mut(ndarray::s![p, .., j]).mapv_inplace(|o| {
+            if o == defect::GOOD {
+                defect::COLUMN
+            } else {
+                o
             }
         });
     }

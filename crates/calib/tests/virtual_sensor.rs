@@ -388,6 +388,9 @@ fn lamp_drift_does_not_bias_the_gain() {
     let k = run.calibration.meta.k;
     let stacked = run.gain.k_without_pairs;
     assert!((k / truth - 1.0).abs() < 0.02, "K {k} vs {truth}");
+    // A clean sensor has no cold pixel and no defective column.
+    let m = &run.calibration.meta;
+    assert_eq!((m.cold_pixels, m.defect_columns), (0, 0));
     // A lamp's slow drift spreads the frames evenly: none is named odd.
     assert!(
         run.calibration.meta.warnings.is_empty(),
@@ -629,6 +632,49 @@ fn flats_up_to_saturation_give_capacity_and_linearity() {
     );
     let le = m.linearity_error.unwrap();
     assert!(le < 0.005, "linearity error {le}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// A column whose amplifier reads 3 DN high (each pixel only 2 DSNU off,
+/// far under any per-pixel threshold) and a pixel stuck 300 DN low are
+/// found: the column's pixels are coded 4, the pixel 3.
+#[test]
+fn cold_pixels_and_defective_columns_are_mapped() {
+    let v = sensor(DarkLaw::Sqrt);
+    let dir = scratch("columns");
+    let s = write_stacks(&v, &dir, 16);
+    // Sensor column 41 (odd: plane G1 or B of RGGB, packed column 20);
+    // sensor (30, 60): plane R, packed (15, 30).
+    for f in &s.bias {
+        let mut fr = pgrf_raw::decode_file(f, &Default::default()).unwrap();
+        for y in 0..96 {
+            fr.mosaic[y * 128 + 41] += 3;
+        }
+        fr.mosaic[30 * 128 + 60] -= 300;
+        write_dng(&fr, f, &DngOptions::default()).unwrap();
+    }
+    let run = calibrate(
+        &CalibrateInput {
+            bias: s.bias,
+            flat: s.flat,
+            ..Default::default()
+        },
+        &pgrf_core::NoProgress,
+    )
+    .unwrap();
+    let m = &run.calibration.meta;
+    let d = &run.calibration.maps.defects;
+    assert_eq!(d[[0, 15, 30]], 3.0, "the cold pixel");
+    assert_eq!(m.cold_pixels, 1);
+    // Sensor column 41 holds G1 (rows 0, 2, ...) and B (rows 1, 3, ...).
+    assert_eq!(m.defect_columns, 2, "{:?}", m);
+    for p in [1, 2] {
+        assert!(
+            d.slice(ndarray::s![p, .., 20]).iter().all(|&c| c == 4.0),
+            "plane {p}"
+        );
+    }
+    assert_eq!(d.iter().filter(|&&c| c == 4.0).count(), 2 * 48);
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
