@@ -6,7 +6,8 @@ use crate::estimate::{
     defect, defects, estimate_bias, estimate_dark, estimate_gain, odd_columns, BiasEstimate,
     DarkEstimate, GainEstimate,
 };
-use crate::stack::{read_stack, ReadOptions, Stack};
+use crate::masters::{masters_of, Master};
+use crate::stack::{read_stack, FrameKey, ReadOptions, Stack};
 use pgrf_core::Progress;
 use pgrf_noise::DarkLaw;
 use std::path::PathBuf;
@@ -26,6 +27,8 @@ pub struct CalibrateInput {
     pub iso: Option<u32>,
     /// Pixels whose temporal samples are kept for the normality check.
     pub tap_pixels: usize,
+    /// Keep each stack's mean as a master frame ([`CalibrationRun::masters`]).
+    pub masters: bool,
     /// Drop the frames that stand out from their stack
     /// ([`crate::stack::Stack::odd_frames`]) and read the stack again
     /// without them; without it they are kept and named in warnings.
@@ -43,6 +46,11 @@ pub struct CalibrationRun {
     pub gain: GainEstimate,
     /// The dark-frame estimates, None without dark frames.
     pub dark: Option<DarkEstimate>,
+    /// The master frames (bias, dark per exposure, flat per level), with
+    /// [`CalibrateInput::masters`].
+    pub masters: Vec<Master>,
+    /// What every frame shared (size, CFA, levels, ISO, camera).
+    pub key: FrameKey,
 }
 
 /// The dark law's name as the record writes it.
@@ -331,6 +339,11 @@ pub fn calibrate(input: &CalibrateInput, progress: &dyn Progress) -> Result<Cali
         &mut rejected,
     )?;
     let gain = estimate_gain(&flat_stack, &bias)?;
+    let mut masters = Vec::new();
+    if input.masters {
+        masters.extend(masters_of(&bias_stack, "bias"));
+        masters.extend(masters_of(&flat_stack, "flat"));
+    }
     let (dark, dark_frames) = if input.dark.is_empty() {
         (None, Vec::new())
     } else {
@@ -342,6 +355,9 @@ pub fn calibrate(input: &CalibrateInput, progress: &dyn Progress) -> Result<Cali
             &mut rejected,
         )?;
         let frames = dark_stack.groups.iter().map(|g| g.files.len()).collect();
+        if input.masters {
+            masters.extend(masters_of(&dark_stack, "dark"));
+        }
         (Some(estimate_dark(&dark_stack, &bias, gain.k)?), frames)
     };
     let defect_map = defects(&bias, Some(&gain), dark.as_ref());
@@ -421,5 +437,7 @@ pub fn calibrate(input: &CalibrateInput, progress: &dyn Progress) -> Result<Cali
         bias,
         gain,
         dark,
+        masters,
+        key,
     })
 }

@@ -383,21 +383,24 @@ fn synth_refuses_bad_arguments_cleanly() {
 
 /// `pgrf calibrate --json` on a `simulate-sensor` folder's three stacks,
 /// writing `cal` and the report in `report`: the JSON line and stderr.
-fn calibrate_vs(vs: &Path, cal: &Path, report: &Path) -> (Value, String) {
-    let r = pgrf(&[
+fn calibrate_vs(vs: &Path, cal: &Path, report: &Path, extra: &[&str]) -> (Value, String) {
+    let (bias, dark, flat) = (vs.join("bias"), vs.join("dark"), vs.join("flat"));
+    let mut args = vec![
         "calibrate",
         "--bias",
-        s(&vs.join("bias")),
+        s(&bias),
         "--dark",
-        s(&vs.join("dark")),
+        s(&dark),
         "--flat",
-        s(&vs.join("flat")),
+        s(&flat),
         "-o",
         s(cal),
         "--report",
         s(report),
         "--json",
-    ]);
+    ];
+    args.extend_from_slice(extra);
+    let r = pgrf(&args);
     let stderr = String::from_utf8_lossy(&r.stderr).into_owned();
     assert!(r.status.success(), "{stderr}");
     let out = String::from_utf8_lossy(&r.stdout);
@@ -434,7 +437,9 @@ fn a_one_frame_dark_ladder_with_an_offset_calibrates() {
     assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
     assert_eq!(std::fs::read_dir(vs.join("dark")).unwrap().count(), 6);
     let report = dir.join("report");
-    let (v, stderr) = calibrate_vs(&vs, &dir.join("c.safetensors"), &report);
+    let masters = dir.join("masters");
+    let cal = dir.join("c.safetensors");
+    let (v, stderr) = calibrate_vs(&vs, &cal, &report, &["--masters", s(&masters)]);
     assert_eq!(
         (&v["dark_law"], &v["dark_offset"]),
         (&json!("linear"), &json!(true))
@@ -445,6 +450,31 @@ fn a_one_frame_dark_ladder_with_an_offset_calibrates() {
     let summary = std::fs::read_to_string(report.join("summary.md")).unwrap();
     assert!(summary.contains("linear + c law"), "{summary}");
     assert!(stderr.contains("dark law linear + c"), "{stderr}");
+    // Masters: the bias stack's mean (the calibration's fixed pattern plus
+    // black, to rounding), one dark per exposure, one flat per level.
+    let mut names: Vec<String> = std::fs::read_dir(&masters)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    names.sort();
+    assert_eq!(names.len(), 1 + 6 + 2 + 1, "{names:?}");
+    assert!(
+        names.contains(&"master_dark_150s.dng".to_string()),
+        "{names:?}"
+    );
+    let bias =
+        pgrf_raw::decode_file(&masters.join("master_bias.dng"), &Default::default()).unwrap();
+    let packed = pgrf_raw::pack_u16(&bias).unwrap();
+    let c = pgrf_calib::Calibration::load(&cal).unwrap();
+    let worst = packed
+        .iter()
+        .zip(c.maps.fixed_pattern.iter())
+        .map(|(&m, &fp)| (m as f32 - (fp + 512.0)).abs())
+        .fold(0.0f32, f32::max);
+    assert!(
+        worst <= 0.5 + 1e-3,
+        "master bias differs from the fixed pattern by {worst} DN"
+    );
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
@@ -477,7 +507,7 @@ fn simulate_calibrate_and_synthesise_with_the_calibration() {
 
     let cal = dir.join("calib.safetensors");
     let report = dir.join("report");
-    let (v, _) = calibrate_vs(&vs, &cal, &report);
+    let (v, _) = calibrate_vs(&vs, &cal, &report, &[]);
     let k = v["K"].as_f64().unwrap();
     assert!((k / (9.563e-4 * 1600.0) - 1.0).abs() < 0.05, "K {k}");
     assert!(v["row_sigma"].as_f64().unwrap() > 0.0);

@@ -36,6 +36,9 @@ pub struct CalibrateArgs {
     /// Drop frames whose mean or noise stands out from their stack (robust z-score above 5) instead of only naming them.
     #[arg(long)]
     pub reject: bool,
+    /// Folder for master frames (created if missing): master_bias.dng, master_dark_<T>s.dng per dark exposure, master_flat_<T>s.dng per flat level (each stack's mean, in the camera's mosaic and levels) and defects.png.
+    #[arg(long)]
+    pub masters: Option<PathBuf>,
 }
 
 pub fn run(a: &CalibrateArgs) -> Result<()> {
@@ -73,6 +76,12 @@ pub fn run(a: &CalibrateArgs) -> Result<()> {
         }
         None => Vec::new(),
     };
+    if let Some(dir) = &a.masters {
+        if dir.exists() && !dir.is_dir() {
+            anyhow::bail!("--masters {} is a file; give a folder", dir.display());
+        }
+        crate::output::require_parent_dir(dir).context("--masters")?;
+    }
     let mut outputs = vec![("-o", a.output.as_path())];
     outputs.extend(report_files.iter().map(|p| ("--report", p.as_path())));
     crate::output::check_outputs(&outputs, &inputs)?;
@@ -80,16 +89,20 @@ pub fn run(a: &CalibrateArgs) -> Result<()> {
     let bar = Bar::new("calibrating", total as u64, "frames", false);
     let run = calibrate(
         &CalibrateInput {
-            bias,
-            dark,
-            flat,
+            bias: bias.clone(),
+            dark: dark.clone(),
+            flat: flat.clone(),
             iso: a.iso,
             tap_pixels: 4096,
             reject: a.reject,
+            masters: a.masters.is_some(),
         },
         &bar,
     )?;
     bar.finish();
+    if let Some(dir) = &a.masters {
+        write_masters(dir, &run, &inputs, &a.output)?;
+    }
     // The report first: the calibration file is the run's result, and it
     // appears only when everything else has been written.
     if let Some(dir) = &a.report {
@@ -143,6 +156,47 @@ pub fn run(a: &CalibrateArgs) -> Result<()> {
             })
         );
     }
+    Ok(())
+}
+
+/// The master frames and the defect picture into `dir` (created if
+/// missing), each checked against the inputs and `-o` before any is written.
+fn write_masters(
+    dir: &std::path::Path,
+    run: &CalibrationRun,
+    inputs: &[&std::path::Path],
+    output: &std::path::Path,
+) -> Result<()> {
+    let files: Vec<PathBuf> = run
+        .masters
+        .iter()
+        .map(|m| dir.join(format!("{}.dng", m.name)))
+        .chain(std::iter::once(dir.join("defects.png")))
+        .collect();
+    if dir.is_dir() {
+        let mut outputs = vec![("-o", output)];
+        outputs.extend(files.iter().map(|f| ("--masters", f.as_path())));
+        crate::output::check_outputs(&outputs, inputs)?;
+    }
+    std::fs::create_dir_all(dir)
+        .with_context(|| format!("{}: cannot create the masters folder", dir.display()))?;
+    for (m, path) in run.masters.iter().zip(&files) {
+        pgrf_raw::write_dng(&m.frame(&run.key)?, path, &Default::default())
+            .with_context(|| format!("--masters {}", path.display()))?;
+    }
+    let key = &run.key;
+    let picture = pgrf_raw::Preview {
+        width: key.width,
+        height: key.height,
+        rgb: pgrf_calib::masters::defect_picture(&run.calibration.maps.defects, key),
+        warnings: Vec::new(),
+    };
+    picture.write_png(files.last().expect("defects.png"), 8)?;
+    eprintln!(
+        "wrote {} master frames and defects.png in {}",
+        run.masters.len(),
+        dir.display()
+    );
     Ok(())
 }
 
