@@ -100,7 +100,7 @@ fn calibration_recovers_the_virtual_sensor() {
             flat: s.flat.clone(),
             iso: Some(1600),
             tap_pixels: 256,
-            reject: false,
+            ..Default::default()
         },
         &pgrf_core::NoProgress,
     )
@@ -259,7 +259,7 @@ fn linear_dark_current_is_recognised() {
             flat: s.flat,
             iso: None,
             tap_pixels: 0,
-            reject: false,
+            ..Default::default()
         },
         &pgrf_core::NoProgress,
     )
@@ -724,7 +724,7 @@ fn bad_stacks_are_refused_with_the_file_named() {
                 flat: s.flat.clone(),
                 iso,
                 tap_pixels: 0,
-                reject: false,
+                ..Default::default()
             },
             &pgrf_core::NoProgress,
         )
@@ -785,7 +785,7 @@ fn calibration_is_bit_identical_from_run_to_run() {
         flat: s.flat.clone(),
         iso: Some(1600),
         tap_pixels: 64,
-        reject: false,
+        ..Default::default()
     };
     let run_with = |threads: usize| {
         rayon::ThreadPoolBuilder::new()
