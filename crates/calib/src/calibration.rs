@@ -505,6 +505,68 @@ impl Calibration {
         Ok(out)
     }
 
+    /// Cosmetic correction, as astro software applies it after dark
+    /// subtraction: every pixel the defect map flags hot, dead or cold is
+    /// replaced by the median of its eight nearest neighbours of the same
+    /// colour that are not flagged (in the mosaic: two photosites away), so
+    /// a hot pixel's shot noise, which no dark frame removes, is not handed
+    /// to the denoiser. Defective columns are left: their offset is in the
+    /// fixed pattern. Returns how many pixels were replaced; `frame` must be
+    /// the calibration's size (checked by the caller with the rest of the
+    /// calibration).
+    pub fn correct_defects(&self, frame: &mut pgrf_raw::RawFrame) -> usize {
+        use crate::estimate::defect;
+        let d = &self.maps.defects;
+        let (_, ph, pw) = d.dim();
+        if (2 * ph, 2 * pw) != (frame.height, frame.width) {
+            return 0;
+        }
+        let flagged = |v: f32| v == defect::HOT || v == defect::DEAD || v == defect::COLD;
+        let w = frame.width;
+        let mut fixed = 0;
+        for (p, (dy, dx)) in frame.cfa.offsets().into_iter().enumerate() {
+            let plane = d.index_axis(ndarray::Axis(0), p);
+            for ((i, j), &c) in plane.indexed_iter() {
+                if !flagged(c) {
+                    continue;
+                }
+                let mut near: Vec<u16> = Vec::with_capacity(8);
+                for (di, dj) in [
+                    (-1, -1),
+                    (-1, 0),
+                    (-1, 1),
+                    (0, -1),
+                    (0, 1),
+                    (1, -1),
+                    (1, 0),
+                    (1, 1),
+                ] {
+                    let (ni, nj) = (i as isize + di, j as isize + dj);
+                    if ni < 0 || nj < 0 || ni >= ph as isize || nj >= pw as isize {
+                        continue;
+                    }
+                    let (ni, nj) = (ni as usize, nj as usize);
+                    if !flagged(plane[[ni, nj]]) {
+                        near.push(frame.mosaic[(2 * ni + dy) * w + 2 * nj + dx]);
+                    }
+                }
+                if near.is_empty() {
+                    continue;
+                }
+                near.sort_unstable();
+                let n = near.len();
+                let med = if n % 2 == 1 {
+                    near[n / 2]
+                } else {
+                    ((near[n / 2 - 1] as u32 + near[n / 2] as u32 + 1) / 2) as u16
+                };
+                frame.mosaic[(2 * i + dy) * w + 2 * j + dx] = med;
+                fixed += 1;
+            }
+        }
+        fixed
+    }
+
     /// A short identity for records: camera, ISO and file name.
     pub fn identity(&self, path: &Path) -> String {
         format!(

@@ -643,6 +643,7 @@ fn cold_pixels_and_defective_columns_are_mapped() {
     let v = sensor(DarkLaw::Sqrt);
     let dir = scratch("columns");
     let s = write_stacks(&v, &dir, 16);
+    let s_bias0 = s.bias[0].clone();
     // Sensor column 41 (odd: plane G1 or B of RGGB, packed column 20);
     // sensor (30, 60): plane R, packed (15, 30).
     for f in &s.bias {
@@ -675,6 +676,29 @@ fn cold_pixels_and_defective_columns_are_mapped() {
         );
     }
     assert_eq!(d.iter().filter(|&&c| c == 4.0).count(), 2 * 48);
+    // Cosmetic correction: the cold pixel of a bias frame becomes the
+    // median of its eight same-colour neighbours; the column is left.
+    let mut fr = pgrf_raw::decode_file(&s_bias0, &Default::default()).unwrap();
+    let mut near: Vec<u16> = [
+        (-2i32, -2i32),
+        (-2, 0),
+        (-2, 2),
+        (0, -2),
+        (0, 2),
+        (2, -2),
+        (2, 0),
+        (2, 2),
+    ]
+    .iter()
+    .map(|(dy, dx)| fr.mosaic[((30 + dy) * 128 + 60 + dx) as usize])
+    .collect();
+    near.sort_unstable();
+    let want = ((near[3] as u32 + near[4] as u32 + 1) / 2) as u16;
+    let column_before: Vec<u16> = (0..96).map(|y| fr.mosaic[y * 128 + 41]).collect();
+    assert_eq!(run.calibration.correct_defects(&mut fr), 1);
+    assert_eq!(fr.mosaic[30 * 128 + 60], want);
+    let column_after: Vec<u16> = (0..96).map(|y| fr.mosaic[y * 128 + 41]).collect();
+    assert_eq!(column_before, column_after);
     std::fs::remove_dir_all(&dir).unwrap();
 }
 

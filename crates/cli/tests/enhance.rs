@@ -538,7 +538,7 @@ fn the_calibrated_fixed_pattern_is_subtracted() {
     }
     let bright = d.join("bright.dng");
     write_dng(&brighter, &bright, &DngOptions::default()).unwrap();
-    let calib = |w: usize, h: usize, path: &Path| {
+    let calib = |w: usize, h: usize, path: &Path, hot: usize| {
         let meta: pgrf_calib::CalibMeta = serde_json::from_value(serde_json::json!({
             "kind": "pgrf-calibration", "schema": 1, "pgrf_version": "test",
             "make": "Sony", "model": "ILCE-7SM2", "iso": 1600, "width": w, "height": h,
@@ -556,7 +556,14 @@ fn the_calibrated_fixed_pattern_is_subtracted() {
             fixed_pattern: Array3::from_elem(shape, 5.0f32),
             sigma_read: Array3::from_elem(shape, 3.0f32),
             dark_rate: Array3::zeros(shape),
-            defects: Array3::zeros(shape),
+            defects: {
+                // `hot` hot pixels along the diagonal of plane R.
+                let mut d = Array3::zeros(shape);
+                for k in 0..hot {
+                    d[[0, 2 + 3 * k, 2 + 3 * k]] = 1.0;
+                }
+                d
+            },
             gain: None,
             response: None,
             r2_sqrt: None,
@@ -566,9 +573,11 @@ fn the_calibrated_fixed_pattern_is_subtracted() {
         Calibration { meta, maps }.save(path).unwrap();
     };
     let good = d.join("good.safetensors");
-    calib(64, 48, &good);
+    calib(64, 48, &good, 0);
     let wrong = d.join("wrong.safetensors");
-    calib(32, 48, &wrong);
+    calib(32, 48, &wrong, 0);
+    let hot = d.join("hot.safetensors");
+    calib(64, 48, &hot, 3);
     let m = model(&d, false, None);
     let run = |input: &Path, out: &Path, extra: &[&str]| {
         let mut args = vec![
@@ -595,6 +604,13 @@ fn the_calibrated_fixed_pattern_is_subtracted() {
         decode_file(&b, &LevelOverrides::default()).unwrap(),
     );
     assert_eq!(ra.mosaic, rb.mosaic);
+    // The report counts the defective pixels the calibration's map had
+    // replaced from their neighbours.
+    for (cal, n) in [(&good, 0), (&hot, 3)] {
+        let r = run(&bright, &d.join("j.dng"), &["--calib", s(cal), "--json"]);
+        let report: Value = serde_json::from_slice(&r.stdout).unwrap();
+        assert_eq!(report["defects_corrected"], n, "{report}");
+    }
     let c = d.join("c.dng");
     let err = one_line_error(&run(&bright, &c, &["--calib", s(&wrong)]));
     assert!(err.contains("32x48") && err.contains("64x48"), "{err}");

@@ -94,6 +94,8 @@ struct FileReport {
     nfe: usize,
     tile: usize,
     tiles: usize,
+    /// Pixels the calibration's defect map replaced (cosmetic correction).
+    defects_corrected: usize,
     seconds: f64,
     peak_rss_mib: Option<f64>,
 }
@@ -309,12 +311,13 @@ fn enhance_one(
     print_header: &dyn Fn(),
 ) -> Result<FileReport> {
     let t0 = Instant::now();
-    let frame = a.input.open(&job.input)?;
+    let mut frame = a.input.open(&job.input)?;
     let ratio = match (a.ratio, a.target_exposure) {
         (Some(r), _) => r,
         (None, Some(t)) => ratio_from_exposure(&frame, t, a.target_iso)?,
         (None, None) => unreachable!("checked in run"),
     };
+    let mut defects_fixed = 0;
     let dark = match (calib, &a.calib) {
         (Some(cal), Some(path)) => {
             cal.check_matches(&frame.make, &frame.model, frame.iso, a.force)
@@ -329,7 +332,9 @@ fn enhance_one(
                     frame.height
                 );
             }
-            Some(cal.dark_shading_dn(frame.exposure_s.unwrap_or(0.0))?)
+            let shading = cal.dark_shading_dn(frame.exposure_s.unwrap_or(0.0))?;
+            defects_fixed = cal.correct_defects(&mut frame);
+            Some(shading)
         }
         _ => None,
     };
@@ -360,7 +365,7 @@ fn enhance_one(
     let seconds = t0.elapsed().as_secs_f64();
     if !a.quiet {
         eprintln!(
-            "wrote {}{}: {}x{}, ratio {ratio:.1}, {tiles} tile{} of {}, {seconds:.1} s",
+            "wrote {}{}: {}x{}, ratio {ratio:.1}, {tiles} tile{} of {}, {seconds:.1} s{}",
             job.output.display(),
             job.png
                 .as_ref()
@@ -370,6 +375,11 @@ fn enhance_one(
             frame.height,
             if tiles == 1 { "" } else { "s" },
             tile,
+            if defects_fixed > 0 {
+                format!(", {defects_fixed} defective pixels corrected from their neighbours")
+            } else {
+                String::new()
+            },
         );
     }
     Ok(FileReport {
@@ -383,6 +393,7 @@ fn enhance_one(
         nfe: restorer.nfe(),
         tile,
         tiles,
+        defects_corrected: defects_fixed,
         seconds,
         peak_rss_mib: pgrf_core::mem::peak_rss_mib(),
     })
