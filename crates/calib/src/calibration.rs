@@ -558,7 +558,7 @@ impl Calibration {
                 let med = if n % 2 == 1 {
                     near[n / 2]
                 } else {
-                    ((near[n / 2 - 1] as u32 + near[n / 2] as u32 + 1) / 2) as u16
+                    (near[n / 2 - 1] as u32 + near[n / 2] as u32).div_ceil(2) as u16
                 };
                 frame.mosaic[(2 * i + dy) * w + 2 * j + dx] = med;
                 fixed += 1;

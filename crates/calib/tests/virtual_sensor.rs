@@ -693,7 +693,7 @@ fn cold_pixels_and_defective_columns_are_mapped() {
     .map(|(dy, dx)| fr.mosaic[((30 + dy) * 128 + 60 + dx) as usize])
     .collect();
     near.sort_unstable();
-    let want = ((near[3] as u32 + near[4] as u32 + 1) / 2) as u16;
+    let want = (near[3] as u32 + near[4] as u32).div_ceil(2) as u16;
     let column_before: Vec<u16> = (0..96).map(|y| fr.mosaic[y * 128 + 41]).collect();
     assert_eq!(run.calibration.correct_defects(&mut fr), 1);
     assert_eq!(fr.mosaic[30 * 128 + 60], want);
