@@ -29,6 +29,10 @@ pub struct CalibrateInput {
     pub tap_pixels: usize,
     /// Keep each stack's mean as a master frame ([`CalibrationRun::masters`]).
     pub masters: bool,
+    /// How far (degrees C) a frame's recorded temperature may lie from the
+    /// median of all frames' before the run is refused; `None` for
+    /// [`TEMPERATURE_TOLERANCE_C`].
+    pub temperature_tolerance: Option<f32>,
     /// Drop the frames that stand out from their stack
     /// ([`crate::stack::Stack::odd_frames`]) and read the stack again
     /// without them; without it they are kept and named in warnings.
@@ -184,9 +188,13 @@ impl CalibrationRun {
                     "e-/sqrt(s)"
                 };
                 let plus = if m.dark_offset { " + c" } else { "" };
+                let at = m
+                    .temperature_c
+                    .map(|t| format!(" at {t:.1} °C"))
+                    .unwrap_or_default();
                 summary.push(row(
                     &format!(
-                        "Dark current (mean, {} law)",
+                        "Dark current (mean, {} law){at}",
                         law_label(m.dark_law, m.dark_offset)
                     ),
                     format!("{rate:.4}"),
@@ -211,6 +219,13 @@ impl CalibrationRun {
                 "",
             )),
         }
+        summary.push(row(
+            "Capture temperature (median of the frames)",
+            m.temperature_c
+                .map(|t| format!("{t:.1}"))
+                .unwrap_or_else(|| "not recorded in the files".into()),
+            "°C",
+        ));
         for w in &m.warnings {
             summary.push(row("Warning", w.clone(), ""));
         }
@@ -252,6 +267,35 @@ impl CalibrationRun {
         ));
         summary
     }
+}
+
+/// How far apart (degrees C) the frames of one calibration may have been
+/// taken unless told otherwise: dark current doubles every 5-7 degrees, so
+/// 2 degrees already moves it by a quarter.
+pub const TEMPERATURE_TOLERANCE_C: f32 = 2.0;
+
+/// The median temperature of the frames that record one, after checking
+/// that none lies further than `tolerance` from it (the file furthest out
+/// is named).
+fn check_temperatures(sets: &[&[(PathBuf, f32)]], tolerance: f32) -> Result<Option<f32>> {
+    let all: Vec<&(PathBuf, f32)> = sets.iter().flat_map(|s| s.iter()).collect();
+    if all.is_empty() {
+        return Ok(None);
+    }
+    let mut v: Vec<f64> = all.iter().map(|(_, t)| *t as f64).collect();
+    let med = pgrf_core::stats::median(&mut v) as f32;
+    let worst = all
+        .iter()
+        .max_by(|a, b| (a.1 - med).abs().total_cmp(&(b.1 - med).abs()))
+        .expect("not empty");
+    if (worst.1 - med).abs() > tolerance {
+        return Err(invalid(format!(
+            "{}: taken at {:.1} °C, the frames' median is {med:.1} °C; frames more than {tolerance} °C apart are not one calibration (dark current doubles every 5-7 °C): shoot at one temperature, or allow more with --temperature-tolerance",
+            worst.0.display(),
+            worst.1
+        )));
+    }
+    Ok(Some(med))
 }
 
 /// Read a stack, then deal with the frames that stand out from it
@@ -338,12 +382,20 @@ pub fn calibrate(input: &CalibrateInput, progress: &dyn Progress) -> Result<Cali
         &mut notes,
         &mut rejected,
     )?;
+    let tolerance = input
+        .temperature_tolerance
+        .unwrap_or(TEMPERATURE_TOLERANCE_C);
+    check_temperatures(
+        &[&bias_stack.temperatures, &flat_stack.temperatures],
+        tolerance,
+    )?;
     let gain = estimate_gain(&flat_stack, &bias)?;
     let mut masters = Vec::new();
     if input.masters {
         masters.extend(masters_of(&bias_stack, "bias"));
         masters.extend(masters_of(&flat_stack, "flat"));
     }
+    let mut dark_temps = Vec::new();
     let (dark, dark_frames) = if input.dark.is_empty() {
         (None, Vec::new())
     } else {
@@ -355,11 +407,20 @@ pub fn calibrate(input: &CalibrateInput, progress: &dyn Progress) -> Result<Cali
             &mut rejected,
         )?;
         let frames = dark_stack.groups.iter().map(|g| g.files.len()).collect();
+        dark_temps = dark_stack.temperatures.clone();
         if input.masters {
             masters.extend(masters_of(&dark_stack, "dark"));
         }
         (Some(estimate_dark(&dark_stack, &bias, gain.k)?), frames)
     };
+    let temperature_c = check_temperatures(
+        &[
+            &bias_stack.temperatures,
+            &flat_stack.temperatures,
+            &dark_temps,
+        ],
+        tolerance,
+    )?;
     let defect_map = defects(&bias, Some(&gain), dark.as_ref());
 
     let zeros = || ndarray::Array3::zeros(bias.fixed_pattern.raw_dim());
@@ -416,6 +477,7 @@ pub fn calibrate(input: &CalibrateInput, progress: &dyn Progress) -> Result<Cali
             .as_ref()
             .filter(|d| d.offset)
             .map(|d| d.offset_mean_dn),
+        temperature_c,
         warnings: gain.warnings.iter().cloned().chain(notes).collect(),
         rejected_frames: rejected,
         ppcc_pixel_median: pp.get(pp.len() / 2).copied(),

@@ -101,6 +101,10 @@ pub struct CalibMeta {
     /// correlation coefficient with a normal (1 is perfectly Gaussian).
     pub ppcc_pixel_median: Option<f64>,
     pub(crate) ppcc_pooled: Option<f64>,
+    /// Median capture temperature of the frames, degrees C, when they record
+    /// one (every frame within the run's tolerance of it).
+    #[serde(default)]
+    pub temperature_c: Option<f32>,
     /// What the estimates could not check (one flat level: no linearity
     /// check of K), as the run printed them.
     #[serde(default)]

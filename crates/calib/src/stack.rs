@@ -198,6 +198,8 @@ pub struct Stack {
     /// Temporal samples of a sparse grid of pixels (one series per tapped
     /// pixel, first exposure group only), kept for the per-pixel normality check.
     pub(crate) tap: Vec<Vec<f32>>,
+    /// The capture temperature of every frame that records one, degrees C.
+    pub temperatures: Vec<(PathBuf, f32)>,
 }
 
 /// Options for reading one stack.
@@ -285,6 +287,7 @@ pub fn read_stack(files: &[PathBuf], opt: &ReadOptions) -> Result<Stack> {
         let mut groups: Vec<Group> = Vec::new();
         let mut tap_index: Vec<usize> = Vec::new();
         let mut tap: Vec<Vec<f32>> = Vec::new();
+        let mut temperatures = Vec::new();
         for msg in in_order {
             let (i, frame) = msg?;
             let file = &files[i];
@@ -301,6 +304,9 @@ pub fn read_stack(files: &[PathBuf], opt: &ReadOptions) -> Result<Stack> {
                     }
                 }
                 None => key = Some(k),
+            }
+            if let Some(c) = frame.temperature_c {
+                temperatures.push((file.clone(), c));
             }
             let t = frame.exposure_s;
             if opt.need_exposure && t.is_none() {
@@ -386,6 +392,7 @@ pub fn read_stack(files: &[PathBuf], opt: &ReadOptions) -> Result<Stack> {
             key: key.ok_or_else(|| invalid(format!("{} stack is empty", opt.kind)))?,
             groups,
             tap,
+            temperatures,
         })
     })
 }

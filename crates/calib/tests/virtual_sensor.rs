@@ -702,6 +702,47 @@ fn cold_pixels_and_defective_columns_are_mapped() {
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
+/// Frames record their temperature: darks taken at -5 °C among bias and
+/// flats at -10 °C are refused with a dark named, unless the tolerance
+/// allows it; the record keeps the frames' median temperature.
+#[test]
+fn frames_of_another_temperature_are_refused() {
+    let mut spec = SensorSpec::preset("a7s2-iso1600").unwrap();
+    spec.width = 64;
+    spec.height = 48;
+    spec.temperature_c = Some(-10.0);
+    let cold = VirtualSensor::new(spec.clone()).unwrap();
+    spec.temperature_c = Some(-5.0);
+    let warm = VirtualSensor::new(spec).unwrap();
+    let dir = scratch("temperature");
+    let s = write_stacks(&cold, &dir, 16);
+    let warm_dark = write_ladder(&warm, &dir.join("warm"), 2, &[1.0, 4.0, 16.0], 4).dark;
+    let input = CalibrateInput {
+        bias: s.bias,
+        flat: s.flat,
+        dark: warm_dark,
+        ..Default::default()
+    };
+    let e = calibrate(&input, &pgrf_core::NoProgress)
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(
+        e.contains("warm/dark/") && e.contains("-5.0 °C") && e.contains("median is -10.0 °C"),
+        "{e}"
+    );
+    let run = calibrate(
+        &CalibrateInput {
+            temperature_tolerance: Some(6.0),
+            ..input
+        },
+        &pgrf_core::NoProgress,
+    )
+    .unwrap();
+    assert_eq!(run.calibration.meta.temperature_c, Some(-10.0));
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
 /// One flat level: K from eq. 3.15 with a warning that nothing checks the
 /// sensor's linearity, in the record (and so in the report).
 #[test]

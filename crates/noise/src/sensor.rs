@@ -69,6 +69,9 @@ pub struct SensorSpec {
     /// clock-induced charge at the start of a readout cycle), so a bias
     /// frame of 1/8000 s has none of it and a dark of a second all of it.
     pub dark_offset: f32,
+    /// Temperature the frames are taken at, degrees C, written into each
+    /// frame's metadata (None: not recorded, as most cameras).
+    pub temperature_c: Option<f32>,
     /// Light lost towards the corners of a flat (lens vignetting or an uneven
     /// lamp): the light falls off as 1 - v r^2, r the distance from the
     /// centre over the half-diagonal. A flat's shading, not the sensor's
@@ -126,6 +129,7 @@ impl SensorSpec {
             dark_offset: 0.0,
             frame_offset_sigma: 0.0,
             vignetting: 0.0,
+            temperature_c: None,
             n_fp: 0.05,
             hot_fraction: 1e-4,
             hot_factor: 50.0,
@@ -261,6 +265,7 @@ impl VirtualSensor {
             .map_err(|e| NoiseError::Invalid(e.to_string()))?;
         f.iso = Some(sp.iso);
         f.exposure_s = Some(t as f64);
+        f.temperature_c = sp.temperature_c;
         f.make = "pgrf".into();
         f.model = format!("virtual sensor {}", sp.name);
         Ok(f)

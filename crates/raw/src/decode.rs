@@ -70,6 +70,7 @@ fn decode_source(
     .and_then(|r| r)
     .map_err(|reason| RawError::decode(path, tidy_reason(&reason)))?;
     let mut frame = frame_from_rawler(path, image, exif)?;
+    frame.temperature_c = crate::container::exif_temperature(source.buf());
     frame.apply_overrides(overrides)?;
     Ok(frame)
 }
@@ -230,6 +231,7 @@ fn frame_from_rawler(
         orientation,
         sensor_origin: (y0, x0),
         sensor_size: (image.height, image.width),
+        temperature_c: None,
         exif,
     };
     frame.check_levels().map_err(|e| {

@@ -86,6 +86,12 @@ pub fn encode_dng(frame: &RawFrame, opts: &DngOptions) -> Result<Vec<u8>> {
         dng.load_base_tags(&image).map_err(|e| e.to_string())?;
         dng.load_metadata(&exif).map_err(|e| e.to_string())?;
         write_color_tags(&mut dng, frame);
+        if let Some(t) = frame.temperature_c.filter(|t| t.is_finite()) {
+            dng.exif_ifd_mut().add_tag(
+                ExifTag::AmbientTemperature,
+                SRational::new((t as f64 * 100.0).round() as i32, 100),
+            );
+        }
         let root = dng.root_ifd_mut();
         root.add_tag(ExifTag::Orientation, frame.orientation);
         root.add_tag(TiffCommonTag::Software, opts.software.as_str());
@@ -235,6 +241,26 @@ fn exposure_rational(t: f64) -> Rational {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The capture temperature survives a DNG round trip (EXIF
+    /// AmbientTemperature, to 0.01 degree), and a frame without one stays
+    /// without.
+    #[test]
+    fn temperature_round_trips() {
+        let mut f = RawFrame::from_mosaic(8, 6, vec![600; 48], crate::Cfa::Rggb, [512.0; 4], 16383)
+            .unwrap();
+        let back = |f: &RawFrame| {
+            let bytes = encode_dng(f, &DngOptions::default()).unwrap();
+            crate::decode_bytes(std::path::Path::new("t.dng"), &bytes, &Default::default())
+                .unwrap()
+                .temperature_c
+        };
+        assert_eq!(back(&f), None);
+        f.temperature_c = Some(-10.25);
+        assert_eq!(back(&f), Some(-10.25));
+        f.temperature_c = Some(23.0);
+        assert_eq!(back(&f), Some(23.0));
+    }
 
     #[test]
     fn exposure_rationals() {

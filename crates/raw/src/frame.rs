@@ -58,6 +58,11 @@ pub struct RawFrame {
     pub sensor_origin: (usize, usize),
     /// Size (height, width) of the full sensor readout; see `sensor_origin`.
     pub sensor_size: (usize, usize),
+    /// Temperature at capture, degrees Celsius, when the file records one
+    /// (EXIF AmbientTemperature, which DNGs pgrf writes carry): dark current
+    /// doubles every few degrees, so calibration frames are checked against
+    /// each other with it.
+    pub temperature_c: Option<f32>,
     /// The decoder's EXIF record, carried into DNGs written from this frame so
     /// lens, date and exposure tags survive a round trip.
     pub(crate) exif: Option<rawler::decoders::RawMetadata>,
@@ -113,6 +118,7 @@ impl RawFrame {
             orientation: 1,
             sensor_origin: (0, 0),
             sensor_size: (height, width),
+            temperature_c: None,
             exif: None,
         };
         frame.check_levels()?;

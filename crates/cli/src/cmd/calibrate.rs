@@ -36,6 +36,9 @@ pub struct CalibrateArgs {
     /// Drop frames whose mean or noise stands out from their stack (robust z-score above 5) instead of only naming them.
     #[arg(long)]
     pub reject: bool,
+    /// How far (°C) a frame's recorded temperature may lie from the frames' median [default: 2].
+    #[arg(long)]
+    pub temperature_tolerance: Option<f32>,
     /// Folder for master frames (created if missing): master_bias.dng, master_dark_<T>s.dng per dark exposure, master_flat_<T>s.dng per flat level (each stack's mean, in the camera's mosaic and levels) and defects.png.
     #[arg(long)]
     pub masters: Option<PathBuf>,
@@ -76,6 +79,11 @@ pub fn run(a: &CalibrateArgs) -> Result<()> {
         }
         None => Vec::new(),
     };
+    if let Some(t) = a.temperature_tolerance {
+        if !(t.is_finite() && t >= 0.0) {
+            anyhow::bail!("--temperature-tolerance must be a non-negative number of °C, got {t}");
+        }
+    }
     if let Some(dir) = &a.masters {
         if dir.exists() && !dir.is_dir() {
             anyhow::bail!("--masters {} is a file; give a folder", dir.display());
@@ -96,6 +104,7 @@ pub fn run(a: &CalibrateArgs) -> Result<()> {
             tap_pixels: 4096,
             reject: a.reject,
             masters: a.masters.is_some(),
+            temperature_tolerance: a.temperature_tolerance,
         },
         &bar,
     )?;
@@ -148,6 +157,7 @@ pub fn run(a: &CalibrateArgs) -> Result<()> {
                 "dark_offset": m.dark_offset,
                 "dark_offset_mean": m.dark_offset_mean,
                 "K_without_pairs": run.gain.k_without_pairs,
+                "temperature_c": m.temperature_c,
                 "warnings": m.warnings,
                 "rejected_frames": m.rejected_frames,
                 "hot_pixels": m.hot_pixels,

@@ -45,6 +45,7 @@ struct Info<'a> {
     color_matrices: &'a [pgrf_raw::ColorMatrix],
     iso: Option<u32>,
     exposure_s: Option<f64>,
+    temperature_c: Option<f32>,
     orientation: u16,
     visible_origin: [usize; 2],
     sensor_size: [usize; 2],
@@ -91,6 +92,7 @@ pub fn run(a: &InfoArgs) -> Result<()> {
         color_matrices: &f.color_matrices,
         iso: f.iso,
         exposure_s: f.exposure_s,
+        temperature_c: f.temperature_c,
         orientation: f.orientation,
         visible_origin: [f.sensor_origin.0, f.sensor_origin.1],
         sensor_size: [f.sensor_size.0, f.sensor_size.1],
@@ -121,6 +123,9 @@ pub fn run(a: &InfoArgs) -> Result<()> {
     println!("white       {} DN ({} bits)", f.white, f.bits);
     println!("iso         {}", opt(f.iso.map(|v| v.to_string())));
     println!("exposure    {}", opt(f.exposure_s.map(format_exposure)));
+    if let Some(t) = f.temperature_c {
+        println!("temperature {t:.2} °C");
+    }
     println!(
         "wb          {}",
         opt(f

@@ -60,6 +60,9 @@ pub struct SimulateArgs {
     /// Whole-frame offset drift: each frame's offset is drawn with this standard deviation, DN.
     #[arg(long, default_value_t = 0.0)]
     pub frame_offset: f32,
+    /// Capture temperature written into every frame, degrees C.
+    #[arg(long, allow_hyphen_values = true)]
+    pub temperature: Option<f32>,
     /// Flat shading: the light lost at the corners (0.2 = 20 %), as a lens's vignetting.
     #[arg(long, default_value_t = 0.0)]
     pub vignetting: f32,
@@ -96,6 +99,11 @@ pub fn run(a: &SimulateArgs) -> Result<()> {
             "--frame-offset must be between 0 and 1000 DN, got {}",
             a.frame_offset
         );
+    }
+    if let Some(t) = a.temperature {
+        if !(t.is_finite() && (-273.0..=200.0).contains(&t)) {
+            bail!("--temperature must be between -273 and 200 °C, got {t}");
+        }
     }
     if !(a.vignetting.is_finite() && (0.0..0.9).contains(&a.vignetting)) {
         bail!(
@@ -140,6 +148,7 @@ pub fn run(a: &SimulateArgs) -> Result<()> {
     spec.dark_offset = a.dark_offset;
     spec.frame_offset_sigma = a.frame_offset;
     spec.vignetting = a.vignetting;
+    spec.temperature_c = a.temperature;
     let sensor = VirtualSensor::new(spec)?;
     for s in &a.stacks {
         if !["bias", "dark", "flat"].contains(&s.as_str()) {

@@ -131,6 +131,31 @@ pub fn check(bytes: &[u8]) -> Result<(), String> {
     check_tiff(bytes, &SUB_IFD_TAGS, Notes::ByMake, true)
 }
 
+/// EXIF AmbientTemperature (tag 0x9400, a signed rational, degrees Celsius)
+/// of a TIFF-based file: in the first IFD's EXIF IFD, where cameras that
+/// record it and the DNGs pgrf writes keep it. rawler does not read it.
+/// `None` for other files, a missing tag or a value no sensor has (outside
+/// -273..1000, or a zero denominator). Call after [`check`], which makes
+/// sure the offsets lie inside the file.
+pub fn exif_temperature(bytes: &[u8]) -> Option<f32> {
+    let order = match bytes.get(..2)? {
+        b"II" => Order(true),
+        b"MM" => Order(false),
+        _ => return None,
+    };
+    let ifd0 = order.u32(bytes, 4)? as u64;
+    let exif = tiff::find_entry(bytes, order, ifd0, 34665)?;
+    let exif_ifd = order.u32(bytes, exif.at)? as u64;
+    let t = tiff::find_entry(bytes, order, exif_ifd, 0x9400)?;
+    if t.kind != 10 || t.count < 1 {
+        return None;
+    }
+    let n = order.u32(bytes, t.at)? as i32;
+    let d = order.u32(bytes, t.at + 4)? as i32;
+    let c = (d != 0).then(|| n as f64 / d as f64)?;
+    (-273.15..=1000.0).contains(&c).then_some(c as f32)
+}
+
 /// The megapixels of a `w` x `h` image, when more than [`MAX_PIXELS`].
 fn too_many_pixels(w: u64, h: u64) -> Option<String> {
     let pixels = w.saturating_mul(h);
