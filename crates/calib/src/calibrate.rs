@@ -222,9 +222,9 @@ impl CalibrationRun {
         summary.push(row(
             "Capture temperature (median of the frames)",
             m.temperature_c
-                .map(|t| format!("{t:.1}"))
+                .map(|t| format!("{t:.1} °C"))
                 .unwrap_or_else(|| "not recorded in the files".into()),
-            "°C",
+            "",
         ));
         for w in &m.warnings {
             summary.push(row("Warning", w.clone(), ""));
@@ -233,12 +233,12 @@ impl CalibrationRun {
             summary.push(row("Rejected", r.clone(), ""));
         }
         summary.push(row(
-            "Hot / dead / cold pixels",
+            "Hot / dead / cold pixels; defective columns",
             format!(
-                "{} / {} / {}; {} defective columns",
+                "{} / {} / {} pixels; {} columns",
                 m.hot_pixels, m.dead_pixels, m.cold_pixels, m.defect_columns
             ),
-            "pixels",
+            "",
         ));
         if let (Some(p), Some(g)) = (m.ppcc_pixel_median, m.ppcc_pooled) {
             summary.push(row(
