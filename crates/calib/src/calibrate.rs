@@ -73,6 +73,12 @@ pub fn law_label(law: Option<DarkLaw>, offset: bool) -> String {
 }
 
 impl CalibrationRun {
+    /// Temporal noise variance without light, DN^2: the bias frames' mean
+    /// per-pixel variance (read noise, row noise, offset drift).
+    pub fn dark_variance(&self) -> f64 {
+        self.bias.var.mean().unwrap_or(0.0)
+    }
+
     /// The run's figures as (quantity, value, unit) rows in EMVA 1288's
     /// vocabulary (system gain, temporal dark noise, DSNU, PRNU, dark
     /// current, ...), formatted for the report's summary table.
@@ -166,7 +172,7 @@ impl CalibrationRun {
                 .unwrap_or_else(|| "not measured (fewer than three levels there)".into()),
             "%",
         ));
-        let bias_var = self.bias.var.mean().unwrap_or(0.0);
+        let bias_var = self.dark_variance();
         let snr: Vec<String> = self
             .gain
             .levels

@@ -52,6 +52,9 @@ pub struct ReportData<'a> {
     pub r2_linear: Option<ArrayView3<'a, f32>>,
     /// Whether both fits carry the offset term c (y = a g(t) + c).
     pub dark_offset: bool,
+    /// Temporal noise variance without light (read, row and offset drift),
+    /// DN^2: with the flat levels' shot variance it gives their SNR.
+    pub dark_var_dn2: f64,
     /// Rows of the summary table: (quantity, value, unit), EMVA 1288 vocabulary
     /// (system gain, temporal dark noise, DSNU, PRNU, dark current ...), already formatted.
     pub summary: Vec<(String, String, String)>,
@@ -63,12 +66,14 @@ const SIGMA_HIST_PNG: &str = "sigma_hist.png";
 const DARK_R2_HIST_PNG: &str = "dark_r2_hist.png";
 const FIXED_PATTERN_PNG: &str = "fixed_pattern.png";
 const SIGMA_MAP_PNG: &str = "sigma_map.png";
+const SNR_PNG: &str = "snr.png";
 const SUMMARY_MD: &str = "summary.md";
 
 /// Every file [`write_report`] may write into its folder, so a caller can
 /// check them all before hours of work (none may be a folder or an input).
-pub const REPORT_FILES: [&str; 6] = [
+pub const REPORT_FILES: [&str; 7] = [
     PTC_PNG,
+    SNR_PNG,
     SIGMA_HIST_PNG,
     DARK_R2_HIST_PNG,
     FIXED_PATTERN_PNG,
@@ -117,6 +122,7 @@ pub fn write_report(dir: &Path, data: &ReportData) -> Result<Vec<PathBuf>, Repor
     let title = report_title(data);
     let sections = [
         ptc_section(dir, data, &title)?,
+        snr_section(dir, data, &title)?,
         sigma_hist_section(dir, data, &title)?,
         dark_r2_section(dir, data, &title)?,
         map_section(
@@ -434,6 +440,110 @@ fn ptc_section(dir: &Path, data: &ReportData, title: &str) -> Result<Section, Re
         );
     }
     Ok(Section::written(HEADING, PTC_PNG, path, text))
+}
+
+/// EMVA 1288's SNR curve: each flat level's SNR, its mean over the square
+/// root of its shot variance plus the dark variance; the model SNR(mu) =
+/// mu / sqrt(K mu + b + dark) from the photon-transfer fit; and the ideal
+/// sensor's sqrt(mu / K), shot noise alone, for reference; log-log against
+/// the mean signal.
+fn snr_section(dir: &Path, data: &ReportData, title: &str) -> Result<Section, ReportError> {
+    const HEADING: &str = "Signal-to-noise ratio";
+    let dark = data.dark_var_dn2.max(0.0);
+    let pts: Vec<(f64, f64)> = data
+        .ptc_points
+        .iter()
+        .filter(|p| p.mean_dn > 0.0 && p.var_dn2.is_finite() && p.var_dn2 + dark > 0.0)
+        .map(|p| (p.mean_dn, p.mean_dn / (p.var_dn2 + dark).sqrt()))
+        .collect();
+    if pts.is_empty() {
+        return Ok(Section::skipped(
+            HEADING,
+            SNR_PNG,
+            "Skipped: no flat level with a positive signal.".to_string(),
+        ));
+    }
+    let fit = data
+        .ptc_fit
+        .filter(|(k, b)| k.is_finite() && *k > 0.0 && b.is_finite());
+    let (x_lo, x_hi) = min_max(pts.iter().map(|p| p.0));
+    let (x_lo, x_hi) = (x_lo / 4.0, x_hi * 2.0);
+    let model = |x: f64| fit.map(|(k, b)| x / (k * x + b + dark).max(f64::MIN_POSITIVE).sqrt());
+    let ideal = |x: f64| fit.map(|(k, _)| (x / k).sqrt());
+    let mut ys: Vec<f64> = pts.iter().map(|p| p.1).collect();
+    for x in [x_lo, x_hi] {
+        ys.extend(model(x));
+        ys.extend(ideal(x));
+    }
+    let (y_lo, y_hi) = min_max(ys.into_iter().filter(|y| *y > 0.0));
+    let (y_lo, y_hi) = (y_lo / 1.6, y_hi * 1.6);
+    let path = dir.join(SNR_PNG);
+    let caption = format!("SNR: {title}");
+    render_png(&path, (PLOT_W, PLOT_H), |root| {
+        let mut chart = ChartBuilder::on(root)
+            .caption(&caption, (FONT_FAMILY, 28))
+            .margin(20)
+            .x_label_area_size(60)
+            .y_label_area_size(90)
+            .build_cartesian_2d((x_lo..x_hi).log_scale(), (y_lo..y_hi).log_scale())?;
+        chart
+            .configure_mesh()
+            .x_desc("mean signal [DN]")
+            .y_desc("SNR")
+            .x_label_formatter(&fmt_tick)
+            .y_label_formatter(&fmt_tick)
+            .axis_desc_style((FONT_FAMILY, 20))
+            .label_style((FONT_FAMILY, 16))
+            .light_line_style(RGBColor(235, 235, 235))
+            .draw()?;
+        let xs: Vec<f64> = (0..=200)
+            .map(|i| x_lo * (x_hi / x_lo).powf(i as f64 / 200.0))
+            .collect();
+        if let Some((k, _)) = fit {
+            let curve = |f: &dyn Fn(f64) -> Option<f64>| -> Vec<(f64, f64)> {
+                xs.iter()
+                    .filter_map(|&x| f(x).map(|y| (x, y)))
+                    .filter(|&(_, y)| y >= y_lo && y <= y_hi)
+                    .collect()
+            };
+            chart
+                .draw_series(LineSeries::new(curve(&model), RED.stroke_width(2)))?
+                .label("model: mean / sqrt(K·mean + b + dark variance)")
+                .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], RED.stroke_width(2)));
+            let grey = RGBColor(120, 120, 120);
+            chart
+                .draw_series(LineSeries::new(curve(&ideal), grey.stroke_width(1)))?
+                .label(format!(
+                    "shot noise alone: sqrt(mean / K), K = {}",
+                    fmt_sig(k, 4)
+                ))
+                .legend(move |(x, y)| {
+                    PathElement::new(vec![(x, y), (x + 24, y)], grey.stroke_width(1))
+                });
+        }
+        chart
+            .draw_series(
+                pts.iter()
+                    .map(|&(x, y)| Circle::new((x, y), 5, BLUE.filled())),
+            )?
+            .label(format!("flat levels ({})", pts.len()))
+            .legend(|(x, y)| Circle::new((x + 12, y), 5, BLUE.filled()));
+        chart
+            .configure_series_labels()
+            .position(SeriesLabelPosition::UpperLeft)
+            .label_font((FONT_FAMILY, 18))
+            .background_style(WHITE.mix(0.9))
+            .border_style(BLACK)
+            .draw()?;
+        Ok(())
+    })?;
+    let text = format!(
+        "SNR of each flat level (mean over the temporal noise, {} DN² of it without light), log-log, \
+         with the model from the photon-transfer fit and the shot-noise limit; at low signal the \
+         dark noise pulls the levels below the shot-noise line.",
+        fmt_sig(dark, 4)
+    );
+    Ok(Section::written(HEADING, SNR_PNG, path, text))
 }
 
 fn min_max(it: impl Iterator<Item = f64>) -> (f64, f64) {
@@ -1040,6 +1150,7 @@ mod tests {
             r2_sqrt: Some(r2s.view()),
             r2_linear: Some(r2l.view()),
             dark_offset: false,
+            dark_var_dn2: 30.0,
             summary: summary_rows(),
         };
         let written = write_report(&dir, &data).unwrap();
@@ -1111,6 +1222,7 @@ mod tests {
             r2_sqrt: None,
             r2_linear: None,
             dark_offset: false,
+            dark_var_dn2: 30.0,
             summary: vec![],
         };
         let written = write_report(&dir, &data).unwrap();
@@ -1146,11 +1258,13 @@ mod tests {
             r2_sqrt: None,
             r2_linear: None,
             dark_offset: false,
+            dark_var_dn2: 30.0,
             summary: vec![],
         };
         let written = write_report(&dir, &data).unwrap();
         assert!(written.contains(&dir.join(PTC_PNG)));
         assert_png(&dir.join(PTC_PNG), PLOT_W, PLOT_H);
+        assert_png(&dir.join(SNR_PNG), PLOT_W, PLOT_H);
         let md = std::fs::read_to_string(dir.join(SUMMARY_MD)).unwrap();
         assert!(md.contains("2 point(s)"), "{md}");
         let _ = std::fs::remove_dir_all(&dir);
@@ -1175,10 +1289,11 @@ mod tests {
             r2_sqrt: Some(bad_r2.view()),
             r2_linear: None,
             dark_offset: false,
+            dark_var_dn2: 30.0,
             summary: vec![],
         };
         let written = write_report(&dir, &data).unwrap();
-        assert_eq!(written.len(), 6, "{written:?}");
+        assert_eq!(written.len(), 7, "{written:?}");
         let _ = std::fs::remove_dir_all(&dir);
     }
 
@@ -1196,6 +1311,7 @@ mod tests {
             r2_sqrt: None,
             r2_linear: None,
             dark_offset: false,
+            dark_var_dn2: 30.0,
             summary: vec![],
         };
         let err = write_report(&dir, &data).unwrap_err();
@@ -1223,6 +1339,7 @@ mod tests {
             r2_sqrt: None,
             r2_linear: None,
             dark_offset: false,
+            dark_var_dn2: 30.0,
             summary: vec![],
         };
         let err = write_report(&dir, &data).unwrap_err().to_string();

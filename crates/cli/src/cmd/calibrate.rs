@@ -231,6 +231,7 @@ fn report_data(run: &CalibrationRun) -> ReportData<'_> {
         r2_sqrt: maps.r2_sqrt.as_ref().map(|a| a.view()),
         r2_linear: maps.r2_linear.as_ref().map(|a| a.view()),
         dark_offset: m.dark_offset,
+        dark_var_dn2: run.dark_variance(),
         summary: run.summary(),
     }
 }
