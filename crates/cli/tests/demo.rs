@@ -133,10 +133,10 @@ fn demo_models_beat_the_noisy_input_and_write_every_file() {
 /// floating-point summation order in other builds.
 const RECORDED: [(&str, &str, f64, f64); 6] = [
     ("x100", "noisy", 24.9240, 0.70078),
-    ("x100", "spc", 29.1058, 0.89326),
+    ("x100", "spc", 28.7955, 0.89406),
     ("x100", "pgrf", 30.0909, 0.90597),
     ("x200", "noisy", 20.2170, 0.51481),
-    ("x200", "spc", 26.0370, 0.80953),
+    ("x200", "spc", 25.8351, 0.82420),
     ("x200", "pgrf", 25.9564, 0.78854),
 ];
 /// Both models must beat the noisy input by this much at both ratios. The
@@ -166,17 +166,18 @@ fn shipped_models_reproduce_the_recorded_scores() {
 /// window (seed 0), as MODELS.md records them.
 const RECORDED_PHOTO: [(&str, &str, f64, f64); 6] = [
     ("x100", "noisy", 28.2011, 0.21777),
-    ("x100", "spc", 34.5500, 0.60820),
+    ("x100", "spc", 44.1203, 0.90442),
     ("x100", "pgrf", 27.1024, 0.22546),
     ("x200", "noisy", 22.3389, 0.05426),
-    ("x200", "spc", 33.0348, 0.50331),
+    ("x200", "spc", 38.3737, 0.75623),
     ("x200", "pgrf", 25.8183, 0.14559),
 ];
 /// SPC must beat the noisy input on the photograph by this much at both
-/// ratios (the shipped model does by 6.3 / 10.7 dB). The shipped PGRF
-/// model, trained on dead leaves only, does not beat it at x100 (MODELS.md,
-/// "Known limits"); its margin is asserted once the photo-trained model ships.
-const SPC_PHOTO_MARGIN_DB: f64 = 5.0;
+/// ratios, the issue's +10 dB with room (the photo-trained model shipped on
+/// 2026-11-25 does by 15.9 / 16.0 dB). The shipped PGRF model, trained on
+/// dead leaves only, does not beat it at x100 (MODELS.md, "Known limits");
+/// its margin is asserted once the photo-trained model ships.
+const SPC_PHOTO_MARGIN_DB: f64 = 12.0;
 
 #[test]
 fn the_photo_demo_restores_a_window_of_the_built_in_photograph() {
