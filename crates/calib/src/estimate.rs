@@ -172,7 +172,7 @@ pub struct PtcLevel {
     /// Spatial mean of (flat mean - bias mean), DN.
     pub mean_dn: f64,
     /// The shot-noise variance, DN^2: the frame pairs' temporal variance
-    /// ([`crate::stack::pair_variance`], light drift removed) minus the bias
+    /// (`crate::stack::pair_variance`, light drift removed) minus the bias
     /// frames' temporal variance.
     pub var_dn2: f64,
     /// The same from every pixel's temporal variance over the whole level
@@ -221,9 +221,9 @@ pub struct GainEstimate {
     pub saturated: Vec<PtcLevel>,
     /// EMVA 1288's saturation capacity, DN above bias: the mean signal of
     /// the level of largest temporal variance among all levels, when some
-    /// level clipped ([`saturation_dn`]).
+    /// level clipped (`saturation_dn`).
     pub saturation_dn: Option<f64>,
-    /// EMVA 1288's linearity error, a fraction ([`linearity_error`]).
+    /// EMVA 1288's linearity error, a fraction (`linearity_error`).
     pub linearity_error: Option<f64>,
     /// Standard error of K, DN/e- (statistical: from the photon-transfer
     /// fit's residuals with three levels or more, else from the pairs'

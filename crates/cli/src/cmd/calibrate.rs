@@ -39,7 +39,7 @@ pub struct CalibrateArgs {
     /// How far (°C) a frame's recorded temperature may lie from the frames' median [default: 2].
     #[arg(long)]
     pub temperature_tolerance: Option<f32>,
-    /// Folder for master frames (created if missing): master_bias.dng, master_dark_<T>s.dng per dark exposure, master_flat_<T>s.dng per flat level (each stack's mean, in the camera's mosaic and levels) and defects.png.
+    /// Folder for master frames (created if missing): master_bias.dng, one master_dark_EXPOSUREs.dng per dark exposure (master_dark_10s.dng), one master_flat_EXPOSUREs.dng per flat level (each stack's mean, in the camera's mosaic and levels) and defects.png.
     #[arg(long)]
     pub masters: Option<PathBuf>,
 }
