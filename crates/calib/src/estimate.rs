@@ -406,19 +406,20 @@ pub(crate) fn estimate_gain(flat: &Stack, bias: &BiasEstimate) -> Result<GainEst
                 g.exposure_s
             )));
         }
+        let level = PtcLevel {
+            exposure_s: g.exposure_s,
+            mean_dn,
+            var_dn2,
+            var_dn2_stack,
+            drift,
+            frames: g.files.len(),
+        };
         let clipped = clipped_fraction(&m, &v, flat.key.white);
         if clipped > MAX_CLIPPED {
             // A clipped level has too little variance for the gain, but it
             // is where the saturation capacity shows (EMVA 1288 runs its
             // flats up to saturation).
-            saturated.push(PtcLevel {
-                exposure_s: g.exposure_s,
-                mean_dn,
-                var_dn2,
-                var_dn2_stack,
-                drift,
-                frames: g.files.len(),
-            });
+            saturated.push(level);
             clipped_note = Some((g.exposure_s, clipped));
             continue;
         }
@@ -428,14 +429,7 @@ pub(crate) fn estimate_gain(flat: &Stack, bias: &BiasEstimate) -> Result<GainEst
         {
             bright = Some((m, v, levels.len()));
         }
-        levels.push(PtcLevel {
-            exposure_s: g.exposure_s,
-            mean_dn,
-            var_dn2,
-            var_dn2_stack,
-            drift,
-            frames: g.files.len(),
-        });
+        levels.push(level);
     }
     let (bm, bv, bi) = match (bright, clipped_note) {
         (Some(b), _) => b,

@@ -21,6 +21,33 @@ struct Stacks {
     flat: Vec<PathBuf>,
 }
 
+/// Takes a virtual sensor's frames and writes them as DNGs into
+/// `dir/SUB`, each frame with the next seed.
+struct Shooter<'a> {
+    v: &'a VirtualSensor,
+    dir: PathBuf,
+    seed: u64,
+}
+
+impl Shooter<'_> {
+    /// `n` frames of `electrons` of light at exposure `t`; a lamp `drift`
+    /// makes frame i of the call (1 + drift i) times brighter.
+    fn shoot(&mut self, sub: &str, n: usize, electrons: f32, t: f32, drift: f32) -> Vec<PathBuf> {
+        let d = self.dir.join(sub);
+        std::fs::create_dir_all(&d).unwrap();
+        (0..n)
+            .map(|i| {
+                self.seed += 1;
+                let e = electrons * (1.0 + drift * i as f32);
+                let p = d.join(format!("{sub}_{electrons}_{t}_{i:03}.dng"));
+                let f = self.v.frame(e, t, self.seed).unwrap();
+                write_dng(&f, &p, &DngOptions::default()).unwrap();
+                p
+            })
+            .collect()
+    }
+}
+
 /// Write bias (64 frames), dark (3 exposures x 16) and flat (2 levels x 16) stacks.
 fn write_stacks(v: &VirtualSensor, dir: &Path, bias_frames: usize) -> Stacks {
     write_ladder(v, dir, bias_frames, &[1.0, 4.0, 16.0], 16)
@@ -35,24 +62,13 @@ fn write_ladder(
     exposures: &[f32],
     per: usize,
 ) -> Stacks {
-    let mut seed = 1000u64;
-    let mut write = |sub: &str, n: usize, electrons: f32, t: f32| -> Vec<PathBuf> {
-        let d = dir.join(sub);
-        std::fs::create_dir_all(&d).unwrap();
-        (0..n)
-            .map(|i| {
-                seed += 1;
-                let p = d.join(format!("{sub}_{t}_{i:03}.dng"));
-                write_dng(
-                    &v.frame(electrons, t, seed).unwrap(),
-                    &p,
-                    &DngOptions::default(),
-                )
-                .unwrap();
-                p
-            })
-            .collect()
+    let mut cam = Shooter {
+        v,
+        dir: dir.to_path_buf(),
+        seed: 1000,
     };
+    let mut write =
+        |sub: &str, n: usize, electrons: f32, t: f32| cam.shoot(sub, n, electrons, t, 0.0);
     let bias = write("bias", bias_frames, 0.0, 1.0 / 8000.0);
     let mut dark = Vec::new();
     for &t in exposures {
@@ -358,20 +374,12 @@ fn one_dark_frame_per_exposure_recovers_the_law_and_rate() {
 fn lamp_drift_does_not_bias_the_gain() {
     let v = sensor(DarkLaw::Sqrt);
     let dir = scratch("drift");
-    let mut seed = 7000u64;
-    let mut write = |sub: &str, n: usize, electrons: f32, t: f32, drift: f32| -> Vec<PathBuf> {
-        let d = dir.join(sub);
-        std::fs::create_dir_all(&d).unwrap();
-        (0..n)
-            .map(|i| {
-                seed += 1;
-                let e = electrons * (1.0 + drift * i as f32);
-                let p = d.join(format!("{sub}_{t}_{i:03}.dng"));
-                write_dng(&v.frame(e, t, seed).unwrap(), &p, &DngOptions::default()).unwrap();
-                p
-            })
-            .collect()
+    let mut cam = Shooter {
+        v: &v,
+        dir: dir.clone(),
+        seed: 7000,
     };
+    let mut write = |sub: &str, n, e, t, drift| cam.shoot(sub, n, e, t, drift);
     let bias = write("bias", 16, 0.0, 1.0 / 8000.0, 0.0);
     let mut flat = write("flat", 16, 2000.0, 0.01, 0.003);
     flat.extend(write("flat", 16, 6000.0, 0.04, 0.003));
@@ -593,17 +601,12 @@ fn highpass_non_uniformity_leaves_out_shading_and_hot_pixels() {
 fn flats_up_to_saturation_give_capacity_and_linearity() {
     let v = sensor(DarkLaw::Sqrt);
     let dir = scratch("saturation");
-    let mut seed = 9000u64;
-    let mut frames = |n: usize, e: f32, t: f32| -> Vec<PathBuf> {
-        (0..n)
-            .map(|i| {
-                seed += 1;
-                let p = dir.join(format!("f_{e}_{i}.dng"));
-                write_dng(&v.frame(e, t, seed).unwrap(), &p, &DngOptions::default()).unwrap();
-                p
-            })
-            .collect()
+    let mut cam = Shooter {
+        v: &v,
+        dir: dir.clone(),
+        seed: 9000,
     };
+    let mut frames = |n, e, t| cam.shoot("f", n, e, t, 0.0);
     let bias = frames(16, 0.0, 1.0 / 8000.0);
     let mut flat = Vec::new();
     for e in [1000.0f32, 3000.0, 6000.0, 9000.0, 14000.0] {
@@ -760,20 +763,12 @@ fn every_emva_figure_holds_on_a_drifting_ccd_like_sensor() {
     spec.vignetting = 0.2;
     let v = VirtualSensor::new(spec).unwrap();
     let dir = scratch("emva");
-    let mut seed = 20_000u64;
-    let mut frames = |sub: &str, n: usize, e: f32, t: f32, drift: f32| -> Vec<PathBuf> {
-        let d = dir.join(sub);
-        std::fs::create_dir_all(&d).unwrap();
-        (0..n)
-            .map(|i| {
-                seed += 1;
-                let p = d.join(format!("{e}_{t}_{i}.dng"));
-                let f = v.frame(e * (1.0 + drift * i as f32), t, seed).unwrap();
-                write_dng(&f, &p, &DngOptions::default()).unwrap();
-                p
-            })
-            .collect()
+    let mut cam = Shooter {
+        v: &v,
+        dir: dir.clone(),
+        seed: 20_000,
     };
+    let mut frames = |sub: &str, n, e, t, drift| cam.shoot(sub, n, e, t, drift);
     let bias = frames("bias", 64, 0.0, 1.0 / 8000.0, 0.0);
     let mut flat = Vec::new();
     // Exposures of 0.5 s and more, so the dark offset (built within the
