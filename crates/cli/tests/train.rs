@@ -367,6 +367,10 @@ fn bad_settings_are_one_line_errors_and_write_nothing() {
             "--clip-grad",
         ),
         (
+            vec!["train", "spc", "--photo-wb-spread", "0.5", "-o", s(&out)],
+            "--photo-wb-spread must be between 1",
+        ),
+        (
             vec![
                 "train",
                 "spc",

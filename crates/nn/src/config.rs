@@ -91,6 +91,11 @@ pub struct TrainConfig {
     pub photo_downscale: usize,
     /// Photos: invert a global S-shaped tone curve before the sRGB transfer.
     pub photo_inverse_tone: bool,
+    /// Photos: the largest factor (and its inverse the smallest) by which
+    /// each crop's red and blue white-balance multipliers are varied,
+    /// log-uniform. 1.25 spans daylight, shade and flash on one camera;
+    /// wider ranges reach cameras whose raw channels are nearly balanced.
+    pub photo_wb_spread: f32,
     /// Smallest exposure ratio (ELD/SID: 100; pgrf's general models: 1).
     pub ratio_min: f32,
     /// Largest exposure ratio (ELD/SID: 300).
@@ -171,6 +176,7 @@ impl Default for TrainConfig {
             camera_like: None,
             photo_downscale: 2,
             photo_inverse_tone: false,
+            photo_wb_spread: crate::data::photos::WB_SPREAD,
             ratio_min: 1.0,
             ratio_max: 300.0,
             patch: 512,
@@ -322,6 +328,12 @@ impl TrainConfig {
         }
         if self.photo_downscale == 0 {
             return Err(invalid("--photo-downscale must be at least 1"));
+        }
+        let w = self.photo_wb_spread;
+        if !(w.is_finite() && (1.0..=4.0).contains(&w)) {
+            return Err(invalid(format!(
+                "--photo-wb-spread must be between 1 (no variation) and 4, got {w}"
+            )));
         }
         self.iso_range()?;
         Ok(())

@@ -41,6 +41,9 @@ pub struct Settings {
     /// Photos: invert a global S-shaped tone curve (Brooks et al.'s smoothstep) before the sRGB transfer.
     #[arg(long, num_args = 0..=1, default_missing_value = "true")]
     pub photo_inverse_tone: Option<bool>,
+    /// Photos: largest factor by which each crop's red and blue white-balance multipliers are varied (log-uniform in [1/S, S]); 1.25 spans one camera's daylight, shade and flash, 2.5 reaches cameras whose raw channels are nearly balanced [default: 1.25].
+    #[arg(long)]
+    pub photo_wb_spread: Option<f32>,
     /// Camera noise profile (built-in name or JSON path), or a mix `NAME[@WEIGHT],...` where each crop draws one camera's noise, e.g. sony-a7s2@3,nikon-d850@1; --iso/--iso-range are the first profile's, and become a gain range the others share [default: sony-a7s2].
     #[arg(long)]
     pub profile: Option<String>,

@@ -136,6 +136,7 @@ fn open_files(
             camera: photo_camera(c)?,
             downscale: c.photo_downscale,
             inverse_tone: c.photo_inverse_tone,
+            wb_spread: c.photo_wb_spread,
             jitter,
         };
         let (f, w) = PhotoFolder::open(files, opts, patch, budget_mib)?;

@@ -370,6 +370,7 @@ mod tests {
                 camera: pgrf_raw::unprocess::CameraSpace::sony_a7s2(),
                 downscale: 2,
                 inverse_tone: false,
+                wb_spread: crate::data::photos::WB_SPREAD,
                 jitter: true,
             };
             PhotoFolder::open(files.clone(), opts, 32, 16).unwrap().0

@@ -10,8 +10,9 @@
 //! - exposure: log-uniform in [`EXPOSURE`] (linear light; values pushed
 //!   past white clip there, as a sensor does);
 //! - white balance: the camera's daylight multipliers, red and blue each
-//!   scaled by a log-uniform factor in [1 / [`WB_SPREAD`], [`WB_SPREAD`]]
-//!   (about the spread of daylight, shade and flash on one camera);
+//!   scaled by a log-uniform factor in [1 / s, s], s = `wb_spread`
+//!   ([`WB_SPREAD`] by default: about the spread of daylight, shade and
+//!   flash on one camera);
 //! - colour matrix: each entry of the camera's camera-from-sRGB matrix
 //!   scaled by 1 + U(-[`MATRIX_SPREAD`], [`MATRIX_SPREAD`]), rows then
 //!   renormalised to sum to 1 (white stays white before the white balance).
@@ -62,6 +63,9 @@ pub struct PhotoOptions {
     pub downscale: usize,
     /// Invert a global S-shaped tone curve before the sRGB transfer.
     pub inverse_tone: bool,
+    /// Largest factor on the red and blue white-balance multipliers
+    /// ([`WB_SPREAD`] by default).
+    pub wb_spread: f32,
     /// Vary exposure, white balance and matrix per crop (validation and
     /// tests may want the camera's own colours).
     pub jitter: bool,
@@ -180,8 +184,9 @@ impl PhotoFolder {
             (lo.ln() + (hi.ln() - lo.ln()) * rng.random::<f32>()).exp()
         };
         u.exposure = log_uniform(EXPOSURE.0, EXPOSURE.1);
-        u.wb[0] *= log_uniform(1.0 / WB_SPREAD, WB_SPREAD);
-        u.wb[2] *= log_uniform(1.0 / WB_SPREAD, WB_SPREAD);
+        let spread = self.opts.wb_spread;
+        u.wb[0] *= log_uniform(1.0 / spread, spread);
+        u.wb[2] *= log_uniform(1.0 / spread, spread);
         for row in u.cam_from_srgb.iter_mut() {
             let sum: f32 = row.iter().sum();
             for v in row.iter_mut() {
@@ -250,6 +255,7 @@ mod tests {
             camera: CameraSpace::sony_a7s2(),
             downscale: 2,
             inverse_tone: false,
+            wb_spread: WB_SPREAD,
             jitter,
         }
     }
@@ -320,6 +326,25 @@ mod tests {
         let c2 = f.crop(8, 6, 0, 0.5, 0.5).unwrap();
         assert_ne!(c1.clean, c2.clean);
         assert!(c1.clean.iter().all(|v| (0.0..=1.0).contains(v)));
+        // A wider white-balance spread reaches balanced channels (the A7S2's
+        // blue multiplier 1.6 divided by 2.5 is below 1); 1 keeps the
+        // camera's own.
+        let wide = PhotoOptions {
+            wb_spread: 2.5,
+            ..options(true)
+        };
+        let (w, _) = PhotoFolder::open(f.files().to_vec(), wide, 8, 16).unwrap();
+        let ratios: Vec<f32> = (0..200u64)
+            .map(|s| w.unprocessing(s).wb[2] / base[2])
+            .collect();
+        assert!(ratios.iter().all(|r| (0.4 - 1e-6..=2.5 + 1e-6).contains(r)));
+        assert!(ratios.iter().any(|&r| r < 0.6) && ratios.iter().any(|&r| r > 1.8));
+        let fixed = PhotoOptions {
+            wb_spread: 1.0,
+            ..options(true)
+        };
+        let (n, _) = PhotoFolder::open(f.files().to_vec(), fixed, 8, 16).unwrap();
+        assert!((0..20u64).all(|s| n.unprocessing(s).wb == base));
         let _ = std::fs::remove_dir_all(&dir);
     }
 }
