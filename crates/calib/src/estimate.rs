@@ -20,7 +20,7 @@ use crate::error::{invalid, Result};
 use crate::ppcc::ppcc;
 use crate::stack::Stack;
 use ndarray::{Array3, Zip};
-use pgrf_core::stats::{median, median_finite};
+use pgrf_core::stats::{median, median_and_robust_sd, median_finite};
 use pgrf_noise::DarkLaw;
 
 /// From bias frames (shortest exposure, no light).
@@ -95,13 +95,10 @@ pub(crate) fn highpass_variance(map: &Array3<f32>) -> f64 {
     if hp.len() < 2 {
         return f64::NAN;
     }
-    let mut sorted = hp.clone();
-    let med = median(&mut sorted);
-    let mut dev: Vec<f64> = hp.iter().map(|v| (v - med).abs()).collect();
-    let mad = median(&mut dev) * 1.4826;
+    let (med, sd) = median_and_robust_sd(&mut hp.clone());
     let kept: Vec<f64> = hp
         .into_iter()
-        .filter(|v| (v - med).abs() <= 5.0 * mad)
+        .filter(|v| (v - med).abs() <= 5.0 * sd)
         .collect();
     let n = kept.len() as f64;
     let m = kept.iter().sum::<f64>() / n;
@@ -798,9 +795,8 @@ fn robust_stats<'a>(values: impl IntoIterator<Item = &'a f32>) -> (f64, f64) {
         .filter(|x| x.is_finite())
         .map(|&x| x as f64)
         .collect();
-    let m = median(&mut v);
-    let mut dev: Vec<f64> = v.iter().map(|x| (x - m).abs()).collect();
-    (m, (median(&mut dev) * 1.4826).max(1e-6))
+    let (m, sd) = median_and_robust_sd(&mut v);
+    (m, sd.max(1e-6))
 }
 
 /// The columns (per plane) whose median of `map` over the plane's rows lies

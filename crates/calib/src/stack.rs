@@ -134,11 +134,8 @@ pub const ODD_Z: f64 = 5.0;
 /// Robust z-scores: (x - median) / (1.4826 MAD), the MAD floored at 1e-9 of
 /// the median's size so that identical values do not divide by zero.
 pub(crate) fn robust_z(x: &[f64]) -> Vec<f64> {
-    let mut v = x.to_vec();
-    let med = pgrf_core::stats::median(&mut v);
-    let mut dev: Vec<f64> = x.iter().map(|a| (a - med).abs()).collect();
-    let mad = pgrf_core::stats::median(&mut dev) * 1.4826;
-    let scale = mad.max(1e-9 * med.abs().max(1.0));
+    let (med, sd) = pgrf_core::stats::median_and_robust_sd(&mut x.to_vec());
+    let scale = sd.max(1e-9 * med.abs().max(1.0));
     x.iter().map(|a| (a - med) / scale).collect()
 }
 
