@@ -3,8 +3,8 @@
 use crate::calibration::{CalibMaps, CalibMeta, Calibration};
 use crate::error::{invalid, Result};
 use crate::estimate::{
-    defect, defects, estimate_bias, estimate_dark, estimate_gain, odd_columns, BiasEstimate,
-    DarkEstimate, GainEstimate,
+    defect, defects, estimate_bias, estimate_dark, estimate_gain, BiasEstimate, DarkEstimate,
+    GainEstimate,
 };
 use crate::masters::{masters_of, Master};
 use crate::stack::{read_stack, FrameKey, ReadOptions, Stack};
@@ -427,7 +427,7 @@ pub fn calibrate(input: &CalibrateInput, progress: &dyn Progress) -> Result<Cali
         ],
         tolerance,
     )?;
-    let defect_map = defects(&bias, Some(&gain), dark.as_ref());
+    let (defect_map, defect_columns) = defects(&bias, Some(&gain), dark.as_ref());
 
     let zeros = || ndarray::Array3::zeros(bias.fixed_pattern.raw_dim());
     let maps = CalibMaps {
@@ -491,13 +491,7 @@ pub fn calibrate(input: &CalibrateInput, progress: &dyn Progress) -> Result<Cali
         hot_pixels: count(defect::HOT),
         dead_pixels: count(defect::DEAD),
         cold_pixels: count(defect::COLD),
-        defect_columns: {
-            let mut cols: Vec<(usize, usize)> = odd_columns(&bias.fixed_pattern);
-            cols.extend(odd_columns(&gain.response));
-            cols.sort_unstable();
-            cols.dedup();
-            cols.len()
-        },
+        defect_columns,
         units: "maps packed (4, H/2, W/2) in R,G1,B,G2 order; fixed_pattern (bias mean - black), sigma_read, response: DN; gain: DN per electron (eq. 3.15 per pixel); dark_rate: electrons per sqrt(s) (sqrt law) or per s (linear law), N_FP absorbed; defects: 0 good, 1 hot, 2 dead, 3 cold, 4 defective column; r2_*: R^2 of the per-pixel dark fits (with the offset term when dark_offset); dark_offset: the dark law's offset c, DN; K, row_sigma, read_sigma_median, dsnu: DN (K: DN/e-)".into(),
     };
     Ok(CalibrationRun {

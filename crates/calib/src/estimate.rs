@@ -835,12 +835,14 @@ pub(crate) fn odd_columns(map: &Array3<f32>) -> Vec<(usize, usize)> {
 /// without darks, above median + 10 robust sd), cold (bias offset below
 /// median - 10 robust sd), dead (mean response below half the median), and
 /// the pixels of defective columns ([`odd_columns`] of the bias offset and
-/// of the response) that are not flagged otherwise.
+/// of the response) that are not flagged otherwise. Returns the map and the
+/// number of defective columns (plane, column), counted once when both the
+/// offset and the response find one.
 pub(crate) fn defects(
     bias: &BiasEstimate,
     gain: Option<&GainEstimate>,
     dark: Option<&DarkEstimate>,
-) -> Array3<f32> {
+) -> (Array3<f32>, usize) {
     let mut out = Array3::<f32>::zeros(bias.fixed_pattern.raw_dim());
     let hot_src = dark.map(|d| &d.rate).unwrap_or(&bias.fixed_pattern);
     let (m, sd) = robust_stats(hot_src);
@@ -871,7 +873,9 @@ pub(crate) fn defects(
     if let Some(g) = gain {
         columns.extend(odd_columns(&g.response));
     }
-    for (p, j) in columns {
+    columns.sort_unstable();
+    columns.dedup();
+    for &(p, j) in &columns {
         out.slice_mut(ndarray::s![p, .., j]).mapv_inplace(|o| {
             if o == defect::GOOD {
                 defect::COLUMN
@@ -880,7 +884,7 @@ pub(crate) fn defects(
             }
         });
     }
-    out
+    (out, columns.len())
 }
 
 #[cfg(test)]
