@@ -294,6 +294,39 @@ fn widen(lo: f64, hi: f64) -> (f64, f64) {
 /// (exposure doubled per level): on linear axes the low-signal points, where
 /// read noise and the fit intercept matter, collapse into one corner. The
 /// straight shot-noise line still reads as slope one and K is annotated.
+/// A log-log chart on a report bitmap.
+type LogLogChart<'a, 'b> =
+    ChartContext<'a, BitMapBackend<'b>, Cartesian2d<LogCoord<f64>, LogCoord<f64>>>;
+
+/// The chart of the plots against mean signal (photon transfer, SNR):
+/// log-log over `x` and `y`, the mesh drawn with the report's fonts and
+/// `y_desc` on the vertical axis.
+fn log_log_chart<'a, 'b>(
+    root: &'a DrawingArea<BitMapBackend<'b>, plotters::coord::Shift>,
+    caption: &str,
+    (x_lo, x_hi): (f64, f64),
+    (y_lo, y_hi): (f64, f64),
+    y_desc: &str,
+) -> Result<LogLogChart<'a, 'b>, Box<dyn std::error::Error>> {
+    let mut chart = ChartBuilder::on(root)
+        .caption(caption, (FONT_FAMILY, 28))
+        .margin(20)
+        .x_label_area_size(60)
+        .y_label_area_size(90)
+        .build_cartesian_2d((x_lo..x_hi).log_scale(), (y_lo..y_hi).log_scale())?;
+    chart
+        .configure_mesh()
+        .x_desc("mean signal [DN]")
+        .y_desc(y_desc)
+        .x_label_formatter(&fmt_tick)
+        .y_label_formatter(&fmt_tick)
+        .axis_desc_style((FONT_FAMILY, 20))
+        .label_style((FONT_FAMILY, 16))
+        .light_line_style(RGBColor(235, 235, 235))
+        .draw()?;
+    Ok(chart)
+}
+
 fn ptc_section(dir: &Path, data: &ReportData, title: &str) -> Result<Section, ReportError> {
     const HEADING: &str = "Photon transfer curve";
     let all = &data.ptc_points;
@@ -343,22 +376,13 @@ fn ptc_section(dir: &Path, data: &ReportData, title: &str) -> Result<Section, Re
     let path = dir.join(PTC_PNG);
     let caption = format!("Photon transfer: {title}");
     render_png(&path, (PLOT_W, PLOT_H), |root| {
-        let mut chart = ChartBuilder::on(root)
-            .caption(&caption, (FONT_FAMILY, 28))
-            .margin(20)
-            .x_label_area_size(60)
-            .y_label_area_size(90)
-            .build_cartesian_2d((x_lo..x_hi).log_scale(), (y_lo..y_hi).log_scale())?;
-        chart
-            .configure_mesh()
-            .x_desc("mean signal [DN]")
-            .y_desc("temporal variance [DN^2]")
-            .x_label_formatter(&fmt_tick)
-            .y_label_formatter(&fmt_tick)
-            .axis_desc_style((FONT_FAMILY, 20))
-            .label_style((FONT_FAMILY, 16))
-            .light_line_style(RGBColor(235, 235, 235))
-            .draw()?;
+        let mut chart = log_log_chart(
+            root,
+            &caption,
+            (x_lo, x_hi),
+            (y_lo, y_hi),
+            "temporal variance [DN^2]",
+        )?;
 
         if let Some((k, b)) = fit {
             // Sampled densely because a line with an intercept is curved on
@@ -480,22 +504,7 @@ fn snr_section(dir: &Path, data: &ReportData, title: &str) -> Result<Section, Re
     let path = dir.join(SNR_PNG);
     let caption = format!("SNR: {title}");
     render_png(&path, (PLOT_W, PLOT_H), |root| {
-        let mut chart = ChartBuilder::on(root)
-            .caption(&caption, (FONT_FAMILY, 28))
-            .margin(20)
-            .x_label_area_size(60)
-            .y_label_area_size(90)
-            .build_cartesian_2d((x_lo..x_hi).log_scale(), (y_lo..y_hi).log_scale())?;
-        chart
-            .configure_mesh()
-            .x_desc("mean signal [DN]")
-            .y_desc("SNR")
-            .x_label_formatter(&fmt_tick)
-            .y_label_formatter(&fmt_tick)
-            .axis_desc_style((FONT_FAMILY, 20))
-            .label_style((FONT_FAMILY, 16))
-            .light_line_style(RGBColor(235, 235, 235))
-            .draw()?;
+        let mut chart = log_log_chart(root, &caption, (x_lo, x_hi), (y_lo, y_hi), "SNR")?;
         let xs: Vec<f64> = (0..=200)
             .map(|i| x_lo * (x_hi / x_lo).powf(i as f64 / 200.0))
             .collect();
