@@ -131,12 +131,13 @@ pub struct OddFrame {
 /// well-behaved frames none is (a normal's 5-sigma tail is 6e-7).
 pub const ODD_Z: f64 = 5.0;
 
-/// Robust z-scores: (x - median) / (1.4826 MAD), the MAD floored at 1e-9 of
-/// the median's size so that identical values do not divide by zero.
-pub(crate) fn robust_z(x: &[f64]) -> Vec<f64> {
+/// The median of `x` and its values' robust z-scores: (x - median) /
+/// (1.4826 MAD), the MAD floored at 1e-9 of the median's size so that
+/// identical values do not divide by zero.
+pub(crate) fn robust_z(x: &[f64]) -> (f64, Vec<f64>) {
     let (med, sd) = pgrf_core::stats::median_and_robust_sd(&mut x.to_vec());
     let scale = sd.max(1e-9 * med.abs().max(1.0));
-    x.iter().map(|a| (a - med) / scale).collect()
+    (med, x.iter().map(|a| (a - med) / scale).collect())
 }
 
 impl Stack {
@@ -149,9 +150,8 @@ impl Stack {
         let mut odd: std::collections::BTreeMap<PathBuf, Vec<String>> = Default::default();
         for g in self.groups.iter().filter(|g| g.files.len() >= 4) {
             for (what, values) in [("mean", &g.frame_means), ("noise", &g.frame_noise)] {
-                let mut sorted = values.clone();
-                let med = pgrf_core::stats::median(&mut sorted);
-                for (i, z) in robust_z(values).into_iter().enumerate() {
+                let (med, z) = robust_z(values);
+                for (i, z) in z.into_iter().enumerate() {
                     if z.abs() > ODD_Z {
                         odd.entry(g.files[i].clone()).or_default().push(format!(
                             "{what} {:.2} DN against the {} s frames' median {med:.2} (robust z {z:.1})",
