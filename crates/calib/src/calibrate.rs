@@ -453,7 +453,7 @@ pub fn calibrate(input: &CalibrateInput, progress: &dyn Progress) -> Result<Cali
         iso: key.iso,
         width: key.width,
         height: key.height,
-        cfa: key.cfa.name().into(),
+        cfa: key.layout().into(),
         black: key.black,
         white: key.white,
         bias_frames: bias.frames,

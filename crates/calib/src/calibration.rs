@@ -128,6 +128,11 @@ pub struct CalibMeta {
 }
 
 impl CalibMeta {
+    /// The frames' filter layout: a CFA phase ("RGGB") or "mono".
+    pub fn layout(&self) -> &str {
+        &self.cfa
+    }
+
     /// The record's values that synthesis and restoration rely on: a frame
     /// size that packs, levels with room between black and white, a positive
     /// finite gain, non-negative finite noise figures, a CFA pgrf knows and
@@ -148,9 +153,11 @@ impl CalibMeta {
                 self.width, self.height
             ));
         }
-        self.cfa
-            .parse::<pgrf_raw::Cfa>()
-            .map_err(|_| format!("unknown CFA '{}'", self.cfa))?;
+        if self.cfa != "mono" {
+            self.cfa
+                .parse::<pgrf_raw::Cfa>()
+                .map_err(|_| format!("unknown CFA '{}'", self.cfa))?;
+        }
         if !(1..=65535).contains(&self.white) {
             return Err(format!("white level {} (must be 1..65535)", self.white));
         }
@@ -435,6 +442,21 @@ impl Calibration {
                 "calibration is for ISO {}, the frame is ISO {} (use --force to apply it anyway)",
                 m.iso.unwrap_or(0),
                 iso.unwrap_or(0)
+            )));
+        }
+        Ok(())
+    }
+
+    /// Refuse a frame whose filter layout (CFA phase, or "mono") differs
+    /// from the calibration's: the per-pixel maps are stored by packed
+    /// plane, so another phase would put every map on the wrong photosites.
+    /// Not overridable, unlike the camera check.
+    pub fn check_layout(&self, frame: &pgrf_raw::RawFrame) -> Result<()> {
+        if self.meta.cfa != frame.layout() {
+            return Err(invalid(format!(
+                "calibration is of a {} sensor, the frame's layout is {}",
+                self.meta.cfa,
+                frame.layout()
             )));
         }
         Ok(())

@@ -1,7 +1,8 @@
 //! Master frames for the astrophotographer's workflow: the mean of each
 //! stack (bias, dark per exposure, flat per level) as a RAW frame of the
 //! camera's own mosaic and levels, what DeepSkyStacker, Siril or
-//! PixInsight take as master bias, dark and flat.
+//! PixInsight take as master bias, dark and flat: FITS (32-bit float, the
+//! mean unrounded) when the frames were FITS, DNG otherwise.
 
 use crate::error::{invalid, Result};
 use crate::stack::{FrameKey, Stack};
@@ -31,7 +32,9 @@ pub(crate) fn masters_of(stack: &Stack, kind: &str) -> Vec<Master> {
             name: if kind == "bias" {
                 "master_bias".into()
             } else {
-                format!("master_{kind}_{}s", g.exposure_s)
+                // Single precision's shortest form: 0.01, not the
+                // 0.009999999776482582 a rational read into f32 becomes.
+                format!("master_{kind}_{}s", g.exposure_s as f32)
             },
             exposure_s: g.exposure_s,
             frames: g.files.len(),
@@ -46,7 +49,14 @@ impl Master {
     /// mean of n frames is finer than a DN, but the DNG holds integers, and
     /// rounding adds 1/12 DN^2, far below any frame's noise.
     pub fn frame(&self, key: &FrameKey) -> Result<RawFrame> {
-        let template = RawFrame::from_mosaic(
+        let white = key.white as f32;
+        let packed = self.mean.mapv(|v| v.round().clamp(0.0, white) as u16);
+        unpack_u16(packed.view(), &self.template(key)?).map_err(|e| invalid(e.to_string()))
+    }
+
+    /// An empty frame of the calibrated camera with this master's metadata.
+    fn template(&self, key: &FrameKey) -> Result<RawFrame> {
+        let mut f = RawFrame::from_mosaic(
             key.width,
             key.height,
             vec![0; key.width * key.height],
@@ -55,14 +65,33 @@ impl Master {
             key.white,
         )
         .map_err(|e| invalid(e.to_string()))?;
-        let white = key.white as f32;
-        let packed = self.mean.mapv(|v| v.round().clamp(0.0, white) as u16);
-        let mut f = unpack_u16(packed.view(), &template).map_err(|e| invalid(e.to_string()))?;
+        f.mono = key.mono;
         f.iso = key.iso;
         f.exposure_s = Some(self.exposure_s);
         f.make = key.make.clone();
         f.model = key.model.clone();
         Ok(f)
+    }
+
+    /// The master as a FITS file: the mean unrounded (32-bit float), with
+    /// IMAGETYP, NCOMBINE, the frames' exposure, ISO, `temperature_c` and
+    /// the measured gain as EGAIN (electrons per ADU, 1 / `k`).
+    pub fn fits(&self, key: &FrameKey, k: f64, temperature_c: Option<f32>) -> Result<Vec<u8>> {
+        let mut template = self.template(key)?;
+        template.temperature_c = temperature_c;
+        let mut mosaic = vec![0.0f32; key.width * key.height];
+        for (p, (dy, dx)) in key.cfa.offsets().into_iter().enumerate() {
+            for ((i, j), &v) in self.mean.index_axis(ndarray::Axis(0), p).indexed_iter() {
+                mosaic[(2 * i + dy) * key.width + 2 * j + dx] = v;
+            }
+        }
+        let kind = match self.name.split('_').nth(1) {
+            Some("bias") => "Master Bias",
+            Some("dark") => "Master Dark",
+            _ => "Master Flat",
+        };
+        pgrf_raw::encode_fits_master(&template, &mosaic, kind, self.frames, Some(1.0 / k))
+            .map_err(|e| invalid(e.to_string()))
     }
 }
 

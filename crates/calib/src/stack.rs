@@ -20,6 +20,11 @@ pub struct FrameKey {
     /// Frame height in pixels.
     pub height: usize,
     pub(crate) cfa: Cfa,
+    /// A monochrome sensor ([`RawFrame::mono`]): `cfa` only orders the
+    /// sub-lattices, and the record says "mono".
+    pub(crate) mono: bool,
+    /// The frames are FITS files: masters are written as FITS.
+    pub fits: bool,
     pub(crate) iso: Option<u32>,
     /// Black level in DN of the planes R, G1, B, G2.
     pub black: [f32; 4],
@@ -34,11 +39,22 @@ impl FrameKey {
             width: f.width,
             height: f.height,
             cfa: f.cfa,
+            mono: f.mono,
+            fits: f.fits.is_some(),
             iso: f.iso,
             black: f.black,
             white: f.white,
             make: f.make.clone(),
             model: f.model.clone(),
+        }
+    }
+
+    /// The filter layout as the record names it: "mono" or the CFA's name.
+    pub(crate) fn layout(&self) -> &'static str {
+        if self.mono {
+            "mono"
+        } else {
+            self.cfa.name()
         }
     }
 
@@ -50,10 +66,11 @@ impl FrameKey {
                 other.width, other.height, self.width, self.height
             ));
         }
-        if self.cfa != other.cfa {
+        if (self.cfa, self.mono) != (other.cfa, other.mono) {
             return Some(format!(
                 "CFA {} differs from the other frames' {}",
-                other.cfa, self.cfa
+                other.layout(),
+                self.layout()
             ));
         }
         if self.iso != other.iso {

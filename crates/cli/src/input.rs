@@ -20,15 +20,27 @@ pub struct InputArgs {
     /// Headerless dump: height in pixels.
     #[arg(long, requires = "width", help_heading = "Headerless dumps")]
     pub height: Option<usize>,
-    /// Headerless dump: CFA phase (RGGB, BGGR, GRBG, GBRG).
-    #[arg(long, requires = "width", help_heading = "Headerless dumps")]
-    pub cfa: Option<Cfa>,
+    /// Headerless dump: CFA phase (RGGB, BGGR, GRBG, GBRG), or "mono" for a
+    /// sensor without a colour filter.
+    #[arg(long, requires = "width", value_parser = parse_layout, help_heading = "Headerless dumps")]
+    pub cfa: Option<Layout>,
     /// Headerless dump: significant bits per sample.
     #[arg(long, default_value_t = 14, help_heading = "Headerless dumps")]
     pub bits: u32,
     /// Headerless dump: samples are big-endian (default little-endian).
     #[arg(long, help_heading = "Headerless dumps")]
     pub big_endian: bool,
+}
+
+/// What `--cfa` names: a Bayer phase, or no colour filter.
+#[derive(Clone, Copy, Debug)]
+pub struct Layout(pub Option<Cfa>);
+
+fn parse_layout(s: &str) -> std::result::Result<Layout, String> {
+    if s.eq_ignore_ascii_case("mono") {
+        return Ok(Layout(None));
+    }
+    s.parse::<Cfa>().map(|c| Layout(Some(c)))
 }
 
 impl InputArgs {
@@ -42,7 +54,7 @@ impl InputArgs {
     /// Open `path` as this command was told to.
     pub fn open(&self, path: &Path) -> Result<RawFrame> {
         match (self.width, self.height, self.cfa) {
-            (Some(width), Some(height), Some(cfa)) => {
+            (Some(width), Some(height), Some(Layout(cfa))) => {
                 let Some(black) = self.black.clone() else {
                     bail!("a headerless dump needs --black (its black level in DN)");
                 };

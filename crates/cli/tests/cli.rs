@@ -478,6 +478,111 @@ fn a_one_frame_dark_ladder_with_an_offset_calibrates() {
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
+/// The astronomer's workflow through the binary: a cooled monochrome
+/// camera's stacks as FITS (`simulate-sensor --mono --fits`), `info` on one,
+/// `calibrate --masters` (a monochrome record; FITS masters), `convert` of a
+/// FITS frame to a monochrome DNG, a grey `preview`, and `enhance` refusing
+/// the monochrome frame in one line.
+#[test]
+fn a_monochrome_fits_camera_from_frames_to_masters() {
+    let dir = scratch("monofits");
+    let vs = dir.join("vs");
+    let r = pgrf(&[
+        "simulate-sensor",
+        "--mono",
+        "--fits",
+        "--frames",
+        "8",
+        "--width",
+        "128",
+        "--height",
+        "96",
+        "--dark-law",
+        "linear",
+        "--dark-exposures",
+        "10,30,100",
+        "--dark-frames",
+        "1",
+        "--temperature",
+        "-10",
+        "-o",
+        s(&vs),
+    ]);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    let bias0 = vs.join("bias").join("bias_0000.fits");
+    let r = pgrf(&["info", s(&bias0), "--json"]);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    let info: Value = serde_json::from_slice(&r.stdout).unwrap();
+    assert_eq!(info["cfa"], json!("mono"));
+    assert_eq!(info["fits"]["bitpix"], json!(16));
+    assert_eq!(info["temperature_c"], json!(-10.0));
+    assert_eq!(info["planes"][0]["plane"], json!("(0,0)"));
+
+    let masters = dir.join("masters");
+    let (v, _) = calibrate_vs(
+        &vs,
+        &dir.join("c.safetensors"),
+        &dir.join("report"),
+        &["--masters", s(&masters)],
+    );
+    assert_eq!(v["cfa"], json!("mono"));
+    let mut names: Vec<String> = std::fs::read_dir(&masters)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    names.sort();
+    assert_eq!(
+        names,
+        [
+            "defects.png",
+            "master_bias.fits",
+            "master_dark_100s.fits",
+            "master_dark_10s.fits",
+            "master_dark_30s.fits",
+            "master_flat_0.01s.fits",
+            "master_flat_0.04s.fits"
+        ]
+    );
+    let dark =
+        pgrf_raw::decode_file(&masters.join("master_dark_100s.fits"), &Default::default()).unwrap();
+    assert!(dark.mono);
+    assert_eq!(dark.exposure_s, Some(100.0));
+    assert_eq!(dark.fits.as_ref().unwrap().bitpix, -32);
+
+    let dng = dir.join("bias.dng");
+    let r = pgrf(&["convert", s(&bias0), "-o", s(&dng)]);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    let a = pgrf_raw::decode_file(&bias0, &Default::default()).unwrap();
+    let b = pgrf_raw::decode_file(&dng, &Default::default()).unwrap();
+    assert!(b.mono);
+    assert_eq!(a.mosaic, b.mosaic);
+
+    let png = dir.join("bias.png");
+    let r = pgrf(&["preview", s(&dng), "-o", s(&png), "--gain", "20"]);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    let img = image::open(&png).unwrap().to_rgb8();
+    assert_eq!(img.dimensions(), (128, 96));
+    assert!(
+        img.pixels().all(|p| p[0] == p[1] && p[1] == p[2]),
+        "not grey"
+    );
+
+    let r = pgrf(&[
+        "enhance",
+        s(&dng),
+        "--model",
+        "builtin:spc",
+        "--ratio",
+        "100",
+        "-o",
+        s(&dir.join("out.dng")),
+    ]);
+    let msg = assert_one_line_failure(&r, "bias.dng");
+    assert!(msg.contains("monochrome"), "{msg}");
+    assert!(!dir.join("out.dng").exists());
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
 #[test]
 fn simulate_calibrate_and_synthesise_with_the_calibration() {
     let dir = scratch("calib");

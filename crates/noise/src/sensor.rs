@@ -42,6 +42,9 @@ pub struct SensorSpec {
     /// Frame height in pixels (even, at least 4).
     pub height: usize,
     pub(crate) cfa: Cfa,
+    /// A monochrome sensor (no colour filter, as astronomy CCDs): frames
+    /// come out monochrome ([`RawFrame::mono`]); the noise is the same.
+    pub mono: bool,
     pub(crate) black: f32,
     pub(crate) white: u32,
     /// ISO written into every frame's EXIF (the presets' noise is that ISO's).
@@ -114,6 +117,7 @@ impl SensorSpec {
             width: 1024,
             height: 768,
             cfa: Cfa::Rggb,
+            mono: false,
             black: profile.black.unwrap_or(512.0) as f32,
             white: (profile.black.unwrap_or(512.0) + profile.dn_range) as u32,
             iso,
@@ -261,6 +265,12 @@ impl VirtualSensor {
             sp.white,
         )
         .map_err(|e| NoiseError::Invalid(e.to_string()))?;
+        let template = if sp.mono {
+            RawFrame::from_mono(sp.width, sp.height, template.mosaic, sp.black, sp.white)
+                .map_err(|e| NoiseError::Invalid(e.to_string()))?
+        } else {
+            template
+        };
         let mut f = pgrf_raw::unpack_u16(packed.view(), &template)
             .map_err(|e| NoiseError::Invalid(e.to_string()))?;
         f.iso = Some(sp.iso);
@@ -290,7 +300,7 @@ impl VirtualSensor {
         serde_json::json!({
             "kind": "virtual-sensor-truth",
             "preset": sp.name,
-            "width": sp.width, "height": sp.height, "cfa": sp.cfa.name(),
+            "width": sp.width, "height": sp.height, "cfa": if sp.mono { "mono" } else { sp.cfa.name() },
             "black": sp.black, "white": sp.white, "iso": sp.iso,
             "K": sp.k, "prnu": sp.prnu, "dsnu": sp.dsnu,
             "read_sigma_median": median(&self.sigma_read),

@@ -19,6 +19,9 @@ pub(crate) const B: usize = 2;
 pub(crate) const G2: usize = 3;
 /// Names of the packed planes, for reports.
 pub const PLANE_NAMES: [&str; 4] = ["R", "G1", "B", "G2"];
+/// Names of the packed planes of a monochrome frame: the (row, column)
+/// parity of the 2x2 sub-lattice each holds, in packed order.
+pub const MONO_PLANE_NAMES: [&str; 4] = ["(0,0)", "(0,1)", "(1,1)", "(1,0)"];
 
 /// A Bayer phase, named by the colours of the top-left 2x2 cell read row by row.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]

@@ -1,10 +1,11 @@
 //! Decoding camera RAW files (ARW, NEF, CR2, CR3, RAF, DNG, ...) through rawler
 //! into a `RawFrame`.
 //!
-//! Only what pgrf's physics needs is kept: the visible Bayer mosaic as u16, its
-//! levels, white balance, colour matrix and exposure metadata. Files that are
-//! not Bayer mosaics (X-Trans, Foveon, linear/demosaiced DNGs, float DNGs) are
-//! refused with a reason rather than half-handled.
+//! Only what pgrf's physics needs is kept: the visible Bayer (or monochrome)
+//! mosaic as u16, its levels, white balance, colour matrix and exposure
+//! metadata. Files that are not sensor mosaics (X-Trans, Foveon,
+//! linear/demosaiced DNGs, float DNGs) are refused with a reason rather than
+//! half-handled.
 
 use crate::cfa::Cfa;
 use crate::error::{RawError, Result};
@@ -17,10 +18,11 @@ use rawler::rawsource::RawSource;
 use std::path::Path;
 
 /// Decode a camera RAW file (ARW, NEF, CR2, CR3, RAF, DNG, ... through
-/// rawler) into its visible Bayer mosaic with levels, white balance, colour
-/// matrices and EXIF, then apply `overrides` to the levels. Files that are
-/// not integer Bayer mosaics (X-Trans, monochrome, linear or float DNGs) are
-/// refused with [`RawError::Unsupported`].
+/// rawler; FITS through [`crate::fits`]) into its visible Bayer mosaic with levels, white balance, colour
+/// matrices and EXIF, then apply `overrides` to the levels. Monochrome files
+/// come back with [`RawFrame::mono`] set. Files that are not integer sensor
+/// mosaics (X-Trans, linear or float DNGs) are refused with
+/// [`RawError::Unsupported`].
 pub fn decode_file(path: &Path, overrides: &LevelOverrides) -> Result<RawFrame> {
     let meta = std::fs::metadata(path).map_err(|e| RawError::io(path, e))?;
     if meta.is_dir() {
@@ -55,6 +57,9 @@ fn decode_source(
     overrides: &LevelOverrides,
 ) -> Result<RawFrame> {
     let source = open().map_err(|reason| RawError::decode(path, reason))?;
+    if crate::fits::is_fits(source.buf()) {
+        return crate::fits_frame::frame_from_fits(path, source.buf(), overrides);
+    }
     crate::container::check(source.buf()).map_err(|reason| RawError::decode(path, reason))?;
     let (image, exif) = quietly(|| -> std::result::Result<_, String> {
         let decoder = rawler::get_decoder(&source).map_err(|e| e.to_string())?;
@@ -93,22 +98,22 @@ fn frame_from_rawler(
     mut image: RawImage,
     exif: Option<RawMetadata>,
 ) -> Result<RawFrame> {
+    // A monochrome file (one-sample LinearRaw DNG: Leica Monochrom, pgrf's
+    // own mono DNGs; or BlackIsZero) has no CFA; its mosaic is read all the
+    // same. Three-sample linear data is already demosaiced.
     let config = match &image.photometric {
-        RawPhotometricInterpretation::Cfa(config) => config.clone(),
-        RawPhotometricInterpretation::LinearRaw => {
+        RawPhotometricInterpretation::Cfa(config) => Some(config.clone()),
+        RawPhotometricInterpretation::LinearRaw if image.cpp != 1 => {
             return Err(RawError::unsupported(
                 path,
                 format!(
-                    "linear (already demosaiced) raw data with {} channels; pgrf needs a Bayer CFA mosaic",
+                    "linear (already demosaiced) raw data with {} channels; pgrf needs the sensor's mosaic",
                     image.cpp
                 ),
             ))
         }
-        RawPhotometricInterpretation::BlackIsZero => {
-            return Err(RawError::unsupported(
-                path,
-                "monochrome raw data; pgrf needs a Bayer CFA mosaic",
-            ))
+        RawPhotometricInterpretation::LinearRaw | RawPhotometricInterpretation::BlackIsZero => {
+            None
         }
     };
     if image.cpp != 1 {
@@ -156,20 +161,27 @@ fn frame_from_rawler(
         ));
     }
 
-    let cfa_name = config.cfa.to_string();
-    if config.cfa.width != 2 || config.cfa.height != 2 {
-        return Err(RawError::unsupported(
-            path,
-            format!(
-                "{}x{} colour filter array '{}' (X-Trans or other non-Bayer sensor); pgrf needs a 2x2 Bayer CFA",
-                config.cfa.height, config.cfa.width, cfa_name
-            ),
-        ));
-    }
-    let full_cfa: Cfa = cfa_name
-        .parse()
-        .map_err(|e: String| RawError::unsupported(path, e))?;
-    let cfa = full_cfa.shifted(y0, x0);
+    let cfa = match &config {
+        Some(config) => {
+            let cfa_name = config.cfa.to_string();
+            if config.cfa.width != 2 || config.cfa.height != 2 {
+                return Err(RawError::unsupported(
+                    path,
+                    format!(
+                        "{}x{} colour filter array '{}' (X-Trans or other non-Bayer sensor); pgrf needs a 2x2 Bayer CFA",
+                        config.cfa.height, config.cfa.width, cfa_name
+                    ),
+                ));
+            }
+            let full_cfa: Cfa = cfa_name
+                .parse()
+                .map_err(|e: String| RawError::unsupported(path, e))?;
+            full_cfa.shifted(y0, x0)
+        }
+        // The packed planes of a monochrome frame are its sub-lattices in
+        // RGGB order (RawFrame::cfa).
+        None => Cfa::Rggb,
+    };
 
     let black = black_per_plane(path, &image, cfa, y0, x0)?;
     let white = *image
@@ -219,10 +231,11 @@ fn frame_from_rawler(
         height: h,
         mosaic,
         cfa,
+        mono: config.is_none(),
         black,
         white,
         bits,
-        wb,
+        wb: if config.is_none() { None } else { wb },
         color_matrices: color_matrices(&image),
         iso,
         exposure_s,
@@ -232,6 +245,7 @@ fn frame_from_rawler(
         sensor_origin: (y0, x0),
         sensor_size: (image.height, image.width),
         temperature_c: None,
+        fits: None,
         exif,
     };
     frame.check_levels().map_err(|e| {

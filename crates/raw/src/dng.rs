@@ -130,7 +130,14 @@ fn rawler_image(frame: &RawFrame) -> RawImage {
         height: 2,
     };
     let white = WhiteLevel::new(vec![frame.white]);
-    let photometric = RawPhotometricInterpretation::Cfa(CFAConfig::new(&cam.cfa, &cam.plane_color));
+    // A monochrome frame is a one-sample LinearRaw image: how the DNG
+    // specification and Leica's Monochrom DNGs store a sensor without a
+    // colour filter. Its black pattern still repeats 2x2.
+    let photometric = if frame.mono {
+        RawPhotometricInterpretation::LinearRaw
+    } else {
+        RawPhotometricInterpretation::Cfa(CFAConfig::new(&cam.cfa, &cam.plane_color))
+    };
     // The writer derives AsShotNeutral from these; it is rewritten exactly below.
     let wb = frame
         .wb
@@ -161,6 +168,11 @@ fn rational_level(v: f32) -> Rational {
 
 fn write_color_tags<B: std::io::Write + std::io::Seek>(dng: &mut DngWriter<B>, frame: &RawFrame) {
     let root = dng.root_ifd_mut();
+    if frame.mono {
+        // No colour: no neutral, no matrices (readers then show grey).
+        root.remove_tag(DngTag::AsShotNeutral);
+        return;
+    }
     match frame.wb {
         Some(w) => {
             // AsShotNeutral is the camera response to neutral: reciprocal multipliers.

@@ -27,8 +27,17 @@ pub struct RawFrame {
     pub height: usize,
     /// Row-major u16 samples in DN (black not subtracted), `width * height` of them.
     pub mosaic: Vec<u16>,
-    /// Bayer phase of pixel (0, 0) of the visible area.
+    /// Bayer phase of pixel (0, 0) of the visible area. For a monochrome
+    /// frame ([`RawFrame::mono`]) there is no colour filter and this is only
+    /// the order in which the packed planes hold the 2x2 sub-lattices
+    /// (always RGGB's: (0,0), (0,1), (1,1), (1,0)).
     pub cfa: Cfa,
+    /// A monochrome sensor (no colour filter: astronomy CCDs, Leica
+    /// Monochrom). Per-pixel work (packing, calibration, synthesis) treats
+    /// its 2x2 sub-lattices as four planes of one colour; nothing colour
+    /// applies (no white balance, matrix or demosaic), and what needs a CFA
+    /// (denoisers trained on Bayer data) refuses it ([`RawFrame::require_cfa`]).
+    pub mono: bool,
     /// Black level in DN of the planes R, G1, B, G2.
     pub black: [f32; 4],
     /// Saturation level in DN.
@@ -63,6 +72,9 @@ pub struct RawFrame {
     /// doubles every few degrees, so calibration frames are checked against
     /// each other with it.
     pub temperature_c: Option<f32>,
+    /// What a FITS file's header said beyond the fields above (None for
+    /// camera RAW files).
+    pub fits: Option<crate::fits_frame::FitsHeader>,
     /// The decoder's EXIF record, carried into DNGs written from this frame so
     /// lens, date and exposure tags survive a round trip.
     pub(crate) exif: Option<rawler::decoders::RawMetadata>,
@@ -106,6 +118,7 @@ impl RawFrame {
             height,
             mosaic,
             cfa,
+            mono: false,
             black,
             white,
             bits: bits_for(white),
@@ -119,10 +132,55 @@ impl RawFrame {
             sensor_origin: (0, 0),
             sensor_size: (height, width),
             temperature_c: None,
+            fits: None,
             exif: None,
         };
         frame.check_levels()?;
         Ok(frame)
+    }
+
+    /// A monochrome frame from raw samples: one black level, no colour.
+    pub fn from_mono(
+        width: usize,
+        height: usize,
+        mosaic: Vec<u16>,
+        black: f32,
+        white: u32,
+    ) -> Result<Self> {
+        let mut frame = Self::from_mosaic(width, height, mosaic, Cfa::Rggb, [black; 4], white)?;
+        frame.mono = true;
+        Ok(frame)
+    }
+
+    /// The filter layout in words: the CFA's name ("RGGB") or "mono".
+    pub fn layout(&self) -> &'static str {
+        if self.mono {
+            "mono"
+        } else {
+            self.cfa.name()
+        }
+    }
+
+    /// Names of the packed planes for reports: R, G1, B, G2, or a
+    /// monochrome frame's sub-lattices.
+    pub fn plane_names(&self) -> [&'static str; 4] {
+        if self.mono {
+            crate::cfa::MONO_PLANE_NAMES
+        } else {
+            crate::cfa::PLANE_NAMES
+        }
+    }
+
+    /// Refuse a monochrome frame where colour is required; `what` says what
+    /// needs it ("the SPC denoiser"). One check so every command words the
+    /// refusal the same way.
+    pub fn require_cfa(&self, what: &str) -> Result<()> {
+        if self.mono {
+            return Err(RawError::Invalid(format!(
+                "a monochrome frame (no colour filter array); {what} requires a Bayer CFA mosaic"
+            )));
+        }
+        Ok(())
     }
 
     /// Apply user overrides, then re-check that the levels make sense.

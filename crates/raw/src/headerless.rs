@@ -16,8 +16,8 @@ pub struct HeaderlessSpec {
     pub height: usize,
     /// Significant bits per sample (samples above 2^bits - 1 are refused).
     pub bits: u32,
-    /// Bayer phase of the first sample.
-    pub cfa: Cfa,
+    /// Bayer phase of the first sample; None for a monochrome sensor.
+    pub cfa: Option<Cfa>,
     /// One black level for all planes, or R, G1, B, G2.
     pub black: Vec<f32>,
     /// Saturation level in DN; defaults to 2^bits - 1.
@@ -92,7 +92,15 @@ pub fn read_headerless(path: &Path, spec: &HeaderlessSpec) -> Result<RawFrame> {
     }
     let black = black_per_plane(&spec.black)?;
     let white = spec.white.unwrap_or(max as u32);
-    let mut frame = RawFrame::from_mosaic(spec.width, spec.height, mosaic, spec.cfa, black, white)?;
+    let mut frame = RawFrame::from_mosaic(
+        spec.width,
+        spec.height,
+        mosaic,
+        spec.cfa.unwrap_or(Cfa::Rggb),
+        black,
+        white,
+    )?;
+    frame.mono = spec.cfa.is_none();
     frame.bits = spec.bits;
     Ok(frame)
 }

@@ -69,6 +69,9 @@ pub fn render_preview(frame: &RawFrame, opts: &PreviewOptions) -> Result<Preview
         )));
     }
     frame.check_levels()?;
+    if frame.mono {
+        return Ok(render_mono(frame, opts));
+    }
     let mut warnings = Vec::new();
     let wb = match (opts.no_wb, frame.wb) {
         (true, _) => [1.0; 3],
@@ -147,6 +150,46 @@ pub fn render_preview(frame: &RawFrame, opts: &PreviewOptions) -> Result<Preview
         rgb,
         warnings,
     })
+}
+
+/// A monochrome frame in grey: normalisation, gain, clipping, sRGB curve
+/// (no white balance, matrix or demosaic: there is one colour); `half`
+/// averages each 2x2 cell.
+fn render_mono(frame: &RawFrame, opts: &PreviewOptions) -> Preview {
+    let (w, h) = (frame.width, frame.height);
+    let value = |r: usize, c: usize| {
+        let p = frame.cfa.plane_at(r, c);
+        let x = (frame.at(r, c) as f32 - frame.black[p]) / (frame.white as f32 - frame.black[p]);
+        (x * opts.gain).clamp(0.0, 1.0)
+    };
+    let (width, height) = if opts.half { (w / 2, h / 2) } else { (w, h) };
+    let mut rgb = vec![0.0f32; width * height * 3];
+    rgb.par_chunks_mut(width * 3)
+        .enumerate()
+        .for_each(|(i, row)| {
+            for j in 0..width {
+                let v = if opts.half {
+                    0.25 * (value(2 * i, 2 * j)
+                        + value(2 * i, 2 * j + 1)
+                        + value(2 * i + 1, 2 * j)
+                        + value(2 * i + 1, 2 * j + 1))
+                } else {
+                    value(i, j)
+                };
+                row[j * 3..j * 3 + 3].fill(srgb_encode(v));
+            }
+        });
+    let (rgb, width, height) = if opts.keep_orientation {
+        (rgb, width, height)
+    } else {
+        apply_orientation(&rgb, width, height, 3, frame.orientation)
+    };
+    Preview {
+        width,
+        height,
+        rgb,
+        warnings: Vec::new(),
+    }
 }
 
 fn to_f32(m: &Mat3) -> [[f32; 3]; 3] {

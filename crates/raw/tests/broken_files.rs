@@ -76,7 +76,7 @@ fn dslr_spec() -> HeaderlessSpec {
         width: 768,
         height: 512,
         bits: 14,
-        cfa: Cfa::Rggb,
+        cfa: Some(Cfa::Rggb),
         black: vec![600.0],
         white: Some(15520),
         big_endian: false,

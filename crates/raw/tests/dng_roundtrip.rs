@@ -12,6 +12,7 @@ use rand_chacha::ChaCha8Rng;
 fn assert_same(a: &RawFrame, b: &RawFrame) {
     assert_eq!((a.width, a.height), (b.width, b.height));
     assert_eq!(a.cfa, b.cfa);
+    assert_eq!(a.mono, b.mono);
     assert_eq!(a.black, b.black);
     assert_eq!(a.white, b.white);
     assert!(a.mosaic == b.mosaic, "pixels differ");
@@ -135,6 +136,38 @@ fn every_cfa_phase_and_odd_sizes_round_trip() {
                     .unwrap_or_else(|e| panic!("{cfa} {w}x{h} {compression:?}: {e}"));
                 assert_same(&f, &back);
             }
+        }
+    }
+}
+
+/// A monochrome frame is written as a one-sample BlackIsZero DNG and comes
+/// back monochrome with the same pixels, per-sub-lattice blacks and
+/// metadata, without colour (no white balance, no matrices).
+#[test]
+fn monochrome_frames_round_trip() {
+    let dir = common::scratch("dngmono");
+    for (w, h) in [(64, 48), (37, 23)] {
+        let mut f = synthetic(Cfa::Rggb, w, h, 41);
+        f.mono = true;
+        f.wb = None;
+        f.color_matrices.clear();
+        f.black = [100.0, 101.0, 99.0, 100.5];
+        for compression in [Compression::Lossless, Compression::Uncompressed] {
+            let out = dir.join(format!("mono-{w}-{compression:?}.dng"));
+            write_dng(
+                &f,
+                &out,
+                &DngOptions {
+                    compression,
+                    ..Default::default()
+                },
+            )
+            .unwrap();
+            let back = decode_file(&out, &LevelOverrides::default())
+                .unwrap_or_else(|e| panic!("mono {w}x{h} {compression:?}: {e}"));
+            assert!(back.mono, "{w}x{h} {compression:?} came back with a CFA");
+            assert_eq!(back.layout(), "mono");
+            assert_same(&f, &back);
         }
     }
 }

@@ -55,6 +55,9 @@ pub struct ReportData<'a> {
     /// Temporal noise variance without light (read, row and offset drift),
     /// DN^2: with the flat levels' shot variance it gives their SNR.
     pub dark_var_dn2: f64,
+    /// A monochrome sensor: maps are drawn as one image (the packed planes
+    /// are its 2x2 sub-lattices), not as four CFA planes.
+    pub mono: bool,
     /// Rows of the summary table: (quantity, value, unit), EMVA 1288 vocabulary
     /// (system gain, temporal dark noise, DSNU, PRNU, dark current ...), already formatted.
     pub summary: Vec<(String, String, String)>,
@@ -132,6 +135,7 @@ pub fn write_report(dir: &Path, data: &ReportData) -> Result<Vec<PathBuf>, Repor
             "bias mean minus black level",
             "DN",
             &data.fixed_pattern,
+            data.mono,
         )?,
         map_section(
             dir,
@@ -140,6 +144,7 @@ pub fn write_report(dir: &Path, data: &ReportData) -> Result<Vec<PathBuf>, Repor
             "per-pixel temporal read noise",
             "DN",
             &data.sigma_read,
+            data.mono,
         )?,
     ];
     let mut written: Vec<PathBuf> = sections.iter().filter_map(|s| s.path.clone()).collect();
@@ -779,7 +784,11 @@ fn sigma_hist_section(dir: &Path, data: &ReportData, title: &str) -> Result<Sect
     let n_bins = bin_count(values.len());
     let (counts, _, above) = bin(&values, lo, hi, n_bins);
     let series = [HistSeries {
-        label: "R, G1, B, G2 pixels".to_string(),
+        label: if data.mono {
+            "pixels".to_string()
+        } else {
+            "R, G1, B, G2 pixels".to_string()
+        },
         color: RGBColor(40, 90, 170),
         counts,
         median: p[1],
@@ -808,8 +817,13 @@ fn sigma_hist_section(dir: &Path, data: &ReportData, title: &str) -> Result<Sect
     let path = dir.join(SIGMA_HIST_PNG);
     render_png(&path, (PLOT_W, PLOT_H), |root| draw_histogram(root, &spec))?;
     let mut text = format!(
-        "Per-pixel temporal read noise over all four CFA planes, log count axis so the \
+        "Per-pixel temporal read noise over {}, log count axis so the \
          hot/RTS tail is visible next to the bulk. Median {} DN.",
+        if data.mono {
+            "every pixel"
+        } else {
+            "all four CFA planes"
+        },
         fmt_sig(p[1], 4)
     );
     if let Some(note) = note {
@@ -908,7 +922,9 @@ const TILE_PLANES: [usize; 4] = [0, 1, 3, 2];
 
 /// A grayscale mosaic, scaled between the 0.5th and 99.5th percentile so a
 /// few hot pixels do not turn the rest of the map black. Percentiles use the
-/// full-resolution data, striding only decides which pixels are drawn.
+/// full-resolution data, striding only decides which pixels are drawn. A
+/// monochrome sensor's planes are its 2x2 sub-lattices: they are put back
+/// together into one picture of the sensor instead of four tiles.
 fn map_section(
     dir: &Path,
     file: &'static str,
@@ -916,6 +932,7 @@ fn map_section(
     what: &str,
     unit: &str,
     map: &ArrayView3<f32>,
+    mono: bool,
 ) -> Result<Section, ReportError> {
     let (h, w) = (map.shape()[1], map.shape()[2]);
     if h == 0 || w == 0 {
@@ -946,7 +963,12 @@ fn map_section(
         let (oy, ox) = ((t / 2) * th, (t % 2) * tw);
         let view = map.slice(s![plane, ..;stride, ..;stride]);
         for ((y, x), &v) in view.indexed_iter() {
-            gray[(oy + y) * out_w + ox + x] = to_gray(v, lo, hi);
+            let (gy, gx) = if mono {
+                (2 * y + t / 2, 2 * x + t % 2)
+            } else {
+                (oy + y, ox + x)
+            };
+            gray[gy * out_w + gx] = to_gray(v, lo, hi);
         }
     }
     let path = dir.join(file);
@@ -962,11 +984,18 @@ fn map_section(
     })?;
     pgrf_core::write_atomic(&path, &png)?;
 
-    let mut text = format!(
-        "{} ({unit}) as grayscale, the four CFA planes tiled 2x2: R top-left, G1 top-right, \
-         G2 bottom-left, B bottom-right.",
-        capitalize(what),
-    );
+    let mut text = if mono {
+        format!(
+            "{} ({unit}) as grayscale, one pixel per photosite (monochrome sensor).",
+            capitalize(what)
+        )
+    } else {
+        format!(
+            "{} ({unit}) as grayscale, the four CFA planes tiled 2x2: R top-left, G1 top-right, \
+             G2 bottom-left, B bottom-right.",
+            capitalize(what),
+        )
+    };
     if hi > lo {
         let _ = write!(
             text,
@@ -1160,6 +1189,7 @@ mod tests {
             r2_linear: Some(r2l.view()),
             dark_offset: false,
             dark_var_dn2: 30.0,
+            mono: false,
             summary: summary_rows(),
         };
         let written = write_report(&dir, &data).unwrap();
@@ -1204,7 +1234,7 @@ mod tests {
         // Each plane constant at its index, so tile brightness reveals the plane.
         let (h, w) = (900, 1000);
         let map = Array3::from_shape_fn((4, h, w), |(p, _, _)| p as f32);
-        let sec = map_section(&dir, SIGMA_MAP_PNG, "t", "test", "DN", &map.view()).unwrap();
+        let sec = map_section(&dir, SIGMA_MAP_PNG, "t", "test", "DN", &map.view(), false).unwrap();
         let img = image::open(sec.path.unwrap()).unwrap().to_luma8();
         // 2 * 1000 = 2000 px > 1600, so stride 2: tiles 450x500.
         assert_eq!((img.width(), img.height()), (1000, 900));
@@ -1213,6 +1243,28 @@ mod tests {
         assert_eq!(at(510, 10), 85, "G1 top-right");
         assert_eq!(at(10, 460), 255, "G2 bottom-left");
         assert_eq!(at(510, 460), 170, "B bottom-right");
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    /// A monochrome map is the sensor itself: sub-lattice (0,0) at even
+    /// rows and columns, (0,1) at even rows and odd columns, (1,1) and (1,0)
+    /// on odd rows, as the packed planes hold them.
+    #[test]
+    fn mono_maps_interleave_the_sub_lattices() {
+        let dir = scratch("monomap");
+        let (h, w) = (6, 5);
+        let map = Array3::from_shape_fn((4, h, w), |(p, _, _)| p as f32);
+        let sec = map_section(&dir, SIGMA_MAP_PNG, "t", "test", "DN", &map.view(), true).unwrap();
+        assert!(sec.text.contains("one pixel per photosite"), "{}", sec.text);
+        let img = image::open(sec.path.unwrap()).unwrap().to_luma8();
+        assert_eq!((img.width(), img.height()), (10, 12));
+        let at = |x, y| img.get_pixel(x, y).0[0];
+        for (y, x) in [(0, 0), (4, 6), (10, 8)] {
+            assert_eq!(at(x, y), 0, "(0,0) at row {y} col {x}");
+            assert_eq!(at(x + 1, y), 85, "(0,1)");
+            assert_eq!(at(x + 1, y + 1), 170, "(1,1)");
+            assert_eq!(at(x, y + 1), 255, "(1,0)");
+        }
         let _ = std::fs::remove_dir_all(&dir);
     }
 
@@ -1232,6 +1284,7 @@ mod tests {
             r2_linear: None,
             dark_offset: false,
             dark_var_dn2: 30.0,
+            mono: false,
             summary: vec![],
         };
         let written = write_report(&dir, &data).unwrap();
@@ -1268,6 +1321,7 @@ mod tests {
             r2_linear: None,
             dark_offset: false,
             dark_var_dn2: 30.0,
+            mono: false,
             summary: vec![],
         };
         let written = write_report(&dir, &data).unwrap();
@@ -1299,6 +1353,7 @@ mod tests {
             r2_linear: None,
             dark_offset: false,
             dark_var_dn2: 30.0,
+            mono: false,
             summary: vec![],
         };
         let written = write_report(&dir, &data).unwrap();
@@ -1321,6 +1376,7 @@ mod tests {
             r2_linear: None,
             dark_offset: false,
             dark_var_dn2: 30.0,
+            mono: false,
             summary: vec![],
         };
         let err = write_report(&dir, &data).unwrap_err();
@@ -1349,6 +1405,7 @@ mod tests {
             r2_linear: None,
             dark_offset: false,
             dark_var_dn2: 30.0,
+            mono: false,
             summary: vec![],
         };
         let err = write_report(&dir, &data).unwrap_err().to_string();

@@ -157,6 +157,7 @@ pub fn run(a: &CalibrateArgs) -> Result<()> {
                 "dark_offset": m.dark_offset,
                 "dark_offset_mean": m.dark_offset_mean,
                 "K_without_pairs": run.gain.k_without_pairs,
+                "cfa": m.layout(),
                 "temperature_c": m.temperature_c,
                 "warnings": m.warnings,
                 "rejected_frames": m.rejected_frames,
@@ -177,10 +178,11 @@ fn write_masters(
     inputs: &[&std::path::Path],
     output: &std::path::Path,
 ) -> Result<()> {
+    let ext = if run.key.fits { "fits" } else { "dng" };
     let files: Vec<PathBuf> = run
         .masters
         .iter()
-        .map(|m| dir.join(format!("{}.dng", m.name)))
+        .map(|m| dir.join(format!("{}.{ext}", m.name)))
         .chain(std::iter::once(dir.join("defects.png")))
         .collect();
     if dir.is_dir() {
@@ -190,9 +192,17 @@ fn write_masters(
     }
     std::fs::create_dir_all(dir)
         .with_context(|| format!("{}: cannot create the masters folder", dir.display()))?;
+    let meta = &run.calibration.meta;
     for (m, path) in run.masters.iter().zip(&files) {
-        pgrf_raw::write_dng(&m.frame(&run.key)?, path, &Default::default())
-            .with_context(|| format!("--masters {}", path.display()))?;
+        let written = if run.key.fits {
+            m.fits(&run.key, meta.k, meta.temperature_c)
+                .map_err(anyhow::Error::from)
+                .and_then(|bytes| Ok(pgrf_core::write_atomic(path, &bytes)?))
+        } else {
+            pgrf_raw::write_dng(&m.frame(&run.key)?, path, &Default::default())
+                .map_err(anyhow::Error::from)
+        };
+        written.with_context(|| format!("--masters {}", path.display()))?;
     }
     let key = &run.key;
     let picture = pgrf_raw::Preview {
@@ -232,6 +242,7 @@ fn report_data(run: &CalibrationRun) -> ReportData<'_> {
         r2_linear: maps.r2_linear.as_ref().map(|a| a.view()),
         dark_offset: m.dark_offset,
         dark_var_dn2: run.dark_variance(),
+        mono: m.layout() == "mono",
         summary: run.summary(),
     }
 }

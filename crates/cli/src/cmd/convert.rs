@@ -1,16 +1,18 @@
-//! `pgrf convert`: any RAW pgrf reads -> DNG, pixels and metadata kept.
+//! `pgrf convert`: any RAW pgrf reads (camera RAW, FITS, headerless dump)
+//! -> DNG, or -> FITS when the output is named .fits/.fit/.fts, pixels and
+//! metadata kept.
 
 use crate::input::InputArgs;
 use anyhow::Result;
 use clap::Args;
-use pgrf_raw::{write_dng, Compression, DngOptions};
+use pgrf_raw::{write_dng, write_fits_frame, Compression, DngOptions};
 use std::path::PathBuf;
 
 #[derive(Args, Debug)]
 pub struct ConvertArgs {
-    /// RAW file or headerless dump.
+    /// RAW file, FITS file or headerless dump.
     pub file: PathBuf,
-    /// Output DNG (written atomically).
+    /// Output DNG, or FITS (16-bit) when named .fits, .fit or .fts (written atomically).
     #[arg(short, long)]
     pub output: PathBuf,
     /// Store pixels uncompressed instead of LJPEG-92 lossless.
@@ -31,13 +33,29 @@ pub fn run(a: &ConvertArgs) -> Result<()> {
         },
         ..Default::default()
     };
-    write_dng(&frame, &a.output, &opts)?;
+    let fits = a
+        .output
+        .extension()
+        .and_then(|e| e.to_str())
+        .is_some_and(|e| ["fits", "fit", "fts"].contains(&e.to_ascii_lowercase().as_str()));
+    if fits {
+        write_fits_frame(&frame, &a.output)?;
+        if frame.black.iter().any(|&b| b != 0.0) {
+            eprintln!(
+                "pgrf: warning: FITS has no black-level keyword: the black level {:?} is not in {}; give --black when reading it",
+                frame.black,
+                a.output.display()
+            );
+        }
+    } else {
+        write_dng(&frame, &a.output, &opts)?;
+    }
     eprintln!(
         "wrote {} ({} x {} {}, black {:?}, white {})",
         a.output.display(),
         frame.width,
         frame.height,
-        frame.cfa,
+        frame.layout(),
         frame.black,
         frame.white
     );

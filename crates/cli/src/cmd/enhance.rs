@@ -312,6 +312,9 @@ fn enhance_one(
 ) -> Result<FileReport> {
     let t0 = Instant::now();
     let mut frame = a.input.open(&job.input)?;
+    frame
+        .require_cfa("pgrf enhance (its denoisers learned Bayer data)")
+        .with_context(|| format!("{}", job.input.display()))?;
     let ratio = match (a.ratio, a.target_exposure) {
         (Some(r), _) => r,
         (None, Some(t)) => ratio_from_exposure(&frame, t, a.target_iso)?,
@@ -321,6 +324,7 @@ fn enhance_one(
     let dark = match (calib, &a.calib) {
         (Some(cal), Some(path)) => {
             cal.check_matches(&frame.make, &frame.model, frame.iso, a.force)
+                .and_then(|()| cal.check_layout(&frame))
                 .with_context(|| format!("--calib {}", path.display()))?;
             if (cal.meta.width, cal.meta.height) != (frame.width, frame.height) {
                 bail!(

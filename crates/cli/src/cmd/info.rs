@@ -3,7 +3,6 @@
 use crate::input::InputArgs;
 use anyhow::Result;
 use clap::Args;
-use pgrf_raw::cfa::PLANE_NAMES;
 use pgrf_raw::ndarray::Axis;
 use pgrf_raw::{pack_u16, RawFrame};
 use serde::Serialize;
@@ -46,6 +45,8 @@ struct Info<'a> {
     iso: Option<u32>,
     exposure_s: Option<f64>,
     temperature_c: Option<f32>,
+    /// FITS header fields beyond the common ones (FITS input only).
+    fits: Option<&'a pgrf_raw::FitsHeader>,
     orientation: u16,
     visible_origin: [usize; 2],
     sensor_size: [usize; 2],
@@ -66,7 +67,7 @@ fn plane_stats(f: &RawFrame) -> Result<Vec<PlaneStats>> {
                 sat += (v as u32 >= f.white) as usize;
             }
             PlaneStats {
-                plane: PLANE_NAMES[c],
+                plane: f.plane_names()[c],
                 min,
                 max,
                 mean: sum as f64 / n,
@@ -84,7 +85,7 @@ pub fn run(a: &InfoArgs) -> Result<()> {
         model: &f.model,
         width: f.width,
         height: f.height,
-        cfa: f.cfa.to_string(),
+        cfa: f.layout().to_string(),
         black: f.black,
         white: f.white,
         bits: f.bits,
@@ -93,6 +94,7 @@ pub fn run(a: &InfoArgs) -> Result<()> {
         iso: f.iso,
         exposure_s: f.exposure_s,
         temperature_c: f.temperature_c,
+        fits: f.fits.as_ref(),
         orientation: f.orientation,
         visible_origin: [f.sensor_origin.0, f.sensor_origin.1],
         sensor_size: [f.sensor_size.0, f.sensor_size.1],
@@ -104,7 +106,12 @@ pub fn run(a: &InfoArgs) -> Result<()> {
     }
     let opt = |v: Option<String>| v.unwrap_or_else(|| "unknown".into());
     println!("file        {}", info.file);
-    println!("camera      {} {}", or_dash(info.make), or_dash(info.model));
+    let camera = [info.make, info.model]
+        .into_iter()
+        .filter(|s| !s.is_empty())
+        .collect::<Vec<_>>()
+        .join(" ");
+    println!("camera      {}", or_dash(&camera));
     println!(
         "visible     {} x {} (at row {}, col {} of a {} x {} readout)",
         info.width,
@@ -114,11 +121,48 @@ pub fn run(a: &InfoArgs) -> Result<()> {
         f.sensor_size.1,
         f.sensor_size.0
     );
-    println!("cfa         {}", info.cfa);
-    println!("orientation {} (EXIF)", f.orientation);
+    if f.mono {
+        println!("cfa         none (monochrome sensor)");
+    } else {
+        println!("cfa         {}", info.cfa);
+    }
+    if let Some(h) = &f.fits {
+        println!(
+            "fits        BITPIX {}{}",
+            h.bitpix,
+            h.conversion
+                .as_ref()
+                .map(|c| format!(" ({c})"))
+                .unwrap_or_default()
+        );
+        if let Some(g) = h.egain_e_per_adu {
+            println!("egain       {g} e-/ADU (header; K = {:.4} DN/e-)", 1.0 / g);
+        }
+        if let Some(g) = h.gain_setting {
+            println!("gain        {g} (the driver's gain setting)");
+        }
+        if let Some(d) = &h.date_obs {
+            println!("date-obs    {d}");
+        }
+    } else {
+        println!("orientation {} (EXIF)", f.orientation);
+    }
+    let names = f.plane_names();
     println!(
-        "black       R {} G1 {} B {} G2 {} DN",
-        f.black[0], f.black[1], f.black[2], f.black[3]
+        "black       {} {} {} {} {} {} {} {} DN{}",
+        names[0],
+        f.black[0],
+        names[1],
+        f.black[1],
+        names[2],
+        f.black[2],
+        names[3],
+        f.black[3],
+        if f.fits.is_some() && a.input.black.is_none() {
+            " (FITS records no black level: a bias stack measures it, --black sets one)"
+        } else {
+            ""
+        }
     );
     println!("white       {} DN ({} bits)", f.white, f.bits);
     println!("iso         {}", opt(f.iso.map(|v| v.to_string())));
@@ -126,14 +170,16 @@ pub fn run(a: &InfoArgs) -> Result<()> {
     if let Some(t) = f.temperature_c {
         println!("temperature {t:.2} °C");
     }
-    println!(
-        "wb          {}",
-        opt(f
-            .wb
-            .map(|w| format!("R {:.4}  G 1  B {:.4} (multipliers)", w[0], w[2])))
-    );
-    if f.color_matrices.is_empty() {
-        println!("matrix      none");
+    if !f.mono {
+        println!(
+            "wb          {}",
+            opt(f
+                .wb
+                .map(|w| format!("R {:.4}  G 1  B {:.4} (multipliers)", w[0], w[2])))
+        );
+        if f.color_matrices.is_empty() {
+            println!("matrix      none");
+        }
     }
     for cm in &f.color_matrices {
         println!(

@@ -7,7 +7,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use pgrf_noise::mapfile::write_maps;
 use pgrf_noise::sensor::{SensorSpec, VirtualSensor};
 use pgrf_noise::DarkLaw;
-use pgrf_raw::{write_dng, DngOptions};
+use pgrf_raw::{write_dng, write_fits_frame, DngOptions};
 use std::path::PathBuf;
 
 /// Dark exposures (s) and flat levels (electrons, exposure s) of the stacks.
@@ -63,6 +63,12 @@ pub struct SimulateArgs {
     /// Capture temperature written into every frame, degrees C.
     #[arg(long, allow_hyphen_values = true)]
     pub temperature: Option<f32>,
+    /// A monochrome sensor (no colour filter, as an astronomy CCD).
+    #[arg(long)]
+    pub mono: bool,
+    /// Write the frames as FITS (16-bit, as astronomy cameras do) instead of DNG.
+    #[arg(long)]
+    pub fits: bool,
     /// Flat shading: the light lost at the corners (0.2 = 20 %), as a lens's vignetting.
     #[arg(long, default_value_t = 0.0)]
     pub vignetting: f32,
@@ -148,6 +154,7 @@ pub fn run(a: &SimulateArgs) -> Result<()> {
     spec.dark_offset = a.dark_offset;
     spec.frame_offset_sigma = a.frame_offset;
     spec.vignetting = a.vignetting;
+    spec.mono = a.mono;
     spec.temperature_c = a.temperature;
     let sensor = VirtualSensor::new(spec)?;
     for s in &a.stacks {
@@ -183,11 +190,13 @@ pub fn run(a: &SimulateArgs) -> Result<()> {
                 1.0
             };
             let f = sensor.frame(electrons * lamp, t, seed)?;
-            write_dng(
-                &f,
-                &a.output.join(sub).join(format!("{tag}_{i:04}.dng")),
-                &DngOptions::default(),
-            )?;
+            let ext = if a.fits { "fits" } else { "dng" };
+            let path = a.output.join(sub).join(format!("{tag}_{i:04}.{ext}"));
+            if a.fits {
+                write_fits_frame(&f, &path)?;
+            } else {
+                write_dng(&f, &path, &DngOptions::default())?;
+            }
             bar.inc(1);
         }
         Ok(())

@@ -142,6 +142,7 @@ pub fn run(a: &SynthArgs) -> Result<()> {
     if let Some(path) = &a.calib {
         let cal = Calibration::load(path)?;
         cal.check_matches(&frame.make, &frame.model, spec.iso, a.force)
+            .and_then(|()| cal.check_layout(&frame))
             .with_context(|| format!("{}", path.display()))?;
         let (ph, pw) = frame.packed_dims();
         if (cal.meta.height / 2, cal.meta.width / 2) != (ph, pw) {

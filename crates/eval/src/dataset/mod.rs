@@ -170,6 +170,8 @@ pub(crate) fn load_pair(s: &Sample, levels: &LevelOverrides) -> Result<LoadedPai
     );
     let n = n.map_err(|e| DatasetError(e.to_string()))?;
     let r = r.map_err(|e| DatasetError(e.to_string()))?;
+    n.require_cfa("evaluation")
+        .map_err(|e| DatasetError(format!("{}: {e}", s.noisy.display())))?;
     if (n.width, n.height, n.cfa) != (r.width, r.height, r.cfa) {
         return err(format!(
             "{} ({}x{} {}) and {} ({}x{} {}) differ in size or CFA phase",

@@ -169,7 +169,11 @@ impl Image {
     pub fn load(&self, levels: &LevelOverrides) -> Result<RawFrame> {
         let e = |e: pgrf_raw::RawError| DatasetError(e.to_string());
         if !self.photo {
-            return decode_file(&self.path, levels).map_err(e);
+            let frame = decode_file(&self.path, levels).map_err(e)?;
+            frame
+                .require_cfa("evaluation")
+                .map_err(|x| DatasetError(format!("{}: {x}", self.path.display())))?;
+            return Ok(frame);
         }
         let photo = pgrf_raw::photo::read_photo(&self.path)
             .and_then(|p| p.downscale(2))

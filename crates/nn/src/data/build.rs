@@ -70,6 +70,7 @@ pub fn photo_camera(c: &TrainConfig) -> Result<CameraSpace> {
     match &c.camera_like {
         Some(path) => {
             let frame = decode_file(path, &LevelOverrides::default())
+                .and_then(|f| f.require_cfa("--camera-like").map(|()| f))
                 .map_err(|e| NnError::Config(format!("--camera-like {}: {e}", path.display())))?;
             CameraSpace::of(&frame)
                 .map_err(|e| NnError::Config(format!("--camera-like {}: {e}", path.display())))

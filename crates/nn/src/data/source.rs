@@ -104,6 +104,7 @@ impl Folder {
         let path = &self.files[i];
         let load = || {
             let frame = decode_file(path, &self.levels)
+                .and_then(|f| f.require_cfa("training").map(|()| f))
                 .map_err(|e| NnError::Invalid(format!("{}: {e}", path.display())))?;
             Packed::from_frame(&frame)
         };

@@ -1,0 +1,286 @@
+//! FITS frames as [`RawFrame`]s: what [`crate::decode_file`] makes of an
+//! astronomy camera's FITS file, and frames and calibration masters written
+//! back as FITS for the astrophotographer's tools (Siril, PixInsight,
+//! DeepSkyStacker read them).
+//!
+//! A FITS file records no black level: a cooled camera's pedestal is in the
+//! data and a bias stack measures it, so frames come in with black 0 (give
+//! `--black` where a known pedestal matters). Rows stay in the file's stored
+//! order, and the Bayer phase is that of stored pixel (0, 0) ([`crate::fits`]
+//! works it out from BAYERPAT, ROWORDER and the offsets); frames pgrf writes
+//! are TOP-DOWN with no offsets, so a round trip keeps rows and phase.
+
+use crate::error::{RawError, Result};
+use crate::fits::{encode_fits_f32, encode_fits_u16, read_fits, FitsCard, FitsValue};
+use crate::frame::{LevelOverrides, RawFrame};
+use pgrf_core::write_atomic;
+use serde::Serialize;
+use std::path::Path;
+
+/// What a FITS header says that the other fields of a [`RawFrame`] do not
+/// hold: kept so `pgrf info` can show it and calibration can compare its
+/// gain with the header's.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct FitsHeader {
+    /// BITPIX of the file (8, 16, 32, -32, -64).
+    pub bitpix: i32,
+    /// EGAIN: electrons per ADU as the camera driver states it.
+    pub egain_e_per_adu: Option<f64>,
+    /// GAIN: in most drivers (ZWO, QHY) a gain setting, not electrons per ADU.
+    pub gain_setting: Option<f64>,
+    /// DATE-OBS, as written.
+    pub date_obs: Option<String>,
+    /// How samples that were not unsigned 16-bit integers became DN.
+    pub conversion: Option<String>,
+}
+
+/// The frame of FITS file `bytes` (`path` names it in errors), with
+/// `overrides` applied to its levels.
+pub(crate) fn frame_from_fits(
+    path: &Path,
+    bytes: &[u8],
+    overrides: &LevelOverrides,
+) -> Result<RawFrame> {
+    let img = read_fits(path, bytes)?;
+    let mut frame = match img.bayer {
+        Some(cfa) => {
+            RawFrame::from_mosaic(img.width, img.height, img.data, cfa, [0.0; 4], img.white)
+        }
+        None => RawFrame::from_mono(img.width, img.height, img.data, 0.0, img.white),
+    }
+    .map_err(|e| RawError::decode(path, e.to_string()))?;
+    frame.exposure_s = img.exposure_s;
+    frame.iso = img.iso;
+    frame.temperature_c = img.temperature_c;
+    frame.model = img.instrument.unwrap_or_default();
+    frame.fits = Some(FitsHeader {
+        bitpix: img.bitpix,
+        egain_e_per_adu: img.egain_e_per_adu,
+        gain_setting: img.gain_setting,
+        date_obs: img.date_obs,
+        conversion: img.conversion,
+    });
+    frame.apply_overrides(overrides)?;
+    Ok(frame)
+}
+
+/// The header cards every FITS file pgrf writes of `frame` carries: its
+/// exposure, ISO, temperature, camera and (for a colour sensor) its Bayer
+/// pattern, stated TOP-DOWN with no offsets because rows are written in
+/// the frame's order.
+fn frame_cards(frame: &RawFrame) -> Vec<FitsCard> {
+    let card = |key: &str, value: FitsValue, comment: &str| FitsCard {
+        key: key.into(),
+        value,
+        comment: comment.into(),
+    };
+    let mut cards = vec![card(
+        "ROWORDER",
+        FitsValue::Str("TOP-DOWN".into()),
+        "first row stored is the top row",
+    )];
+    if !frame.mono {
+        cards.push(card(
+            "BAYERPAT",
+            FitsValue::Str(frame.cfa.name().into()),
+            "colour filter of the top-left 2x2 cell",
+        ));
+        cards.push(card(
+            "XBAYROFF",
+            FitsValue::Int(0),
+            "Bayer pattern x offset",
+        ));
+        cards.push(card(
+            "YBAYROFF",
+            FitsValue::Int(0),
+            "Bayer pattern y offset",
+        ));
+    }
+    cards.push(card(
+        "SATURATE",
+        FitsValue::Int(frame.white as i64),
+        "saturation level [ADU]",
+    ));
+    if let Some(t) = frame.exposure_s.filter(|t| t.is_finite()) {
+        cards.push(card("EXPTIME", FitsValue::Float(t), "exposure time [s]"));
+    }
+    if let Some(iso) = frame.iso {
+        cards.push(card("ISOSPEED", FitsValue::Int(iso as i64), "ISO speed"));
+    }
+    if let Some(t) = frame.temperature_c.filter(|t| t.is_finite()) {
+        cards.push(card(
+            "CCD-TEMP",
+            FitsValue::Float(t as f64),
+            "sensor temperature [C]",
+        ));
+    }
+    let camera = [frame.make.as_str(), frame.model.as_str()]
+        .into_iter()
+        .filter(|s| !s.is_empty())
+        .collect::<Vec<_>>()
+        .join(" ");
+    let camera: String = camera
+        .chars()
+        .filter(|c| c.is_ascii_graphic() || *c == ' ')
+        .take(60)
+        .collect();
+    if !camera.is_empty() {
+        cards.push(card("INSTRUME", FitsValue::Str(camera), "camera"));
+    }
+    if let Some(g) = frame.fits.as_ref().and_then(|h| h.egain_e_per_adu) {
+        cards.push(card("EGAIN", FitsValue::Float(g), "electrons per ADU"));
+    }
+    cards.push(card(
+        "CREATOR",
+        FitsValue::Str(format!("pgrf {}", env!("CARGO_PKG_VERSION"))),
+        "",
+    ));
+    cards
+}
+
+/// `frame` as a FITS file: unsigned 16-bit samples (BITPIX 16, BZERO
+/// 32768), black level included as the camera recorded it.
+pub fn encode_fits_frame(frame: &RawFrame) -> Result<Vec<u8>> {
+    encode_fits_u16(
+        frame.width,
+        frame.height,
+        &frame.mosaic,
+        &frame_cards(frame),
+    )
+}
+
+/// [`encode_fits_frame`] written atomically to `path`.
+pub fn write_fits_frame(frame: &RawFrame, path: &Path) -> Result<()> {
+    Ok(write_atomic(path, &encode_fits_frame(frame)?)?)
+}
+
+/// A calibration master as FITS: the mean of `frames` frames, `mosaic` in
+/// DN (one value per photosite of `template`'s size), written as 32-bit
+/// floats normalised by 65535 (the [0, 1] convention of Siril and
+/// PixInsight; pgrf reads it back at the DN scale) so the mean keeps its
+/// fraction of a DN, which rounding to integers would lose (a master bias
+/// of 64 frames is known to about a tenth of a DN). `kind` names it in
+/// IMAGETYP ("Master Bias", ...); `egain`, when given, is the measured
+/// electrons per ADU (1 / K).
+pub fn encode_fits_master(
+    template: &RawFrame,
+    mosaic: &[f32],
+    kind: &str,
+    frames: usize,
+    egain: Option<f64>,
+) -> Result<Vec<u8>> {
+    if mosaic.len() != template.width * template.height {
+        return Err(RawError::Invalid(format!(
+            "master has {} values, a {}x{} frame needs {}",
+            mosaic.len(),
+            template.width,
+            template.height,
+            template.width * template.height
+        )));
+    }
+    let mut cards = frame_cards(template);
+    cards.retain(|c| c.key != "EGAIN");
+    cards.insert(
+        0,
+        FitsCard {
+            key: "IMAGETYP".into(),
+            value: FitsValue::Str(kind.into()),
+            comment: "calibration master".into(),
+        },
+    );
+    cards.push(FitsCard {
+        key: "NCOMBINE".into(),
+        value: FitsValue::Int(frames as i64),
+        comment: "frames averaged".into(),
+    });
+    if let Some(g) = egain.filter(|g| g.is_finite() && *g > 0.0) {
+        cards.push(FitsCard {
+            key: "EGAIN".into(),
+            value: FitsValue::Float(g),
+            comment: "electrons per ADU (measured, 1/K)".into(),
+        });
+    }
+    let scaled: Vec<f32> = mosaic.iter().map(|v| v / 65535.0).collect();
+    encode_fits_f32(template.width, template.height, &scaled, &cards)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::cfa::Cfa;
+    use rand::{Rng, SeedableRng};
+    use rand_xoshiro::Xoshiro256PlusPlus;
+
+    fn frame(cfa: Option<Cfa>, seed: u64) -> RawFrame {
+        let (w, h) = (10, 6);
+        let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed);
+        let data: Vec<u16> = (0..w * h).map(|_| rng.random_range(0..=60000)).collect();
+        let mut f = match cfa {
+            Some(c) => RawFrame::from_mosaic(w, h, data, c, [0.0; 4], 60000).unwrap(),
+            None => RawFrame::from_mono(w, h, data, 0.0, 60000).unwrap(),
+        };
+        f.exposure_s = Some(300.0);
+        f.iso = Some(800);
+        f.temperature_c = Some(-10.5);
+        f.model = "SBIG STL-1001".into();
+        f
+    }
+
+    /// Written and read back: same samples, layout and metadata, for a
+    /// monochrome frame and every Bayer phase.
+    #[test]
+    fn frames_round_trip_through_fits() {
+        let mut cases: Vec<Option<Cfa>> = vec![None];
+        cases.extend(Cfa::ALL.map(Some));
+        for (k, cfa) in cases.into_iter().enumerate() {
+            let f = frame(cfa, 7 + k as u64);
+            let bytes = encode_fits_frame(&f).unwrap();
+            assert_eq!(bytes.len() % 2880, 0);
+            let back =
+                frame_from_fits(Path::new("t.fits"), &bytes, &LevelOverrides::default()).unwrap();
+            assert_eq!(back.mosaic, f.mosaic, "{cfa:?}");
+            assert_eq!(back.mono, cfa.is_none());
+            if let Some(c) = cfa {
+                assert_eq!(back.cfa, c);
+            }
+            assert_eq!(
+                (back.exposure_s, back.iso, back.temperature_c),
+                (Some(300.0), Some(800), Some(-10.5))
+            );
+            assert_eq!(back.model, "SBIG STL-1001");
+            assert_eq!(back.black, [0.0; 4]);
+            assert_eq!(back.white, 60000, "SATURATE");
+            assert_eq!(back.fits.as_ref().unwrap().bitpix, 16);
+        }
+    }
+
+    /// A master keeps its fractional DN to float precision (relative
+    /// 2^-24 of 65535: well under 0.01 DN).
+    #[test]
+    fn masters_keep_fractions_of_a_dn() {
+        let f = frame(None, 3);
+        let mosaic: Vec<f32> = (0..f.width * f.height)
+            .map(|i| 1000.0 + i as f32 * 0.37)
+            .collect();
+        let bytes = encode_fits_master(&f, &mosaic, "Master Bias", 64, Some(2.06)).unwrap();
+        let img = read_fits(Path::new("m.fits"), &bytes).unwrap();
+        assert_eq!(img.bitpix, -32);
+        assert_eq!(img.egain_e_per_adu, Some(2.06));
+        // Read as DN, rounded.
+        for (a, b) in img.data.iter().zip(&mosaic) {
+            assert!((*a as f32 - b).abs() <= 0.5, "{a} vs {b}");
+        }
+        // The stored floats themselves: big-endian after the header's
+        // 2880-byte blocks (the header ends with the END card).
+        let end = (0..bytes.len() / 80)
+            .find(|i| bytes[i * 80..i * 80 + 8] == *b"END     ")
+            .unwrap();
+        let start = ((end + 1) * 80).div_ceil(2880) * 2880;
+        for (i, b) in mosaic.iter().enumerate() {
+            let o = start + 4 * i;
+            let v = f32::from_be_bytes(bytes[o..o + 4].try_into().unwrap()) * 65535.0;
+            assert!((v - b).abs() < 0.01, "{v} vs {b}");
+        }
+        assert!(encode_fits_master(&f, &mosaic[1..], "Master Bias", 64, None).is_err());
+    }
+}
