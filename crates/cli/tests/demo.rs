@@ -134,13 +134,14 @@ fn demo_models_beat_the_noisy_input_and_write_every_file() {
 const RECORDED: [(&str, &str, f64, f64); 6] = [
     ("x100", "noisy", 24.9240, 0.70078),
     ("x100", "spc", 28.7955, 0.89406),
-    ("x100", "pgrf", 30.0909, 0.90597),
+    ("x100", "pgrf", 28.5209, 0.87210),
     ("x200", "noisy", 20.2170, 0.51481),
     ("x200", "spc", 25.8351, 0.82420),
-    ("x200", "pgrf", 25.9564, 0.78854),
+    ("x200", "pgrf", 25.6801, 0.79363),
 ];
 /// Both models must beat the noisy input by this much at both ratios. The
-/// shipped ones do by 4.2 / 5.8 dB (SPC) and 5.2 / 5.7 dB (PGRF).
+/// shipped ones do by 3.9 / 5.6 dB (SPC) and 3.6 / 5.5 dB (PGRF); both are
+/// photo-trained now, and dead leaves are no longer what they do best.
 const SPC_MARGIN_DB: f64 = 3.0;
 const PGRF_MARGIN_DB: f64 = 3.0;
 
@@ -167,17 +168,20 @@ fn shipped_models_reproduce_the_recorded_scores() {
 const RECORDED_PHOTO: [(&str, &str, f64, f64); 6] = [
     ("x100", "noisy", 28.2011, 0.21777),
     ("x100", "spc", 44.1203, 0.90442),
-    ("x100", "pgrf", 27.1024, 0.22546),
+    ("x100", "pgrf", 33.6835, 0.47964),
     ("x200", "noisy", 22.3389, 0.05426),
     ("x200", "spc", 38.3737, 0.75623),
-    ("x200", "pgrf", 25.8183, 0.14559),
+    ("x200", "pgrf", 30.6916, 0.37378),
 ];
 /// SPC must beat the noisy input on the photograph by this much at both
 /// ratios, the issue's +10 dB with room (the photo-trained model shipped on
-/// 2026-11-25 does by 15.9 / 16.0 dB). The shipped PGRF model, trained on
-/// dead leaves only, does not beat it at x100 (MODELS.md, "Known limits");
-/// its margin is asserted once the photo-trained model ships.
+/// 2026-11-25 does by 15.9 / 16.0 dB).
 const SPC_PHOTO_MARGIN_DB: f64 = 12.0;
+/// PGRF's margin on the photograph: the photo-trained flow model shipped on
+/// 2026-11-25 (second session) gains 5.5 / 8.4 dB (the dead-leaves one it
+/// replaced lost 1.1 dB at x100); short of the issue's +10 dB
+/// (MODELS.md, "Known limits").
+const PGRF_PHOTO_MARGIN_DB: f64 = 4.0;
 
 #[test]
 fn the_photo_demo_restores_a_window_of_the_built_in_photograph() {
@@ -189,6 +193,11 @@ fn the_photo_demo_restores_a_window_of_the_built_in_photograph() {
         assert!(
             spc >= noisy + SPC_PHOTO_MARGIN_DB,
             "{ratio}: SPC {spc:.2}, noisy {noisy:.2}"
+        );
+        let pgrf = psnr(&v, ratio, "pgrf");
+        assert!(
+            pgrf >= noisy + PGRF_PHOTO_MARGIN_DB,
+            "{ratio}: PGRF {pgrf:.2}, noisy {noisy:.2}"
         );
     }
     // clean.dng is the photograph's centre window, sample for sample: the
