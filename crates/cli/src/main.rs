@@ -51,6 +51,10 @@ enum Command {
     Eval(Box<cmd::eval::EvalArgs>),
     /// Write a miniature benchmark folder in the ELD or SID layout (procedural scenes, A7S2 noise).
     MakeDataset(cmd::make_dataset::MakeDatasetArgs),
+    /// Import a published PyTorch SID U-Net checkpoint (SID, ELD, PMN, PNNP, LED) as a pgrf weight file.
+    ImportWeights(cmd::weights::ImportArgs),
+    /// Export a pgrf weight file for PyTorch (.pth or .safetensors in UNetSeeInDark's names).
+    ExportWeights(cmd::weights::ExportArgs),
 }
 
 fn main() -> ExitCode {
@@ -76,6 +80,8 @@ fn main() -> ExitCode {
         Command::Metrics(a) => cmd::metrics::run(a),
         Command::Eval(a) => cmd::eval::run(a),
         Command::MakeDataset(a) => cmd::make_dataset::run(a),
+        Command::ImportWeights(a) => cmd::weights::run_import(a),
+        Command::ExportWeights(a) => cmd::weights::run_export(a),
     };
     pgrf_core::exit::finish("pgrf", result)
 }

@@ -12,6 +12,7 @@ mod atomic;
 pub mod exit;
 pub mod mem;
 pub mod number;
+pub mod panic_guard;
 mod progress;
 pub mod record;
 pub mod seed;

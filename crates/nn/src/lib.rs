@@ -28,6 +28,7 @@ pub mod data;
 mod error;
 pub mod flow;
 pub mod infer;
+pub mod interop;
 pub mod layers;
 pub mod named;
 mod net;

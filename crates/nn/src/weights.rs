@@ -155,6 +155,31 @@ pub struct TrainingSummary {
     pub config: Option<crate::TrainConfig>,
 }
 
+/// Where a network imported from another framework's file came from
+/// (`pgrf import-weights`), and the input convention its authors used,
+/// so that whoever runs it knows what pgrf applies and what it cannot.
+#[derive(Clone, Debug, Default, Serialize, Deserialize, PartialEq)]
+pub struct ImportedFrom {
+    /// The source file's name.
+    pub file: String,
+    /// SHA-256 of the source file, hex.
+    pub sha256: String,
+    /// The container, in words ("PyTorch zip checkpoint", "safetensors").
+    pub container: String,
+    /// The nesting the tensors were found under ("netG.", "module.", or
+    /// empty for a plain state dict).
+    pub nesting: String,
+    /// Other nestings the file holds the network under (LED's
+    /// `params_ema`), not imported.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub also_under: Vec<String>,
+    /// The repository the weights are from (`--from`), when given.
+    pub repository: Option<String>,
+    /// That repository's input and output convention, and what pgrf does
+    /// differently at inference, in words.
+    pub convention: Option<String>,
+}
+
 /// The record stored in every weight file, as JSON under the safetensors
 /// metadata key "pgrf".
 #[derive(Clone, Debug, Serialize, Deserialize)]
@@ -173,6 +198,9 @@ pub struct WeightMeta {
     /// Second time of the two-stage sampler (flow model), from the sampling
     /// search; None until searched.
     pub t2: Option<f32>,
+    /// Set for a network imported from another framework's file.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub imported: Option<ImportedFrom>,
 }
 
 impl WeightMeta {
@@ -186,6 +214,7 @@ impl WeightMeta {
             noise,
             training: None,
             t2: None,
+            imported: None,
         }
     }
 }
@@ -213,7 +242,10 @@ fn fill_defaults(value: &mut serde_json::Value) {
 }
 
 /// Serialise named tensors and the record to safetensors bytes.
-fn encode(tensors: &BTreeMap<String, NamedTensor>, meta: &WeightMeta) -> Result<Vec<u8>> {
+pub(crate) fn encode(
+    tensors: &BTreeMap<String, NamedTensor>,
+    meta: &WeightMeta,
+) -> Result<Vec<u8>> {
     let text = serde_json::to_string(meta).map_err(|e| NnError::Invalid(e.to_string()))?;
     record::encode(
         tensors

@@ -14,3 +14,4 @@ pub mod search;
 pub mod simulate;
 pub mod synth;
 pub mod train;
+pub mod weights;
