@@ -350,6 +350,70 @@ fn synth_is_byte_reproducible_and_keeps_the_frame_geometry() {
     }
 }
 
+/// The P-G model's dark capture carries its exact noise as a DNG
+/// NoiseProfile (S = K / range, O = sigma^2 / range^2), and that file is a
+/// profile again (`--profile dng:FILE`) with the same gain and read noise at
+/// its ISO, which `synth` takes by default.
+#[test]
+fn a_pg_capture_states_its_noise_and_serves_as_a_profile() {
+    let dir = scratch("dngnp");
+    let demo = dir.join("demo");
+    let r = pgrf(&["demo", "-o", s(&demo), "--size", "128x96", "--quiet"]);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    let clean = demo.join("clean.dng");
+    let (a, b) = (dir.join("a.dng"), dir.join("b.dng"));
+    let r = pgrf(&[
+        "synth",
+        s(&clean),
+        "--profile",
+        "sony-a7s2",
+        "--model",
+        "pg",
+        "--iso",
+        "3200",
+        "--ratio",
+        "50",
+        "--seed",
+        "1",
+        "-o",
+        s(&a),
+    ]);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    let f = pgrf_raw::decode_file(&a, &Default::default()).unwrap();
+    let range = f.white as f64 - f.black[0] as f64;
+    let p = pgrf_noise::CameraProfile::built_in("sony-a7s2")
+        .unwrap()
+        .params_at_iso(3200)
+        .unwrap();
+    let np = f.noise_profile.expect("a NoiseProfile");
+    assert_eq!(np.len(), 1);
+    assert!((np[0][0] - p.k / range).abs() < 1e-12, "{np:?}");
+    assert!(
+        (np[0][1] - (p.sigma_gauss / range).powi(2)).abs() < 1e-15,
+        "{np:?}"
+    );
+    let profile = format!("dng:{}", a.display());
+    let r = pgrf(&[
+        "synth",
+        s(&clean),
+        "--profile",
+        &profile,
+        "--model",
+        "pg",
+        "--ratio",
+        "50",
+        "-o",
+        s(&b),
+    ]);
+    let err = String::from_utf8_lossy(&r.stderr);
+    assert!(r.status.success(), "{err}");
+    assert!(
+        err.contains("ISO 3200") && err.contains(&format!("K {:.4}", p.k)),
+        "{err}"
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
 #[test]
 fn synth_refuses_bad_arguments_cleanly() {
     let dir = scratch("synth-bad");

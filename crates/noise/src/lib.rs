@@ -18,6 +18,7 @@ pub mod mix;
 mod model;
 pub mod pair;
 mod params;
+pub mod pg_profile;
 mod poisson;
 pub mod profile;
 pub mod sensor;

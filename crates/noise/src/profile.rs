@@ -190,10 +190,14 @@ impl CameraProfile {
         })
     }
 
-    /// A built-in name or a path to a JSON file, validated.
+    /// A built-in name, `dng:FILE.dng` (the file's NoiseProfile tag at its
+    /// ISO, [`crate::pg_profile`]) or a path to a JSON file, validated.
     pub fn load(name_or_path: &str) -> Result<CameraProfile> {
         if let Some(p) = Self::built_in(name_or_path) {
             return Ok(p);
+        }
+        if let Some(file) = name_or_path.strip_prefix("dng:") {
+            return crate::pg_profile::from_dng(file);
         }
         let path = Path::new(name_or_path);
         if !path.exists() {
@@ -224,6 +228,20 @@ impl CameraProfile {
             reason,
         })?;
         Ok(p)
+    }
+
+    /// The one ISO a profile holds at, when it holds at one only (a DNG
+    /// NoiseProfile's): commands default to it instead of the frame's ISO.
+    pub fn only_iso(&self) -> Option<u32> {
+        match self.per_iso.as_slice() {
+            [one] if self.k_per_iso.is_none() => Some(one.iso),
+            _ => None,
+        }
+    }
+
+    /// This profile if it passes the checks every loaded profile passes.
+    pub(crate) fn checked(self) -> std::result::Result<CameraProfile, String> {
+        self.validate().map(|()| self)
     }
 
     fn validate(&self) -> std::result::Result<(), String> {

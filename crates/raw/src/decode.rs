@@ -76,6 +76,12 @@ fn decode_source(
     .map_err(|reason| RawError::decode(path, tidy_reason(&reason)))?;
     let mut frame = frame_from_rawler(path, image, exif)?;
     frame.temperature_c = crate::container::exif_temperature(source.buf());
+    // A damaged NoiseProfile does not make the photo unreadable: it is left
+    // out here, and `--profile dng:FILE` reports it.
+    let planes = if frame.mono { 1 } else { 3 };
+    frame.noise_profile = crate::container::noise_profile(source.buf(), planes)
+        .ok()
+        .flatten();
     frame.apply_overrides(overrides)?;
     Ok(frame)
 }
@@ -245,6 +251,7 @@ fn frame_from_rawler(
         sensor_origin: (y0, x0),
         sensor_size: (image.height, image.width),
         temperature_c: None,
+        noise_profile: None,
         fits: None,
         exif,
     };

@@ -82,6 +82,11 @@ pub fn encode_dng(frame: &RawFrame, opts: &DngOptions) -> Result<Vec<u8>> {
             1,
         )
         .map_err(|e| e.to_string())?;
+        if let Some(np) = &frame.noise_profile {
+            let flat: Vec<f64> = np.iter().flatten().copied().collect();
+            raw.ifd_mut()
+                .add_tag(rawler::tags::DngTag::NoiseProfile, flat.as_slice());
+        }
         raw.finalize().map_err(|e| e.to_string())?;
         dng.load_base_tags(&image).map_err(|e| e.to_string())?;
         dng.load_metadata(&exif).map_err(|e| e.to_string())?;

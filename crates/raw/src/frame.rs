@@ -72,6 +72,11 @@ pub struct RawFrame {
     /// doubles every few degrees, so calibration frames are checked against
     /// each other with it.
     pub temperature_c: Option<f32>,
+    /// The DNG NoiseProfile of the file, when it has a usable one: (S, O)
+    /// pairs, one for all planes or one per colour plane (R, G, B), with the
+    /// noise variance S x + O at signal x normalised to [0, 1]. Written
+    /// back into DNGs of this frame ([`crate::container::noise_profile`]).
+    pub noise_profile: Option<Vec<[f64; 2]>>,
     /// What a FITS file's header said beyond the fields above (None for
     /// camera RAW files).
     pub fits: Option<crate::fits_frame::FitsHeader>,
@@ -132,6 +137,7 @@ impl RawFrame {
             sensor_origin: (0, 0),
             sensor_size: (height, width),
             temperature_c: None,
+            noise_profile: None,
             fits: None,
             exif: None,
         };

@@ -13,6 +13,7 @@ fn assert_same(a: &RawFrame, b: &RawFrame) {
     assert_eq!((a.width, a.height), (b.width, b.height));
     assert_eq!(a.cfa, b.cfa);
     assert_eq!(a.mono, b.mono);
+    assert_eq!(a.noise_profile, b.noise_profile);
     assert_eq!(a.black, b.black);
     assert_eq!(a.white, b.white);
     assert!(a.mosaic == b.mosaic, "pixels differ");
@@ -90,6 +91,7 @@ fn synthetic(cfa: Cfa, w: usize, h: usize, seed: u64) -> RawFrame {
     f.iso = Some(3200);
     f.exposure_s = Some(1.0 / 30.0);
     f.wb = Some([2.1, 1.0, 1.55]);
+    f.noise_profile = Some(vec![[2.5e-4, 3.1e-6], [1.9e-4, 2.7e-6], [2.8e-4, 3.3e-6]]);
     // The A7S2's two published matrices: tungsten (A) in slot 1, D65 in slot 2.
     f.color_matrices = vec![
         ColorMatrix {
@@ -152,6 +154,8 @@ fn monochrome_frames_round_trip() {
         f.wb = None;
         f.color_matrices.clear();
         f.black = [100.0, 101.0, 99.0, 100.5];
+        // One plane: one (S, O) pair.
+        f.noise_profile = Some(vec![[2.5e-4, 3.1e-6]]);
         for compression in [Compression::Lossless, Compression::Uncompressed] {
             let out = dir.join(format!("mono-{w}-{compression:?}.dng"));
             write_dng(

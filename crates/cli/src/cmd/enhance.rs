@@ -360,8 +360,11 @@ fn enhance_one(
         "tiles",
         a.quiet,
     );
-    let restored = restore_frame(restorer, &frame, ratio, dark.as_ref(), &tiling, &bar)?;
+    let mut restored = restore_frame(restorer, &frame, ratio, dark.as_ref(), &tiling, &bar)?;
     let (tiles, tile) = (restored.packed.plan.count(), restored.packed.tile_side());
+    // The input's NoiseProfile describes the noisy input; what noise a
+    // network leaves is not known, so the output states none.
+    restored.frame.noise_profile = None;
     write_dng(&restored.frame, &job.output, &DngOptions::default())?;
     if let Some(png) = &job.png {
         render_preview(&restored.frame, &PreviewOptions::default())?.write_png(png, 8)?;

@@ -45,6 +45,8 @@ struct Info<'a> {
     iso: Option<u32>,
     exposure_s: Option<f64>,
     temperature_c: Option<f32>,
+    /// The DNG NoiseProfile's (S, O) pairs, when the file has one.
+    noise_profile: Option<&'a [[f64; 2]]>,
     /// FITS header fields beyond the common ones (FITS input only).
     fits: Option<&'a pgrf_raw::FitsHeader>,
     orientation: u16,
@@ -94,6 +96,7 @@ pub fn run(a: &InfoArgs) -> Result<()> {
         iso: f.iso,
         exposure_s: f.exposure_s,
         temperature_c: f.temperature_c,
+        noise_profile: f.noise_profile.as_deref(),
         fits: f.fits.as_ref(),
         orientation: f.orientation,
         visible_origin: [f.sensor_origin.0, f.sensor_origin.1],
@@ -169,6 +172,16 @@ pub fn run(a: &InfoArgs) -> Result<()> {
     println!("exposure    {}", opt(f.exposure_s.map(format_exposure)));
     if let Some(t) = f.temperature_c {
         println!("temperature {t:.2} °C");
+    }
+    if let Some(np) = &f.noise_profile {
+        let pairs: Vec<String> = np
+            .iter()
+            .map(|[s, o]| format!("S {s:.4e} O {o:.4e}"))
+            .collect();
+        println!(
+            "noise       DNG NoiseProfile: {} (variance S x + O, x in [0, 1])",
+            pairs.join("; ")
+        );
     }
     if !f.mono {
         println!(

@@ -122,11 +122,12 @@ pub fn run(a: &SynthArgs) -> Result<()> {
     let frame = a.input.open(&a.clean)?;
     let clean = pack_normalized(&frame, true)?;
 
+    let only_iso = profile.only_iso();
     let mut spec = PairSpec::new(profile, a.model);
     spec.components = components;
     spec.global = a.global;
     spec.tukey = !a.gaussian_read;
-    spec.iso = a.iso.or(frame.iso);
+    spec.iso = a.iso.or(only_iso).or(frame.iso);
     spec.ratio = match a.ratio {
         Some(r) => RatioSpec::Fixed(r),
         None => RatioSpec::default(),
@@ -173,6 +174,17 @@ pub fn run(a: &SynthArgs) -> Result<()> {
         out.iso = Some(iso);
     }
     out.exposure_s = Some(pair.exposure_s as f64);
+    // The NoiseProfile of the capture written: exact for the P-G model
+    // (variance K x + sigma^2 in DN, normalised by the range; a brightened
+    // frame's is the ratio's square times the dark one's at the dark
+    // signal). The ELD and pgrf models add row noise, heavy tails and per-pixel
+    // maps that one (S, O) pair cannot state, so their DNGs carry none rather
+    // than a wrong one; nor does the clean frame's own tag survive.
+    out.noise_profile = (a.model == ModelKind::PoissonGaussian && !a.brightened).then(|| {
+        let range = (frame.white as f64) - frame.black.iter().map(|&b| b as f64).sum::<f64>() / 4.0;
+        let p = &pair.params;
+        vec![[p.k / range, (p.sigma_gauss / range).powi(2)]]
+    });
     write_dng(&out, &a.output, &DngOptions::default())?;
     let p = &pair.params;
     eprintln!(

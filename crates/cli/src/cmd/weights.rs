@@ -101,7 +101,7 @@ pub fn run_export(a: &ExportArgs) -> Result<()> {
     pgrf_core::write_atomic(&a.output, &out.bytes)
         .with_context(|| format!("-o {}", a.output.display()))?;
     eprintln!(
-        "wrote {}: {} in {} names, {} tensors",
+        "wrote {}: {} in {}, {} tensors",
         a.output.display(),
         meta.arch.describe(),
         out.naming,
@@ -109,7 +109,13 @@ pub fn run_export(a: &ExportArgs) -> Result<()> {
     );
     if out.residual {
         eprintln!(
-            "note: this network is residual: its output is the input plus the network's; add the input after UNetSeeInDark's forward (tests/reference/sid_unet_torch.py check --residual)"
+            "{}",
+            match meta.arch {
+                pgrf_nn::weights::Architecture::SidUnet(_) =>
+                    "note: this network is residual: add the input to UNetSeeInDark's output (tests/reference/sid_unet_torch.py check --residual)",
+                pgrf_nn::weights::Architecture::Sr3(_) =>
+                    "note: this network is residual: v = (T + network - Xt) / max(1 - t, 0.1) (bench/sr3_reference.py, --config the pgrf file for its settings)",
+            }
         );
     }
     Ok(())

@@ -289,11 +289,11 @@ pub fn export(
                 })?;
                 v.push((t, x));
             }
-            (v, "UNetSeeInDark (conv1_1 .. conv10_1)", c.residual)
+            (v, "UNetSeeInDark's names (conv1_1 .. conv10_1)", c.residual)
         }
         Architecture::Sr3(c) => (
             tensors.iter().map(|(n, t)| (n.clone(), t)).collect(),
-            "pgrf's SR3 names (bench/sr3_reference.py)",
+            "pgrf's SR3 names (bench/sr3_reference.py loads them)",
             c.residual,
         ),
     };

@@ -156,6 +156,79 @@ pub fn exif_temperature(bytes: &[u8]) -> Option<f32> {
     (-273.15..=1000.0).contains(&c).then_some(c as f32)
 }
 
+/// The DNG NoiseProfile tag (51041) of a TIFF-based file: (S, O) pairs,
+/// one for all planes or one per colour plane, such that a pixel's noise
+/// variance is S x + O for x its signal normalised to [0, 1] (black 0,
+/// white 1). Looked up in IFD0 and its SubIFDs (Adobe's converter puts it
+/// in the raw IFD). `Ok(None)` without the tag; `Err` for a tag that is
+/// there but unusable (wrong type, a count that is neither 2 nor 2 x
+/// planes, negative or non-finite values), named for one line.
+pub fn noise_profile(bytes: &[u8], planes: usize) -> Result<Option<Vec<[f64; 2]>>, String> {
+    let Some(order) = (match bytes.get(..2) {
+        Some(b"II") => Some(Order(true)),
+        Some(b"MM") => Some(Order(false)),
+        _ => None,
+    }) else {
+        return Ok(None);
+    };
+    let Some(ifd0) = order.u32(bytes, 4).map(u64::from) else {
+        return Ok(None);
+    };
+    let mut ifds = vec![ifd0];
+    if let Some(sub) = tiff::find_entry(bytes, order, ifd0, 330) {
+        if sub.kind == 4 || sub.kind == 13 {
+            for k in 0..sub.count.min(16) as usize {
+                if let Some(o) = order.u32(bytes, sub.at + 4 * k) {
+                    ifds.push(o as u64);
+                }
+            }
+        }
+    }
+    let Some(e) = ifds
+        .iter()
+        .find_map(|&ifd| tiff::find_entry(bytes, order, ifd, 51041))
+    else {
+        return Ok(None);
+    };
+    if e.kind != 12 {
+        return Err(format!(
+            "NoiseProfile (tag 51041) has TIFF type {}, not DOUBLE (12)",
+            e.kind
+        ));
+    }
+    if e.count != 2 && e.count != 2 * planes as u64 {
+        return Err(format!(
+            "NoiseProfile (tag 51041) holds {} values; it needs 2 (one pair for all planes) or {} (a pair per plane)",
+            e.count,
+            2 * planes
+        ));
+    }
+    let mut pairs = Vec::new();
+    for k in 0..e.count as usize / 2 {
+        let f = |i: usize| -> Option<f64> {
+            let at = e.at + 8 * i;
+            let hi = order.u32(bytes, at)? as u64;
+            let lo = order.u32(bytes, at + 4)? as u64;
+            Some(f64::from_bits(if order.0 {
+                (lo << 32) | hi
+            } else {
+                (hi << 32) | lo
+            }))
+        };
+        let (Some(s), Some(o)) = (f(2 * k), f(2 * k + 1)) else {
+            return Err("NoiseProfile (tag 51041) points past the end of the file".into());
+        };
+        if !(s.is_finite() && o.is_finite() && s >= 0.0 && o >= 0.0) {
+            return Err(format!(
+                "NoiseProfile (tag 51041) pair {} is ({s}, {o}); both must be finite and >= 0",
+                k + 1
+            ));
+        }
+        pairs.push([s, o]);
+    }
+    Ok(Some(pairs))
+}
+
 /// The megapixels of a `w` x `h` image, when more than [`MAX_PIXELS`].
 fn too_many_pixels(w: u64, h: u64) -> Option<String> {
     let pixels = w.saturating_mul(h);
