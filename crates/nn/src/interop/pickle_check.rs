@@ -167,30 +167,33 @@ fn check_one(bytes: &[u8]) -> Result<usize, (usize, String)> {
                 pushed = None;
             }
             b'q' | b'r' | b'p' => {
-                let idx = match op {
-                    b'q' => arg[0] as u64,
-                    b'r' => u32::from_le_bytes(arg.try_into().expect("4 bytes")) as u64,
-                    _ => text(arg).trim().parse().unwrap_or(u64::MAX),
-                };
                 if let Some(s) = &top[1] {
-                    memo.insert(idx, s.clone());
+                    memo.insert(memo_index(op, arg), s.clone());
                 }
                 pushed = None;
             }
-            b'h' | b'j' | b'g' => {
-                let idx = match op {
-                    b'h' => arg[0] as u64,
-                    b'j' => u32::from_le_bytes(arg.try_into().expect("4 bytes")) as u64,
-                    _ => text(arg).trim().parse().unwrap_or(u64::MAX),
-                };
-                pushed = Some(memo.get(&idx).cloned());
-            }
+            b'h' | b'j' | b'g' => pushed = Some(memo.get(&memo_index(op, arg)).cloned()),
             0x80 | 0x95 => pushed = None,
             _ => {}
         }
         if let Some(p) = pushed {
             top = [top[1].take(), p];
         }
+    }
+}
+
+/// The memo index in the argument of a PUT/GET family opcode `op`: one
+/// byte (BINPUT, BINGET), four little-endian bytes (LONG_BINPUT,
+/// LONG_BINGET) or a decimal line (PUT, GET; unreadable: an index no
+/// string has).
+fn memo_index(op: u8, arg: &[u8]) -> u64 {
+    match op {
+        b'q' | b'h' => arg[0] as u64,
+        b'r' | b'j' => u32::from_le_bytes(arg.try_into().expect("4 bytes")) as u64,
+        _ => String::from_utf8_lossy(arg)
+            .trim()
+            .parse()
+            .unwrap_or(u64::MAX),
     }
 }
 
