@@ -79,6 +79,18 @@ impl CalibrationRun {
         self.bias.var.mean().unwrap_or(0.0)
     }
 
+    /// The sensor's noise in the DNG NoiseProfile form (tag 51041): variance
+    /// S x + O at signal x normalised to [0, 1] (black 0, white 1), with
+    /// S = K / (white - black) and O = the dark temporal variance
+    /// ([`CalibrationRun::dark_variance`]: read, row and offset drift) over
+    /// (white - black)^2. What DNG readers and `--profile dng:` take.
+    pub fn noise_profile(&self) -> [f64; 2] {
+        let m = &self.calibration.meta;
+        let black = m.black.iter().map(|&b| b as f64).sum::<f64>() / 4.0;
+        let range = m.white as f64 - black;
+        [m.k / range, self.dark_variance() / (range * range)]
+    }
+
     /// The run's figures as (quantity, value, unit) rows in EMVA 1288's
     /// vocabulary (system gain, temporal dark noise, DSNU, PRNU, dark
     /// current, ...), formatted for the report's summary table.
@@ -186,6 +198,12 @@ impl CalibrationRun {
             })
             .collect();
         summary.push(row("SNR by flat level", snr.join(", "), ""));
+        let [s, o] = self.noise_profile();
+        summary.push(row(
+            "DNG NoiseProfile (variance S x + O, x in [0, 1])",
+            format!("S {s:.4e}, O {o:.4e}"),
+            "",
+        ));
         match (m.dark_rate_mean, m.dark_r2_sqrt, m.dark_r2_linear) {
             (Some(rate), Some(rs), Some(rl)) => {
                 let unit = if m.dark_law == Some(DarkLaw::Linear) {

@@ -823,6 +823,24 @@ fn every_emva_figure_holds_on_a_drifting_ccd_like_sensor() {
     );
     let fo = m.frame_offset_sigma.unwrap();
     assert!(rel(fo, 0.5) < 0.15, "frame offset {fo}");
+    // The DNG NoiseProfile pair: S = K / range (2 %), O = the dark temporal
+    // variance (mean read variance + row + frame offset + 1/12 DN^2 of
+    // rounding) / range^2 (5 %).
+    let range = (sp.dn_range()) as f64;
+    let [s, o] = run.noise_profile();
+    assert!(rel(s, sp.k as f64 / range) < 0.02, "S {s}");
+    let read_var = v
+        .sigma_read
+        .iter()
+        .map(|&x| (x as f64).powi(2))
+        .sum::<f64>()
+        / v.sigma_read.len() as f64;
+    let dark_var = read_var + (sp.row_sigma as f64).powi(2) + 0.25 + 1.0 / 12.0;
+    assert!(
+        rel(o, dark_var / (range * range)) < 0.05,
+        "O {o} vs {}",
+        dark_var / (range * range)
+    );
     // DSNU and PRNU, EMVA high-pass: 10 % and 15 % (design: 1.5 DN, 1 %).
     assert!(
         rel(m.dsnu_highpass.unwrap(), 1.5) < 0.10,

@@ -157,6 +157,7 @@ pub fn run(a: &CalibrateArgs) -> Result<()> {
                 "dark_offset": m.dark_offset,
                 "dark_offset_mean": m.dark_offset_mean,
                 "K_without_pairs": run.gain.k_without_pairs,
+                "noise_profile": run.noise_profile(),
                 "cfa": m.layout(),
                 "temperature_c": m.temperature_c,
                 "warnings": m.warnings,
