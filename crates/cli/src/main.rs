@@ -19,6 +19,9 @@ struct Cli {
     /// Whose CPU operations the networks run: pgrf's own kernels (convolution gradients, transposed convolution, activations, Adam) or burn 0.21's, for comparison. Same numbers to rounding; CUDA always runs burn's.
     #[arg(long, global = true, default_value = "pgrf", value_name = "pgrf|burn")]
     kernels: pgrf_nn::ops::Kernels,
+    /// darktable's noiseprofiles.json, for `--profile darktable:"MAKER MODEL"` and `pgrf profiles` [default: darktable's install, e.g. /usr/share/darktable/noiseprofiles.json].
+    #[arg(long, global = true, value_name = "PATH")]
+    darktable_profiles: Option<std::path::PathBuf>,
 }
 
 #[derive(Subcommand, Debug)]
@@ -55,6 +58,8 @@ enum Command {
     ImportWeights(cmd::weights::ImportArgs),
     /// Export a pgrf weight file for PyTorch (.pth or .safetensors in UNetSeeInDark's names).
     ExportWeights(cmd::weights::ExportArgs),
+    /// List the camera profiles --profile accepts (built in, darktable's cameras) and show what one holds.
+    Profiles(cmd::profiles::ProfilesArgs),
 }
 
 fn main() -> ExitCode {
@@ -64,6 +69,7 @@ fn main() -> ExitCode {
         Err(e) => return usage_error(e),
     };
     pgrf_nn::ops::set_kernels(cli.kernels);
+    pgrf_noise::darktable::set_profiles_path(cli.darktable_profiles.clone());
     pgrf_core::mem::keep_freed_buffers();
     let result = match &cli.command {
         Command::Demo(a) => cmd::demo::run(a),
@@ -82,6 +88,7 @@ fn main() -> ExitCode {
         Command::MakeDataset(a) => cmd::make_dataset::run(a),
         Command::ImportWeights(a) => cmd::weights::run_import(a),
         Command::ExportWeights(a) => cmd::weights::run_export(a),
+        Command::Profiles(a) => cmd::profiles::run(a),
     };
     pgrf_core::exit::finish("pgrf", result)
 }

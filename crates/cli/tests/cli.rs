@@ -351,9 +351,10 @@ fn synth_is_byte_reproducible_and_keeps_the_frame_geometry() {
 }
 
 /// The P-G model's dark capture carries its exact noise as a DNG
-/// NoiseProfile (S = K / range, O = sigma^2 / range^2), and that file is a
-/// profile again (`--profile dng:FILE`) with the same gain and read noise at
-/// its ISO, which `synth` takes by default.
+/// NoiseProfile (S = K / range, O = sigma^2 / range^2, range the profile's
+/// scale the noise was drawn on), and that file is a profile again
+/// (`--profile dng:FILE`) with the same normalised noise at its ISO, which
+/// `synth` takes by default.
 #[test]
 fn a_pg_capture_states_its_noise_and_serves_as_a_profile() {
     let dir = scratch("dngnp");
@@ -380,7 +381,8 @@ fn a_pg_capture_states_its_noise_and_serves_as_a_profile() {
     ]);
     assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
     let f = pgrf_raw::decode_file(&a, &Default::default()).unwrap();
-    let range = f.white as f64 - f.black[0] as f64;
+    // Normalised on the profile's scale (A7S2: 16383 - 512), as drawn.
+    let range = 16383.0 - 512.0;
     let p = pgrf_noise::CameraProfile::built_in("sony-a7s2")
         .unwrap()
         .params_at_iso(3200)
@@ -408,7 +410,12 @@ fn a_pg_capture_states_its_noise_and_serves_as_a_profile() {
     let err = String::from_utf8_lossy(&r.stderr);
     assert!(r.status.success(), "{err}");
     assert!(
-        err.contains("ISO 3200") && err.contains(&format!("K {:.4}", p.k)),
+        // The same normalised noise, stated on the file's own scale.
+        err.contains("ISO 3200")
+            && err.contains(&format!(
+                "K {:.4}",
+                p.k / range * (f.white as f64 - f.black[0] as f64)
+            )),
         "{err}"
     );
     std::fs::remove_dir_all(&dir).unwrap();

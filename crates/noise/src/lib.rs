@@ -11,6 +11,7 @@
 
 pub mod capture;
 mod components;
+pub mod darktable;
 mod error;
 pub mod mapfile;
 mod maps;

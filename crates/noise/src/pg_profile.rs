@@ -1,5 +1,7 @@
 //! Poisson-Gaussian camera profiles from the noise descriptions other
-//! tools write: the DNG NoiseProfile tag (`--profile dng:FILE.dng`).
+//! tools write: the DNG NoiseProfile tag (`--profile dng:FILE.dng`), and
+//! tables of them over ISO ([`poisson_gaussian_table`]: darktable's
+//! `noiseprofiles.json`, [`crate::darktable`]).
 //!
 //! Those describe noise as a variance S x + O of the signal x normalised to
 //! [0, 1] (black 0, white 1). In pgrf's DN terms, on a scale of
@@ -9,9 +11,12 @@
 //! K = S range and sigma = sqrt(O) range.
 //!
 //! That is all such a description holds: no row noise, no fixed pattern,
-//! no heavy-tailed read noise, one ISO. The profile made from it drives the
+//! no heavy-tailed read noise. The profile made from it drives the
 //! Poisson-Gaussian model (`--model pg`) exactly; ELD's and pgrf's models
-//! run on it with those components at zero and a near-Gaussian read noise.
+//! run on it with those components at zero and a near-Gaussian read noise
+//! of the same standard deviation (a Tukey lambda of shape 0.14 whose scale
+//! is sigma / 1.4527, since that shape's standard deviation is 1.4527 times
+//! its scale).
 
 use crate::error::{NoiseError, Result};
 use crate::profile::{CameraProfile, EldFits, IsoPoint, LogFit};
@@ -20,6 +25,12 @@ use std::path::Path;
 /// Tukey lambda of a near-Gaussian read noise (0.14 matches the normal
 /// distribution's shape most closely), for the models that draw one.
 const GAUSSIAN_LAMBDA: f64 = 0.14;
+
+/// Standard deviation of the Tukey-lambda distribution of shape
+/// [`GAUSSIAN_LAMBDA`] and scale 1: sqrt((2 / l^2) (1 / (1 + 2 l) -
+/// Gamma(l + 1)^2 / Gamma(2 l + 2))) at l = 0.14. A read noise of standard
+/// deviation sigma drawn from that shape has scale sigma / TUKEY_SD.
+const TUKEY_SD: f64 = 1.452_686_140_298_209;
 
 /// Noise of one camera at one ISO in the normalised Poisson-Gaussian form.
 #[derive(Clone, Debug, PartialEq)]
@@ -36,6 +47,18 @@ pub struct PgNoise {
     pub black: f64,
 }
 
+/// One ISO of a Poisson-Gaussian table: variance S x + O at signal x
+/// normalised to [0, 1].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PgRow {
+    /// The ISO it holds at.
+    pub iso: u32,
+    /// S: variance per unit of normalised signal.
+    pub s: f64,
+    /// O: variance without signal.
+    pub o: f64,
+}
+
 /// A single-ISO Poisson-Gaussian profile of `noise`, named `name`, of the
 /// camera `make` `model`; `source` says where the numbers came from.
 pub fn poisson_gaussian(
@@ -45,28 +68,73 @@ pub fn poisson_gaussian(
     noise: &PgNoise,
     source: String,
 ) -> Result<CameraProfile> {
-    let &PgNoise {
-        iso,
-        s,
-        o,
-        range,
-        black,
-    } = noise;
+    let row = PgRow {
+        iso: noise.iso,
+        s: noise.s,
+        o: noise.o,
+    };
+    poisson_gaussian_table(
+        name,
+        make,
+        model,
+        &[row],
+        noise.range,
+        Some(noise.black),
+        source,
+    )
+}
+
+/// A Poisson-Gaussian profile holding at the ISOs of `rows` (strictly
+/// increasing), on the scale `range` = white - black DN, with black level
+/// `black` DN (None: not known, and results are not clipped below black).
+/// Between two rows, [`CameraProfile::params_at_iso`] interpolates K and
+/// sigma linearly in log ISO; outside them it refuses. Without an ISO,
+/// capture parameters are drawn as ELD draws them: ln K uniform over the
+/// rows' gains, ln sigma from a least-squares line in ln K through the rows
+/// with a read noise (sigma > 0), with the line's residual standard
+/// deviation.
+pub fn poisson_gaussian_table(
+    name: &str,
+    make: &str,
+    model: &str,
+    rows: &[PgRow],
+    range: f64,
+    black: Option<f64>,
+    source: String,
+) -> Result<CameraProfile> {
     let bad = |reason: String| NoiseError::Profile {
         name: name.to_string(),
         reason,
     };
-    if !(s.is_finite() && s > 0.0 && o.is_finite() && o >= 0.0) {
-        return Err(bad(format!(
-            "the noise pair (S {s}, O {o}) needs S > 0 and O >= 0, both finite"
-        )));
+    if rows.is_empty() {
+        return Err(bad("the noise table is empty".into()));
     }
-    let k = s * range;
-    let sigma = o.sqrt() * range;
-    let flat = |v: f64| LogFit {
-        slope: 0.0,
-        bias: v.max(1e-12).ln(),
-        sigma: 0.0,
+    let mut per_iso = Vec::with_capacity(rows.len());
+    for &PgRow { iso, s, o } in rows {
+        if !(s.is_finite() && s > 0.0 && o.is_finite() && o >= 0.0) {
+            return Err(bad(format!(
+                "the noise pair at ISO {iso} (S {s}, O {o}) needs S > 0 and O >= 0, both finite"
+            )));
+        }
+        let k = s * range;
+        let sigma = o.sqrt() * range;
+        per_iso.push(IsoPoint {
+            iso,
+            k,
+            tukey_lambda: GAUSSIAN_LAMBDA,
+            sigma_tukey: sigma / TUKEY_SD,
+            sigma_gauss: sigma,
+            sigma_row: 0.0,
+            black_level_error: 0.0,
+        });
+    }
+    let (k_min, k_max) = per_iso.iter().fold((f64::INFINITY, 0.0f64), |(l, h), p| {
+        (l.min(p.k), h.max(p.k))
+    });
+    let gauss_scale = read_fit(&per_iso);
+    let tukey_scale = LogFit {
+        bias: gauss_scale.bias - TUKEY_SD.ln(),
+        ..gauss_scale.clone()
     };
     let p = CameraProfile {
         schema: 1,
@@ -76,29 +144,60 @@ pub fn poisson_gaussian(
         source,
         units: "DN on the scale dn_range = white - black".into(),
         dn_range: range,
-        black: Some(black),
+        black,
         k_per_iso: None,
-        k_min: k,
-        k_max: k,
+        k_min,
+        k_max,
         eld: EldFits {
             tukey_shapes: vec![GAUSSIAN_LAMBDA],
-            tukey_scale: flat(sigma),
-            gauss_scale: flat(sigma),
+            tukey_scale,
+            gauss_scale,
             row_scale: flat(0.0),
             color_bias: Vec::new(),
         },
-        per_iso: vec![IsoPoint {
-            iso,
-            k,
-            tukey_lambda: GAUSSIAN_LAMBDA,
-            sigma_tukey: sigma,
-            sigma_gauss: sigma,
-            sigma_row: 0.0,
-            black_level_error: 0.0,
-        }],
+        per_iso,
         dark_current: None,
     };
     p.checked().map_err(bad)
+}
+
+/// ln(sigma) = slope ln(K) + bias through the rows with a read noise, by
+/// least squares; a constant (the geometric mean) when fewer than two
+/// distinct gains have one.
+fn read_fit(rows: &[IsoPoint]) -> LogFit {
+    let pts: Vec<(f64, f64)> = rows
+        .iter()
+        .filter(|p| p.sigma_gauss > 0.0)
+        .map(|p| (p.k.ln(), p.sigma_gauss.ln()))
+        .collect();
+    let n = pts.len() as f64;
+    if pts.is_empty() {
+        return flat(0.0);
+    }
+    let mx = pts.iter().map(|p| p.0).sum::<f64>() / n;
+    let my = pts.iter().map(|p| p.1).sum::<f64>() / n;
+    let sxx: f64 = pts.iter().map(|p| (p.0 - mx).powi(2)).sum();
+    if pts.len() < 2 || sxx <= 1e-12 {
+        return flat(my.exp());
+    }
+    let slope = pts.iter().map(|p| (p.0 - mx) * (p.1 - my)).sum::<f64>() / sxx;
+    let bias = my - slope * mx;
+    let sigma = if pts.len() > 2 {
+        let ss: f64 = pts.iter().map(|p| (p.1 - slope * p.0 - bias).powi(2)).sum();
+        (ss / (n - 2.0)).sqrt()
+    } else {
+        0.0
+    };
+    LogFit { slope, bias, sigma }
+}
+
+/// A scale that does not depend on the gain (1e-12 DN for none).
+fn flat(v: f64) -> LogFit {
+    LogFit {
+        slope: 0.0,
+        bias: v.max(1e-12).ln(),
+        sigma: 0.0,
+    }
 }
 
 /// The profile in a DNG's NoiseProfile tag, at the file's ISO: `spec` is
@@ -154,4 +253,91 @@ pub fn from_dng(spec: &str) -> Result<CameraProfile> {
             mean[1]
         ),
     )
+}
+
+/// The names of the built-in profiles (`--profile NAME`).
+pub fn built_in_names() -> Vec<&'static str> {
+    crate::profile::built_in_names()
+}
+
+/// What a loaded profile holds, for display (`pgrf profiles show`): every
+/// DN value on the profile's scale `dn_range`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ProfileView {
+    /// The profile's name.
+    pub name: String,
+    /// Camera maker.
+    pub make: String,
+    /// Camera model.
+    pub model: String,
+    /// Where the numbers come from, with their limits.
+    pub source: String,
+    /// white - black, DN: the scale of every DN value.
+    pub dn_range: f64,
+    /// Black level, DN, when known.
+    pub black: Option<f64>,
+    /// K = k_per_iso x ISO, when the profile states it.
+    pub k_per_iso: Option<f64>,
+    /// The range of system gain K (DN per electron) the profile covers.
+    pub k_range: (f64, f64),
+    /// The per-ISO table (empty when the profile has none).
+    pub rows: Vec<ViewRow>,
+    /// ELD's fits: ln(sigma) = slope ln(K) + bias + N(0, sd^2), as
+    /// (slope, bias, sd), for the Gaussian read, Tukey read and row scales.
+    pub fits: [(f64, f64, f64); 3],
+    /// The Tukey-lambda shapes ELD's sampling draws from.
+    pub tukey_shapes: Vec<f64>,
+}
+
+/// One ISO of a profile's table.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ViewRow {
+    /// The ISO.
+    pub iso: u32,
+    /// System gain, DN per electron.
+    pub k: f64,
+    /// Gaussian read-noise standard deviation, DN.
+    pub sigma_gauss: f64,
+    /// Tukey-lambda read-noise shape.
+    pub tukey_lambda: f64,
+    /// Tukey-lambda read-noise scale, DN.
+    pub sigma_tukey: f64,
+    /// Row-noise standard deviation, DN.
+    pub sigma_row: f64,
+    /// Mean offset of the dark level from the nominal black, DN.
+    pub black_level_error: f64,
+}
+
+/// What `p` holds.
+pub fn view(p: &CameraProfile) -> ProfileView {
+    let fit = |f: &LogFit| (f.slope, f.bias, f.sigma);
+    ProfileView {
+        name: p.name.clone(),
+        make: p.make.clone(),
+        model: p.model.clone(),
+        source: p.source.clone(),
+        dn_range: p.dn_range,
+        black: p.black,
+        k_per_iso: p.k_per_iso,
+        k_range: (p.k_min, p.k_max),
+        rows: p
+            .per_iso
+            .iter()
+            .map(|r| ViewRow {
+                iso: r.iso,
+                k: r.k,
+                sigma_gauss: r.sigma_gauss,
+                tukey_lambda: r.tukey_lambda,
+                sigma_tukey: r.sigma_tukey,
+                sigma_row: r.sigma_row,
+                black_level_error: r.black_level_error,
+            })
+            .collect(),
+        fits: [
+            fit(&p.eld.gauss_scale),
+            fit(&p.eld.tukey_scale),
+            fit(&p.eld.row_scale),
+        ],
+        tukey_shapes: p.eld.tukey_shapes.clone(),
+    }
 }

@@ -191,13 +191,18 @@ impl CameraProfile {
     }
 
     /// A built-in name, `dng:FILE.dng` (the file's NoiseProfile tag at its
-    /// ISO, [`crate::pg_profile`]) or a path to a JSON file, validated.
+    /// ISO, [`crate::pg_profile`]), `darktable:MAKER MODEL` (a camera of
+    /// darktable's noiseprofiles.json, [`crate::darktable`]) or a path to a
+    /// JSON file, validated.
     pub fn load(name_or_path: &str) -> Result<CameraProfile> {
         if let Some(p) = Self::built_in(name_or_path) {
             return Ok(p);
         }
         if let Some(file) = name_or_path.strip_prefix("dng:") {
             return crate::pg_profile::from_dng(file);
+        }
+        if let Some(camera) = name_or_path.strip_prefix("darktable:") {
+            return crate::darktable::load(camera);
         }
         let path = Path::new(name_or_path);
         if !path.exists() {

@@ -139,7 +139,7 @@ pub struct EvalArgs {
     /// Synthetic: exposure ratios, comma-separated, each >= 1 (default 50,100,200,300).
     #[arg(long)]
     pub ratio: Option<String>,
-    /// Synthetic: camera noise profile, a built-in name or a JSON file (default sony-a7s2).
+    /// Synthetic: camera noise profile: a built-in name, darktable:"MAKER MODEL", dng:FILE.dng or a JSON file (default sony-a7s2).
     #[arg(long)]
     pub profile: Option<String>,
     /// Synthetic: noise model, pgrf, eld or pg (default pgrf).

@@ -10,6 +10,7 @@ pub mod info;
 pub mod make_dataset;
 pub mod metrics;
 pub mod preview;
+pub mod profiles;
 pub mod search;
 pub mod simulate;
 pub mod synth;

@@ -21,7 +21,7 @@ pub struct SynthArgs {
     /// Clean (long-exposure) RAW file or headerless dump.
     pub clean: PathBuf,
     /// Camera profile: a built-in name (sony-a7s2, nikon-d850, canon-eos70d,
-    /// canon-eos700d, canon-eos5d4) or a JSON file.
+    /// canon-eos700d, canon-eos5d4), darktable:"MAKER MODEL", dng:FILE.dng or a JSON file.
     #[arg(long)]
     pub profile: String,
     /// Exposure ratio (the capture is this many times darker). Default: drawn from U(100, 300) by the seed.
@@ -181,7 +181,8 @@ pub fn run(a: &SynthArgs) -> Result<()> {
     // maps that one (S, O) pair cannot state, so their DNGs carry none rather
     // than a wrong one; nor does the clean frame's own tag survive.
     out.noise_profile = (a.model == ModelKind::PoissonGaussian && !a.brightened).then(|| {
-        let range = (frame.white as f64) - frame.black.iter().map(|&b| b as f64).sum::<f64>() / 4.0;
+        // The noise was drawn on the profile's scale and normalised by it.
+        let range = spec.dn_range();
         let p = &pair.params;
         vec![[p.k / range, (p.sigma_gauss / range).powi(2)]]
     });

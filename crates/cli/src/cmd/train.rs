@@ -44,7 +44,7 @@ pub struct Settings {
     /// Photos: largest factor by which each crop's red and blue white-balance multipliers are varied (log-uniform in [1/S, S]); 1.25 spans one camera's daylight, shade and flash, 2.5 reaches cameras whose raw channels are nearly balanced [default: 1.25].
     #[arg(long)]
     pub photo_wb_spread: Option<f32>,
-    /// Camera noise profile (built-in name or JSON path), or a mix `NAME[@WEIGHT],...` where each crop draws one camera's noise, e.g. sony-a7s2@3,nikon-d850@1; --iso/--iso-range are the first profile's, and become a gain range the others share [default: sony-a7s2].
+    /// Camera noise profile (built-in name, darktable:"MAKER MODEL", dng:FILE.dng or JSON path), or a mix `NAME[@WEIGHT],...` where each crop draws one camera's noise, e.g. sony-a7s2@3,nikon-d850@1; --iso/--iso-range are the first profile's, and become a gain range the others share [default: sony-a7s2].
     #[arg(long)]
     pub profile: Option<String>,
     /// Per-pixel calibration file (from `pgrf calibrate`) for the pgrf noise model.

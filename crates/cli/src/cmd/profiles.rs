@@ -1,0 +1,248 @@
+//! `pgrf profiles`: the camera profiles `--profile` accepts (built in, and
+//! darktable's cameras) and what one of them holds.
+
+use anyhow::{bail, Result};
+use clap::{Args, Subcommand};
+use pgrf_noise::darktable::{NoiseProfiles, DN_RANGE, VARIANCE_FACTOR};
+use pgrf_noise::pg_profile::{self, ProfileView};
+use pgrf_noise::CameraProfile;
+
+#[derive(Args, Debug)]
+pub struct ProfilesArgs {
+    #[command(subcommand)]
+    pub action: Action,
+}
+
+#[derive(Subcommand, Debug)]
+pub enum Action {
+    /// List the built-in profiles (and, with --darktable, the cameras of darktable's noiseprofiles.json: maker, model, measured ISOs).
+    List(ListArgs),
+    /// Print what a profile holds: K and read noise per ISO on its DN scale, its source and limits.
+    Show(ShowArgs),
+}
+
+#[derive(Args, Debug)]
+pub struct ListArgs {
+    /// Also list darktable's cameras (from --darktable-profiles PATH, else darktable's install).
+    #[arg(long)]
+    pub darktable: bool,
+}
+
+#[derive(Args, Debug)]
+pub struct ShowArgs {
+    /// What --profile takes: a built-in name, darktable:"MAKER MODEL", dng:FILE.dng or a profile JSON file.
+    pub name: String,
+    /// Also print the parameters synthesis uses at this ISO (interpolated as it interpolates).
+    #[arg(long)]
+    pub iso: Option<u32>,
+}
+
+pub fn run(a: &ProfilesArgs) -> Result<()> {
+    match &a.action {
+        Action::List(l) => list(l),
+        Action::Show(s) => show(s),
+    }
+}
+
+fn list(a: &ListArgs) -> Result<()> {
+    // Read darktable's file first: a missing one is the only error, before any output.
+    let db = if a.darktable {
+        Some(NoiseProfiles::open()?)
+    } else {
+        None
+    };
+    let builtins: Vec<(&str, ProfileView)> = pg_profile::built_in_names()
+        .into_iter()
+        .map(|n| {
+            (
+                n,
+                pg_profile::view(&CameraProfile::built_in(n).expect("built-in")),
+            )
+        })
+        .collect();
+    let width = builtins
+        .iter()
+        .map(|(_, v)| v.make.chars().count() + v.model.chars().count() + 1)
+        .max()
+        .unwrap_or(0);
+    println!("built-in profiles (--profile NAME):");
+    for (name, v) in &builtins {
+        let isos = match (v.rows.first(), v.rows.last()) {
+            (Some(lo), Some(hi)) => format!("ISO {}..{} ({} ISOs)", lo.iso, hi.iso, v.rows.len()),
+            _ => format!(
+                "no ISO table: K {:.4}..{:.4} DN/e- drawn as ELD draws it (omit --iso)",
+                v.k_range.0, v.k_range.1
+            ),
+        };
+        let camera = format!("{} {}", v.make, v.model);
+        println!("  {name:<14} {camera:<width$}  {isos}");
+    }
+    println!(
+        "also: dng:FILE.dng (a DNG's NoiseProfile tag), darktable:\"MAKER MODEL\" (darktable's noiseprofiles.json), a profile JSON file"
+    );
+    let Some(db) = db else {
+        println!("darktable's cameras: pgrf profiles list --darktable");
+        return Ok(());
+    };
+    println!(
+        "darktable cameras in {} (format version {}, {} cameras; --profile darktable:\"MAKER MODEL\"):",
+        db.path.display(),
+        db.version,
+        db.cameras.len()
+    );
+    let width = db
+        .cameras
+        .iter()
+        .map(|c| c.name().chars().count())
+        .max()
+        .unwrap_or(0);
+    for c in &db.cameras {
+        let isos: Vec<String> = c.isos().iter().map(|i| i.to_string()).collect();
+        let isos = if isos.is_empty() {
+            "every entry marked skip".to_string()
+        } else {
+            format!("ISO {}", isos.join(" "))
+        };
+        println!("  {:<width$}  {isos}", c.name());
+    }
+    Ok(())
+}
+
+fn show(a: &ShowArgs) -> Result<()> {
+    let profile = CameraProfile::load(&a.name)?;
+    // What synthesis uses at --iso, before any output: a refusal is the only output.
+    let at_iso = a.iso.map(|iso| profile.params_at_iso(iso)).transpose()?;
+    let v = pg_profile::view(&profile);
+    println!("profile   {}", v.name);
+    println!("camera    {} {}", v.make, v.model);
+    println!("source    {}", v.source);
+    println!(
+        "scale     DN on white - black = {} DN; black {}",
+        v.dn_range,
+        v.black
+            .map(|b| format!("{b} DN"))
+            .unwrap_or_else(|| "not known (nothing clipped below it)".into())
+    );
+    if let Some(camera) = a.name.strip_prefix("darktable:") {
+        show_darktable(camera)?;
+    } else if v.rows.is_empty() {
+        show_fits(&v);
+    } else {
+        show_table(&v);
+    }
+    match &profile.dark_current {
+        Some(d) => println!(
+            "dark      {} e- per {} (law {:?})",
+            d.rate,
+            match d.law {
+                pgrf_noise::DarkLaw::Sqrt => "sqrt(s)",
+                pgrf_noise::DarkLaw::Linear => "s",
+            },
+            d.law
+        ),
+        None => println!("dark      no dark current measured (give --dark-rate, or --calib)"),
+    }
+    if let (Some(iso), Some(p)) = (a.iso, at_iso) {
+        println!(
+            "at ISO {iso}: K {:.5} DN/e-, read sigma {:.4} DN (Gaussian; Tukey scale {:.4} DN), row sigma {:.4} DN",
+            p.k, p.sigma_gauss, p.sigma_tukey, p.sigma_row
+        );
+    }
+    Ok(())
+}
+
+/// The measured ISOs of a darktable camera: darktable's numbers and pgrf's.
+fn show_darktable(camera: &str) -> Result<()> {
+    let db = NoiseProfiles::open()?;
+    let cam = db.find(camera)?;
+    let rows = cam.measured();
+    if rows.is_empty() {
+        bail!("darktable:{camera}: every entry is marked skip");
+    }
+    println!(
+        "table     measured ISOs (between them a and b are linear in ISO, as darktable interpolates); S = {VARIANCE_FACTOR} a, O = {VARIANCE_FACTOR} max(b, 0), K = S x {DN_RANGE}, sigma = sqrt(O) x {DN_RANGE}"
+    );
+    println!(
+        "  {:>7}  {:>12}  {:>12}  {:>11}  {:>14}",
+        "ISO", "a (green)", "b (green)", "K (DN/e-)", "read sigma (DN)"
+    );
+    for m in &rows {
+        let (k, sigma) = m.gain_and_read();
+        let mut notes = Vec::new();
+        if m.b < 0.0 {
+            notes.push("b < 0: no read noise resolved".to_string());
+        }
+        if m.entries > 1 {
+            notes.push(format!("{} entries averaged", m.entries));
+        }
+        println!(
+            "  {:>7}  {:>12.5e}  {:>12.5e}  {:>11.5}  {:>14.4}{}",
+            m.iso,
+            m.a,
+            m.b,
+            k,
+            sigma,
+            if notes.is_empty() {
+                String::new()
+            } else {
+                format!("  ({})", notes.join("; "))
+            }
+        );
+    }
+    Ok(())
+}
+
+fn show_table(v: &ProfileView) {
+    println!("table     {} ISOs", v.rows.len());
+    println!(
+        "  {:>7}  {:>11}  {:>15}  {:>12}  {:>16}  {:>14}  {:>12}",
+        "ISO",
+        "K (DN/e-)",
+        "read sigma (DN)",
+        "Tukey lambda",
+        "Tukey scale (DN)",
+        "row sigma (DN)",
+        "black error"
+    );
+    for r in &v.rows {
+        println!(
+            "  {:>7}  {:>11.5}  {:>15.4}  {:>12.4}  {:>16.4}  {:>14.4}  {:>12.4}",
+            r.iso,
+            r.k,
+            r.sigma_gauss,
+            r.tukey_lambda,
+            r.sigma_tukey,
+            r.sigma_row,
+            r.black_level_error
+        );
+    }
+    if let Some(k) = v.k_per_iso {
+        println!("gain      K = {k} x ISO DN/e-");
+    }
+}
+
+fn show_fits(v: &ProfileView) {
+    println!(
+        "gain      no ISO table: K {:.5}..{:.5} DN/e-, drawn with ln K uniform (omit --iso){}",
+        v.k_range.0,
+        v.k_range.1,
+        v.k_per_iso
+            .map(|k| format!("; K = {k} x ISO at a given ISO"))
+            .unwrap_or_default()
+    );
+    for (what, (slope, bias, sd)) in ["read (Gaussian)", "read (Tukey)", "row"]
+        .iter()
+        .zip(v.fits)
+    {
+        println!("fit       {what:<16} ln sigma = {slope:.4} ln K {bias:+.4}, residual sd {sd:.4}");
+    }
+    println!(
+        "shapes    {} Tukey lambdas, {:.3}..{:.3}",
+        v.tukey_shapes.len(),
+        v.tukey_shapes.iter().cloned().fold(f64::INFINITY, f64::min),
+        v.tukey_shapes
+            .iter()
+            .cloned()
+            .fold(f64::NEG_INFINITY, f64::max)
+    );
+}
