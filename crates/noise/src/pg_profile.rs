@@ -210,8 +210,10 @@ pub fn from_dng(spec: &str) -> Result<CameraProfile> {
         reason,
     };
     let path = Path::new(spec);
-    let frame = pgrf_raw::decode_file(path, &Default::default()).map_err(|e| bad(e.to_string()))?;
+    // Read once: the decoder and the tag reader see the same bytes.
     let bytes = std::fs::read(path).map_err(|e| bad(e.to_string()))?;
+    let frame = pgrf_raw::decode_bytes(path, &bytes, &Default::default())
+        .map_err(|e| bad(e.to_string()))?;
     let planes = if frame.mono { 1 } else { 3 };
     let pairs = pgrf_raw::container::noise_profile(&bytes, planes)
         .map_err(bad)?
@@ -253,11 +255,6 @@ pub fn from_dng(spec: &str) -> Result<CameraProfile> {
             mean[1]
         ),
     )
-}
-
-/// The names of the built-in profiles (`--profile NAME`).
-pub fn built_in_names() -> Vec<&'static str> {
-    crate::profile::built_in_names()
 }
 
 /// What a loaded profile holds, for display (`pgrf profiles show`): every

@@ -176,8 +176,8 @@ const BUILT_IN: [(&str, &str); 5] = [
     ),
 ];
 
-/// Names of the built-in profiles.
-pub(crate) fn built_in_names() -> Vec<&'static str> {
+/// Names of the built-in profiles (`--profile NAME`).
+pub fn built_in_names() -> Vec<&'static str> {
     BUILT_IN.iter().map(|(n, _)| *n).collect()
 }
 

@@ -51,7 +51,7 @@ fn list(a: &ListArgs) -> Result<()> {
     } else {
         None
     };
-    let builtins: Vec<(&str, ProfileView)> = pg_profile::built_in_names()
+    let builtins: Vec<(&str, ProfileView)> = pgrf_noise::profile::built_in_names()
         .into_iter()
         .map(|n| {
             (

@@ -19,7 +19,6 @@ use crate::error::{NnError, Result};
 use crate::named::NamedTensor;
 use crate::unet::SidUnetConfig;
 use crate::weights::{self, Architecture, ImportedFrom, NoiseSource, WeightMeta};
-use sha2::{Digest, Sha256};
 use std::collections::BTreeMap;
 use std::path::Path;
 
@@ -233,11 +232,7 @@ pub fn import_sid(path: &Path, from: Option<Source>, key: Option<&str>) -> Resul
         .into_iter()
         .map(|(t, p)| (p, torch[&t].clone()))
         .collect();
-    let bytes = std::fs::read(path).map_err(|e| bad(e.to_string()))?;
-    let sha: String = Sha256::digest(&bytes)
-        .iter()
-        .map(|b| format!("{b:02x}"))
-        .collect();
+
     let arch = Architecture::SidUnet(
         SidUnetConfig::new()
             .with_width(width)
@@ -251,7 +246,7 @@ pub fn import_sid(path: &Path, from: Option<Source>, key: Option<&str>) -> Resul
             .file_name()
             .map(|n| n.to_string_lossy().into_owned())
             .unwrap_or_default(),
-        sha256: sha,
+        sha256: file.sha256.clone(),
         container: file.format.to_string(),
         nesting: prefix,
         also_under: others,

@@ -27,6 +27,8 @@ pub struct TorchTensors {
     pub tensors: BTreeMap<String, NamedTensor>,
     /// The container, in words ("PyTorch zip checkpoint", ...).
     pub format: &'static str,
+    /// SHA-256 of the file's bytes, hex (the provenance an import records).
+    pub sha256: String,
 }
 
 fn bad(path: &Path, reason: impl std::fmt::Display) -> NnError {
@@ -48,6 +50,7 @@ pub fn read(path: &Path) -> Result<TorchTensors> {
         return Ok(TorchTensors {
             tensors: burn_read(path)?,
             format: "PyTorch zip checkpoint",
+            sha256: sha256(&bytes),
         });
     }
     if bytes.len() >= 8 {
@@ -56,6 +59,7 @@ pub fn read(path: &Path) -> Result<TorchTensors> {
             return Ok(TorchTensors {
                 tensors: read_safetensors(path, &bytes)?,
                 format: "safetensors",
+                sha256: sha256(&bytes),
             });
         }
     }
@@ -72,6 +76,7 @@ pub fn read(path: &Path) -> Result<TorchTensors> {
         return Ok(TorchTensors {
             tensors: burn_read(path)?,
             format: "legacy PyTorch pickle checkpoint",
+            sha256: sha256(&bytes),
         });
     }
     Err(bad(
@@ -195,6 +200,15 @@ fn half_to_f32(h: u16) -> f32 {
         e => sign | (((e - 15 + 127) as u32) << 23) | (frac << 13),
     };
     f32::from_bits(bits)
+}
+
+/// SHA-256 of `bytes`, lower-case hex.
+fn sha256(bytes: &[u8]) -> String {
+    use sha2::{Digest, Sha256};
+    Sha256::digest(bytes)
+        .iter()
+        .map(|b| format!("{b:02x}"))
+        .collect()
 }
 
 /// The reader's multi-line messages on one line.
