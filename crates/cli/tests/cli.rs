@@ -590,13 +590,16 @@ fn a_monochrome_fits_camera_from_frames_to_masters() {
     assert_eq!(info["planes"][0]["plane"], json!("(0,0)"));
 
     let masters = dir.join("masters");
-    let (v, _) = calibrate_vs(
+    let (v, stderr) = calibrate_vs(
         &vs,
         &dir.join("c.safetensors"),
         &dir.join("report"),
         &["--masters", s(&masters)],
     );
     assert_eq!(v["cfa"], json!("mono"));
+    // FITS names no maker: no darktable entry unless asked for (and named).
+    assert!(stderr.contains("no camera maker or model"), "{stderr}");
+    assert!(!dir.join("c.noiseprofiles.json").exists());
     let mut names: Vec<String> = std::fs::read_dir(&masters)
         .unwrap()
         .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
@@ -689,6 +692,64 @@ fn simulate_calibrate_and_synthesise_with_the_calibration() {
     assert!(v["row_sigma"].as_f64().unwrap() > 0.0);
     assert!(v["read_sigma_median"].as_f64().unwrap() > 4.0);
     assert_eq!(v["dark_law"], "sqrt");
+    // Beside the calibration, its darktable entry: the stated (S, O) over
+    // 12.9 under the frames' maker and model at their ISO.
+    let dt: Value = serde_json::from_str(
+        &std::fs::read_to_string(dir.join("calib.noiseprofiles.json")).unwrap(),
+    )
+    .unwrap();
+    let (ss, oo) = (
+        v["noise_profile"][0].as_f64().unwrap(),
+        v["noise_profile"][1].as_f64().unwrap(),
+    );
+    assert_eq!(dt["version"], 0);
+    let maker = &dt["noiseprofiles"][0];
+    assert_eq!(maker["maker"], "pgrf");
+    assert_eq!(maker["models"][0]["model"], "virtual sensor a7s2-iso1600");
+    let e = &maker["models"][0]["profiles"][0];
+    assert_eq!(e["iso"], 1600);
+    let (a, b) = (e["a"][1].as_f64().unwrap(), e["b"][1].as_f64().unwrap());
+    assert!(
+        (a * 12.9 / ss - 1.0).abs() < 1e-12 && (b * 12.9 / oo - 1.0).abs() < 1e-12,
+        "{e}"
+    );
+    // Into a file of several ISOs: a second calibration at the same ISO
+    // replaces the entry; a file darktable would refuse stops the run
+    // before any work.
+    let merged = dir.join("merged.json");
+    for (run, says) in [
+        (
+            0,
+            "darktable noise-profile entry \"Sony ILCE-7SM2 iso 1600\" (",
+        ),
+        (1, "replacing 1 entry of that camera"),
+    ] {
+        let out = dir.join(format!("c{run}.safetensors"));
+        let (_, stderr) = calibrate_vs(
+            &vs,
+            &out,
+            &dir.join(format!("r{run}")),
+            &[
+                "--darktable-into",
+                s(&merged),
+                "--darktable-model",
+                "ILCE-7SM2",
+                "--darktable-maker",
+                "Sony",
+            ],
+        );
+        assert!(stderr.contains(says), "{stderr}");
+        assert!(!dir.join(format!("c{run}.noiseprofiles.json")).exists());
+    }
+    let r = pgrf(&[
+        "profiles",
+        "show",
+        "darktable:Sony ILCE-7SM2",
+        "--darktable-profiles",
+        s(&merged),
+    ]);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    assert!(String::from_utf8_lossy(&r.stdout).contains("     1600 "));
     for f in [
         "ptc.png",
         "sigma_hist.png",
@@ -737,30 +798,42 @@ fn simulate_calibrate_and_synthesise_with_the_calibration() {
     assert_eq!(r.status.code(), Some(1));
     assert!(String::from_utf8_lossy(&r.stderr).contains("--force"));
 
-    // Bad input: an empty folder, a missing output folder.
+    // Bad input: an empty folder, a missing output folder, a darktable file
+    // darktable would refuse (before any work).
     let empty = dir.join("empty");
     std::fs::create_dir_all(&empty).unwrap();
-    let r = pgrf(&[
-        "calibrate",
-        "--bias",
-        s(&empty),
-        "--flat",
-        s(&vs.join("flat")),
-        "-o",
-        s(&dir.join("c2.safetensors")),
-    ]);
+    let broken = dir.join("broken.json");
+    std::fs::write(
+        &broken,
+        r#"{"version": 0, "noiseprofiles": [{"maker": "x"}]}"#,
+    )
+    .unwrap();
+    let (bias, flat) = (vs.join("bias"), vs.join("flat"));
+    let calibrate = |bias: &Path, out: &Path, extra: &[&str]| {
+        let mut a = vec![
+            "calibrate",
+            "--bias",
+            s(bias),
+            "--flat",
+            s(&flat),
+            "-o",
+            s(out),
+        ];
+        a.extend_from_slice(extra);
+        pgrf(&a)
+    };
+    let r = calibrate(&empty, &dir.join("c2.safetensors"), &[]);
     assert_eq!(r.status.code(), Some(1));
     assert!(String::from_utf8_lossy(&r.stderr).contains("no files"));
-    let r = pgrf(&[
-        "calibrate",
-        "--bias",
-        s(&vs.join("bias")),
-        "--flat",
-        s(&vs.join("flat")),
-        "-o",
-        s(&dir.join("nope/c.safetensors")),
-    ]);
+    let r = calibrate(&bias, &dir.join("nope/c.safetensors"), &[]);
     assert_eq!(r.status.code(), Some(1));
+    let r = calibrate(
+        &bias,
+        &dir.join("c3.safetensors"),
+        &["--darktable-into", s(&broken)],
+    );
+    assert_one_line_failure(&r, "broken.json");
+    assert!(!dir.join("c3.safetensors").exists());
     assert!(!dir.join("c2.safetensors").exists());
 }
 

@@ -557,6 +557,145 @@ pub fn load(spec: &str) -> Result<CameraProfile> {
     NoiseProfiles::open()?.profile(spec)
 }
 
+/// A camera pgrf measured (`pgrf calibrate`), as one entry of darktable's
+/// `noiseprofiles.json`: the inverse of [`Measured::photosite`].
+///
+/// darktable's a and b are the variance its profiling chain leaves (Haar HH
+/// of a PPG-demosaiced image), [`VARIANCE_FACTOR`] times lower than a
+/// photosite's, so the entry holds a = S / 12.9 and b = O / 12.9 for each of
+/// red, green and blue: a photosite's noise has one gain whatever its colour,
+/// and darktable's profiled denoise reads the green values only ("only use
+/// green channel + wb for now", src/iop/denoiseprofile.c). Reading the entry
+/// back with `--profile darktable:` gives S and O again.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Export {
+    /// The maker as darktable names it (rawspeed's clean name, which is
+    /// rawler's: "Sony", "Canon").
+    pub maker: String,
+    /// The model as darktable names it ("ILCE-7SM2", "EOS 550D").
+    pub model: String,
+    /// The ISO the camera was measured at.
+    pub iso: u32,
+    /// Photosite variance per unit of normalised signal (the DNG
+    /// NoiseProfile's S).
+    pub s: f64,
+    /// Photosite variance without signal (the DNG NoiseProfile's O).
+    pub o: f64,
+    /// The model's `comment`: who measured it, and how.
+    pub comment: String,
+}
+
+impl Export {
+    /// The entry's `name`, darktable's style: "Sony ILCE-7SM2 iso 1600".
+    pub fn entry_name(&self) -> String {
+        format!(
+            "{} {} iso {}",
+            collapse(&self.maker),
+            collapse(&self.model),
+            self.iso
+        )
+    }
+
+    fn check(&self) -> Result<()> {
+        let bad = |reason: String| NoiseError::Profile {
+            name: "darktable export".into(),
+            reason,
+        };
+        if collapse(&self.maker).is_empty() || collapse(&self.model).is_empty() {
+            return Err(bad(format!(
+                "the frames name no camera (maker \"{}\", model \"{}\"): darktable finds an entry by maker and model",
+                self.maker, self.model
+            )));
+        }
+        if self.iso == 0 {
+            return Err(bad("no ISO: darktable finds an entry by ISO".into()));
+        }
+        if !(self.s.is_finite() && self.s > 0.0 && self.o.is_finite() && self.o >= 0.0) {
+            return Err(bad(format!(
+                "noise S = {}, O = {}: darktable needs S > 0 and O >= 0",
+                self.s, self.o
+            )));
+        }
+        Ok(())
+    }
+
+    /// The entry as darktable writes one (`name`, `iso`, `a`, `b`).
+    fn entry(&self) -> Value {
+        let (a, b) = (self.s / VARIANCE_FACTOR, self.o / VARIANCE_FACTOR);
+        serde_json::json!({
+            "name": self.entry_name(),
+            "iso": self.iso,
+            "a": [a, a, a],
+            "b": [b, b, b],
+        })
+    }
+
+    /// A whole `noiseprofiles.json` (format version 0) holding this entry
+    /// alone: what darktable's `--noiseprofiles FILE` option reads.
+    pub fn file(&self) -> Result<String> {
+        self.merge_into(None, Path::new("(new file)"))
+            .map(|(text, _)| text)
+    }
+
+    /// `existing` (the text of a darktable `noiseprofiles.json`, checked as
+    /// darktable checks it; None: a new file) with this entry added: under
+    /// the maker and model with exactly these names (added where missing),
+    /// replacing the entries of that camera at this ISO; everything else is
+    /// kept as it was. Returns the new text and how many entries were
+    /// replaced.
+    pub fn merge_into(&self, existing: Option<&str>, path: &Path) -> Result<(String, usize)> {
+        self.check()?;
+        let mut root = match existing {
+            None => serde_json::json!({"version": FORMAT_VERSION, "noiseprofiles": []}),
+            Some(text) => {
+                NoiseProfiles::parse(text, path)?;
+                serde_json::from_str(text).expect("checked by parse")
+            }
+        };
+        let (maker, model) = (collapse(&self.maker), collapse(&self.model));
+        let makers = root["noiseprofiles"]
+            .as_array_mut()
+            .expect("checked by parse");
+        let maker_entry = find_or_add(makers, "maker", &maker, "models");
+        let models = maker_entry["models"]
+            .as_array_mut()
+            .expect("checked by parse");
+        let entry = find_or_add(models, "model", &model, "profiles");
+        entry["comment"] = Value::String(self.comment.clone());
+        let profiles = entry["profiles"].as_array_mut().expect("checked by parse");
+        let before = profiles.len();
+        profiles.retain(|p| p["iso"].as_f64() != Some(self.iso as f64));
+        let replaced = before - profiles.len();
+        let at = profiles
+            .iter()
+            .position(|p| p["iso"].as_f64().is_some_and(|i| i > self.iso as f64))
+            .unwrap_or(profiles.len());
+        profiles.insert(at, self.entry());
+        let mut text = serde_json::to_string_pretty(&root).expect("JSON values serialise");
+        text.push('\n');
+        Ok((text, replaced))
+    }
+}
+
+/// The object of `list` whose `key` is `name`, added as `{key: name,
+/// children: []}` at the end when there is none (a maker's `models`, a
+/// model's `profiles`).
+fn find_or_add<'a>(
+    list: &'a mut Vec<Value>,
+    key: &str,
+    name: &str,
+    children: &str,
+) -> &'a mut Value {
+    let i = match list.iter().position(|v| v[key] == name) {
+        Some(i) => i,
+        None => {
+            list.push(serde_json::json!({ key: name, children: [] }));
+            list.len() - 1
+        }
+    };
+    &mut list[i]
+}
+
 /// darktable's measurement at `iso` inside the measured range: the entry
 /// there, else a and b linear in ISO between the neighbours
 /// (`dt_noiseprofile_interpolate`).

@@ -312,3 +312,131 @@ fn bad_files_and_names_are_refused_in_one_line() {
         .to_string();
     one_line(e, &["marked \"skip\""]);
 }
+
+fn export(maker: &str, model: &str, iso: u32, s: f64, o: f64) -> darktable::Export {
+    darktable::Export {
+        maker: maker.into(),
+        model: model.into(),
+        iso,
+        s,
+        o,
+        comment: "a test calibration".into(),
+    }
+}
+
+/// What `pgrf calibrate` exports is darktable's format and reads back as the
+/// noise it states: a = S / 12.9 and b = O / 12.9 for red, green and blue,
+/// and `--profile darktable:` of that file gives S and O again (K = S 16383,
+/// sigma = sqrt(O) 16383 on the nominal scale).
+#[test]
+fn an_exported_entry_reads_back_as_the_calibrated_noise() {
+    let (s, o) = (9.678370e-5, 1.818743e-7);
+    let text = export("Sony", "ILCE-7SM2", 1600, s, o).file().unwrap();
+    let path = Path::new("exported.json");
+    let file = NoiseProfiles::parse(&text, path).unwrap();
+    assert_eq!(file.version, 0);
+    assert_eq!(file.cameras.len(), 1);
+    let cam = file.find("Sony ILCE-7SM2").unwrap();
+    assert_eq!(cam.comment.as_deref(), Some("a test calibration"));
+    let e = &cam.entries[0];
+    assert_eq!(
+        (e.name.as_str(), e.iso, e.skip),
+        ("Sony ILCE-7SM2 iso 1600", 1600, false)
+    );
+    for ch in 0..3 {
+        assert!(close(e.a[ch], s / 12.9, 1e-15) && close(e.b[ch], o / 12.9, 1e-15));
+    }
+    let p = file
+        .profile("Sony ILCE-7SM2")
+        .unwrap()
+        .params_at_iso(1600)
+        .unwrap();
+    assert!(close(p.k, s * 16383.0, 1e-12), "K {}", p.k);
+    assert!(
+        close(p.sigma_gauss, o.sqrt() * 16383.0, 1e-12),
+        "sigma {}",
+        p.sigma_gauss
+    );
+    // darktable's keys and nothing else, as its own tool writes them.
+    let v: serde_json::Value = serde_json::from_str(&text).unwrap();
+    let entry = &v["noiseprofiles"][0]["models"][0]["profiles"][0];
+    let mut keys: Vec<&str> = entry
+        .as_object()
+        .unwrap()
+        .keys()
+        .map(|k| k.as_str())
+        .collect();
+    keys.sort_unstable();
+    assert_eq!(keys, ["a", "b", "iso", "name"]);
+}
+
+/// Merging into a darktable file keeps every other camera and entry, adds
+/// the maker and model where missing, keeps the entries sorted by ISO and
+/// replaces the camera's entries at the same ISO (skipped ones too).
+#[test]
+fn merging_keeps_the_file_and_replaces_the_same_iso() {
+    let path = Path::new("noiseprofiles.json");
+    let before = NoiseProfiles::parse(FIXTURE, path).unwrap();
+    // A new ISO of a camera the file has: inserted between 100 and 1600.
+    let (text, replaced) = export("Testmaker", "TM-1", 800, 4e-4, 2e-6)
+        .merge_into(Some(FIXTURE), path)
+        .unwrap();
+    assert_eq!(replaced, 0);
+    let after = NoiseProfiles::parse(&text, path).unwrap();
+    assert_eq!(after.cameras.len(), before.cameras.len());
+    let tm1 = after.find("Testmaker TM-1").unwrap();
+    assert_eq!(tm1.entries.len(), 6);
+    assert_eq!(tm1.isos(), [100, 400, 800, 1600]);
+    assert_eq!(
+        after.find("Othermaker OM 5").unwrap(),
+        before.find("Othermaker OM 5").unwrap()
+    );
+    assert_eq!(
+        after.find("Testmaker TM-2").unwrap(),
+        before.find("Testmaker TM-2").unwrap()
+    );
+    // ISO 400 again: the entry and the skipped one at 400 both go.
+    let (text, replaced) = export("Testmaker", "TM-1", 400, 1e-4, 1e-6)
+        .merge_into(Some(&text), path)
+        .unwrap();
+    assert_eq!(replaced, 2);
+    let tm1 = NoiseProfiles::parse(&text, path).unwrap();
+    let tm1 = tm1.find("Testmaker TM-1").unwrap();
+    let at400: Vec<_> = tm1.entries.iter().filter(|e| e.iso == 400).collect();
+    assert_eq!(at400.len(), 1);
+    assert!(close(at400[0].a[1], 1e-4 / 12.9, 1e-15));
+    // A camera the file lacks, under a maker it has and one it lacks.
+    let (text, _) = export("Testmaker", "TM-9", 100, 1e-5, 0.0)
+        .merge_into(Some(FIXTURE), path)
+        .unwrap();
+    let (text, _) = export("Newmaker", "NM 1", 3200, 2e-4, 1e-6)
+        .merge_into(Some(&text), path)
+        .unwrap();
+    let f = NoiseProfiles::parse(&text, path).unwrap();
+    assert_eq!(f.cameras.len(), before.cameras.len() + 2);
+    assert_eq!(f.find("Testmaker TM-9").unwrap().maker, "Testmaker");
+    assert_eq!(f.find("Newmaker NM 1").unwrap().isos(), [3200]);
+}
+
+/// Numbers darktable cannot use, a camera without a name, no ISO and a
+/// file darktable would refuse: one line each, nothing produced.
+#[test]
+fn exports_darktable_cannot_use_are_refused() {
+    let path = Path::new("noiseprofiles.json");
+    for (e, says) in [
+        (export("Sony", "ILCE-7SM2", 1600, 0.0, 1e-7), "S > 0"),
+        (export("Sony", "ILCE-7SM2", 1600, f64::NAN, 1e-7), "S > 0"),
+        (export("Sony", "ILCE-7SM2", 1600, 1e-4, -1e-9), "O >= 0"),
+        (export("Sony", "  ", 1600, 1e-4, 1e-7), "name no camera"),
+        (export("Sony", "ILCE-7SM2", 0, 1e-4, 1e-7), "no ISO"),
+    ] {
+        let err = e.file().unwrap_err().to_string();
+        assert!(err.contains(says) && !err.contains('\n'), "{says}: {err}");
+    }
+    let broken = r#"{"version": 0, "noiseprofiles": [{"maker": "x"}]}"#;
+    let err = export("Sony", "ILCE-7SM2", 1600, 1e-4, 1e-7)
+        .merge_into(Some(broken), path)
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("`models` is missing"), "{err}");
+}

@@ -42,6 +42,15 @@ pub struct CalibrateArgs {
     /// Folder for master frames (created if missing): master_bias.dng, one master_dark_EXPOSUREs.dng per dark exposure (master_dark_10s.dng), one master_flat_EXPOSUREs.dng per flat level (each stack's mean, in the camera's mosaic and levels) and defects.png.
     #[arg(long)]
     pub masters: Option<PathBuf>,
+    /// Add the calibrated camera's darktable noise-profile entry (at its ISO) to this darktable noiseprofiles.json, created if missing: a copy of darktable's own file, or one that earlier calibrations at other ISOs wrote; an entry of the same camera at the same ISO is replaced. Without it the entry is written alone beside -o as OUTPUT.noiseprofiles.json. darktable reads such a file with `darktable --noiseprofiles FILE`.
+    #[arg(long)]
+    pub darktable_into: Option<PathBuf>,
+    /// The maker name the darktable entry is filed under [default: the frames' maker as pgrf reads it, rawspeed's clean name for native RAWs]. darktable uses the entry for images whose maker contains this string.
+    #[arg(long)]
+    pub darktable_maker: Option<String>,
+    /// The model name the darktable entry is filed under [default: the frames' model as pgrf reads it]. darktable uses the entry only for images whose model, as darktable names it, is exactly this: set it where the names differ (an alias such as EOS Kiss X4, which darktable files under EOS 550D).
+    #[arg(long)]
+    pub darktable_model: Option<String>,
 }
 
 pub fn run(a: &CalibrateArgs) -> Result<()> {
@@ -90,7 +99,37 @@ pub fn run(a: &CalibrateArgs) -> Result<()> {
         }
         crate::output::require_parent_dir(dir).context("--masters")?;
     }
-    let mut outputs = vec![("-o", a.output.as_path())];
+    for (flag, name) in [
+        ("--darktable-maker", &a.darktable_maker),
+        ("--darktable-model", &a.darktable_model),
+    ] {
+        if name.as_deref().is_some_and(|n| n.trim().is_empty()) {
+            anyhow::bail!("{flag} is empty: darktable finds an entry by maker and model");
+        }
+    }
+    let darktable_file = darktable_path(a);
+    // The file to merge into is read before any work, so a malformed one
+    // stops the run at once.
+    let darktable_existing = match &a.darktable_into {
+        Some(p) if p.exists() => {
+            let text = std::fs::read_to_string(p)
+                .with_context(|| format!("--darktable-into {}", p.display()))?;
+            pgrf_noise::darktable::NoiseProfiles::parse(&text, p).context("--darktable-into")?;
+            Some(text)
+        }
+        _ => None,
+    };
+    let mut outputs = vec![
+        ("-o", a.output.as_path()),
+        (
+            if a.darktable_into.is_some() {
+                "--darktable-into"
+            } else {
+                "-o (its darktable entry)"
+            },
+            darktable_file.as_path(),
+        ),
+    ];
     outputs.extend(report_files.iter().map(|p| ("--report", p.as_path())));
     crate::output::check_outputs(&outputs, &inputs)?;
     let total = bias.len() + flat.len() + dark.len();
@@ -109,6 +148,9 @@ pub fn run(a: &CalibrateArgs) -> Result<()> {
         &bar,
     )?;
     bar.finish();
+    // The darktable entry needs the camera's name and ISO, known now: made
+    // (and refused) before anything is written.
+    let darktable_text = darktable_entry(a, &run, darktable_existing.as_deref(), &darktable_file)?;
     if let Some(dir) = &a.masters {
         write_masters(dir, &run, &inputs, &a.output)?;
     }
@@ -119,6 +161,19 @@ pub fn run(a: &CalibrateArgs) -> Result<()> {
             .with_context(|| format!("{}: cannot create report folder", dir.display()))?;
         let files = write_report(dir, &report_data(&run))?;
         eprintln!("wrote report: {} files in {}", files.len(), dir.display());
+    }
+    if let Some((text, replaced, name)) = &darktable_text {
+        pgrf_core::write_atomic(&darktable_file, text.as_bytes())
+            .with_context(|| format!("{}", darktable_file.display()))?;
+        let replacing = match replaced {
+            0 => String::new(),
+            n => format!(", replacing {n} entry of that camera at that ISO"),
+        };
+        eprintln!(
+            "wrote {}: darktable noise-profile entry \"{name}\"{replacing} (darktable reads the file with: darktable --noiseprofiles {})",
+            darktable_file.display(),
+            darktable_file.display()
+        );
     }
     run.calibration.save(&a.output)?;
     let m = &run.calibration.meta;
@@ -219,6 +274,71 @@ fn write_masters(
         dir.display()
     );
     Ok(())
+}
+
+/// Where the darktable entry goes: `--darktable-into`, else beside `-o`.
+fn darktable_path(a: &CalibrateArgs) -> PathBuf {
+    a.darktable_into
+        .clone()
+        .unwrap_or_else(|| a.output.with_extension("noiseprofiles.json"))
+}
+
+/// The text of the darktable file with the calibrated camera's entry
+/// (`pgrf_noise::darktable::Export`), how many entries it replaced and the
+/// entry's name; None (with a note) when the frames carry no ISO and no
+/// file was asked for.
+fn darktable_entry(
+    a: &CalibrateArgs,
+    run: &CalibrationRun,
+    existing: Option<&str>,
+    path: &std::path::Path,
+) -> Result<Option<(String, usize, String)>> {
+    let m = &run.calibration.meta;
+    let maker = a.darktable_maker.clone().unwrap_or_else(|| m.make.clone());
+    let model = a.darktable_model.clone().unwrap_or_else(|| m.model.clone());
+    // darktable finds an entry by maker, model and ISO; frames without them
+    // (FITS from an astronomy camera names no maker) get no entry unless
+    // one was asked for.
+    let missing = if m.iso.is_none() {
+        Some("record no ISO (give --iso)")
+    } else if maker.trim().is_empty() || model.trim().is_empty() {
+        Some("name no camera maker or model (give --darktable-maker and --darktable-model)")
+    } else {
+        None
+    };
+    if let Some(what) = missing {
+        if a.darktable_into.is_some() {
+            anyhow::bail!(
+                "--darktable-into {}: the frames {what}, and darktable finds a profile by maker, model and ISO",
+                path.display()
+            );
+        }
+        eprintln!("pgrf: note: the frames {what}: no darktable noise profile written");
+        return Ok(None);
+    }
+    let iso = m.iso.expect("checked above");
+    let [s, o] = run.noise_profile();
+    let export = pgrf_noise::darktable::Export {
+        maker,
+        model,
+        iso,
+        s,
+        o,
+        comment: format!(
+            "measured by pgrf calibrate: K {:.4} DN/e-, photosite variance S x + O on [0, 1] with S {s:.6e}, O {o:.6e}; a, b = S, O / {} (darktable's PPG profiling chain)",
+            m.k,
+            pgrf_noise::darktable::VARIANCE_FACTOR
+        ),
+    };
+    let flag = if a.darktable_into.is_some() {
+        "--darktable-into"
+    } else {
+        "darktable entry"
+    };
+    let (text, replaced) = export
+        .merge_into(existing, path)
+        .with_context(|| format!("{flag} {}", path.display()))?;
+    Ok(Some((text, replaced, export.entry_name())))
 }
 
 fn report_data(run: &CalibrationRun) -> ReportData<'_> {
