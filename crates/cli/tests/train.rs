@@ -42,6 +42,14 @@ const SMALL: &[&str] = &[
     "--json",
 ];
 
+/// The JSON record a weight file carries in its safetensors header.
+fn record(p: &Path) -> Value {
+    let b = std::fs::read(p).unwrap();
+    let n = u64::from_le_bytes(b[..8].try_into().unwrap()) as usize;
+    let header: Value = serde_json::from_slice(&b[8..8 + n]).unwrap();
+    serde_json::from_str(header["__metadata__"]["pgrf"].as_str().unwrap()).unwrap()
+}
+
 #[test]
 fn denoiser_trains_resumes_and_writes_a_described_weight_file() {
     let d = scratch("denoiser");
@@ -72,11 +80,7 @@ fn denoiser_trains_resumes_and_writes_a_described_weight_file() {
     assert!(log.lines().last().unwrap().starts_with("6,"), "{log}");
 
     // The record says what the file is.
-    let bytes = std::fs::read(&out).unwrap();
-    let n = u64::from_le_bytes(bytes[..8].try_into().unwrap()) as usize;
-    let header: Value = serde_json::from_slice(&bytes[8..8 + n]).unwrap();
-    let meta: Value =
-        serde_json::from_str(header["__metadata__"]["pgrf"].as_str().unwrap()).unwrap();
+    let meta = record(&out);
     assert_eq!(meta["format"], "pgrf-weights");
     assert_eq!(meta["arch"], "sid-unet");
     assert_eq!(meta["config"]["width"], 4);
@@ -140,6 +144,58 @@ fn denoiser_trains_resumes_and_writes_a_described_weight_file() {
     c.extend_from_slice(SMALL);
     let e = one_line_error(&pgrf(&c));
     assert!(e.contains("another network"), "{e}");
+
+    // Fine-tuning: --init starts from a weight file. With no steps the
+    // result holds exactly its weights; the record names the file and adds
+    // up the steps behind it, through a chain of fine-tunings.
+    let fine_tune = |steps: &str, out: &Path, init: &Path| {
+        let mut a = vec!["train", "denoiser", "--steps", steps, "--width", "4"];
+        a.extend_from_slice(&["-o", s(out), "--init", s(init)]);
+        a.extend_from_slice(SMALL);
+        summary(&pgrf(&a))
+    };
+    let started_from = |p: &Path| {
+        let from = &record(p)["training"]["started_from"];
+        (
+            from["file"].as_str().map(String::from),
+            from["steps"].as_u64(),
+        )
+    };
+    let tuned = d.join("t.safetensors");
+    assert_eq!(fine_tune("0", &tuned, &out)["steps"], 0);
+    assert!(
+        tensors(&tuned) == tensors(&out),
+        "--init did not start from the file's weights"
+    );
+    assert_eq!(
+        started_from(&tuned),
+        (Some("m.safetensors".into()), Some(6))
+    );
+    let again = d.join("t2.safetensors");
+    assert_eq!(fine_tune("2", &again, &half)["steps"], 2);
+    assert!(
+        tensors(&again) != tensors(&half),
+        "two steps changed nothing"
+    );
+    let chained = d.join("t3.safetensors");
+    fine_tune("0", &chained, &again);
+    assert_eq!(
+        started_from(&chained),
+        (Some("t2.safetensors".into()), Some(8))
+    );
+    // Another width, or no such file: one line, nothing written.
+    for (init, says) in [
+        (s(&out), "holds SPC denoiser (SID U-Net, width 4)"),
+        ("nope.safetensors", "nope.safetensors"),
+    ] {
+        let bad = d.join("bad.safetensors");
+        let mut b = vec!["train", "denoiser", "--steps", "1", "--width", "8"];
+        b.extend_from_slice(&["-o", s(&bad), "--init", init]);
+        b.extend_from_slice(SMALL);
+        let e = one_line_error(&pgrf(&b));
+        assert!(e.contains(says), "{e}");
+        assert!(!bad.exists());
+    }
 }
 
 #[test]
@@ -178,11 +234,7 @@ fn flow_trains_from_a_toml_config_that_flags_override() {
     let last: Value = serde_json::from_str(log.lines().last().unwrap()).unwrap();
     assert_eq!(last["step"], 3);
     assert!(last["val_psnr"].as_f64().is_some());
-    let bytes = std::fs::read(&out).unwrap();
-    let n = u64::from_le_bytes(bytes[..8].try_into().unwrap()) as usize;
-    let header: Value = serde_json::from_slice(&bytes[8..8 + n]).unwrap();
-    let meta: Value =
-        serde_json::from_str(header["__metadata__"]["pgrf"].as_str().unwrap()).unwrap();
+    let meta = record(&out);
     assert_eq!(meta["arch"], "sr3");
     assert_eq!(meta["config"]["channel_mults"], serde_json::json!([1, 2]));
     assert_eq!(

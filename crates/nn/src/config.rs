@@ -125,6 +125,11 @@ pub struct TrainConfig {
     pub width: Option<usize>,
     /// Learn a correction to the input (not the papers' design).
     pub residual: bool,
+    /// Start from this weight file's weights (a network of exactly this
+    /// configuration) instead of fresh ones: fine-tuning a trained model on
+    /// other data or conditions. The optimiser and the schedule start
+    /// afresh; a resumed run takes its weights from the checkpoint.
+    pub init: Option<PathBuf>,
     /// SR3 channels of the first level.
     pub inner_channels: Option<usize>,
     /// SR3 channel multipliers per level.
@@ -191,6 +196,7 @@ impl Default for TrainConfig {
             no_augment: false,
             width: None,
             residual: false,
+            init: None,
             inner_channels: None,
             channel_mults: None,
             res_blocks: None,

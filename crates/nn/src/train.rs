@@ -13,7 +13,7 @@ use crate::ops::adam::PgrfAdam;
 use crate::ops::{PgrfAutodiff, PgrfOps};
 use crate::schedule::Schedule;
 use crate::step::denoiser_loss;
-use crate::weights::{Architecture, NoiseSource, TrainingSummary, WeightMeta};
+use crate::weights::{Architecture, NoiseSource, StartedFrom, TrainingSummary, WeightMeta};
 use burn::module::{AutodiffModule, Module};
 use burn::optim::adaptor::OptimizerAdaptor;
 use burn::optim::grad_clipping::GradientClippingConfig;
@@ -71,6 +71,10 @@ pub struct TrainSettings {
     /// Continue from `checkpoint` instead of starting afresh; the checkpoint
     /// must be of the same network, seed, batch and patch.
     pub resume: bool,
+    /// Start from this weight file (a trained network of exactly `arch`)
+    /// instead of fresh weights: fine-tuning. Ignored for the weights when
+    /// resuming (the checkpoint holds them), still recorded.
+    pub init: Option<PathBuf>,
     /// The noise the pairs are synthesised with, recorded in the weight file.
     pub noise: NoiseSource,
     /// Where the clean images came from, in words, recorded in the weight
@@ -223,6 +227,16 @@ pub(crate) fn train<B: PgrfAutodiff>(
     }
     let arch_json = serde_json::to_value(&s.arch).map_err(|e| NnError::Invalid(e.to_string()))?;
     let mut net: Net<B> = s.arch.init_seeded(device, s.seed)?;
+    let started_from = match &s.init {
+        None => None,
+        Some(path) => {
+            let meta = crate::weights::require_arch(path, &s.arch)?;
+            if !s.resume {
+                net = crate::weights::load::<B>(path, device)?.0;
+            }
+            Some(StartedFrom::of(path, &meta))
+        }
+    };
     // burn's Adam defaults (beta 0.9, 0.999) with epsilon 1e-8; one pass per
     // parameter tensor on the CPU (crate::ops::adam), burn's Adam elsewhere.
     let mut optim = OptimizerAdaptor::<PgrfAdam, Net<B>, B>::from(PgrfAdam::new(0.9, 0.999, 1e-8));
@@ -412,6 +426,7 @@ pub(crate) fn train<B: PgrfAutodiff>(
         images_per_s,
         device: s.device.clone(),
         config: s.config.clone(),
+        started_from,
     });
     net.valid().save(&s.out, &meta)?;
     progress.finish();

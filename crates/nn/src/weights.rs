@@ -153,6 +153,41 @@ pub struct TrainingSummary {
     /// recorded have none).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub config: Option<crate::TrainConfig>,
+    /// The trained model this run started from (`init`), when it was a
+    /// fine-tuning run: `steps` and `seconds` above count this run alone.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub started_from: Option<StartedFrom>,
+}
+
+/// The weights a fine-tuning run started from, and what training they had
+/// had, so a model's whole history (steps, machine time) can be added up.
+#[derive(Clone, Debug, Default, Serialize, Deserialize, PartialEq)]
+pub struct StartedFrom {
+    /// The weight file's name.
+    pub file: String,
+    /// Steps that file had been trained for, its own history included.
+    pub steps: u64,
+    /// Training seconds behind that file, its own history included.
+    pub seconds: f64,
+}
+
+impl StartedFrom {
+    /// What a run starting from the weights of `meta` (read from the file
+    /// `path`) records: that file's steps and seconds, and those of the
+    /// model it started from in turn. A file not trained by `pgrf train`
+    /// (imported weights) counts as no steps.
+    pub fn of(path: &Path, meta: &WeightMeta) -> StartedFrom {
+        let t = meta.training.as_ref();
+        let earlier = t.and_then(|t| t.started_from.as_ref());
+        StartedFrom {
+            file: path
+                .file_name()
+                .map(|n| n.to_string_lossy().into_owned())
+                .unwrap_or_else(|| path.display().to_string()),
+            steps: t.map_or(0, |t| t.steps) + earlier.map_or(0, |e| e.steps),
+            seconds: t.map_or(0.0, |t| t.seconds) + earlier.map_or(0.0, |e| e.seconds),
+        }
+    }
 }
 
 /// Where a network imported from another framework's file came from
@@ -324,6 +359,23 @@ fn decode_meta(path: &Path, bytes: &[u8]) -> Result<WeightMeta> {
 /// reads) without building the network.
 pub fn read_meta(path: &Path) -> Result<WeightMeta> {
     Ok(read(path)?.0)
+}
+
+/// The record of `path` when it holds a network of exactly `arch` (what a
+/// fine-tuning run's `--init` must name), else one line saying what it
+/// holds instead.
+pub fn require_arch(path: &Path, arch: &Architecture) -> Result<WeightMeta> {
+    let meta = read_meta(path)?;
+    let json = |a: &Architecture| serde_json::to_value(a).ok();
+    if json(&meta.arch) != json(arch) {
+        return Err(NnError::Invalid(format!(
+            "--init {}: holds {}, not the {} this configuration trains",
+            path.display(),
+            meta.arch.describe(),
+            arch.describe()
+        )));
+    }
+    Ok(meta)
 }
 
 /// Read a weight file: its record and its named tensors, checked to be

@@ -101,6 +101,9 @@ pub struct Settings {
     /// Learn a correction: the SID U-Net adds its input to its output; the flow model adds T - Xt to its velocity (its first stage starts as the noisy input). Not the papers' design; converges far faster for small CPU-trained models.
     #[arg(long, num_args = 0..=1, default_missing_value = "true")]
     pub residual: Option<bool>,
+    /// Start from this weight file's weights (a trained network of exactly this configuration, e.g. models/spc.safetensors) instead of fresh ones: fine-tuning on other data or conditions; the optimiser and the learning-rate schedule start afresh, and the output records the file and its training.
+    #[arg(long)]
+    pub init: Option<PathBuf>,
     /// SR3 channels of the first level [default: 64, or --width].
     #[arg(long)]
     pub inner_channels: Option<usize>,
@@ -214,6 +217,7 @@ pub fn run(a: &TrainArgs) -> Result<()> {
     let mut inputs: Vec<&std::path::Path> = data_files.iter().map(|p| p.as_path()).collect();
     inputs.extend(s.calib.as_deref());
     inputs.extend(s.camera_like.as_deref());
+    inputs.extend(s.init.as_deref());
     crate::output::check_outputs(
         &[
             ("-o", &out),
@@ -225,6 +229,9 @@ pub fn run(a: &TrainArgs) -> Result<()> {
     let device = s.device;
     device.check_available().map_err(anyhow::Error::msg)?;
     let arch = s.architecture(a.method)?;
+    if let Some(init) = &s.init {
+        pgrf_nn::weights::require_arch(init, &arch)?;
+    }
     {
         use pgrf_nn::infer::memory::{tile_bytes, training_bytes};
         let (p, b, v) = (s.patch, s.batch, s.val_patch());
@@ -297,6 +304,7 @@ pub fn run(a: &TrainArgs) -> Result<()> {
         log: Some(log_path),
         log_every: s.log_every,
         resume: a.resume,
+        init: s.init.clone(),
         noise: NoiseSource {
             profile: Some(profile_name.clone()),
             calibration,
