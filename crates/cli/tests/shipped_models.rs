@@ -42,6 +42,25 @@ fn check(name: &str, method: Method) {
 #[test]
 fn spc_config_describes_the_shipped_denoiser() {
     check("spc", Method::Spc);
+    // Its second stage started from the first stage's weights, which
+    // spc_base.toml trained: same network, its steps behind them.
+    let base =
+        TrainConfig::from_toml(&std::fs::read_to_string(models().join("spc_base.toml")).unwrap())
+            .unwrap();
+    let meta = read_meta(&models().join("spc.safetensors")).unwrap();
+    assert_eq!(
+        serde_json::to_value(base.architecture(Method::Spc).unwrap()).unwrap(),
+        serde_json::to_value(&meta.arch).unwrap()
+    );
+    let from = meta
+        .training
+        .and_then(|t| t.started_from)
+        .expect("a fine-tuned file");
+    assert_eq!(
+        (from.file.as_str(), from.steps),
+        ("spc.safetensors", base.steps)
+    );
+    assert!(from.seconds > 3600.0, "{}", from.seconds);
 }
 
 #[test]
