@@ -229,11 +229,16 @@ pub(crate) fn train<B: PgrfAutodiff>(
     let mut net: Net<B> = s.arch.init_seeded(device, s.seed)?;
     let started_from = match &s.init {
         None => None,
+        // A resumed run takes its weights from the checkpoint: only the
+        // record is read then.
+        Some(path) if s.resume => Some(StartedFrom::of(
+            path,
+            &crate::weights::require_arch(path, &s.arch)?,
+        )),
         Some(path) => {
-            let meta = crate::weights::require_arch(path, &s.arch)?;
-            if !s.resume {
-                net = crate::weights::load::<B>(path, device)?.0;
-            }
+            let (trained, meta) = crate::weights::load::<B>(path, device)?;
+            crate::weights::check_arch(path, &meta, &s.arch)?;
+            net = trained;
             Some(StartedFrom::of(path, &meta))
         }
     };

@@ -366,6 +366,12 @@ pub fn read_meta(path: &Path) -> Result<WeightMeta> {
 /// holds instead.
 pub fn require_arch(path: &Path, arch: &Architecture) -> Result<WeightMeta> {
     let meta = read_meta(path)?;
+    check_arch(path, &meta, arch)?;
+    Ok(meta)
+}
+
+/// [`require_arch`]'s comparison, for a record already read.
+pub(crate) fn check_arch(path: &Path, meta: &WeightMeta, arch: &Architecture) -> Result<()> {
     let json = |a: &Architecture| serde_json::to_value(a).ok();
     if json(&meta.arch) != json(arch) {
         return Err(NnError::Invalid(format!(
@@ -375,7 +381,7 @@ pub fn require_arch(path: &Path, arch: &Architecture) -> Result<WeightMeta> {
             arch.describe()
         )));
     }
-    Ok(meta)
+    Ok(())
 }
 
 /// Read a weight file: its record and its named tensors, checked to be
