@@ -48,7 +48,7 @@ pub struct CalibrateArgs {
     /// The maker name the darktable entry is filed under [default: the frames' maker as pgrf reads it, rawspeed's clean name for native RAWs]. darktable uses the entry for images whose maker contains this string.
     #[arg(long)]
     pub darktable_maker: Option<String>,
-    /// The model name the darktable entry is filed under [default: the frames' model as pgrf reads it]. darktable uses the entry only for images whose model, as darktable names it, is exactly this: set it where the names differ (an alias such as EOS Kiss X4, which darktable files under EOS 550D).
+    /// The model name the darktable entry is filed under [default: the frames' model as pgrf reads it]. darktable uses the entry only for images whose model, as darktable names it, is exactly this: set it where the names differ (an alias: the EOS Kiss X4 is the EOS 550D, the name darktable's own file uses).
     #[arg(long)]
     pub darktable_model: Option<String>,
 }
