@@ -3,7 +3,7 @@
 //! shipped weight file was trained with, and it must describe exactly the
 //! network, noise and run the file's own record says.
 
-use pgrf_nn::weights::read_meta;
+use pgrf_nn::weights::{read_meta, WeightMeta};
 use pgrf_nn::{Method, TrainConfig};
 use std::path::PathBuf;
 
@@ -11,9 +11,16 @@ fn models() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../models")
 }
 
-fn check(name: &str, method: Method) {
+/// `models/NAME.toml`, parsed.
+fn config(name: &str) -> TrainConfig {
     let text = std::fs::read_to_string(models().join(format!("{name}.toml"))).unwrap();
-    let cfg = TrainConfig::from_toml(&text).unwrap();
+    TrainConfig::from_toml(&text).unwrap()
+}
+
+/// Checks `models/NAME.toml` against `models/NAME.safetensors` and returns
+/// the file's record.
+fn check(name: &str, method: Method) -> WeightMeta {
+    let cfg = config(name);
     let meta = read_meta(&models().join(format!("{name}.safetensors"))).unwrap();
     assert_eq!(meta.arch.method(), method);
     // The architecture the config builds is the file's, field for field.
@@ -37,17 +44,15 @@ fn check(name: &str, method: Method) {
         (cfg.steps, cfg.batch, cfg.patch, cfg.seed, cfg.data.as_str()),
         "{name}: run"
     );
+    meta
 }
 
 #[test]
 fn spc_config_describes_the_shipped_denoiser() {
-    check("spc", Method::Spc);
+    let meta = check("spc", Method::Spc);
     // Its second stage started from the first stage's weights, which
     // spc_base.toml trained: same network, its steps behind them.
-    let base =
-        TrainConfig::from_toml(&std::fs::read_to_string(models().join("spc_base.toml")).unwrap())
-            .unwrap();
-    let meta = read_meta(&models().join("spc.safetensors")).unwrap();
+    let base = config("spc_base");
     assert_eq!(
         serde_json::to_value(base.architecture(Method::Spc).unwrap()).unwrap(),
         serde_json::to_value(&meta.arch).unwrap()

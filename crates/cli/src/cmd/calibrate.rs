@@ -107,7 +107,7 @@ pub fn run(a: &CalibrateArgs) -> Result<()> {
             anyhow::bail!("{flag} is empty: darktable finds an entry by maker and model");
         }
     }
-    let darktable_file = darktable_path(a);
+    let (darktable_flag, darktable_file) = darktable_target(a);
     // The file to merge into is read before any work, so a malformed one
     // stops the run at once.
     let darktable_existing = match &a.darktable_into {
@@ -121,14 +121,7 @@ pub fn run(a: &CalibrateArgs) -> Result<()> {
     };
     let mut outputs = vec![
         ("-o", a.output.as_path()),
-        (
-            if a.darktable_into.is_some() {
-                "--darktable-into"
-            } else {
-                "-o (its darktable entry)"
-            },
-            darktable_file.as_path(),
-        ),
+        (darktable_flag, darktable_file.as_path()),
     ];
     outputs.extend(report_files.iter().map(|p| ("--report", p.as_path())));
     crate::output::check_outputs(&outputs, &inputs)?;
@@ -150,7 +143,13 @@ pub fn run(a: &CalibrateArgs) -> Result<()> {
     bar.finish();
     // The darktable entry needs the camera's name and ISO, known now: made
     // (and refused) before anything is written.
-    let darktable_text = darktable_entry(a, &run, darktable_existing.as_deref(), &darktable_file)?;
+    let darktable_text = darktable_entry(
+        a,
+        &run,
+        darktable_existing.as_deref(),
+        darktable_flag,
+        &darktable_file,
+    )?;
     if let Some(dir) = &a.masters {
         write_masters(dir, &run, &inputs, &a.output)?;
     }
@@ -276,11 +275,16 @@ fn write_masters(
     Ok(())
 }
 
-/// Where the darktable entry goes: `--darktable-into`, else beside `-o`.
-fn darktable_path(a: &CalibrateArgs) -> PathBuf {
-    a.darktable_into
-        .clone()
-        .unwrap_or_else(|| a.output.with_extension("noiseprofiles.json"))
+/// Where the darktable entry goes, and the flag that named it in messages:
+/// `--darktable-into`, else beside `-o`.
+fn darktable_target(a: &CalibrateArgs) -> (&'static str, PathBuf) {
+    match &a.darktable_into {
+        Some(p) => ("--darktable-into", p.clone()),
+        None => (
+            "-o (its darktable entry)",
+            a.output.with_extension("noiseprofiles.json"),
+        ),
+    }
 }
 
 /// The text of the darktable file with the calibrated camera's entry
@@ -291,6 +295,7 @@ fn darktable_entry(
     a: &CalibrateArgs,
     run: &CalibrationRun,
     existing: Option<&str>,
+    flag: &str,
     path: &std::path::Path,
 ) -> Result<Option<(String, usize, String)>> {
     let m = &run.calibration.meta;
@@ -329,11 +334,6 @@ fn darktable_entry(
             m.k,
             pgrf_noise::darktable::VARIANCE_FACTOR
         ),
-    };
-    let flag = if a.darktable_into.is_some() {
-        "--darktable-into"
-    } else {
-        "darktable entry"
     };
     let (text, replaced) = export
         .merge_into(existing, path)
