@@ -307,6 +307,36 @@ fn a_profile_mix_trains_is_recorded_and_searches() {
         text.contains("noise: sony-a7s2 (75%) + nikon-d850 (25%) pgrf, ISO 800..3200"),
         "{text}"
     );
+    // Photos validate too, unprocessed as the record's configuration says;
+    // the broken one is a note, not a failure.
+    let photos = photo_folder(&d);
+    let r = pgrf(&[
+        "search",
+        "--model",
+        s(&out),
+        "--val",
+        s(&photos),
+        "--pairs",
+        "2",
+        "--patch",
+        "16",
+        "--step",
+        "0.5",
+        "--dry-run",
+    ]);
+    let (text, err) = (
+        String::from_utf8_lossy(&r.stdout),
+        String::from_utf8_lossy(&r.stderr),
+    );
+    assert!(r.status.success(), "{err}");
+    assert!(
+        text.contains("2 crops of 4 photos unprocessed into the camera's RAW space (2x downscale)"),
+        "{text}"
+    );
+    assert!(
+        err.contains("note: --val: ") && err.contains("broken.jpg"),
+        "{err}"
+    );
 }
 
 #[test]

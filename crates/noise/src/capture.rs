@@ -11,6 +11,7 @@
 use crate::error::{NoiseError, Result};
 use crate::pair::{ExposureSpec, PairSpec, RatioSpec};
 use crate::{CameraProfile, ModelKind};
+use ndarray::Array3;
 use pgrf_raw::{pack_normalized, unpack_normalized, RawFrame};
 
 /// What the camera records of a synthesised pair's noisy image: the pair is
@@ -64,5 +65,23 @@ impl DarkCapture {
         out.iso = Some(self.iso);
         out.exposure_s = Some(self.exposure_s);
         Ok(out)
+    }
+
+    /// The dark-level offset every frame of [`DarkCapture::take`] on
+    /// `clean` carries, packed like `clean` (`(4, H/2, W/2)`, R, G1, B, G2)
+    /// in `clean`'s DN: the profile's black-level error at this ISO,
+    /// rescaled from the profile's DN range to the frame's. It is what a
+    /// calibration of the simulated camera measures (bias frames' mean minus
+    /// the file's black level), so a calibrated pipeline subtracts it before
+    /// amplifying, as `pgrf enhance --calib` does with a real one.
+    pub fn dark_level_dn(&self, clean: &RawFrame) -> Result<Array3<f32>> {
+        let spec = PairSpec::new(self.profile.clone(), self.model);
+        let bias = self.profile.params_at_iso(self.iso)?.bias;
+        let dn = spec.dn_range();
+        let level: [f32; 4] = std::array::from_fn(|p| {
+            (bias[p] / dn * (clean.white as f64 - clean.black[p] as f64)) as f32
+        });
+        let (ph, pw) = (clean.height / 2, clean.width / 2);
+        Ok(Array3::from_shape_fn((4, ph, pw), |(p, _, _)| level[p]))
     }
 }

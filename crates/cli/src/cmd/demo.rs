@@ -21,6 +21,7 @@ use pgrf_nn::infer::{restore_frame, Restore, SamplerChoice, Tiling};
 use pgrf_noise::capture::DarkCapture;
 use pgrf_noise::{CameraProfile, ModelKind};
 use pgrf_raw::scene::{render_demo, SceneLevels};
+use pgrf_raw::unpack_normalized;
 use pgrf_raw::{
     decode_bytes, decode_file, pack_normalized, render_preview, write_dng, Cfa, DngOptions,
     LevelOverrides, Preview, PreviewOptions, RawFrame,
@@ -114,7 +115,11 @@ fn model(file: Option<&Path>, builtin: &str, method: &str, flag: &str) -> Result
 /// One capture's results, in table order: noisy input, SPC, PGRF.
 struct Capture {
     ratio: u32,
+    /// The simulated capture, as the camera wrote it.
     dark: RawFrame,
+    /// What the denoisers and the noisy score saw: the capture minus its
+    /// calibrated dark level (before the ratio), for the noisy panel.
+    calibrated: RawFrame,
     scores: [Scores; 3],
     restored: [RawFrame; 2],
 }
@@ -214,30 +219,35 @@ pub fn run(a: &DemoArgs) -> Result<()> {
     let mut captures = Vec::new();
     for (k, &ratio) in RATIOS.iter().enumerate() {
         bar.set_message(format!("x{ratio}: simulating the capture"));
-        let dark = DarkCapture {
+        let dark_model = DarkCapture {
             profile: profile.clone(),
             model: ModelKind::Pgrf,
             iso: ISO,
             exposure_s: CLEAN_EXPOSURE_S / ratio as f64,
             ratio: ratio as f32,
             seed: a.seed.wrapping_mul(1_000_003).wrapping_add(k as u64 + 1),
-        }
-        .take(&clean)?;
-        let input = network_input(&dark, ratio as f32, None)?;
+        };
+        let dark = dark_model.take(&clean)?;
+        // The simulated camera is calibrated: its black-level error at the
+        // ISO is known (bias frames), subtracted as `enhance --calib` does.
+        let dark_dn = dark_model.dark_level_dn(&clean)?;
+        let input = network_input(&dark, ratio as f32, Some(&dark_dn))?;
         let noisy = evaluate(input.view(), reference.view(), &protocol)?;
         bar.inc(1);
         let run = |r: &dyn Restore, name: &str| -> Result<(Scores, RawFrame)> {
             bar.set_message(format!("x{ratio}: {name}"));
-            let out = restore_frame(r, &dark, ratio as f32, None, &tiling, &NoProgress)?;
+            let out = restore_frame(r, &dark, ratio as f32, Some(&dark_dn), &tiling, &NoProgress)?;
             let s = evaluate(out.packed.output.view(), reference.view(), &protocol)?;
             bar.inc(1);
             Ok((s, out.frame))
         };
         let (spc_s, spc_f) = run(spc.as_ref(), "SPC")?;
         let (pgrf_s, pgrf_f) = run(pgrf.as_ref(), "PGRF")?;
+        let calibrated = unpack_normalized(input.mapv(|v| v / ratio as f32).view(), &dark)?;
         captures.push(Capture {
             ratio,
             dark,
+            calibrated,
             scores: [noisy, spc_s, pgrf_s],
             restored: [spc_f, pgrf_f],
         });
@@ -413,7 +423,7 @@ fn write_picture(path: &Path, clean: &RawFrame, captures: &[Capture], scene: Sce
             Some(s) => format!("x{} {name}: {:.2} dB, SSIM {:.3}", c.ratio, s.psnr, s.ssim),
             None => name.to_string(),
         };
-        let (nw, nc) = views(&c.dark, c.ratio as f32)?;
+        let (nw, nc) = views(&c.calibrated, c.ratio as f32)?;
         let (sw, sc) = views(&c.restored[0], 1.0)?;
         let (pw, pc) = views(&c.restored[1], 1.0)?;
         let panel = |caption: String, image: Preview| Panel { caption, image };

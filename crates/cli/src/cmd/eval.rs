@@ -50,7 +50,8 @@ images; no correction.\n\
   synthetic  --root FILE|FOLDER... of clean RAW files (or JPEG/PNG/TIFF photos: downscaled 2x and unprocessed \
 into the Sony A7S2's camera space); each is made dark at every --iso x --ratio condition (default ISO \
 800,1600,3200,6400 x ratio 50,100,200,300) with the --profile's noise (--noise pgrf|eld|pg) at that ISO: \
-reference / ratio -> noise model -> x ratio, clamped [0,1]; each file's own black/white levels; full images; no \
+reference / ratio -> noise model -> x ratio, minus the capture's dark-level offset (the profile's black-level \
+error at the ISO: the camera counts as calibrated, as with `pgrf enhance --calib`), clamped [0,1]; each file's own black/white levels; full images; no \
 correction (the exposure is known). Capture seed = mix64(mix64(mix64(SEED ^ fnv1a64(file name)) ^ ISO) ^ f32 bits \
 of the ratio) (SplitMix64 finaliser, 64-bit FNV-1a): the same command gives the same numbers, and adding files \
 leaves the others' noise as it was. Rows per ISO and ratio; the CSV has one line per file, condition and method.\n\
@@ -230,7 +231,7 @@ fn header(
         None => "white from each file".into(),
     };
     let input = if synthetic {
-        "capture = reference / ratio through the noise model, x ratio, clamped [0,1]"
+        "capture = reference / ratio through the noise model, x ratio, minus its dark-level offset (the profile's black-level error at the ISO, calibrated), clamped [0,1]"
     } else {
         "input x ratio clamped [0,1]"
     };

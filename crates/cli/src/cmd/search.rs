@@ -10,14 +10,14 @@ use clap::Args;
 use pgrf_calib::Calibration;
 use pgrf_eval::Protocol;
 use pgrf_nn::backend::DeviceKind;
-use pgrf_nn::data::source::{Folder, Source};
+use pgrf_nn::data::build::validation_source;
+use pgrf_nn::data::source::Source;
 use pgrf_nn::data::validation::ValSet;
 use pgrf_nn::flow::search::{self, SearchOptions};
 use pgrf_nn::weights::{self, Architecture};
 use pgrf_noise::mix::PairMix;
 use pgrf_noise::pair::RatioSpec;
 use pgrf_noise::ModelKind;
-use pgrf_raw::LevelOverrides;
 use pgrf_report::{write_search_plot, SearchCurve};
 use serde::Serialize;
 use std::path::PathBuf;
@@ -27,7 +27,8 @@ pub struct SearchArgs {
     /// Flow model weight file (from `pgrf train flow`); its t2 is rewritten.
     #[arg(long, short = 'm')]
     pub model: PathBuf,
-    /// Folder of clean RAW files to make validation pairs from.
+    /// Folder of clean RAW files, or of photos (unprocessed into the camera's
+    /// RAW space as the model's training run did it), to make validation pairs from.
     #[arg(long, conflicts_with = "procedural")]
     pub val: Option<PathBuf>,
     /// Or: this many procedural scenes as validation pairs.
@@ -153,16 +154,23 @@ pub fn run(a: &SearchArgs) -> Result<()> {
     }
     let (source, count, what) = match (&a.val, a.procedural) {
         (Some(dir), _) => {
-            let files = Folder::list(dir)?;
-            let f = Folder::new(files, LevelOverrides::default(), 1024)?;
-            f.check(a.patch)?;
-            let src = Source::Folder(f);
+            // Photos are unprocessed as the model's training run did it.
+            let config = (meta.training.as_ref())
+                .and_then(|t| t.config.clone())
+                .unwrap_or_default();
+            let (src, skipped) = validation_source(&config, dir, a.patch)
+                .with_context(|| format!("--val {}", dir.display()))?;
+            if !a.json {
+                for w in skipped {
+                    eprintln!("note: --val: {w}");
+                }
+            }
             let what = format!("{} crops of {}", a.pairs, src.describe());
             (src, a.pairs, what)
         }
         (None, Some(n)) => (Source::Procedural, n, format!("{n} procedural scenes")),
         (None, None) => {
-            bail!("give validation data: --val DIR (clean RAW files) or --procedural N")
+            bail!("give validation data: --val DIR (clean RAW files or photos) or --procedural N")
         }
     };
     if count == 0 {

@@ -14,8 +14,13 @@
 //!    with the camera profile's parameters at that ISO and the fixed ratio:
 //!    the reference, taken as the profile camera's normalised signal, is
 //!    divided by the ratio, put through the noise model and multiplied back;
-//! 3. the network input is that capture clamped to [0, 1] (the "noisy input"
-//!    column too), exactly what the file-pair protocols feed;
+//! 3. the network input is that capture minus its dark-level offset and
+//!    clamped to [0, 1] (the "noisy input" column too): the camera is taken
+//!    as calibrated, so the profile's black-level error at the ISO (which
+//!    the capture carries, ELD's per-ISO bias) is known and subtracted, as
+//!    `pgrf enhance --calib` subtracts a calibration's fixed pattern (bias
+//!    frames' mean minus the file's black level) from a real photo, and as
+//!    the VST+BM3D peer is given the true offset ([`Synthetic::calibrated_input`]);
 //! 4. PSNR/SSIM under ELD's measurement, by default without illuminance
 //!    correction (the exposure is known exactly), and the colour cast of
 //!    [`crate::cast`].
@@ -266,7 +271,8 @@ impl Synthetic {
 
     /// The network input for clean packed `clean` (file `name`, planes on
     /// sensor rows `plane_rows`) at condition number `k`: the amplified
-    /// capture clamped to [0, 1], and the seed it was drawn with.
+    /// capture, calibrated and clamped ([`Synthetic::calibrated_input`]),
+    /// and the seed it was drawn with.
     pub fn capture(
         &self,
         clean: ArrayView3<f32>,
@@ -275,7 +281,31 @@ impl Synthetic {
         k: usize,
     ) -> Result<(Array3<f32>, u64)> {
         let (pair, seed) = self.synthesize(clean, plane_rows, name, k)?;
-        Ok((pair.noisy.mapv(|v| v.clamp(0.0, 1.0)), seed))
+        Ok((self.calibrated_input(&pair), seed))
+    }
+
+    /// What a calibrated camera hands the denoiser: the amplified capture
+    /// minus its dark-level offset (the capture's per-plane bias in DN,
+    /// times the ratio, over the DN range: the `offset` of the noise
+    /// record), clamped to [0, 1]. A calibration (bias frames) measures that
+    /// offset; without it a network must guess the camera's black-level
+    /// error, which at x100-x200 shifts dark areas by several percent of
+    /// full scale and tints them.
+    pub fn calibrated_input(&self, pair: &pgrf_noise::pair::Pair) -> Array3<f32> {
+        let mut input = pair.noisy.clone();
+        let offsets = self.offsets(&pair.params, pair.ratio);
+        for (mut plane, off) in input.outer_iter_mut().zip(offsets) {
+            let off = off as f32;
+            plane.mapv_inplace(|v| (v - off).clamp(0.0, 1.0));
+        }
+        input
+    }
+
+    /// The dark-level offset of an amplified, normalised capture drawn with
+    /// `params` at `ratio`, per plane: ratio x bias (DN) / DN range.
+    fn offsets(&self, params: &pgrf_noise::CaptureParams, ratio: f32) -> [f64; 4] {
+        let scale = ratio as f64 / self.specs[0].dn_range();
+        params.bias.map(|b| b * scale)
     }
 
     /// The whole synthesised pair behind [`Synthetic::capture`], and its seed.
@@ -320,7 +350,7 @@ impl Synthetic {
             "dn_range": dn,
             "alpha": r * params.k / dn,
             "sigma": r * var_dn.sqrt() / dn,
-            "offset": params.bias.map(|b| r * b / dn),
+            "offset": self.offsets(params, ratio),
         })
     }
 
@@ -387,7 +417,7 @@ pub fn run(
         let c = synth.conditions[ci];
         let plane_rows = frame.cfa.offsets().map(|(r, _)| r);
         let (pair, seed) = synth.synthesize(clean.view(), plane_rows, &img.id, ci)?;
-        let input = pair.noisy.mapv(|v| v.clamp(0.0, 1.0));
+        let input = synth.calibrated_input(&pair);
         let synthesis = opts.dump.is_some().then(|| Synthesis {
             noise: synth.noise_record(&pair.params, c.ratio),
             capture: pair.noisy,
@@ -531,6 +561,34 @@ mod tests {
     }
 
     #[test]
+    fn the_calibrated_input_has_no_dark_level_offset() {
+        // A flat grey far from the clamps, ISO 1600 x100: the capture
+        // carries the A7S2's black-level error there (+2.43 DN, x100 over
+        // the 16,383 - 512 DN range: +0.0153); the calibrated input is the
+        // clean level on average. Noise sd ~0.045 over 16,384 samples: the
+        // mean's standard error is ~0.00035, the tolerance 0.002 (~6 SE).
+        let clean = Array3::from_elem((4, 64, 64), 0.3f32);
+        let conds = grid(&[1600], &[100.0]);
+        let s = Synthetic::new("sony-a7s2", ModelKind::Pgrf, conds, 3).unwrap();
+        let (pair, _) = s
+            .synthesize(clean.view(), [0, 0, 1, 1], "flat.dng", 0)
+            .unwrap();
+        let off = s.offsets(&pair.params, pair.ratio);
+        assert!(off.iter().all(|o| (o - 0.0153).abs() < 0.0003), "{off:?}");
+        let mean = |x: &Array3<f32>| x.iter().map(|&v| v as f64).sum::<f64>() / x.len() as f64;
+        let raw = mean(&pair.noisy) - 0.3;
+        let calibrated = mean(&s.calibrated_input(&pair)) - 0.3;
+        assert!(
+            (raw - off[0]).abs() < 0.002,
+            "raw capture {raw} vs offset {}",
+            off[0]
+        );
+        assert!(calibrated.abs() < 0.002, "calibrated input {calibrated}");
+        let record = s.noise_record(&pair.params, pair.ratio);
+        assert_eq!(record["offset"][2].as_f64().unwrap(), off[2]);
+    }
+
+    #[test]
     fn captures_repeat_exactly_and_differ_between_conditions() {
         let clean = Array3::from_shape_fn((4, 32, 48), |(p, y, x)| {
             0.05 + 0.1 * p as f32 + 0.01 * ((x + 2 * y) % 17) as f32
@@ -544,8 +602,7 @@ mod tests {
         assert_eq!(a, b);
         assert!(a.iter().all(|v| (0.0..=1.0).contains(v)));
         // Noisy, but about the right brightness: the mean within 10 % of the
-        // clean mean (the profile's black-level error and the clamp at 0
-        // lift it by ~6 % here).
+        // clean mean (the clamp at 0 lifts it a little).
         let mean = |x: &Array3<f32>| x.iter().map(|&v| v as f64).sum::<f64>() / x.len() as f64;
         let rel = mean(&a) / mean(&clean) - 1.0;
         assert!(a != clean && rel.abs() < 0.1, "{rel}");

@@ -150,6 +150,28 @@ fn open_files(
     }
 }
 
+/// The validation source of one file or folder, all of it: clean RAW
+/// files as they are, or photos unprocessed as `c` says (camera, downscale,
+/// tone, white-balance range) with no per-crop jitter; crops of `patch`.
+/// Also the files skipped, one line each. `pgrf search --val` uses it too,
+/// with the model's own recorded configuration, so a flow model's second
+/// time is searched on data like its validation set.
+pub fn validation_source(
+    c: &TrainConfig,
+    path: &Path,
+    patch: usize,
+) -> Result<(Source, Vec<String>)> {
+    let (photos, raws) = entry_files(path)?;
+    let is_photos = !photos.is_empty();
+    let files = if is_photos { photos } else { raws };
+    if files.is_empty() {
+        return Err(NnError::Config(format!("{}: no files", path.display())));
+    }
+    let mut warnings = Vec::new();
+    let v = open_files(c, is_photos, files, patch, false, 256, &mut warnings)?;
+    Ok((v, warnings))
+}
+
 fn combine(mut parts: Vec<(f64, Source)>) -> Source {
     if parts.len() == 1 {
         parts.pop().expect("one part").1
@@ -202,11 +224,7 @@ pub fn sources(c: &TrainConfig) -> Result<Sources> {
                 val.push((e.weight, Source::Procedural));
                 continue;
             };
-            let (photos, raws) = entry_files(path)?;
-            let is_photos = !photos.is_empty();
-            let files = if is_photos { photos } else { raws };
-            let mut w = Vec::new();
-            let v = open_files(c, is_photos, files, val_patch, false, 256, &mut w)?;
+            let (v, w) = validation_source(c, path, val_patch)?;
             warnings.extend(w.into_iter().map(|w| format!("validation: {w}")));
             val.push((e.weight, v));
         }
