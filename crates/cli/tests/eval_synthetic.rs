@@ -289,12 +289,15 @@ fn dumped_cases_come_back_as_an_outside_column() {
             .collect();
         let want = (ratio * -1.726297 / 15871.0) as f32;
         assert!(offset.iter().all(|o| (o - want).abs() < 1e-5), "{offset:?}");
-        for p in 0..4 {
-            let (i, c) = (input.index_axis(Axis(0), p), capture.index_axis(Axis(0), p));
+        for ((i, c), off) in input
+            .axis_iter(Axis(0))
+            .zip(capture.axis_iter(Axis(0)))
+            .zip(&offset)
+        {
             assert!(i
                 .iter()
                 .zip(&c)
-                .all(|(a, b)| *a == (b - offset[p]).clamp(0.0, 1.0)));
+                .all(|(a, b)| *a == (b - off).clamp(0.0, 1.0)));
         }
         assert!(capture.iter().any(|v| *v < 0.0));
         std::fs::copy(
