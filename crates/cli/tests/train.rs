@@ -274,16 +274,18 @@ fn a_profile_mix_trains_is_recorded_and_searches() {
         "1",
         "--val-pairs",
         "1",
+        "--calibrated-dark-level",
         "-o",
         s(&out),
     ]);
     let err = String::from_utf8_lossy(&r.stderr);
     assert!(r.status.success(), "{err}");
     assert!(
-        err.contains("noise pgrf from sony-a7s2 (75%) + nikon-d850 (25%)"),
+        err.contains("noise pgrf from sony-a7s2 (75%) + nikon-d850 (25%) (dark level calibrated)"),
         "{err}"
     );
     let meta = pgrf_nn::weights::read_meta(&out).unwrap();
+    assert!(meta.noise.calibrated_dark_level);
     assert_eq!(
         meta.noise.profile.as_deref(),
         Some("sony-a7s2@3,nikon-d850@1")

@@ -120,6 +120,12 @@ pub struct TrainConfig {
     pub seed: u64,
     /// Turn off flips and transposes.
     pub no_augment: bool,
+    /// Train on captures without the camera's dark-level offset (black-level
+    /// error, colour bias): for inputs calibrated as `pgrf enhance --calib`
+    /// and the synthetic protocol make them. Without it the network learns
+    /// to guess an offset it cannot see, and subtracts the average guess
+    /// from calibrated inputs too (a tint in dark areas).
+    pub calibrated_dark_level: bool,
     /// SID U-Net width; for the flow model the SR3 inner channels unless
     /// `inner_channels` is given.
     pub width: Option<usize>,
@@ -194,6 +200,7 @@ impl Default for TrainConfig {
             clip_grad: None,
             seed: 0,
             no_augment: false,
+            calibrated_dark_level: false,
             width: None,
             residual: false,
             init: None,

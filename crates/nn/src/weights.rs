@@ -123,6 +123,10 @@ pub struct NoiseSource {
     pub iso_range: Option<[u32; 2]>,
     /// Exposure-ratio range the pairs were drawn from.
     pub ratio: [f32; 2],
+    /// The captures carried no dark-level offset (`calibrated_dark_level`):
+    /// the network expects calibrated input. Absent (false) in older files.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub calibrated_dark_level: bool,
 }
 
 /// How training went, for people choosing between files.
@@ -513,6 +517,7 @@ mod tests {
             iso: None,
             iso_range: None,
             ratio: [100.0, 300.0],
+            calibrated_dark_level: false,
         }
     }
 

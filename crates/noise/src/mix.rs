@@ -157,6 +157,14 @@ impl PairMix {
         }
     }
 
+    /// Every camera's captures without their dark-level offset
+    /// ([`PairSpec::calibrated_dark_level`]).
+    pub fn set_calibrated_dark_level(&mut self, on: bool) {
+        for s in &mut self.specs {
+            s.calibrated_dark_level = on;
+        }
+    }
+
     /// "sony-a7s2" or "sony-a7s2 (75%) + nikon-d850 (25%)", for headers.
     pub fn describe(&self) -> String {
         if self.specs.len() == 1 {

@@ -98,6 +98,12 @@ pub struct PairSpec {
     pub ratio: RatioSpec,
     /// How the noisy capture's exposure time (dark current) is chosen.
     pub exposure: ExposureSpec,
+    /// The camera's dark-level offset (the profile's black-level error, or
+    /// ELD's drawn colour bias) is taken as calibrated and subtracted, so
+    /// the captures carry none: what a denoiser sees after `pgrf enhance
+    /// --calib` (or in the synthetic protocol). Per-pixel calibration maps
+    /// keep their own fixed pattern.
+    pub calibrated_dark_level: bool,
 }
 
 /// Global results of a calibration that accompany its per-pixel maps.
@@ -147,6 +153,7 @@ impl PairSpec {
             gain_range: None,
             ratio: RatioSpec::default(),
             exposure: ExposureSpec::default(),
+            calibrated_dark_level: false,
         }
     }
 
@@ -160,6 +167,9 @@ impl PairSpec {
                 self.profile.sample_params(seed, Some(range))
             }
         };
+        if self.calibrated_dark_level {
+            params.bias = [0.0; 4];
+        }
         let mut profile = std::borrow::Cow::Borrowed(&self.profile);
         if let Some(m) = self.measured {
             params.k = m.k;
@@ -321,6 +331,54 @@ mod tests {
         let s = 0.5 * 15871.0 / 100.0;
         let se = (1.53008 * s / n).sqrt() * 100.0 / 15871.0;
         assert!((mean - 0.5).abs() < 5.0 * se, "{mean}");
+    }
+
+    #[test]
+    fn calibrated_captures_carry_no_dark_level_offset() {
+        // ELD-sampled parameters (no ISO): each capture draws one of the
+        // A7S2's measured colour biases. Per plane over 16,384 samples of a
+        // flat 0.3 at x100, the mean moves by ratio x bias / 15871 with the
+        // offset and by nothing without it (noise SE ~4e-4 at the highest
+        // gain; tolerance 3e-3).
+        let mut spec = PairSpec::new(
+            CameraProfile::built_in("sony-a7s2").unwrap(),
+            ModelKind::Pgrf,
+        );
+        spec.ratio = RatioSpec::Fixed(100.0);
+        let flat = Array3::from_elem((4, 128, 128), 0.3f32);
+        let plane_means = |p: &Pair| -> Vec<f64> {
+            p.noisy
+                .outer_iter()
+                .map(|v| v.iter().map(|&x| x as f64).sum::<f64>() / v.len() as f64)
+                .collect()
+        };
+        let mut biased = 0;
+        for seed in 0..6 {
+            let raw = spec.synthesize(flat.view(), [0, 0, 1, 1], seed).unwrap();
+            let mut cal_spec = spec.clone();
+            cal_spec.calibrated_dark_level = true;
+            let cal = cal_spec
+                .synthesize(flat.view(), [0, 0, 1, 1], seed)
+                .unwrap();
+            assert_eq!(cal.params.bias, [0.0; 4]);
+            assert_eq!(cal.params.k, raw.params.k, "the same draw otherwise");
+            for (p, (mr, mc)) in plane_means(&raw).iter().zip(plane_means(&cal)).enumerate() {
+                let off = 100.0 * raw.params.bias[p] / 15871.0;
+                assert!(
+                    (mr - 0.3 - off).abs() < 3e-3,
+                    "seed {seed} plane {p}: {mr} vs {off}"
+                );
+                assert!(
+                    (mc - 0.3).abs() < 3e-3,
+                    "seed {seed} plane {p}: calibrated {mc}"
+                );
+            }
+            biased += raw.params.bias.iter().any(|b| b.abs() > 1.0) as usize;
+        }
+        assert!(
+            biased >= 2,
+            "only {biased} of 6 draws had an offset over 1 DN"
+        );
     }
 
     #[test]

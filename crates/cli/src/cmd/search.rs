@@ -140,6 +140,7 @@ pub fn run(a: &SearchArgs) -> Result<()> {
     };
     let mut mix = PairMix::build(&profile_name, model, iso, iso_range, ratio)
         .with_context(|| format!("--model {}: its noise record", a.model.display()))?;
+    mix.set_calibrated_dark_level(noise.calibrated_dark_level);
     if let Some(p) = &a.calib {
         let described = mix.describe();
         let Some(spec) = mix.single_mut() else {

@@ -95,6 +95,9 @@ pub struct Settings {
     /// Turn off flips and transposes.
     #[arg(long, num_args = 0..=1, default_missing_value = "true")]
     pub no_augment: Option<bool>,
+    /// Train on captures without the camera's dark-level offset (black-level error, colour bias): for input calibrated by `pgrf enhance --calib` (or the synthetic protocol); recorded in the weight file.
+    #[arg(long, num_args = 0..=1, default_missing_value = "true")]
+    pub calibrated_dark_level: Option<bool>,
     /// Width of the first level: SID U-Net channels [default: 32]; for the flow model the SR3 inner channels unless --inner-channels is given.
     #[arg(long)]
     pub width: Option<usize>,
@@ -258,6 +261,7 @@ pub fn run(a: &TrainArgs) -> Result<()> {
         RatioSpec::Uniform { lo, hi },
     )
     .context("--profile")?;
+    mix.set_calibrated_dark_level(s.calibrated_dark_level);
     let mut calibration = None;
     if let Some(path) = &s.calib {
         let described = mix.describe();
@@ -312,6 +316,7 @@ pub fn run(a: &TrainArgs) -> Result<()> {
             iso: s.iso,
             iso_range: iso_range.map(|(a, b)| [a, b]),
             ratio: [lo, hi],
+            calibrated_dark_level: s.calibrated_dark_level,
         },
         data: data.clone(),
         device: device.to_string(),
@@ -325,7 +330,7 @@ pub fn run(a: &TrainArgs) -> Result<()> {
     }
     if !a.quiet {
         eprintln!(
-            "training {} on {} ({}x{} crops, batch {batch}), noise {} from {}{}, {} steps, lr {:e} ({:?}), {} on {}",
+            "training {} on {} ({}x{} crops, batch {batch}), noise {} from {}{}{}, {} steps, lr {:e} ({:?}), {} on {}",
             arch.describe(),
             train_src.describe(),
             patch,
@@ -333,6 +338,7 @@ pub fn run(a: &TrainArgs) -> Result<()> {
             settings.noise.model,
             mix.describe(),
             settings.noise.calibration.as_ref().map(|c| format!(" + calibration {c}")).unwrap_or_default(),
+            if settings.noise.calibrated_dark_level { " (dark level calibrated)" } else { "" },
             steps,
             settings.lr,
             schedule,

@@ -66,6 +66,7 @@ pub fn tiny_model(dir: &Path, flow: bool, t2: Option<f32>, seed: u64) -> PathBuf
             iso: Some(1600),
             iso_range: None,
             ratio: [100.0, 300.0],
+            calibrated_dark_level: false,
         },
     );
     meta.t2 = t2;
