@@ -339,6 +339,25 @@ fn a_profile_mix_trains_is_recorded_and_searches() {
         err.contains("note: --val: ") && err.contains("broken.jpg"),
         "{err}"
     );
+    // Enhancing without --calib with a model of calibrated captures: a note.
+    let chart = d.join("chart.dng");
+    common::chart(&chart, 64, 64);
+    let r = pgrf(&[
+        "enhance",
+        s(&chart),
+        "--model",
+        s(&out),
+        "--ratio",
+        "100",
+        "-o",
+        s(&d.join("e.dng")),
+    ]);
+    let err = String::from_utf8_lossy(&r.stderr);
+    assert!(r.status.success(), "{err}");
+    assert!(
+        err.contains("learned calibrated captures (dark level subtracted); without --calib"),
+        "{err}"
+    );
 }
 
 #[test]

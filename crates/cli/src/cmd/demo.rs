@@ -332,7 +332,8 @@ fn print_report(
     };
     out(&format!(
         "pgrf demo: {what}; dark captures x{} and x{} simulated with the Sony A7S2's noise \
-(pgrf model, built-in profile) at ISO {ISO}, seed {}",
+(pgrf model, built-in profile) at ISO {ISO}, seed {}; the camera counts as calibrated: its black-level \
+error at the ISO is subtracted before the denoisers and the noisy score, as `pgrf enhance --calib` does",
         RATIOS[0], RATIOS[1], a.seed
     ));
     let model_line = |name: &str, r: &dyn Restore, file: &Option<PathBuf>| {

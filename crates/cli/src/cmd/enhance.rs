@@ -158,6 +158,13 @@ pub fn run(a: &EnhanceArgs) -> Result<()> {
                     pgrf_nn::infer::restorer::UNSEARCHED_T2
                 );
             }
+            if restorer.meta().noise.calibrated_dark_level && a.calib.is_none() {
+                eprintln!(
+                    "note: {} learned calibrated captures (dark level subtracted); without --calib \
+the file's black level is taken as exact, and an error in it tints dark areas",
+                    a.model.display()
+                );
+            }
         }
     };
     let mut failed: Vec<(PathBuf, String)> = Vec::new();
