@@ -35,6 +35,7 @@ fn check(name: &str, method: Method) -> WeightMeta {
     assert_eq!(noise.model, cfg.noise);
     assert_eq!(noise.iso, cfg.iso);
     assert_eq!(noise.ratio, [cfg.ratio_min, cfg.ratio_max]);
+    assert_eq!(noise.calibrated_dark_level, cfg.calibrated_dark_level);
     let t = meta
         .training
         .as_ref()
@@ -47,30 +48,55 @@ fn check(name: &str, method: Method) -> WeightMeta {
     meta
 }
 
+/// A fine-tuned file's earlier stages, `earlier` (config names, oldest
+/// first): each builds the shipped network, the last one's output is the
+/// file the record says the run started from (also the `init` the shipped
+/// config names), and their steps sum to the steps the record carries.
+/// Returns the seconds behind the starting point.
+fn check_stages(name: &str, meta: &WeightMeta, earlier: &[&str], method: Method) -> f64 {
+    let from = meta
+        .training
+        .as_ref()
+        .and_then(|t| t.started_from.as_ref())
+        .expect("a fine-tuned file");
+    let mut steps = 0;
+    for stage in earlier {
+        let cfg = config(stage);
+        assert_eq!(
+            serde_json::to_value(cfg.architecture(method).unwrap()).unwrap(),
+            serde_json::to_value(&meta.arch).unwrap(),
+            "{stage}: architecture"
+        );
+        steps += cfg.steps;
+    }
+    let init = config(name)
+        .init
+        .expect("a fine-tuning config names its init");
+    assert_eq!(
+        init.file_name().and_then(|n| n.to_str()),
+        Some(from.file.as_str())
+    );
+    assert_eq!(from.steps, steps, "{name}: steps before this stage");
+    from.seconds
+}
+
 #[test]
 fn spc_config_describes_the_shipped_denoiser() {
     let meta = check("spc", Method::Spc);
-    // Its second stage started from the first stage's weights, which
-    // spc_base.toml trained: same network, its steps behind them.
-    let base = config("spc_base");
-    assert_eq!(
-        serde_json::to_value(base.architecture(Method::Spc).unwrap()).unwrap(),
-        serde_json::to_value(&meta.arch).unwrap()
-    );
-    let from = meta
-        .training
-        .and_then(|t| t.started_from)
-        .expect("a fine-tuned file");
-    assert_eq!(
-        (from.file.as_str(), from.steps),
-        ("spc.safetensors", base.steps)
-    );
-    assert!(from.seconds > 3600.0, "{}", from.seconds);
+    // Its third stage started from the second stage's output, which started
+    // from the first's: 20,000 + 9,000 steps, 6,942 + 5,242 s.
+    let seconds = check_stages("spc", &meta, &["spc_base", "spc_stage2"], Method::Spc);
+    assert!((seconds - 12_184.0).abs() < 1.0, "{seconds}");
+    assert!(meta.noise.calibrated_dark_level);
 }
 
 #[test]
 fn pgrf_config_describes_the_shipped_flow_model() {
-    check("pgrf", Method::Pgrf);
+    let meta = check("pgrf", Method::Pgrf);
+    let seconds = check_stages("pgrf", &meta, &["pgrf_base"], Method::Pgrf);
+    assert!(seconds > 3600.0, "{seconds}");
+    assert!(meta.noise.calibrated_dark_level);
+    assert!(meta.t2.is_some(), "searched");
 }
 
 /// The check can fail: a config with another width is not the shipped file.
