@@ -75,9 +75,8 @@ impl DarkCapture {
     /// the file's black level), so a calibrated pipeline subtracts it before
     /// amplifying, as `pgrf enhance --calib` does with a real one.
     pub fn dark_level_dn(&self, clean: &RawFrame) -> Result<Array3<f32>> {
-        let spec = PairSpec::new(self.profile.clone(), self.model);
         let bias = self.profile.params_at_iso(self.iso)?.bias;
-        let dn = spec.dn_range();
+        let dn = self.profile.dn_range;
         let level: [f32; 4] = std::array::from_fn(|p| {
             (bias[p] / dn * (clean.white as f64 - clean.black[p] as f64)) as f32
         });
