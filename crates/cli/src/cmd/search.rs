@@ -159,8 +159,7 @@ pub fn run(a: &SearchArgs) -> Result<()> {
             let config = (meta.training.as_ref())
                 .and_then(|t| t.config.clone())
                 .unwrap_or_default();
-            let (src, skipped) = validation_source(&config, dir, a.patch)
-                .with_context(|| format!("--val {}", dir.display()))?;
+            let (src, skipped) = validation_source(&config, "--val", dir, a.patch)?;
             if !a.json {
                 for w in skipped {
                     eprintln!("note: --val: {w}");

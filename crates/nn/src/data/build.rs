@@ -92,25 +92,31 @@ pub fn photo_camera(c: &TrainConfig) -> Result<CameraSpace> {
     }
 }
 
-/// The files of an entry: the file itself, or the folder's files sorted by
-/// name, split into (photos, RAWs).
-fn entry_files(path: &Path) -> Result<(Vec<PathBuf>, Vec<PathBuf>)> {
+/// The files of an entry given with `flag` (named in the messages): the
+/// file itself, or the folder's files sorted by name; whether they are
+/// photos, and the files (at least one, all of one kind).
+fn entry_files(flag: &str, path: &Path) -> Result<(bool, Vec<PathBuf>)> {
     let files = if path.is_file() {
         vec![path.to_path_buf()]
     } else {
         pgrf_raw::files::list_files(path)
-            .map_err(|e| NnError::Config(format!("--data {}: {e}", path.display())))?
+            .map_err(|e| NnError::Config(format!("{flag} {}: {e}", path.display())))?
     };
     let (photos, raws): (Vec<PathBuf>, Vec<PathBuf>) = files.into_iter().partition(|f| is_photo(f));
-    if !photos.is_empty() && !raws.is_empty() {
-        return Err(NnError::Config(format!(
-            "--data {}: holds both photos ({}) and RAW files ({}); give them as two entries",
+    match (photos.is_empty(), raws.is_empty()) {
+        (false, false) => Err(NnError::Config(format!(
+            "{flag} {}: holds both photos ({}) and RAW files ({}); give them as two entries",
             path.display(),
             photos.len(),
             raws.len()
-        )));
+        ))),
+        (true, true) => Err(NnError::Config(format!(
+            "{flag} {}: no files",
+            path.display()
+        ))),
+        (false, true) => Ok((true, photos)),
+        (true, false) => Ok((false, raws)),
     }
-    Ok((photos, raws))
 }
 
 /// The last tenth of `files` (at least one) when `hold` and there are two or
@@ -155,20 +161,18 @@ fn open_files(
 /// tone, white-balance range) with no per-crop jitter; crops of `patch`.
 /// Also the files skipped, one line each. `pgrf search --val` uses it too,
 /// with the model's own recorded configuration, so a flow model's second
-/// time is searched on data like its validation set.
+/// time is searched on data like its validation set. Errors name `flag`
+/// and `path`.
 pub fn validation_source(
     c: &TrainConfig,
+    flag: &str,
     path: &Path,
     patch: usize,
 ) -> Result<(Source, Vec<String>)> {
-    let (photos, raws) = entry_files(path)?;
-    let is_photos = !photos.is_empty();
-    let files = if is_photos { photos } else { raws };
-    if files.is_empty() {
-        return Err(NnError::Config(format!("{}: no files", path.display())));
-    }
+    let (is_photos, files) = entry_files(flag, path)?;
     let mut warnings = Vec::new();
-    let v = open_files(c, is_photos, files, patch, false, 256, &mut warnings)?;
+    let v = open_files(c, is_photos, files, patch, false, 256, &mut warnings)
+        .map_err(|e| NnError::Config(format!("{flag} {}: {e}", path.display())))?;
     Ok((v, warnings))
 }
 
@@ -196,15 +200,7 @@ pub fn sources(c: &TrainConfig) -> Result<Sources> {
             val.push((e.weight, Source::Procedural));
             continue;
         };
-        let (photos, raws) = entry_files(path)?;
-        let is_photos = !photos.is_empty();
-        let mut files = if is_photos { photos } else { raws };
-        if files.is_empty() {
-            return Err(NnError::Config(format!(
-                "--data {}: no files",
-                path.display()
-            )));
-        }
+        let (is_photos, mut files) = entry_files("--data", path)?;
         let held = hold_out(&mut files, val_entries.is_none());
         let val_files = held.unwrap_or_else(|| files.clone());
         train.push((
@@ -224,7 +220,7 @@ pub fn sources(c: &TrainConfig) -> Result<Sources> {
                 val.push((e.weight, Source::Procedural));
                 continue;
             };
-            let (v, w) = validation_source(c, path, val_patch)?;
+            let (v, w) = validation_source(c, "--val-data", path, val_patch)?;
             warnings.extend(w.into_iter().map(|w| format!("validation: {w}")));
             val.push((e.weight, v));
         }
@@ -277,7 +273,7 @@ mod tests {
         std::fs::create_dir_all(&dir).unwrap();
         std::fs::write(dir.join("a.jpg"), b"x").unwrap();
         std::fs::write(dir.join("b.dng"), b"x").unwrap();
-        let e = entry_files(&dir).unwrap_err().to_string();
+        let e = entry_files("--data", &dir).unwrap_err().to_string();
         assert!(e.contains("both photos (1) and RAW files (1)"), "{e}");
         let _ = std::fs::remove_dir_all(&dir);
     }
