@@ -275,6 +275,8 @@ fn a_profile_mix_trains_is_recorded_and_searches() {
         "--val-pairs",
         "1",
         "--calibrated-dark-level",
+        "--time-max",
+        "0.5",
         "-o",
         s(&out),
     ]);
@@ -284,8 +286,11 @@ fn a_profile_mix_trains_is_recorded_and_searches() {
         err.contains("noise pgrf from sony-a7s2 (75%) + nikon-d850 (25%) (dark level calibrated)"),
         "{err}"
     );
+    assert!(err.contains("(Eld), times t ~ U(0, 0.5),"), "{err}");
     let meta = pgrf_nn::weights::read_meta(&out).unwrap();
     assert!(meta.noise.calibrated_dark_level);
+    let t = meta.training.as_ref().unwrap();
+    assert_eq!(t.config.as_ref().unwrap().time_max, 0.5);
     assert_eq!(
         meta.noise.profile.as_deref(),
         Some("sony-a7s2@3,nikon-d850@1")
@@ -472,6 +477,22 @@ fn bad_settings_are_one_line_errors_and_write_nothing() {
         (
             vec!["train", "spc", "--photo-wb-spread", "0.5", "-o", s(&out)],
             "--photo-wb-spread must be between 1",
+        ),
+        (
+            vec!["train", "flow", "--time-max", "0", "-o", s(&out)],
+            "--time-max must be in (0, 1]",
+        ),
+        (
+            vec!["train", "flow", "--time-max", "1.5", "-o", s(&out)],
+            "--time-max must be in (0, 1]",
+        ),
+        (
+            vec!["train", "flow", "--time-max", "NaN", "-o", s(&out)],
+            "--time-max must be in (0, 1]",
+        ),
+        (
+            vec!["train", "spc", "--time-max", "0.5", "-o", s(&out)],
+            "the SPC denoiser has none",
         ),
         (
             vec![

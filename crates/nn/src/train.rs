@@ -58,6 +58,9 @@ pub struct TrainSettings {
     pub val_every: u64,
     /// t2 of the two-stage sampler used for validating the flow model.
     pub val_t2: f32,
+    /// Flow model: training times t ~ U(0, time_max), in (0, 1] (1:
+    /// Algorithm 1's U(0, 1)); the denoiser ignores it.
+    pub time_max: f32,
     /// Write a checkpoint every this many steps (0: only at the end).
     pub checkpoint_every: u64,
     /// The checkpoint file, written and (with `resume`) read.
@@ -295,6 +298,7 @@ pub(crate) fn train<B: PgrfAutodiff>(
         seed: s.seed,
         augment: s.augment,
         extras,
+        t_max: s.time_max,
     };
     let mut loader = Loader::start(source, mix, sample, s.batch, start, s.workers, 2);
     let shape = [s.batch, 4, s.patch, s.patch];

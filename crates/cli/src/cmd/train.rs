@@ -137,6 +137,9 @@ pub struct Settings {
     /// t2 of the two-stage sampler when validating the flow model [default: 0.5].
     #[arg(long)]
     pub val_t2: Option<f32>,
+    /// Flow model: draw the training time t from U(0, TIME_MAX) instead of U(0, 1) (Algorithm 1), in (0, 1]: spend the training on the times the two-stage sampler uses (t = 0 and t2), e.g. 0.5; recorded in the weight file [default: 1].
+    #[arg(long)]
+    pub time_max: Option<f32>,
     /// Checkpoint every N steps [default: 1000].
     #[arg(long)]
     pub checkpoint_every: Option<u64>,
@@ -192,6 +195,9 @@ fn merged(a: &TrainArgs) -> Result<TrainConfig> {
     };
     let c = file.overlay(&a.settings)?;
     c.validate()?;
+    if a.method == Method::Spc && c.time_max != 1.0 {
+        bail!("--time-max is the flow model's training time range; the SPC denoiser has none");
+    }
     Ok(c)
 }
 
@@ -302,6 +308,7 @@ pub fn run(a: &TrainArgs) -> Result<()> {
         workers: s.workers,
         val_every: s.val_every,
         val_t2: s.val_t2,
+        time_max: s.time_max,
         checkpoint_every: s.checkpoint_every,
         out: out.clone(),
         checkpoint: checkpoint_path,
@@ -330,7 +337,7 @@ pub fn run(a: &TrainArgs) -> Result<()> {
     }
     if !a.quiet {
         eprintln!(
-            "training {} on {} ({}x{} crops, batch {batch}), noise {} from {}{}{}, {} steps, lr {:e} ({:?}), {} on {}",
+            "training {} on {} ({}x{} crops, batch {batch}), noise {} from {}{}{}, {} steps, lr {:e} ({:?}){}, {} on {}",
             arch.describe(),
             train_src.describe(),
             patch,
@@ -342,6 +349,7 @@ pub fn run(a: &TrainArgs) -> Result<()> {
             steps,
             settings.lr,
             schedule,
+            if s.time_max < 1.0 { format!(", times t ~ U(0, {})", s.time_max) } else { String::new() },
             device,
             pgrf_nn::backend::describe(device),
         );

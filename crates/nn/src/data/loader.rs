@@ -40,7 +40,7 @@ pub(crate) struct Batch {
     pub(crate) clean: Vec<f32>,
     /// Flow only: X0 (same shape) and t (one per item).
     pub(crate) x0: Vec<f32>,
-    /// Flow only: t ~ U(0, 1), one per item.
+    /// Flow only: t ~ U(0, t_max), one per item.
     pub(crate) t: Vec<f32>,
     /// Exposure ratio of each item.
     pub(crate) ratios: Vec<f32>,
@@ -57,6 +57,9 @@ pub(crate) struct SampleSpec {
     pub(crate) augment: bool,
     /// What else each item carries.
     pub(crate) extras: Extras,
+    /// Flow only: the training times are drawn from U(0, t_max), t_max in
+    /// (0, 1] (1: Algorithm 1's U(0, 1)).
+    pub(crate) t_max: f32,
 }
 
 const SAMPLE_DOMAIN: u64 = 0x7261_696e; // "rain"
@@ -130,7 +133,7 @@ pub(crate) fn make_sample(
     let clean: Vec<f32> = pair.clean.iter().copied().collect();
     let (x0, t) = match s.extras {
         Extras::None => (Vec::new(), 0.0),
-        Extras::Flow => crate::flow::draw::training_start_and_time(&mut rng, noisy.len()),
+        Extras::Flow => crate::flow::draw::training_start_and_time(&mut rng, noisy.len(), s.t_max),
     };
     Ok(Sample {
         noisy,
@@ -247,6 +250,7 @@ pub fn loader_rate(
         seed: 0,
         augment: true,
         extras: Extras::None,
+        t_max: 1.0,
     };
     let mut loader = Loader::start(source, mix, sample, batch, 0, workers, 2);
     for _ in 0..workers.max(1) {
@@ -291,6 +295,7 @@ mod tests {
             seed: 3,
             augment: true,
             extras: Extras::Flow,
+            t_max: 1.0,
         };
         let src = Arc::new(Source::Procedural);
         let sp = Arc::new(PairMix::from(spec()));
@@ -331,6 +336,7 @@ mod tests {
             seed: 9,
             augment: false,
             extras: Extras::None,
+            t_max: 1.0,
         };
         let b = make_batch(&Source::Procedural, &spec.into(), &sample, 2, 0).unwrap();
         let (mut sn, mut sc, mut k) = (0.0f64, 0.0f64, 0usize);
@@ -386,6 +392,7 @@ mod tests {
             seed: 4,
             augment: true,
             extras: Extras::None,
+            t_max: 1.0,
         };
         let sp = Arc::new(PairMix::from(spec()));
         let mut one = Loader::start(mix(open()), sp.clone(), sample.clone(), 4, 0, 1, 1);
