@@ -291,14 +291,13 @@ pub(crate) fn train<B: PgrfAutodiff>(
 
     let extras = match s.arch {
         Architecture::SidUnet(_) => Extras::None,
-        Architecture::Sr3(_) => Extras::Flow,
+        Architecture::Sr3(_) => Extras::Flow { t_max: s.time_max },
     };
     let sample = SampleSpec {
         patch: s.patch,
         seed: s.seed,
         augment: s.augment,
         extras,
-        t_max: s.time_max,
     };
     let mut loader = Loader::start(source, mix, sample, s.batch, start, s.workers, 2);
     let shape = [s.batch, 4, s.patch, s.patch];

@@ -23,12 +23,16 @@ use std::sync::Arc;
 use std::thread::JoinHandle;
 
 /// What to put in a batch besides (noisy, clean).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub(crate) enum Extras {
     /// Nothing else: the denoiser's batches.
     None,
-    /// X0 ~ N(0, I) and t ~ U(0, 1) per item, for the rectified flow.
-    Flow,
+    /// X0 ~ N(0, I) and t ~ U(0, t_max) per item, for the rectified flow;
+    /// `t_max` in (0, 1] (1: Algorithm 1's U(0, 1)).
+    Flow {
+        /// Upper end of the training times (`pgrf train --time-max`).
+        t_max: f32,
+    },
 }
 
 /// One batch, NCHW f32 (`(n, 4, P, P)` flattened), ready to become tensors.
@@ -57,9 +61,6 @@ pub(crate) struct SampleSpec {
     pub(crate) augment: bool,
     /// What else each item carries.
     pub(crate) extras: Extras,
-    /// Flow only: the training times are drawn from U(0, t_max), t_max in
-    /// (0, 1] (1: Algorithm 1's U(0, 1)).
-    pub(crate) t_max: f32,
 }
 
 const SAMPLE_DOMAIN: u64 = 0x7261_696e; // "rain"
@@ -133,7 +134,9 @@ pub(crate) fn make_sample(
     let clean: Vec<f32> = pair.clean.iter().copied().collect();
     let (x0, t) = match s.extras {
         Extras::None => (Vec::new(), 0.0),
-        Extras::Flow => crate::flow::draw::training_start_and_time(&mut rng, noisy.len(), s.t_max),
+        Extras::Flow { t_max } => {
+            crate::flow::draw::training_start_and_time(&mut rng, noisy.len(), t_max)
+        }
     };
     Ok(Sample {
         noisy,
@@ -164,7 +167,7 @@ pub(crate) fn make_batch(
         batch.noisy.extend(item.noisy);
         batch.clean.extend(item.clean);
         batch.x0.extend(item.x0);
-        if s.extras == Extras::Flow {
+        if matches!(s.extras, Extras::Flow { .. }) {
             batch.t.push(item.t);
         }
         batch.ratios.push(item.ratio);
@@ -250,7 +253,6 @@ pub fn loader_rate(
         seed: 0,
         augment: true,
         extras: Extras::None,
-        t_max: 1.0,
     };
     let mut loader = Loader::start(source, mix, sample, batch, 0, workers, 2);
     for _ in 0..workers.max(1) {
@@ -294,8 +296,7 @@ mod tests {
             patch: 32,
             seed: 3,
             augment: true,
-            extras: Extras::Flow,
-            t_max: 1.0,
+            extras: Extras::Flow { t_max: 1.0 },
         };
         let src = Arc::new(Source::Procedural);
         let sp = Arc::new(PairMix::from(spec()));
@@ -336,7 +337,6 @@ mod tests {
             seed: 9,
             augment: false,
             extras: Extras::None,
-            t_max: 1.0,
         };
         let b = make_batch(&Source::Procedural, &spec.into(), &sample, 2, 0).unwrap();
         let (mut sn, mut sc, mut k) = (0.0f64, 0.0f64, 0usize);
@@ -392,7 +392,6 @@ mod tests {
             seed: 4,
             augment: true,
             extras: Extras::None,
-            t_max: 1.0,
         };
         let sp = Arc::new(PairMix::from(spec()));
         let mut one = Loader::start(mix(open()), sp.clone(), sample.clone(), 4, 0, 1, 1);

@@ -51,8 +51,7 @@ impl ValSet {
             patch,
             seed: mix64(seed ^ VAL_DOMAIN),
             augment: false,
-            extras: Extras::Flow,
-            t_max: 1.0,
+            extras: Extras::Flow { t_max: 1.0 },
         };
         let pairs = (0..count as u64)
             .map(|i| {
@@ -115,7 +114,6 @@ mod tests {
             seed: 1,
             augment: false,
             extras: Extras::None,
-            t_max: 1.0,
         };
         let t = make_sample(&Source::Procedural, &spec, &train, 0).unwrap();
         assert_ne!(t.clean, a.pairs[0].clean);
