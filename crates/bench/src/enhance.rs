@@ -31,7 +31,8 @@ use pgrf_nn::infer::memory::{attention_tokens, auto_tile, fixed_bytes, tile_byte
 use pgrf_nn::infer::restorer::UNSEARCHED_T2;
 use pgrf_nn::infer::DEFAULT_OVERLAP;
 use pgrf_nn::infer::{restore_image, ImageOptions, Restore, Restorer, SamplerChoice};
-use pgrf_nn::weights::{Architecture, NoiseSource, WeightMeta};
+use pgrf_nn::weights::{NoiseSource, WeightMeta};
+use pgrf_nn::Architecture;
 use pgrf_nn::{SidUnetConfig, Sr3Config};
 use pgrf_raw::ndarray::Array3;
 use rayon::prelude::*;
@@ -236,7 +237,7 @@ fn build<B: pgrf_nn::ops::PgrfOps>(a: &EnhanceArgs, device: B::Device) -> Result
     };
     let (net, meta, weights) = match &a.model {
         Some(path) => {
-            let (net, meta) = pgrf_nn::weights::load::<B>(path, &device)
+            let (net, meta) = pgrf_nn::model::load::<B>(path, &device)
                 .with_context(|| format!("--model {}", path.display()))?;
             (net, meta, path.display().to_string())
         }

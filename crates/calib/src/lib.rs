@@ -10,9 +10,11 @@ mod calibration;
 mod error;
 pub mod estimate;
 pub mod masters;
+pub mod mix;
 mod ppcc;
 pub mod stack;
 mod stats;
+pub mod synth;
 
 pub use calibrate::{calibrate, CalibrateInput, CalibrationRun};
 pub use calibration::{CalibMaps, CalibMeta, Calibration, GainMethod};

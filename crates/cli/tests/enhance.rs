@@ -474,7 +474,7 @@ fn search_writes_the_best_t2_and_agrees_with_the_sampler() {
         hi: 300.0,
     };
     let val = ValSet::build(&Source::Procedural, &spec.into(), 32, 2, 0).unwrap();
-    let (net, meta) = pgrf_nn::weights::load::<Cpu>(&m, &Default::default()).unwrap();
+    let (net, meta) = pgrf_nn::model::load::<Cpu>(&m, &Default::default()).unwrap();
     let r = Restorer::new(net, meta, SamplerChoice::default(), 0.5, Default::default()).unwrap();
     let mut mean = 0.0;
     for p in &val.pairs {

@@ -8,12 +8,9 @@
 
 use crate::error::{NnError, Result};
 use crate::schedule::Schedule;
-use crate::sr3::Sr3Config;
-use crate::unet::SidUnetConfig;
-use crate::weights::Architecture;
 use pgrf_noise::ModelKind;
 use serde::{Deserialize, Serialize};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 /// What `pgrf train` trains: the paper's two methods.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -57,125 +54,156 @@ impl std::fmt::Display for Method {
     }
 }
 
-/// Every training setting. `None` means "derived": from the network
-/// configuration's own default (`width`, SR3 sizes), from another setting
-/// (`val_patch` from `patch`, `checkpoint` and `log` from `output`), or
-/// not used (`clip_grad`, `iso`, `calib`).
+/// Every training setting, the one type behind the `--config` TOML file,
+/// `pgrf train`'s flags (with the `clap` feature: each field's doc comment
+/// is its flag's help, and [`crate::flags::TrainFlags`] overlays the flags a
+/// user gave), the record in the weight file and the checkpoint's run.
+/// `None` means "derived": from the network configuration's own default
+/// (`width`, SR3 sizes), from another setting (`val_patch` from `patch`,
+/// `checkpoint` and `log` from `output`), or not used (`clip_grad`, `iso`,
+/// `calib`). Keys are the flags with underscores.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "clap", derive(clap::Args))]
 #[serde(default, deny_unknown_fields)]
 pub struct TrainConfig {
-    /// Clean training images: comma-separated entries `SOURCE[@WEIGHT]`,
-    /// each a folder (or file) of clean RAWs, a folder of photos (JPEG, PNG,
-    /// TIFF), or "procedural"; crops are drawn from the entries in
-    /// proportion to their weights (default 1 each). See [`crate::data::build`].
+    /// Clean training images, comma-separated entries `SOURCE[@WEIGHT]`: a folder (or file) of clean RAWs, a folder of photos (JPEG/PNG/TIFF, unprocessed into the camera's RAW space), or "procedural" (dead-leaves scenes); crops are drawn in proportion to the weights (default 1 each), e.g. `photos/@3,procedural@1` [default: procedural].
+    #[cfg_attr(feature = "clap", arg(long, default_value_t = d().data, hide_default_value = true))]
     pub data: String,
-    /// Validation images (default: 10% of `data`'s files held out).
+    /// Validation images, entries as --data (default: 10% of each folder's files held out; procedural entries validate on procedural scenes).
+    #[cfg_attr(feature = "clap", arg(long))]
     pub val_data: Option<String>,
-    /// Camera noise profile, built-in name or JSON path, or a weighted mix
-    /// `NAME[@WEIGHT],...` (see `pgrf_noise::mix`).
+    /// Camera noise profile (built-in name, darktable:"MAKER MODEL", dng:FILE.dng or JSON path), or a mix `NAME[@WEIGHT],...` where each crop draws one camera's noise, e.g. sony-a7s2@3,nikon-d850@1; --iso/--iso-range are the first profile's, and become a gain range the others share [default: sony-a7s2].
+    #[cfg_attr(feature = "clap", arg(long, default_value_t = d().profile, hide_default_value = true))]
     pub profile: String,
-    /// Per-pixel calibration file for the pgrf noise model.
+    /// Per-pixel calibration file (from `pgrf calibrate`) for the pgrf noise model.
+    #[cfg_attr(feature = "clap", arg(long))]
     pub calib: Option<PathBuf>,
-    /// Noise model of the synthetic pairs.
+    /// Noise model of the synthetic pairs: pg, eld or pgrf [default: pgrf].
+    #[cfg_attr(feature = "clap", arg(long, default_value_t = d().noise, hide_default_value = true))]
     pub noise: ModelKind,
-    /// Fixed ISO (None: parameters drawn from the profile's distribution).
+    /// Fixed ISO (default: parameters drawn from the profile's ELD distribution).
+    #[cfg_attr(feature = "clap", arg(long))]
     pub iso: Option<u32>,
-    /// Without a fixed ISO: draw the gain between these two ISOs only
-    /// (None: the profile's whole range, ELD's distribution).
+    /// Draw the gain between two ISOs only, e.g. 800,6400 (default: the profile's whole range).
+    #[cfg_attr(feature = "clap", arg(long, value_delimiter = ','))]
     pub iso_range: Option<Vec<u32>>,
-    /// The camera photos are unprocessed into: any RAW file of it (its
-    /// colour matrix, white balance, CFA and levels). None: the built-in
-    /// A7S2's with the sony-a7s2 profile; other profiles need one.
+    /// The camera photos are unprocessed into: any RAW file of it (colour matrix, white balance, CFA, levels) [default: the built-in A7S2's with the sony-a7s2 profile].
+    #[cfg_attr(feature = "clap", arg(long))]
     pub camera_like: Option<PathBuf>,
-    /// Photos: downscale factor per side before cropping (area filter).
+    /// Photos: downscale factor per side before cropping (area filter; removes JPEG and demosaicing artefacts) [default: 2].
+    #[cfg_attr(feature = "clap", arg(long, default_value_t = d().photo_downscale, hide_default_value = true))]
     pub photo_downscale: usize,
-    /// Photos: invert a global S-shaped tone curve before the sRGB transfer.
+    /// Photos: invert a global S-shaped tone curve (Brooks et al.'s smoothstep) before the sRGB transfer.
+    #[cfg_attr(feature = "clap", arg(long, action = clap::ArgAction::Set, num_args = 0..=1, default_missing_value = "true", default_value_t = false, hide_default_value = true))]
     pub photo_inverse_tone: bool,
-    /// Photos: the largest factor (and its inverse the smallest) by which
-    /// each crop's red and blue white-balance multipliers are varied,
-    /// log-uniform. 1.25 spans daylight, shade and flash on one camera;
-    /// wider ranges reach cameras whose raw channels are nearly balanced.
+    /// Photos: largest factor by which each crop's red and blue white-balance multipliers are varied (log-uniform in [1/S, S]); 1.25 spans one camera's daylight, shade and flash, 2.5 reaches cameras whose raw channels are nearly balanced [default: 1.25].
+    #[cfg_attr(feature = "clap", arg(long, default_value_t = d().photo_wb_spread, hide_default_value = true))]
     pub photo_wb_spread: f32,
-    /// Smallest exposure ratio (ELD/SID: 100; pgrf's general models: 1).
+    /// Smallest exposure ratio [default: 1].
+    #[cfg_attr(feature = "clap", arg(long, default_value_t = d().ratio_min, hide_default_value = true))]
     pub ratio_min: f32,
-    /// Largest exposure ratio (ELD/SID: 300).
+    /// Largest exposure ratio [default: 300].
+    #[cfg_attr(feature = "clap", arg(long, default_value_t = d().ratio_max, hide_default_value = true))]
     pub ratio_max: f32,
-    /// Side of the packed training crops (ELD/SID: 512).
+    /// Side of the packed training crops [default: 512].
+    #[cfg_attr(feature = "clap", arg(long, default_value_t = d().patch, hide_default_value = true))]
     pub patch: usize,
-    /// Crops per step.
+    /// Crops per step [default: 1].
+    #[cfg_attr(feature = "clap", arg(long, default_value_t = d().batch, hide_default_value = true))]
     pub batch: usize,
-    /// Data worker threads.
+    /// Data worker threads [default: 2].
+    #[cfg_attr(feature = "clap", arg(long, default_value_t = d().workers, hide_default_value = true))]
     pub workers: usize,
-    /// Memory for decoded training RAWs, MiB.
+    /// Memory for decoded training RAWs, MiB [default: 4096].
+    #[cfg_attr(feature = "clap", arg(long, default_value_t = d().cache_mib, hide_default_value = true))]
     pub cache_mib: usize,
-    /// Optimisation steps.
+    /// Optimisation steps [default: 30000].
+    #[cfg_attr(feature = "clap", arg(long, default_value_t = d().steps, hide_default_value = true))]
     pub steps: u64,
-    /// Base learning rate (ELD: 1e-4).
+    /// Base learning rate [default: 1e-4].
+    #[cfg_attr(feature = "clap", arg(long, default_value_t = d().lr, hide_default_value = true))]
     pub lr: f64,
-    /// Learning-rate schedule.
+    /// Learning-rate schedule: eld (1/2 at 50%, 1/10 at 90%), constant or cosine [default: eld].
+    #[cfg_attr(feature = "clap", arg(long, default_value_t = d().schedule, hide_default_value = true))]
     pub schedule: Schedule,
-    /// Per-tensor gradient norm limit.
+    /// Clip each parameter's gradient to this norm.
+    #[cfg_attr(feature = "clap", arg(long))]
     pub clip_grad: Option<f32>,
-    /// Seed of initialisation, crops, noise, X0 and t.
+    /// Seed of initialisation, crops, noise, X0 and t [default: 0].
+    #[cfg_attr(feature = "clap", arg(long, default_value_t = d().seed, hide_default_value = true))]
     pub seed: u64,
     /// Turn off flips and transposes.
+    #[cfg_attr(feature = "clap", arg(long, action = clap::ArgAction::Set, num_args = 0..=1, default_missing_value = "true", default_value_t = false, hide_default_value = true))]
     pub no_augment: bool,
-    /// Train on captures without the camera's dark-level offset (black-level
-    /// error, colour bias): for inputs calibrated as `pgrf enhance --calib`
-    /// and the synthetic protocol make them. Without it the network learns
-    /// to guess an offset it cannot see, and subtracts the average guess
-    /// from calibrated inputs too (a tint in dark areas).
+    /// Train on captures without the camera's dark-level offset (black-level error, colour bias): for input calibrated by `pgrf enhance --calib` (or the synthetic protocol); recorded in the weight file. Without it the network learns to guess an offset it cannot see, and subtracts the average guess from calibrated inputs too (a tint in dark areas).
+    #[cfg_attr(feature = "clap", arg(long, action = clap::ArgAction::Set, num_args = 0..=1, default_missing_value = "true", default_value_t = false, hide_default_value = true))]
     pub calibrated_dark_level: bool,
-    /// SID U-Net width; for the flow model the SR3 inner channels unless
-    /// `inner_channels` is given.
+    /// Width of the first level: SID U-Net channels [default: 32]; for the flow model the SR3 inner channels unless --inner-channels is given.
+    #[cfg_attr(feature = "clap", arg(long))]
     pub width: Option<usize>,
-    /// Learn a correction to the input (not the papers' design).
+    /// Learn a correction: the SID U-Net adds its input to its output; the flow model adds T - Xt to its velocity (its first stage starts as the noisy input). Not the papers' design; converges far faster for small CPU-trained models.
+    #[cfg_attr(feature = "clap", arg(long, action = clap::ArgAction::Set, num_args = 0..=1, default_missing_value = "true", default_value_t = false, hide_default_value = true))]
     pub residual: bool,
-    /// Start from this weight file's weights (a network of exactly this
-    /// configuration) instead of fresh ones: fine-tuning a trained model on
-    /// other data or conditions. The optimiser and the schedule start
-    /// afresh; a resumed run takes its weights from the checkpoint.
+    /// Start from this weight file's weights (a trained network of exactly this configuration, e.g. models/spc.safetensors) instead of fresh ones: fine-tuning on other data or conditions; the optimiser and the learning-rate schedule start afresh (a resumed run takes its weights from the checkpoint), and the output records the file and its training.
+    #[cfg_attr(feature = "clap", arg(long))]
     pub init: Option<PathBuf>,
-    /// SR3 channels of the first level.
+    /// SR3 channels of the first level [default: 64, or --width].
+    #[cfg_attr(feature = "clap", arg(long))]
     pub inner_channels: Option<usize>,
-    /// SR3 channel multipliers per level.
+    /// SR3 channel multipliers per level, comma-separated [default: 1,2,4,8,8].
+    #[cfg_attr(feature = "clap", arg(long, value_delimiter = ','))]
     pub channel_mults: Option<Vec<usize>>,
-    /// SR3 residual blocks per level.
+    /// SR3 residual blocks per level [default: 2].
+    #[cfg_attr(feature = "clap", arg(long))]
     pub res_blocks: Option<usize>,
-    /// SR3 levels with self-attention.
+    /// SR3 levels with self-attention (0 = full resolution), comma-separated [default: 3].
+    #[cfg_attr(feature = "clap", arg(long, value_delimiter = ','))]
     pub attn_levels: Option<Vec<usize>>,
-    /// SR3 GroupNorm groups (None: the largest <= 32 dividing every level).
+    /// SR3 GroupNorm groups [default: 32, or fewer to divide the channels].
+    #[cfg_attr(feature = "clap", arg(long))]
     pub norm_groups: Option<usize>,
-    /// SR3 dropout.
+    /// SR3 dropout [default: 0].
+    #[cfg_attr(feature = "clap", arg(long))]
     pub dropout: Option<f64>,
-    /// Validate every N steps (0: only at the end).
+    /// Validate every N steps (0: only at the end) [default: 1000].
+    #[cfg_attr(feature = "clap", arg(long, default_value_t = d().val_every, hide_default_value = true))]
     pub val_every: u64,
-    /// Validation pairs.
+    /// Validation pairs [default: 4].
+    #[cfg_attr(feature = "clap", arg(long, default_value_t = d().val_pairs, hide_default_value = true))]
     pub val_pairs: usize,
-    /// Side of the validation crops (None: min(patch, 256)).
+    /// Side of the validation crops [default: min(patch, 256)].
+    #[cfg_attr(feature = "clap", arg(long))]
     pub val_patch: Option<usize>,
-    /// t2 of the two-stage sampler when validating the flow model.
+    /// t2 of the two-stage sampler when validating the flow model [default: 0.5].
+    #[cfg_attr(feature = "clap", arg(long, default_value_t = d().val_t2, hide_default_value = true))]
     pub val_t2: f32,
-    /// Flow model: draw the training time t from U(0, time_max) instead of
-    /// Algorithm 1's U(0, 1). The two-stage sampler only evaluates t = 0
-    /// and t = t2, and the residual field's L1 loss weighs late times up to
-    /// ten times more (MODELS.md, "The calibrated measure"); a range
-    /// covering t2 spends the training on the times the sampler uses. The
-    /// Euler sampler and the search's t above `time_max` leave what the
-    /// field learned.
+    /// Flow model: draw the training time t from U(0, TIME_MAX) instead of U(0, 1) (Algorithm 1), in (0, 1]: spend the training on the times the two-stage sampler uses (t = 0 and t2), e.g. 0.5; recorded in the weight file [default: 1]. The residual field's L1 loss weighs late times up to ten times more (MODELS.md, "The calibrated measure"); the Euler sampler and the search's t above it leave what the field learned.
+    #[cfg_attr(feature = "clap", arg(long, default_value_t = d().time_max, hide_default_value = true))]
     pub time_max: f32,
-    /// Checkpoint every N steps.
+    /// Checkpoint every N steps [default: 1000].
+    #[cfg_attr(feature = "clap", arg(long, default_value_t = d().checkpoint_every, hide_default_value = true))]
     pub checkpoint_every: u64,
-    /// Checkpoint file (None: the output with extension .ckpt).
+    /// Checkpoint file [default: OUTPUT with extension .ckpt].
+    #[cfg_attr(feature = "clap", arg(long))]
     pub checkpoint: Option<PathBuf>,
-    /// Log file, CSV or JSON lines (None: the output with .log.csv).
+    /// Log file, CSV (or JSON lines if it ends in .jsonl) [default: OUTPUT with extension .log.csv].
+    #[cfg_attr(feature = "clap", arg(long))]
     pub log: Option<PathBuf>,
-    /// Log the mean loss every N steps.
+    /// Log the mean loss every N steps [default: 10].
+    #[cfg_attr(feature = "clap", arg(long, default_value_t = d().log_every, hide_default_value = true))]
     pub log_every: u64,
     /// Weight file to write.
+    #[cfg_attr(feature = "clap", arg(short = 'o', long = "output"))]
     pub output: Option<PathBuf>,
-    /// cpu or cuda.
+    /// cpu or cuda [default: cpu].
+    #[cfg_attr(feature = "clap", arg(long, default_value_t = d().device, hide_default_value = true))]
     pub device: crate::backend::DeviceKind,
+}
+
+/// The defaults the flags show (the same as [`TrainConfig::default`]).
+#[cfg(feature = "clap")]
+fn d() -> TrainConfig {
+    TrainConfig::default()
 }
 
 impl Default for TrainConfig {
@@ -237,7 +265,83 @@ fn invalid(what: impl std::fmt::Display) -> NnError {
     NnError::Config(what.to_string())
 }
 
+/// The files a training run writes, resolved from the configuration.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TrainOutputs {
+    /// The weight file (`output`).
+    pub weights: PathBuf,
+    /// The checkpoint (`checkpoint`, else the output with extension .ckpt).
+    pub checkpoint: PathBuf,
+    /// The log (`log`, else the output with extension .log.csv).
+    pub log: PathBuf,
+}
+
 impl TrainConfig {
+    /// Read a `--config` file (any subset of the keys); errors name the file.
+    pub fn from_file(path: &Path) -> Result<TrainConfig> {
+        let bad = |reason: String| NnError::BadConfigFile {
+            path: path.to_path_buf(),
+            reason,
+        };
+        let text = std::fs::read_to_string(path).map_err(|e| bad(e.to_string()))?;
+        TrainConfig::from_toml(&text).map_err(|e| bad(e.to_string()))
+    }
+
+    /// The configuration of `pgrf train`: the defaults, then the `--config`
+    /// file `file` (if any), then `over` (the flags given), checked for
+    /// training `method` ([`TrainConfig::check_for`]).
+    pub fn merged<T: Serialize>(
+        file: Option<&Path>,
+        over: &T,
+        method: Method,
+    ) -> Result<TrainConfig> {
+        let base = match file {
+            None => TrainConfig::default(),
+            Some(p) => TrainConfig::from_file(p)?,
+        };
+        let c = base.overlay(over)?;
+        c.check_for(method)?;
+        Ok(c)
+    }
+
+    /// [`TrainConfig::validate`], and what only the other method has:
+    /// the flow's training time range is refused for the SPC denoiser.
+    pub fn check_for(&self, method: Method) -> Result<()> {
+        self.validate()?;
+        if method == Method::Spc && self.time_max != 1.0 {
+            return Err(NnError::BadSetting {
+                flag: "--time-max",
+                message:
+                    "--time-max is the flow model's training time range; the SPC denoiser has none"
+                        .into(),
+            });
+        }
+        Ok(())
+    }
+
+    /// The files a run writes: the weight file (refused when `output` is
+    /// not set), the checkpoint and the log.
+    pub fn outputs(&self) -> Result<TrainOutputs> {
+        let Some(out) = self.output.clone() else {
+            return Err(NnError::BadSetting {
+                flag: "-o",
+                message: "no output: give -o FILE.safetensors (or `output = ...` in the config)"
+                    .into(),
+            });
+        };
+        Ok(TrainOutputs {
+            checkpoint: self
+                .checkpoint
+                .clone()
+                .unwrap_or_else(|| out.with_extension("ckpt")),
+            log: self
+                .log
+                .clone()
+                .unwrap_or_else(|| out.with_extension("log.csv")),
+            weights: out,
+        })
+    }
+
     /// Parse a TOML file's text (any subset of the keys; unknown keys are
     /// refused with their name).
     pub fn from_toml(text: &str) -> Result<TrainConfig> {
@@ -257,50 +361,6 @@ impl TrainConfig {
         base.extend(top);
         base.try_into::<TrainConfig>()
             .map_err(|e| invalid(e.message()))
-    }
-
-    /// The network this configuration trains for `method`, checked.
-    pub fn architecture(&self, method: Method) -> Result<Architecture> {
-        Ok(match method {
-            Method::Spc => {
-                let cfg = SidUnetConfig::new().with_residual(self.residual);
-                let w = self.width.unwrap_or(cfg.width);
-                if w == 0 {
-                    return Err(invalid("--width must be at least 1"));
-                }
-                Architecture::SidUnet(cfg.with_width(w))
-            }
-            Method::Pgrf => {
-                let d = Sr3Config::new();
-                let inner = self
-                    .inner_channels
-                    .or(self.width)
-                    .unwrap_or(d.inner_channels);
-                let mults = self.channel_mults.clone().unwrap_or(d.channel_mults);
-                let attn = self.attn_levels.clone().unwrap_or(d.attn_levels);
-                if let Some(l) = attn.iter().find(|&&l| l >= mults.len()) {
-                    return Err(invalid(format!(
-                        "--attn-levels {l} does not exist: the network has {} levels (0..{})",
-                        mults.len(),
-                        mults.len().saturating_sub(1)
-                    )));
-                }
-                let groups = self
-                    .norm_groups
-                    .unwrap_or_else(|| default_groups(inner, &mults));
-                let cfg = Sr3Config::new()
-                    .with_inner_channels(inner)
-                    .with_channel_mults(mults)
-                    .with_res_blocks(self.res_blocks.unwrap_or(d.res_blocks))
-                    .with_attn_levels(attn)
-                    .with_norm_groups(groups)
-                    .with_dropout(self.dropout.unwrap_or(d.dropout))
-                    .with_residual(self.residual);
-                cfg.validate()
-                    .map_err(|e| invalid(format!("flow network: {e}")))?;
-                Architecture::Sr3(cfg)
-            }
-        })
     }
 
     /// The ISO range as (low, high), checked: two positive ISOs, ordered,
@@ -368,18 +428,10 @@ impl TrainConfig {
     }
 }
 
-/// The largest group count <= 32 that divides every level's channel count, so
-/// reduced configurations work without the user doing the arithmetic.
-fn default_groups(inner: usize, mults: &[usize]) -> usize {
-    (1..=32usize)
-        .rev()
-        .find(|&g| inner.is_multiple_of(g) && mults.iter().all(|m| (m * inner).is_multiple_of(g)))
-        .unwrap_or(1)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::arch::{Architecture, SidUnetConfig, Sr3Config};
 
     #[test]
     fn toml_round_trip_keeps_every_setting() {

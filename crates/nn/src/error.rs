@@ -33,6 +33,55 @@ pub enum NnError {
     /// A network or training configuration that cannot be built.
     #[error("{0}")]
     Config(String),
+    /// A training configuration file (`--config`) that cannot be read or
+    /// parsed.
+    #[error("{}: {reason}", path.display())]
+    BadConfigFile {
+        /// The file.
+        path: PathBuf,
+        /// Why not (the TOML parser's message names the key).
+        reason: String,
+    },
+    /// A setting (a flag, or its key in a configuration file) whose value
+    /// cannot be used; the message names the flag and the value.
+    #[error("{message}")]
+    BadSetting {
+        /// The flag, e.g. `--time-max`.
+        flag: &'static str,
+        /// What is wrong, in words (the whole message).
+        message: String,
+    },
+    /// A file given with a flag that could not be used: the flag and the
+    /// file name the underlying error.
+    #[error("{flag} {}: {source}", path.display())]
+    Input {
+        /// The flag, e.g. `--model`.
+        flag: &'static str,
+        /// The file.
+        path: PathBuf,
+        /// What went wrong with it.
+        source: Box<NnError>,
+    },
+    /// A weight file holding another network than the one the operation
+    /// needs (a denoiser given to the flow's search, `--init` of another
+    /// configuration, a checkpoint of another network).
+    #[error("{message}")]
+    WrongArchitecture {
+        /// The file.
+        path: PathBuf,
+        /// What it holds and what was needed, in words (the whole message).
+        message: String,
+    },
+    /// A device this build cannot use (`cuda` without the feature).
+    #[error("{0}")]
+    Device(String),
+    /// Work that would not fit in the machine's memory, with the settings
+    /// that make it smaller.
+    #[error("{0}")]
+    TooLarge(String),
+    /// The pairs' noise could not be built (calibration file, profiles).
+    #[error(transparent)]
+    Calibration(pgrf_calib::mix::MixError),
     /// Any other refused input, on one line.
     #[error("{0}")]
     Invalid(String),

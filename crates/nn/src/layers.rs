@@ -87,7 +87,7 @@ pub enum Layer {
         /// Width of the feature map.
         w: usize,
     },
-    /// The single-head self-attention core [`crate::sr3::attention_core`]:
+    /// The single-head self-attention core [`crate::arch::sr3::attention_core`]:
     /// from the query/key/value projection `(3 channels, h * w)` to the
     /// attended values `(channels, h * w)`. The 1x1 convolutions around it
     /// and its GroupNorm are listed as layers of their own.

@@ -14,38 +14,58 @@
 //! (see [`flow`]).
 //!
 //! The items most callers need are re-exported here: the training
-//! configuration ([`TrainConfig`], [`Method`]), the two networks and their
-//! configurations, the device choice ([`DeviceKind`]) and the path from a
+//! configuration ([`TrainConfig`], [`Method`]), the networks ([`Net`]) and
+//! their configurations ([`Architecture`]), the device choice ([`DeviceKind`]) and the path from a
 //! dark frame to a restored one ([`infer::load`] gives a [`Restore`], which
 //! [`restore_frame`] runs tile by tile as [`Tiling`] says).
+//!
+//! The recipes commands call, one function each: training from a
+//! [`TrainConfig`] ([`train::run`]) and the flow's sampling search from a
+//! weight file and a validation spec ([`flow::search::run`]).
+//!
+//! # Adding a network
+//!
+//! One new file in [`arch`] and one arm per match in `arch/mod.rs`:
+//!
+//! 1. `arch/NAME.rs` holds the network's configuration (a burn `Config`,
+//!    serialised into weight files), its module and `forward`, how
+//!    `pgrf train`'s settings make its configuration (`from_train_config`)
+//!    and its answers to `arch::network::NetworkConfig`: the method it
+//!    implements, its description, the checks before building from a record,
+//!    its parameter lower bound, its memory per pixel and attention tokens,
+//!    its tile multiple and cap, whether it is sampled from start noise, and
+//!    what its training batches carry.
+//! 2. In `arch/mod.rs`: a variant of [`Architecture`] (its record name) and
+//!    of [`Net`], and that variant's arm in the matches there (its
+//!    `NetworkConfig`, `init`, the parameters, the restored tile, the
+//!    training loss). Nothing else in the crate matches on the networks.
 
 #![warn(missing_docs)]
 
+pub mod arch;
 pub mod backend;
 mod checkpoint;
 mod config;
 pub mod data;
 mod error;
+#[cfg(feature = "clap")]
+pub mod flags;
 pub mod flow;
 pub mod infer;
 pub mod interop;
 pub mod layers;
+pub mod model;
 pub mod named;
-mod net;
 pub mod norm;
 pub mod ops;
 pub mod schedule;
 pub mod seeded;
-pub mod sr3;
 pub mod step;
 pub mod train;
-mod unet;
 pub mod weights;
 
+pub use arch::{Architecture, Net, SidUnet, SidUnetConfig, Sr3Config, Sr3Unet};
 pub use backend::DeviceKind;
-pub use config::{Method, TrainConfig};
+pub use config::{Method, TrainConfig, TrainOutputs};
 pub use error::{NnError, Result};
 pub use infer::{restore_frame, Restore, SamplerChoice, Tiling};
-pub use net::Net;
-pub use sr3::{Sr3Config, Sr3Unet};
-pub use unet::{SidUnet, SidUnetConfig};

@@ -127,8 +127,8 @@ pub fn assign<B: Backend, M: Module<B>>(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::arch::sid_unet::SidUnetConfig;
     use crate::backend::Cpu;
-    use crate::unet::SidUnetConfig;
 
     #[test]
     fn names_follow_the_module_tree_and_round_trip() {

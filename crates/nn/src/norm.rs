@@ -15,7 +15,7 @@ use burn::tensor::Tensor;
 /// `norm` (burn's `GroupNorm`: its group count, epsilon and optional affine)
 /// applied to `x`, `(n, c, h, w)` with `c` a multiple of the group count;
 /// returns the same shape. Equal to `norm.forward(x)` to rounding, faster on
-/// Flex; SR3 ([`crate::sr3`]) runs every GroupNorm through it.
+/// Flex; SR3 ([`crate::arch::sr3`]) runs every GroupNorm through it.
 pub fn group_norm<B: Backend>(norm: &GroupNorm<B>, x: Tensor<B, 4>) -> Tensor<B, 4> {
     folded(
         x,

@@ -32,6 +32,16 @@ impl std::str::FromStr for Schedule {
     }
 }
 
+impl std::fmt::Display for Schedule {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Schedule::Eld => "eld",
+            Schedule::Constant => "constant",
+            Schedule::Cosine => "cosine",
+        })
+    }
+}
+
 impl Schedule {
     /// Learning rate at `step` (0-based) of `total`, for base rate `lr`.
     pub(crate) fn lr(self, lr: f64, step: u64, total: u64) -> f64 {

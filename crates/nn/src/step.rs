@@ -6,10 +6,10 @@
 //!   t ~ U(0, 1), Xt = t X1 + (1 - t) X0, loss |X1 - X0 - v(Xt, T, t)|_1;
 //!   the path and the loss are [`crate::flow`]'s.
 
+use crate::arch::sid_unet::SidUnet;
+use crate::arch::sr3::Sr3Unet;
 use crate::flow::flow_loss;
 use crate::ops::{PgrfAutodiff, PgrfOps};
-use crate::sr3::Sr3Unet;
-use crate::unet::SidUnet;
 use burn::optim::{GradientsParams, Optimizer};
 use burn::tensor::{ElementConversion, Tensor};
 
@@ -69,8 +69,8 @@ pub fn flow_step<B: PgrfAutodiff, O: Optimizer<Sr3Unet<B>, B>>(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::sr3::Sr3Config;
-    use crate::unet::SidUnetConfig;
+    use crate::arch::sid_unet::SidUnetConfig;
+    use crate::arch::sr3::Sr3Config;
     use burn::backend::{Autodiff, Flex};
     use burn::optim::AdamConfig;
     use burn::tensor::Distribution;

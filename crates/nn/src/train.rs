@@ -1,94 +1,37 @@
-//! The training loop shared by both networks: batches from the worker-thread
-//! loader, Adam with a learning-rate schedule, validation PSNR, logs,
-//! checkpoints, and a clean stop on request. Backend-generic: the CLI picks
-//! Flex on the CPU or CUDA.
+//! Training, whole: [`run`] turns a [`TrainConfig`] into a trained weight
+//! file (`pgrf train` is that call plus printing). Before the loop it checks
+//! the device, the network and the memory a step needs, builds the pairs'
+//! noise (profiles and calibration, `pgrf_calib::mix`), the clean sources
+//! and the validation pairs; the loop shared by both networks takes batches
+//! from the worker-thread loader, runs Adam with a learning-rate schedule,
+//! validation PSNR, logs and checkpoints, and stops cleanly on request.
+//! Backend-generic: the device setting picks Flex on the CPU or CUDA.
 
+use crate::arch::{Architecture, Net};
+use crate::backend::{on_train_device, OnTrainBackend};
 use crate::checkpoint::{self, CheckpointState};
+use crate::config::{Method, TrainConfig, TrainOutputs};
 use crate::data::validation::{psnr, ValSet};
-use crate::data::{Extras, Loader, SampleSpec, Source};
+use crate::data::{Loader, SampleSpec, Source};
 use crate::error::{NnError, Result};
-use crate::flow::flow_loss;
-use crate::net::Net;
 use crate::ops::adam::PgrfAdam;
 use crate::ops::{PgrfAutodiff, PgrfOps};
-use crate::schedule::Schedule;
-use crate::step::denoiser_loss;
-use crate::weights::{Architecture, NoiseSource, StartedFrom, TrainingSummary, WeightMeta};
+use crate::weights::{NoiseSource, StartedFrom, TrainingSummary, WeightMeta};
 use burn::module::{AutodiffModule, Module};
 use burn::optim::adaptor::OptimizerAdaptor;
 use burn::optim::grad_clipping::GradientClippingConfig;
 use burn::optim::{GradientsParams, Optimizer};
 use burn::record::{BinBytesRecorder, FullPrecisionSettings, Recorder};
 use burn::tensor::{ElementConversion, Tensor, TensorData};
+use pgrf_calib::mix::{MixError, MixSpec};
 use pgrf_core::Progress;
 use pgrf_noise::mix::PairMix;
+use pgrf_noise::pair::RatioSpec;
 use std::io::Write;
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::Instant;
-
-/// Everything the loop needs to know, resolved (no defaults left): the CLI
-/// makes it from a [`crate::TrainConfig`] and runs it with
-/// [`crate::backend::train`].
-#[derive(Clone, Debug)]
-pub struct TrainSettings {
-    /// The network to train (and so the method: SPC or PGRF).
-    pub arch: Architecture,
-    /// Total optimisation steps of the run (a resumed run continues to this).
-    pub steps: u64,
-    /// Crops per step.
-    pub batch: usize,
-    /// Side of the square packed training crops, in packed pixels.
-    pub patch: usize,
-    /// Seed of the initial weights and of every sample (crop, flips, noise,
-    /// X0, t): batch b of a run is a function of (seed, b).
-    pub seed: u64,
-    /// Base learning rate of Adam, before the schedule.
-    pub lr: f64,
-    /// How the learning rate changes over the run.
-    pub schedule: Schedule,
-    /// Per-tensor gradient norm limit (burn's clipping), if any.
-    pub clip_grad: Option<f32>,
-    /// Draw flips and transposes of the clean crops.
-    pub augment: bool,
-    /// Data worker threads synthesising pairs ahead of the optimiser.
-    pub workers: usize,
-    /// Validate every this many steps (0: only at the end).
-    pub val_every: u64,
-    /// t2 of the two-stage sampler used for validating the flow model.
-    pub val_t2: f32,
-    /// Flow model: training times t ~ U(0, time_max), in (0, 1] (1:
-    /// Algorithm 1's U(0, 1)); the denoiser ignores it.
-    pub time_max: f32,
-    /// Write a checkpoint every this many steps (0: only at the end).
-    pub checkpoint_every: u64,
-    /// The checkpoint file, written and (with `resume`) read.
-    pub checkpoint: PathBuf,
-    /// The weight file written at the end (also when stopped early).
-    pub out: PathBuf,
-    /// CSV log (or JSON lines when the name ends in .jsonl/.json).
-    pub log: Option<PathBuf>,
-    /// Log the mean loss every this many steps.
-    pub log_every: u64,
-    /// Continue from `checkpoint` instead of starting afresh; the checkpoint
-    /// must be of the same network, seed, batch and patch.
-    pub resume: bool,
-    /// Start from this weight file (a trained network of exactly `arch`)
-    /// instead of fresh weights: fine-tuning. Ignored for the weights when
-    /// resuming (the checkpoint holds them), still recorded.
-    pub init: Option<PathBuf>,
-    /// The noise the pairs are synthesised with, recorded in the weight file.
-    pub noise: NoiseSource,
-    /// Where the clean images came from, in words, recorded in the weight
-    /// file.
-    pub data: String,
-    /// The compute device, in words, recorded in the weight file.
-    pub device: String,
-    /// The configuration the run was started from (stored in the weight
-    /// file, so the run can be repeated with `pgrf train --config`).
-    pub config: Option<crate::TrainConfig>,
-}
 
 /// How a run ended.
 #[derive(Clone, Debug)]
@@ -112,6 +55,202 @@ pub struct Outcome {
     pub images_per_s: f64,
     /// Stopped by the `stop` flag before `steps`.
     pub interrupted: bool,
+}
+
+/// A finished (or stopped) run: how it ended and what it wrote.
+#[derive(Clone, Debug)]
+pub struct Trained {
+    /// How the run ended.
+    pub outcome: Outcome,
+    /// The method trained.
+    pub method: Method,
+    /// The weight file, checkpoint and log written.
+    pub outputs: TrainOutputs,
+}
+
+/// `pgrf train`'s recipe: train `method`'s network as `config` says
+/// (already merged and checked, [`TrainConfig::check_for`]), from scratch or,
+/// with `resume`, from the checkpoint. Before any step: the device, the
+/// network (and `init`'s weights) and the memory a step needs are checked,
+/// the pairs' noise is built, the clean sources are opened (`warn` hears each
+/// file left out), the validation pairs are made, and one line saying what
+/// will be trained goes to `progress` as a note. `progress` hears one unit
+/// per step; setting `stop` ends the run cleanly after the current step
+/// (checkpoint and weight file written, [`Outcome::interrupted`]).
+pub fn run(
+    config: &TrainConfig,
+    method: Method,
+    resume: bool,
+    progress: &dyn Progress,
+    stop: &AtomicBool,
+    warn: &dyn Fn(&str),
+) -> Result<Trained> {
+    let c = config;
+    let outputs = c.outputs()?;
+    c.device.check_available().map_err(NnError::Device)?;
+    let arch = c.architecture(method)?;
+    if let Some(init) = &c.init {
+        crate::weights::require_arch(init, &arch)?;
+    }
+    check_memory(c, &arch)?;
+    let iso_range = c.iso_range()?;
+    let (lo, hi) = (c.ratio_min, c.ratio_max);
+    let built = pgrf_calib::mix::build(&MixSpec {
+        profile: &c.profile,
+        model: c.noise,
+        iso: c.iso,
+        iso_range,
+        ratio: RatioSpec::Uniform { lo, hi },
+        calibrated_dark_level: c.calibrated_dark_level,
+        calibration: c.calib.as_deref(),
+    })
+    .map_err(|e| match e {
+        MixError::Profile(e) => NnError::BadSetting {
+            flag: "--profile",
+            message: format!("--profile: {e}"),
+        },
+        MixError::CalibrationWithMix { path, mix } => NnError::BadSetting {
+            flag: "--calib",
+            message: format!(
+                "--calib {} describes one sensor; it cannot go with a mix of profiles ({mix})",
+                path.display()
+            ),
+        },
+        e => NnError::Calibration(e),
+    })?;
+    let sources = crate::data::build::sources(c)?;
+    for w in &sources.warnings {
+        warn(w);
+    }
+    let mix = Arc::new(built.mix);
+    let val = if c.val_pairs > 0 {
+        Some(ValSet::build(
+            &sources.val,
+            &mix,
+            c.val_patch(),
+            c.val_pairs,
+            c.seed,
+        )?)
+    } else {
+        None
+    };
+    let noise = NoiseSource {
+        profile: Some(c.profile.clone()),
+        calibration: built.calibration,
+        model: c.noise,
+        iso: c.iso,
+        iso_range: iso_range.map(|(a, b)| [a, b]),
+        ratio: [lo, hi],
+        calibrated_dark_level: c.calibrated_dark_level,
+    };
+    if resume && !outputs.checkpoint.exists() {
+        return Err(NnError::BadSetting {
+            flag: "--resume",
+            message: format!(
+                "--resume: no checkpoint at {}",
+                outputs.checkpoint.display()
+            ),
+        });
+    }
+    progress.note(&header(c, &arch, &sources.train, &mix, &noise));
+    let job = Job {
+        config: c,
+        arch,
+        outputs,
+        resume,
+        noise,
+        source: Arc::new(sources.train),
+        mix,
+        val: val.as_ref(),
+        progress,
+        stop,
+    };
+    let outputs = job.outputs.clone();
+    let outcome = on_train_device(c.device, job)?;
+    Ok(Trained {
+        outcome,
+        method,
+        outputs,
+    })
+}
+
+/// Refuse a run whose step (or validation crop) would not fit in memory.
+fn check_memory(c: &TrainConfig, arch: &Architecture) -> Result<()> {
+    use crate::infer::memory::{tile_bytes, training_bytes};
+    let (p, b, v) = (c.patch, c.batch, c.val_patch());
+    let need = training_bytes(arch, p, b).max(tile_bytes(arch, v, v));
+    pgrf_core::mem::check_fits(
+        &format!("training with --patch {p} --batch {b} (validation crops {v})"),
+        need,
+    )
+    .map_err(|e| {
+        NnError::TooLarge(format!(
+            "{e}; give a smaller --patch, --batch or --val-patch"
+        ))
+    })
+}
+
+/// The line that says what a run trains: network, data, noise, schedule,
+/// device.
+fn header(
+    c: &TrainConfig,
+    arch: &Architecture,
+    train: &Source,
+    mix: &PairMix,
+    noise: &NoiseSource,
+) -> String {
+    format!(
+        "training {} on {} ({}x{} crops, batch {}), noise {} from {}{}{}, {} steps, lr {:e} ({:?}){}, {} on {}",
+        arch.describe(),
+        train.describe(),
+        c.patch,
+        c.patch,
+        c.batch,
+        noise.model,
+        mix.describe(),
+        noise.calibration.as_ref().map(|c| format!(" + calibration {c}")).unwrap_or_default(),
+        if noise.calibrated_dark_level { " (dark level calibrated)" } else { "" },
+        c.steps,
+        c.lr,
+        c.schedule,
+        if c.time_max < 1.0 { format!(", times t ~ U(0, {})", c.time_max) } else { String::new() },
+        c.device,
+        crate::backend::describe(c.device),
+    )
+}
+
+/// One run's pieces besides its configuration, resolved by [`run`], and the
+/// work [`on_train_device`] runs on the configured device's backend.
+struct Job<'a> {
+    config: &'a TrainConfig,
+    /// The network (and so the method).
+    arch: Architecture,
+    /// The weight file, checkpoint and log.
+    outputs: TrainOutputs,
+    /// Continue from the checkpoint.
+    resume: bool,
+    /// The noise, as the weight file records it.
+    noise: NoiseSource,
+    source: Arc<Source>,
+    mix: Arc<PairMix>,
+    val: Option<&'a ValSet>,
+    progress: &'a dyn Progress,
+    stop: &'a AtomicBool,
+}
+
+impl OnTrainBackend for Job<'_> {
+    type Output = Outcome;
+    fn run<B: PgrfAutodiff>(self, device: B::Device) -> Result<Outcome> {
+        train::<B>(
+            &self,
+            self.source.clone(),
+            self.mix.clone(),
+            self.val,
+            &device,
+            self.progress,
+            self.stop,
+        )
+    }
 }
 
 type Rec = BinBytesRecorder<FullPrecisionSettings>;
@@ -207,9 +346,9 @@ impl Log {
     }
 }
 
-/// Train from scratch or resume, until `settings.steps` or until `stop` is set.
-pub(crate) fn train<B: PgrfAutodiff>(
-    s: &TrainSettings,
+/// Train from scratch or resume, until `config.steps` or until `stop` is set.
+fn train<B: PgrfAutodiff>(
+    j: &Job,
     source: Arc<Source>,
     mix: Arc<PairMix>,
     val: Option<&ValSet>,
@@ -217,6 +356,7 @@ pub(crate) fn train<B: PgrfAutodiff>(
     progress: &dyn Progress,
     stop: &AtomicBool,
 ) -> Result<Outcome> {
+    let s = j.config;
     if s.batch == 0 || s.patch == 0 {
         return Err(NnError::Invalid(
             "batch and patch must be at least 1".into(),
@@ -228,19 +368,19 @@ pub(crate) fn train<B: PgrfAutodiff>(
             s.lr
         )));
     }
-    let arch_json = serde_json::to_value(&s.arch).map_err(|e| NnError::Invalid(e.to_string()))?;
-    let mut net: Net<B> = s.arch.init_seeded(device, s.seed)?;
+    let arch_json = serde_json::to_value(&j.arch).map_err(|e| NnError::Invalid(e.to_string()))?;
+    let mut net: Net<B> = j.arch.init_seeded(device, s.seed)?;
     let started_from = match &s.init {
         None => None,
         // A resumed run takes its weights from the checkpoint: only the
         // record is read then.
-        Some(path) if s.resume => Some(StartedFrom::of(
+        Some(path) if j.resume => Some(StartedFrom::of(
             path,
-            &crate::weights::require_arch(path, &s.arch)?,
+            &crate::weights::require_arch(path, &j.arch)?,
         )),
         Some(path) => {
-            let (trained, meta) = crate::weights::load::<B>(path, device)?;
-            crate::weights::check_arch(path, &meta, &s.arch)?;
+            let (trained, meta) = crate::model::load::<B>(path, device)?;
+            crate::weights::check_arch(path, &meta, &j.arch)?;
             net = trained;
             Some(StartedFrom::of(path, &meta))
         }
@@ -254,13 +394,13 @@ pub(crate) fn train<B: PgrfAutodiff>(
     let recorder = Rec::default();
 
     let (mut start, mut elapsed0, mut last_val) = (0u64, 0.0f64, None);
-    if s.resume {
-        let ck = checkpoint::load(&s.checkpoint)?;
+    if j.resume {
+        let ck = checkpoint::load(&j.outputs.checkpoint)?;
         let st = &ck.state;
-        if st.task != s.arch.method() || st.arch != arch_json {
+        if st.task != j.arch.method() || st.arch != arch_json {
             return Err(NnError::Invalid(format!(
                 "{}: checkpoint is of another network ({} {}), not this configuration",
-                s.checkpoint.display(),
+                j.outputs.checkpoint.display(),
                 st.task,
                 st.arch
             )));
@@ -268,14 +408,14 @@ pub(crate) fn train<B: PgrfAutodiff>(
         if (st.seed, st.batch, st.patch) != (s.seed, s.batch, s.patch) {
             return Err(NnError::Invalid(format!(
                 "{}: checkpoint was made with seed {}, batch {}, patch {}; resume with the same",
-                s.checkpoint.display(),
+                j.outputs.checkpoint.display(),
                 st.seed,
                 st.batch,
                 st.patch
             )));
         }
         let bad = |e: burn::record::RecorderError| {
-            NnError::Invalid(format!("{}: {e}", s.checkpoint.display()))
+            NnError::Invalid(format!("{}: {e}", j.outputs.checkpoint.display()))
         };
         net = net.load_record(recorder.load(ck.model, device).map_err(bad)?);
         optim = optim.load_record(recorder.load(ck.optim, device).map_err(bad)?);
@@ -284,20 +424,16 @@ pub(crate) fn train<B: PgrfAutodiff>(
         last_val = st.last_val_psnr;
         progress.note(&format!(
             "resumed from {} at step {start}",
-            s.checkpoint.display()
+            j.outputs.checkpoint.display()
         ));
     }
-    let mut log = Log::open(s.log.as_ref(), s.resume.then_some(start))?;
+    let mut log = Log::open(Some(&j.outputs.log), j.resume.then_some(start))?;
 
-    let extras = match s.arch {
-        Architecture::SidUnet(_) => Extras::None,
-        Architecture::Sr3(_) => Extras::Flow { t_max: s.time_max },
-    };
     let sample = SampleSpec {
         patch: s.patch,
         seed: s.seed,
-        augment: s.augment,
-        extras,
+        augment: !s.no_augment,
+        extras: j.arch.extras(s.time_max),
     };
     let mut loader = Loader::start(source, mix, sample, s.batch, start, s.workers, 2);
     let shape = [s.batch, 4, s.patch, s.patch];
@@ -319,7 +455,7 @@ pub(crate) fn train<B: PgrfAutodiff>(
             .map_err(bad)?;
         let opt = recorder.record(optim.to_record(), ()).map_err(bad)?;
         let state = CheckpointState {
-            task: s.arch.method(),
+            task: j.arch.method(),
             arch: arch_json.clone(),
             step,
             steps: s.steps,
@@ -330,7 +466,7 @@ pub(crate) fn train<B: PgrfAutodiff>(
             last_loss,
             last_val_psnr: last_val,
         };
-        checkpoint::save(&s.checkpoint, &state, &model, &opt)
+        checkpoint::save(&j.outputs.checkpoint, &state, &model, &opt)
     };
 
     progress.start(s.steps, "steps");
@@ -344,15 +480,12 @@ pub(crate) fn train<B: PgrfAutodiff>(
         let lr = s.schedule.lr(s.lr, step, s.steps);
         let noisy = to_tensor::<B>(&batch.noisy, shape, device);
         let clean = to_tensor::<B>(&batch.clean, shape, device);
-        let loss = match &net {
-            Net::Spc(n) => denoiser_loss(n, noisy, clean),
-            Net::Pgrf(n) => {
-                let x0 = to_tensor::<B>(&batch.x0, shape, device);
-                let t =
-                    Tensor::<B, 1>::from_data(TensorData::new(batch.t.clone(), [s.batch]), device);
-                flow_loss(n, noisy, clean, x0, t)
-            }
-        };
+        let loss = net.loss(
+            noisy,
+            clean,
+            || to_tensor::<B>(&batch.x0, shape, device),
+            || Tensor::<B, 1>::from_data(TensorData::new(batch.t.clone(), [s.batch]), device),
+        );
         let value: f32 = loss.clone().into_scalar().elem();
         if !value.is_finite() {
             return Err(NnError::Invalid(format!(
@@ -421,7 +554,7 @@ pub(crate) fn train<B: PgrfAutodiff>(
         losses.last().copied(),
         val_psnr,
     )?;
-    let mut meta = WeightMeta::new(s.arch.clone(), s.noise.clone());
+    let mut meta = WeightMeta::new(j.arch.clone(), j.noise.clone());
     meta.training = Some(TrainingSummary {
         steps: step,
         batch: s.batch,
@@ -432,11 +565,11 @@ pub(crate) fn train<B: PgrfAutodiff>(
         val_psnr,
         seconds: elapsed0 + seconds,
         images_per_s,
-        device: s.device.clone(),
-        config: s.config.clone(),
+        device: s.device.to_string(),
+        config: Some(s.clone()),
         started_from,
     });
-    net.valid().save(&s.out, &meta)?;
+    net.valid().save(&j.outputs.weights, &meta)?;
     progress.finish();
     Ok(Outcome {
         start_step: start,

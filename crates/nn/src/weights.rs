@@ -3,14 +3,13 @@
 //! configuration), what noise it was trained on, how training went, and for
 //! the flow model the searched t2. Everything a later command needs to use
 //! the file travels with it, so `pgrf enhance` needs no flags about the model.
+//!
+//! The file format only: building the network a file describes is
+//! [`crate::model::load`]'s, the networks are [`crate::arch`]'s.
 
+use crate::arch::Architecture;
 use crate::error::{NnError, Result};
-use crate::named::{self, NamedTensor};
-use crate::net::Net;
-use crate::sr3::{Sr3Config, Sr3Unet};
-use crate::unet::SidUnetConfig;
-use burn::module::Module;
-use burn::tensor::backend::Backend;
+use crate::named::NamedTensor;
 use pgrf_core::record::{self, RecordError};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
@@ -20,91 +19,6 @@ use std::path::Path;
 const FORMAT: &str = "pgrf-weights";
 /// Version of the record this pgrf writes; newer files are refused.
 const VERSION: u32 = 1;
-
-/// The two networks and their configurations: in the record as
-/// `"arch": "sid-unet" | "sr3"` with the configuration under `"config"`.
-/// [`Architecture::init`] builds the network.
-#[derive(Clone, Debug, Serialize, Deserialize)]
-#[serde(tag = "arch", content = "config", rename_all = "kebab-case")]
-pub enum Architecture {
-    /// SPC: the SID U-Net, one pass from amplified noisy to clean.
-    SidUnet(SidUnetConfig),
-    /// PGRF: the SR3 velocity field of the rectified flow.
-    Sr3(Sr3Config),
-}
-
-impl Architecture {
-    /// The method the weights implement: the SID U-Net is SPC, the SR3
-    /// velocity field is PGRF.
-    pub fn method(&self) -> crate::Method {
-        match self {
-            Architecture::SidUnet(_) => crate::Method::Spc,
-            Architecture::Sr3(_) => crate::Method::Pgrf,
-        }
-    }
-
-    /// One line for headers and errors, e.g. "SPC denoiser (SID U-Net, width
-    /// 32)" or "PGRF flow model (SR3, 64 channels x [1, 2, 4, 8, 8])".
-    pub fn describe(&self) -> String {
-        match self {
-            Architecture::SidUnet(c) => format!(
-                "SPC denoiser (SID U-Net, width {}{})",
-                c.width,
-                if c.residual { ", residual" } else { "" }
-            ),
-            Architecture::Sr3(c) => format!(
-                "PGRF flow model (SR3, {} channels x {:?}{})",
-                c.inner_channels,
-                c.channel_mults,
-                if c.residual { ", residual" } else { "" }
-            ),
-        }
-    }
-
-    /// A lower bound on the parameters of the network this describes,
-    /// computed from the record alone (in f64: absurd records give huge
-    /// values, never an overflow). Exact for the SID U-Net; for SR3 it
-    /// counts only 3x3 convolutions of a level's width C taken as C to C:
-    /// the second of every down block, both of every up block (the first
-    /// reads at least C channels) and both of the two middle blocks, which
-    /// every such network has. A file holding fewer values
-    /// cannot be this network, and is refused before anything is built:
-    /// building materialises every parameter, and a 336-byte record of
-    /// width 512 would otherwise cost gigabytes before failing.
-    pub fn min_params(&self) -> f64 {
-        let conv = |k: f64, a: f64, b: f64| k * k * a * b + b;
-        match self {
-            Architecture::SidUnet(c) => {
-                let w = c.width as f64;
-                let widths = [w, 2.0 * w, 4.0 * w, 8.0 * w, 16.0 * w];
-                let mut total = conv(1.0, w, c.out_channels as f64);
-                let mut a = c.in_channels as f64;
-                for &ch in &widths {
-                    total += conv(3.0, a, ch) + conv(3.0, ch, ch);
-                    a = ch;
-                }
-                for level in 0..4 {
-                    let (hi, lo) = (widths[level + 1], widths[level]);
-                    total += conv(2.0, hi, lo) + conv(3.0, 2.0 * lo, lo) + conv(3.0, lo, lo);
-                }
-                total
-            }
-            Architecture::Sr3(c) => {
-                let inner = c.inner_channels as f64;
-                let per_level: f64 = c
-                    .channel_mults
-                    .iter()
-                    .map(|&m| {
-                        let convs = c.res_blocks as f64 + 2.0 * (c.res_blocks as f64 + 1.0);
-                        convs * conv(3.0, inner * m as f64, inner * m as f64)
-                    })
-                    .sum();
-                let last = inner * c.channel_mults.last().copied().unwrap_or(0) as f64;
-                per_level + 4.0 * conv(3.0, last, last)
-            }
-        }
-    }
-}
 
 /// Which noise the network learned to remove.
 #[derive(Clone, Debug, Default, Serialize, Deserialize, PartialEq)]
@@ -295,13 +209,15 @@ pub(crate) fn encode(
     .map_err(|e| NnError::Invalid(e.to_string()))
 }
 
-/// Write `module`'s parameters and `meta` atomically.
-pub(crate) fn save<B: Backend, M: Module<B>>(
+/// Write `module`'s parameters and `meta` atomically (tests write bare
+/// networks; commands save a [`crate::Net`]).
+#[cfg(test)]
+pub(crate) fn save<B: burn::tensor::backend::Backend, M: burn::module::Module<B>>(
     path: &Path,
     module: &M,
     meta: &WeightMeta,
 ) -> Result<()> {
-    let bytes = encode(&named::collect::<B, M>(module), meta)?;
+    let bytes = encode(&crate::named::collect::<B, M>(module), meta)?;
     Ok(pgrf_core::write_atomic(path, &bytes)?)
 }
 
@@ -399,78 +315,6 @@ pub(crate) fn read_bytes(path: &Path) -> Result<Vec<u8>> {
     std::fs::read(path).map_err(|e| err(path, e))
 }
 
-/// Build the network the file describes and load its weights on `device`;
-/// every tensor must fit the recorded architecture by name and shape.
-pub fn load<B: Backend>(path: &Path, device: &B::Device) -> Result<(Net<B>, WeightMeta)> {
-    load_bytes(path, &read_bytes(path)?, device)
-}
-
-/// [`load`] from a weight file's bytes (weights built into the binary);
-/// `path` names them in errors.
-pub(crate) fn load_bytes<B: Backend>(
-    path: &Path,
-    bytes: &[u8],
-    device: &B::Device,
-) -> Result<(Net<B>, WeightMeta)> {
-    let (meta, tensors) = from_bytes(bytes, path)?;
-    let held: u64 = tensors.values().map(|t| t.values.len() as u64).sum();
-    let needed = meta.arch.min_params();
-    if needed > held as f64 {
-        return Err(NnError::SizeMismatch(format!(
-            "{}: weights do not fit {}: it has at least {needed:.0} parameters, the file holds {held} values",
-            path.display(),
-            meta.arch.describe()
-        )));
-    }
-    let fit = |e: String| {
-        NnError::SizeMismatch(format!(
-            "{}: weights do not fit {}: {e}",
-            path.display(),
-            meta.arch.describe()
-        ))
-    };
-    let net = match meta
-        .arch
-        .init::<B>(device)
-        .map_err(|e| NnError::Config(format!("{}: {e}", path.display())))?
-    {
-        Net::Spc(n) => Net::Spc(named::assign(n, &tensors, device).map_err(fit)?),
-        Net::Pgrf(n) => Net::Pgrf(named::assign(n, &tensors, device).map_err(fit)?),
-    };
-    Ok((net, meta))
-}
-
-/// Load a file that must hold the SPC denoiser.
-#[cfg(test)]
-fn load_denoiser<B: Backend>(
-    path: &Path,
-    device: &B::Device,
-) -> Result<(crate::unet::SidUnet<B>, WeightMeta)> {
-    match load::<B>(path, device)? {
-        (Net::Spc(n), m) => Ok((n, m)),
-        (_, m) => Err(NnError::WrongMethod {
-            path: path.to_path_buf(),
-            wanted: crate::Method::Spc,
-            found: format!("a {}", m.arch.describe()),
-        }),
-    }
-}
-
-/// Load a file that must hold the PGRF flow model.
-pub(crate) fn load_flow<B: Backend>(
-    path: &Path,
-    device: &B::Device,
-) -> Result<(Sr3Unet<B>, WeightMeta)> {
-    match load::<B>(path, device)? {
-        (Net::Pgrf(n), m) => Ok((n, m)),
-        (_, m) => Err(NnError::WrongMethod {
-            path: path.to_path_buf(),
-            wanted: crate::Method::Pgrf,
-            found: format!("an {}", m.arch.describe()),
-        }),
-    }
-}
-
 /// Rewrite only the record of an existing weight file (e.g. the searched t2),
 /// atomically, keeping the tensors bit for bit.
 pub(crate) fn update_meta(path: &Path, f: impl FnOnce(&mut WeightMeta)) -> Result<WeightMeta> {
@@ -484,7 +328,9 @@ pub(crate) fn update_meta(path: &Path, f: impl FnOnce(&mut WeightMeta)) -> Resul
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::arch::{SidUnetConfig, Sr3Config};
     use crate::backend::Cpu;
+    use crate::model::{load_denoiser, load_flow};
     use burn::tensor::{Distribution, Tensor};
 
     fn tmp(name: &str) -> std::path::PathBuf {

@@ -7,8 +7,9 @@
 use burn::tensor::{Tensor, TensorData};
 use pgrf_nn::backend::Cpu;
 use pgrf_nn::interop::{self, Source};
-use pgrf_nn::weights::{self, Architecture};
+use pgrf_nn::weights;
 use pgrf_nn::Net;
+use pgrf_nn::{model, Architecture};
 use std::path::{Path, PathBuf};
 
 fn data(name: &str) -> PathBuf {
@@ -30,7 +31,7 @@ fn f32s(name: &str) -> Vec<f32> {
 fn max_diff_from_pytorch(bytes: &[u8], scratch: &Path) -> f32 {
     let device = Default::default();
     std::fs::write(scratch, bytes).unwrap();
-    let (net, meta) = weights::load::<Cpu>(scratch, &device).unwrap();
+    let (net, meta) = model::load::<Cpu>(scratch, &device).unwrap();
     assert!(matches!(meta.arch, Architecture::SidUnet(_)));
     let Net::Spc(net) = net else {
         panic!("not a SID U-Net")
@@ -162,7 +163,7 @@ fn the_shipped_spc_exports_to_what_pytorch_computes() {
     let model = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../models/spc.safetensors");
     let (meta, tensors) = weights::read(&model).unwrap();
     let device = Default::default();
-    let (net, _) = weights::load::<Cpu>(&model, &device).unwrap();
+    let (net, _) = model::load::<Cpu>(&model, &device).unwrap();
     let Net::Spc(net) = net else {
         panic!("not a SID U-Net")
     };

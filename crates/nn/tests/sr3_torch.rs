@@ -16,7 +16,7 @@
 
 use burn::tensor::{Tensor, TensorData};
 use pgrf_nn::backend::Cpu;
-use pgrf_nn::weights;
+use pgrf_nn::model;
 use pgrf_nn::Net;
 use sha2::{Digest, Sha256};
 use std::path::{Path, PathBuf};
@@ -89,7 +89,7 @@ fn shipped_pgrf_matches_pytorch_reference() {
         )
     };
     let device = Default::default();
-    let (net, _) = weights::load::<Cpu>(&model, &device).unwrap();
+    let (net, _) = model::load::<Cpu>(&model, &device).unwrap();
     let Net::Pgrf(net) = net else {
         panic!("models/pgrf.safetensors is not a PGRF (SR3) model")
     };

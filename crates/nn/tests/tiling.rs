@@ -8,7 +8,8 @@ use pgrf_nn::backend::Cpu;
 use pgrf_nn::infer::image::plan_for;
 use pgrf_nn::infer::start::start_noise;
 use pgrf_nn::infer::{restore_image, ImageOptions, Restore, Restorer, SamplerChoice};
-use pgrf_nn::weights::{Architecture, NoiseSource, WeightMeta};
+use pgrf_nn::weights::{NoiseSource, WeightMeta};
+use pgrf_nn::Architecture;
 use pgrf_nn::{SidUnetConfig, Sr3Config};
 
 /// Scales every weight: burn's default initialisation shrinks activations

@@ -2,18 +2,16 @@
 //! scene out (as a DNG with the input's size, CFA and levels): by default
 //! the dark capture the camera would record (un-amplified, EXIF exposure
 //! divided by the ratio), so that `pgrf enhance --ratio R` restores it;
-//! `--brightened` writes it multiplied back by the ratio instead.
+//! `--brightened` writes it multiplied back by the ratio instead. The
+//! recipe is `pgrf_calib::synth::synthesize`; this reads the frame, writes
+//! the DNG (and preview) and prints.
 
 use crate::input::InputArgs;
-use anyhow::{bail, Context, Result};
+use anyhow::{bail, Result};
 use clap::Args;
-use pgrf_calib::Calibration;
-use pgrf_noise::pair::{ExposureSpec, PairSpec, RatioSpec};
-use pgrf_noise::profile::DarkCurrent;
-use pgrf_noise::{CameraProfile, Components, DarkLaw, ModelKind};
-use pgrf_raw::{
-    pack_normalized, render_preview, unpack_normalized, write_dng, DngOptions, PreviewOptions,
-};
+use pgrf_calib::synth::{synthesize, SynthConfig};
+use pgrf_noise::{DarkLaw, ModelKind};
+use pgrf_raw::{render_preview, write_dng, DngOptions, PreviewOptions};
 use std::path::PathBuf;
 
 #[derive(Args, Debug)]
@@ -98,117 +96,30 @@ pub fn run(a: &SynthArgs) -> Result<()> {
             bail!("--png-gain must be a positive number, got {g}");
         }
     }
-    let mut profile = CameraProfile::load(&a.profile)?;
-    if let Some(rate) = a.dark_rate {
-        if !(rate.is_finite() && rate >= 0.0) {
-            bail!("--dark-rate must be >= 0 electrons, got {rate}");
-        }
-        profile.dark_current = Some(DarkCurrent {
-            law: a.dark_law,
-            rate,
-        });
-    }
-    if let Some(r) = a.ratio {
-        if !(r.is_finite() && r > 0.0) {
-            bail!("--ratio must be a positive number, got {r}");
-        }
-    }
-    if let Some(t) = a.exposure_time {
-        if !(t.is_finite() && t >= 0.0) {
-            bail!("--exposure-time must be >= 0 seconds, got {t}");
-        }
-    }
-    let components = Components::parse(&a.components)?;
     let frame = a.input.open(&a.clean)?;
-    let clean = pack_normalized(&frame, true)?;
-
-    let only_iso = profile.only_iso();
-    let mut spec = PairSpec::new(profile, a.model);
-    spec.components = components;
-    spec.global = a.global;
-    spec.tukey = !a.gaussian_read;
-    spec.iso = a.iso.or(only_iso).or(frame.iso);
-    spec.ratio = match a.ratio {
-        Some(r) => RatioSpec::Fixed(r),
-        None => RatioSpec::default(),
-    };
-    // The ratio must be known to derive the exposure from the file's.
-    let (ratio, _) = spec.conditions(a.seed)?;
-    spec.ratio = RatioSpec::Fixed(ratio);
-    spec.exposure = match (a.exposure_time, frame.exposure_s) {
-        (Some(t), _) => ExposureSpec::Fixed(t),
-        (None, Some(t)) => ExposureSpec::Fixed((t / ratio as f64) as f32),
-        (None, None) => ExposureSpec::default(),
-    };
-    if let Some(path) = &a.calib {
-        let cal = Calibration::load(path)?;
-        cal.check_matches(&frame.make, &frame.model, spec.iso, a.force)
-            .and_then(|()| cal.check_layout(&frame))
-            .with_context(|| format!("{}", path.display()))?;
-        let (ph, pw) = frame.packed_dims();
-        if (cal.meta.height / 2, cal.meta.width / 2) != (ph, pw) {
-            bail!(
-                "{}: calibration is {}x{}, the clean frame {}x{}",
-                path.display(),
-                cal.meta.width,
-                cal.meta.height,
-                frame.width,
-                frame.height
-            );
-        }
-        cal.apply_to(&mut spec)
-            .with_context(|| format!("--calib {}", path.display()))?;
-    }
-    let plane_rows = frame.cfa.offsets().map(|(r, _)| r);
-    let pair = spec
-        .synthesize(clean.view(), plane_rows, a.seed)
-        .with_context(|| format!("{}", a.clean.display()))?;
-
-    let noisy = if a.brightened {
-        pair.noisy.mapv(|v| v.clamp(0.0, 1.0))
-    } else {
-        pgrf_noise::capture::recorded(&pair.noisy, pair.ratio)
-    };
-    let mut out = unpack_normalized(noisy.view(), &frame)?;
-    if let Some(iso) = spec.iso {
-        out.iso = Some(iso);
-    }
-    out.exposure_s = Some(pair.exposure_s as f64);
-    // The NoiseProfile of the capture written: exact for the P-G model
-    // (variance K x + sigma^2 in DN, normalised by the range; a brightened
-    // frame's is the ratio's square times the dark one's at the dark
-    // signal). The ELD and pgrf models add row noise, heavy tails and per-pixel
-    // maps that one (S, O) pair cannot state, so their DNGs carry none rather
-    // than a wrong one; nor does the clean frame's own tag survive.
-    out.noise_profile = (a.model == ModelKind::PoissonGaussian && !a.brightened).then(|| {
-        // The noise was drawn on the profile's scale and normalised by it.
-        let range = spec.dn_range();
-        let p = &pair.params;
-        vec![[p.k / range, (p.sigma_gauss / range).powi(2)]]
-    });
-    write_dng(&out, &a.output, &DngOptions::default())?;
-    let p = &pair.params;
+    let made = synthesize(&frame, &a.clean, &config(a))?;
+    write_dng(&made.frame, &a.output, &DngOptions::default())?;
     eprintln!(
         "wrote {} ({}): model {:?}{}, ratio {:.1}, exposure {:.4} s, {}, K {:.4} DN/e-, read {:.3} DN, row {:.3} DN, seed {}",
         a.output.display(),
         if a.brightened { "brightened by the ratio" } else { "dark capture" },
         a.model,
-        if a.model == ModelKind::Pgrf { format!(" [{}{}]", components, if a.global { ", noD" } else { "" }) } else { String::new() },
-        pair.ratio,
-        pair.exposure_s,
-        spec.iso.map(|i| format!("ISO {i}")).unwrap_or_else(|| "parameters drawn from the ELD distribution".into()),
-        p.k,
-        if a.model == ModelKind::Eld && !a.gaussian_read { p.sigma_tukey } else { p.sigma_gauss },
-        p.sigma_row,
+        if a.model == ModelKind::Pgrf { format!(" [{}{}]", made.components, if a.global { ", noD" } else { "" }) } else { String::new() },
+        made.ratio,
+        made.exposure_s,
+        made.iso.map(|i| format!("ISO {i}")).unwrap_or_else(|| "parameters drawn from the ELD distribution".into()),
+        made.k,
+        made.read_dn,
+        made.row_dn,
         a.seed
     );
     if let Some(png) = &a.png {
         let prev = render_preview(
-            &out,
+            &made.frame,
             &PreviewOptions {
                 gain: a
                     .png_gain
-                    .unwrap_or(if a.brightened { 1.0 } else { pair.ratio }),
+                    .unwrap_or(if a.brightened { 1.0 } else { made.ratio }),
                 ..Default::default()
             },
         )?;
@@ -216,4 +127,24 @@ pub fn run(a: &SynthArgs) -> Result<()> {
         eprintln!("wrote {}", png.display());
     }
     Ok(())
+}
+
+/// The flags as the recipe's settings.
+fn config(a: &SynthArgs) -> SynthConfig {
+    SynthConfig {
+        profile: a.profile.clone(),
+        ratio: a.ratio,
+        iso: a.iso,
+        model: a.model,
+        components: a.components.clone(),
+        global: a.global,
+        gaussian_read: a.gaussian_read,
+        exposure_time: a.exposure_time,
+        dark_rate: a.dark_rate,
+        dark_law: a.dark_law,
+        calib: a.calib.clone(),
+        force: a.force,
+        seed: a.seed,
+        brightened: a.brightened,
+    }
 }

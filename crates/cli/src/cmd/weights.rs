@@ -111,9 +111,9 @@ pub fn run_export(a: &ExportArgs) -> Result<()> {
         eprintln!(
             "{}",
             match meta.arch {
-                pgrf_nn::weights::Architecture::SidUnet(_) =>
+                pgrf_nn::Architecture::SidUnet(_) =>
                     "note: this network is residual: add the input to UNetSeeInDark's output (tests/reference/sid_unet_torch.py check --residual)",
-                pgrf_nn::weights::Architecture::Sr3(_) =>
+                pgrf_nn::Architecture::Sr3(_) =>
                     "note: this network is residual: v = (T + network - Xt) / max(1 - t, 0.1) (bench/sr3_reference.py, --config the pgrf file for its settings)",
             }
         );

@@ -41,7 +41,8 @@ pub fn one_line_error(out: &Output) -> String {
 /// not of denoising.
 pub fn tiny_model(dir: &Path, flow: bool, t2: Option<f32>, seed: u64) -> PathBuf {
     use pgrf_nn::backend::Cpu;
-    use pgrf_nn::weights::{Architecture, NoiseSource, WeightMeta};
+    use pgrf_nn::weights::{NoiseSource, WeightMeta};
+    use pgrf_nn::Architecture;
     use pgrf_nn::{SidUnetConfig, Sr3Config};
     let device = Default::default();
     let arch = if flow {

@@ -53,6 +53,21 @@ pub fn parse_data(text: &str) -> Result<Vec<DataEntry>> {
         .collect())
 }
 
+impl TrainConfig {
+    /// The files a run reads: the `data` entries' files and folders (none
+    /// when `data` does not parse), the calibration, the camera for photos
+    /// and the starting weights; what no output may overwrite.
+    pub fn input_files(&self) -> Vec<PathBuf> {
+        let mut inputs: Vec<PathBuf> = parse_data(&self.data)
+            .map(|entries| entries.into_iter().filter_map(|e| e.path).collect())
+            .unwrap_or_default();
+        inputs.extend(self.calib.clone());
+        inputs.extend(self.camera_like.clone());
+        inputs.extend(self.init.clone());
+        inputs
+    }
+}
+
 /// The training and validation sources of a configuration, and one line for
 /// each file left out.
 pub struct Sources {

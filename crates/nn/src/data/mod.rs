@@ -8,6 +8,7 @@
 mod augment;
 pub mod build;
 mod cache;
+mod crop;
 mod loader;
 pub mod photos;
 pub mod source;

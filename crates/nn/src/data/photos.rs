@@ -23,7 +23,7 @@
 //! beyond it they are decoded again when drawn.
 
 use crate::data::cache::BudgetCache;
-use crate::data::source::Crop;
+use crate::data::crop::Crop;
 use crate::error::{NnError, Result};
 use pgrf_core::seed::mix64;
 use pgrf_raw::photo::read_photo;

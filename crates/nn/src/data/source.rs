@@ -9,6 +9,7 @@
 //! again when drawn.
 
 use crate::data::cache::BudgetCache;
+use crate::data::crop::Crop;
 use crate::data::photos::PhotoFolder;
 use crate::error::{NnError, Result};
 use pgrf_core::seed::mix64;
@@ -16,19 +17,6 @@ use pgrf_raw::ndarray::{s, Array3};
 use pgrf_raw::{decode_file, pack_u16, LevelOverrides, RawFrame, SceneKind, SceneSpec};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
-
-/// A clean crop and its place on the sensor.
-#[derive(Clone, Debug)]
-pub(crate) struct Crop {
-    /// Packed planes R, G1, B, G2, normalised (not clipped).
-    pub(crate) clean: Array3<f32>,
-    /// Sensor-row parity of each plane (from the CFA).
-    pub(crate) plane_rows: [usize; 4],
-    /// Top-left corner in packed coordinates of the source image.
-    pub(crate) origin: (usize, usize),
-    /// Packed size of the whole source image.
-    pub(crate) image: (usize, usize),
-}
 
 /// One decoded clean file, packed.
 struct Packed {

@@ -11,8 +11,8 @@
 //! input.
 
 use super::path::interpolate;
+use crate::arch::sr3::Sr3Unet;
 use crate::ops::PgrfOps;
-use crate::sr3::Sr3Unet;
 use crate::step::l1;
 use burn::tensor::Tensor;
 

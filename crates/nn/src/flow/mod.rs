@@ -4,7 +4,7 @@
 //! Symbols as in the paper: X1 the clean image, X0 ~ N(0, I) the start,
 //! T the condition (the synthetic or real noisy capture, amplified by its
 //! exposure ratio), t in [0, 1] the time along the path, v(Xt, T, t) the
-//! velocity field (an SR3-style U-Net, [`crate::sr3`]), t2 the searched
+//! velocity field (an SR3-style U-Net, [`crate::arch::sr3`]), t2 the searched
 //! second time of the two-stage sampler.
 //!
 //! | paper | here |

@@ -25,8 +25,8 @@
 //! [`crate::infer::Restorer`]).
 
 use super::path::interpolate;
+use crate::arch::sr3::Sr3Unet;
 use crate::ops::PgrfOps;
-use crate::sr3::Sr3Unet;
 use burn::tensor::Tensor;
 
 /// A velocity field v(X, T, t) (the paper's v, an SR3-style U-Net with the
@@ -217,8 +217,8 @@ impl std::str::FromStr for SamplerKind {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::arch::sr3::Sr3Config;
     use crate::backend::Cpu;
-    use crate::sr3::Sr3Config;
     use burn::module::{Module, Param};
     use burn::tensor::{Tensor, TensorData};
 

@@ -9,20 +9,28 @@
 //! network evaluations per pair (not 2n) and scores exactly what inference
 //! will run at t2 = t. Scores are pgrf-eval's (ELD protocol by default).
 //!
-//! [`run`] measures ([`SearchOutcome`]); [`store_t2`] writes the chosen t2
-//! into the weight file. `pgrf search` is those two calls plus printing.
+//! [`run`] is `pgrf search`'s recipe: from a weight file and a
+//! [`SearchRequest`] it makes validation pairs like the model's training
+//! pairs (its record's noise, the calibration given, clean RAWs, photos or
+//! procedural scenes), measures ([`measure`], [`SearchOutcome`]) and writes
+//! the chosen t2 into the weight file ([`store_t2`]) unless told not to.
+//! `pgrf search` is that call plus printing.
 
 use super::sample::{first_stage, second_stage, two_stage, Velocity};
 use crate::backend::{on_device, DeviceKind, OnBackend};
+use crate::data::build::validation_source;
+use crate::data::source::Source;
 use crate::data::validation::ValSet;
 use crate::error::{NnError, Result};
 use crate::ops::PgrfOps;
 use crate::weights::{self, WeightMeta};
 use burn::tensor::{Tensor, TensorData};
 use ndarray::{Array3, ArrayView3};
+use pgrf_calib::mix::{MixError, MixSpec};
 use pgrf_core::Progress;
 use pgrf_eval::{evaluate, Protocol};
-use std::path::Path;
+use pgrf_noise::pair::RatioSpec;
+use std::path::{Path, PathBuf};
 
 /// The candidate times {s, 2s, .., ns} with ns <= 1 (1 included when s divides it).
 pub(crate) fn grid(step: f64) -> Result<Vec<f64>> {
@@ -118,13 +126,206 @@ pub struct SearchOutcome {
     pub averaging: Vec<(usize, f64, f64)>,
 }
 
+/// Where the search's validation pairs come from.
+#[derive(Clone, Debug, PartialEq)]
+pub enum ValPairs {
+    /// `pairs` crops of the clean RAW files, or of photos (unprocessed as
+    /// the model's training run did it), in a folder or file.
+    Files {
+        /// The folder or file.
+        path: PathBuf,
+        /// How many pairs to draw.
+        pairs: usize,
+    },
+    /// This many procedural scenes.
+    Procedural(usize),
+}
+
+/// What `pgrf search` is asked: the model, its validation pairs, the noise
+/// overrides and how to search.
+#[derive(Clone, Debug)]
+pub struct SearchRequest {
+    /// The flow model's weight file; its t2 is rewritten unless `dry_run`.
+    pub model: PathBuf,
+    /// The validation pairs (None: refused, naming the flags).
+    pub val: Option<ValPairs>,
+    /// Side of the validation crops in packed pixels (at least 16).
+    pub patch: usize,
+    /// A fixed exposure ratio (default: drawn from the file's training range).
+    pub ratio: Option<f32>,
+    /// ISO of the synthetic noise (default: the file's, else ELD-sampled).
+    pub iso: Option<u32>,
+    /// The calibration file the model was trained with.
+    pub calib: Option<PathBuf>,
+    /// Measure only, leaving the weight file as it is.
+    pub dry_run: bool,
+    /// Grid, averaging study, seed (of the pairs too), device, protocol.
+    pub options: SearchOptions,
+}
+
+/// What [`run`] measured and on what, for printing.
+#[derive(Clone, Debug)]
+pub struct Searched {
+    /// The scores.
+    pub outcome: SearchOutcome,
+    /// The model's record (before t2 was written).
+    pub meta: WeightMeta,
+    /// The number of validation pairs.
+    pub pairs: usize,
+    /// The pairs, in words ("2 procedural scenes", "8 crops of ...").
+    pub what: String,
+    /// The exposure ratios of the pairs.
+    pub ratio: RatioSpec,
+    /// The fixed ISO of the noise, if any.
+    pub iso: Option<u32>,
+    /// Otherwise the ISO range the gain was drawn from, if narrowed.
+    pub iso_range: Option<(u32, u32)>,
+    /// The noise's profiles, in words.
+    pub profiles: String,
+    /// Whether t2 was written into the weight file.
+    pub written: bool,
+}
+
+/// `pgrf search`'s recipe (Algorithm 2, whole): checks the request and the
+/// model (a flow model), makes the validation pairs as the model's training
+/// pairs were made (its record's profile or mix, ISO or ISO range, ratios;
+/// `iso` and `ratio` override; `calib` applied; photos unprocessed as its
+/// recorded configuration says; `warn` hears each file skipped), refuses
+/// pairs that would not fit in memory, measures ([`measure`]) and, unless
+/// `dry_run`, stores the best t2 ([`store_t2`]).
+pub fn run(req: &SearchRequest, progress: &dyn Progress, warn: &dyn Fn(&str)) -> Result<Searched> {
+    // Bad --step or --samples are refused before any costly work.
+    req.options.times()?;
+    let meta = weights::read_meta(&req.model).map_err(|e| NnError::Input {
+        flag: "--model",
+        path: req.model.clone(),
+        source: Box::new(e),
+    })?;
+    if !meta.arch.sampled() {
+        return Err(NnError::WrongArchitecture {
+            path: req.model.clone(),
+            message: format!(
+                "--model {}: holds an {}; the sampling search is for PGRF flow models",
+                req.model.display(),
+                meta.arch.describe()
+            ),
+        });
+    }
+    if req.patch < 16 {
+        return Err(NnError::BadSetting {
+            flag: "--patch",
+            message: format!(
+                "--patch must be at least 16 packed pixels, got {}",
+                req.patch
+            ),
+        });
+    }
+    req.options
+        .device
+        .check_available()
+        .map_err(NnError::Device)?;
+    let noise = &meta.noise;
+    let ratio = match req.ratio {
+        Some(r) if r.is_finite() && r > 0.0 => RatioSpec::Fixed(r),
+        Some(r) => {
+            return Err(NnError::BadSetting {
+                flag: "--ratio",
+                message: format!("--ratio must be a positive number, got {r}"),
+            })
+        }
+        None => RatioSpec::Uniform {
+            lo: noise.ratio[0],
+            hi: noise.ratio[1],
+        },
+    };
+    let (iso, iso_range) = match req.iso {
+        Some(v) => (Some(v), None),
+        None => (noise.iso, noise.iso_range.map(|[lo, hi]| (lo, hi))),
+    };
+    let profile = noise.profile.clone().unwrap_or_else(|| "sony-a7s2".into());
+    let built = pgrf_calib::mix::build(&MixSpec {
+        profile: &profile,
+        model: noise.model,
+        iso,
+        iso_range,
+        ratio,
+        calibrated_dark_level: noise.calibrated_dark_level,
+        calibration: req.calib.as_deref(),
+    })
+    .map_err(|e| match e {
+        MixError::Profile(e) => NnError::Input {
+            flag: "--model",
+            path: req.model.clone(),
+            source: Box::new(NnError::Config(format!("its noise record: {e}"))),
+        },
+        MixError::CalibrationWithMix { path, mix } => NnError::BadSetting {
+            flag: "--calib",
+            message: format!(
+                "--calib {}: the model was trained on a mix of profiles ({mix}); a calibration describes one sensor",
+                path.display()
+            ),
+        },
+        e => NnError::Calibration(e),
+    })?;
+    let (source, count, what) = match &req.val {
+        Some(ValPairs::Files { path, pairs }) => {
+            // Photos are unprocessed as the model's training run did it.
+            let config = (meta.training.as_ref())
+                .and_then(|t| t.config.clone())
+                .unwrap_or_default();
+            let (src, skipped) = validation_source(&config, "--val", path, req.patch)?;
+            for w in skipped {
+                warn(&w);
+            }
+            let what = format!("{pairs} crops of {}", src.describe());
+            (src, *pairs, what)
+        }
+        Some(ValPairs::Procedural(n)) => (Source::Procedural, *n, format!("{n} procedural scenes")),
+        None => {
+            return Err(NnError::BadSetting {
+                flag: "--val",
+                message:
+                    "give validation data: --val DIR (clean RAW files or photos) or --procedural N"
+                        .into(),
+            })
+        }
+    };
+    if count == 0 {
+        return Err(NnError::BadSetting {
+            flag: "--pairs",
+            message: "no validation pairs: --pairs/--procedural must be at least 1".into(),
+        });
+    }
+    let p = req.patch;
+    let need =
+        crate::infer::memory::tile_bytes(&meta.arch, p, p) + (count * 3 * 4 * p * p * 4) as f64;
+    pgrf_core::mem::check_fits(&format!("--patch {p} with {count} pairs"), need)
+        .map_err(|e| NnError::TooLarge(format!("{e}; give a smaller --patch or fewer pairs")))?;
+    let val = ValSet::build(&source, &built.mix, p, count, req.options.seed)?;
+    let outcome = measure(&req.model, &val, &req.options, progress)?;
+    if !req.dry_run {
+        store_t2(&req.model, outcome.best_t2)?;
+    }
+    Ok(Searched {
+        outcome,
+        meta,
+        pairs: count,
+        what,
+        ratio,
+        iso,
+        iso_range,
+        profiles: built.mix.describe(),
+        written: !req.dry_run,
+    })
+}
+
 /// Algorithm 2 with the flow model in the weight file `model`: scores the
 /// two-stage sampler at every candidate t on `pairs` (their own X0), the
 /// one-step sampler and the input, keeps the best t, and runs the
 /// averaging study when `opts.samples > 1`. Reports network evaluations to
 /// `progress` (one stage of `pairs x (n + 1 [+ samples])` units).
 /// Leaves the weight file as it is: see [`store_t2`].
-pub fn run(
+pub fn measure(
     model: &Path,
     pairs: &ValSet,
     opts: &SearchOptions,
@@ -161,11 +362,11 @@ fn run_on<B: PgrfOps>(
     opts: &SearchOptions,
     progress: &dyn Progress,
 ) -> Result<SearchOutcome> {
-    let (net, _) = weights::load_flow::<B>(model, device)?;
+    let (net, _) = crate::model::load_flow::<B>(model, device)?;
     search_with(&net, device, pairs, opts, progress)
 }
 
-/// [`run`] with a network already in memory (any velocity field `net` on
+/// [`measure`] with a network already in memory (any velocity field `net` on
 /// `device`): the same measurement, for callers that hold the model and
 /// for tests.
 pub(crate) fn search_with<B: PgrfOps>(
@@ -360,9 +561,9 @@ mod tests {
 
     /// A small SR3 field with seeded (random, not trained) weights and two
     /// procedural validation pairs: the second stage depends on t.
-    fn fixture() -> (crate::sr3::Sr3Unet<Cpu>, ValSet) {
+    fn fixture() -> (crate::arch::sr3::Sr3Unet<Cpu>, ValSet) {
+        use crate::arch::sr3::Sr3Config;
         use crate::data::source::Source;
-        use crate::sr3::Sr3Config;
         use pgrf_noise::pair::PairSpec;
         use pgrf_noise::{CameraProfile, ModelKind};
         let dev = Default::default();

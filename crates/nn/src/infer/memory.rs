@@ -3,46 +3,17 @@
 //! The peak of a forward pass grows with the tile's pixel count times the
 //! widest full-resolution layers' channels (activations, the skips the
 //! U-Nets keep, the unfolded input of a 3x3 convolution). The per-pixel
-//! costs below are measured, not derived: peak resident memory of
-//! `pgrf enhance --json` on this project's 2-core CPU machine at two tile
-//! sizes, the difference divided by the difference in pixels:
-//! - SID U-Net, width 32: 305 MiB at 512^2, 804 MiB at 1024^2 -> ~670 B/px
-//!   (5.2 floats per pixel per channel of width);
-//! - SR3 default (inner 64): 772 MiB at 256^2, 1282 MiB at 512^2 ->
-//!   ~2.7 KB/px (10.6 floats per pixel per inner channel).
-//!
-//! The estimates round these up by about a third.
+//! costs are measured, not derived, and each network's file states its own
+//! ([`crate::arch`]): peak resident memory of `pgrf enhance --json` on this
+//! project's 2-core CPU machine at two tile sizes, the difference divided by
+//! the difference in pixels, rounded up by about a third.
 
-use crate::weights::Architecture;
+use crate::arch::Architecture;
 
-/// Estimated peak bytes per packed pixel of one tile's forward pass.
-pub(crate) fn bytes_per_pixel(arch: &Architecture) -> f64 {
-    let floats = match arch {
-        Architecture::SidUnet(c) => 7.0 * c.width as f64,
-        Architecture::Sr3(c) => {
-            let w = c.inner_channels as f64 * c.channel_mults.first().copied().unwrap_or(1) as f64;
-            14.0 * w + 16.0
-        }
-    };
-    floats * 4.0
-}
-
-/// Tokens of the largest self-attention in an `h` x `w` tile: SR3 attends
-/// at its `attn_levels` and in the first middle block (the last level); each
-/// level halves the side, rounding up. Zero for the SID U-Net.
+/// Tokens of the largest self-attention in an `h` x `w` tile (zero for a
+/// network without attention, such as the SID U-Net).
 pub fn attention_tokens(arch: &Architecture, h: usize, w: usize) -> usize {
-    let Architecture::Sr3(c) = arch else {
-        return 0;
-    };
-    let last = c.channel_mults.len().saturating_sub(1);
-    c.attn_levels
-        .iter()
-        .copied()
-        .chain(std::iter::once(last))
-        .filter(|&l| l <= last)
-        .map(|l| h.div_ceil(1 << l) * w.div_ceil(1 << l))
-        .max()
-        .unwrap_or(0)
+    arch.attention_tokens(h, w)
 }
 
 /// Estimated peak bytes of one `h` x `w` tile: the per-pixel activations
@@ -50,7 +21,7 @@ pub fn attention_tokens(arch: &Architecture, h: usize, w: usize) -> usize {
 /// which grow with the square of the pixel count.
 pub fn tile_bytes(arch: &Architecture, h: usize, w: usize) -> f64 {
     let tokens = attention_tokens(arch, h, w) as f64;
-    bytes_per_pixel(arch) * (h * w) as f64 + 2.0 * 4.0 * tokens * tokens
+    arch.bytes_per_pixel() * (h * w) as f64 + 2.0 * 4.0 * tokens * tokens
 }
 
 /// The largest square tile, a multiple of `multiple` between
@@ -63,7 +34,7 @@ pub(crate) fn tile_for_budget(
 ) -> usize {
     let m = multiple.max(1);
     let lo = (8 * m).max(super::image::MIN_TILE).div_ceil(m) * m;
-    let by_pixels = (budget as f64 / bytes_per_pixel(arch)).sqrt() as usize;
+    let by_pixels = (budget as f64 / arch.bytes_per_pixel()).sqrt() as usize;
     let mut side = (by_pixels.min(cap).max(lo) / m) * m;
     while side > lo && tile_bytes(arch, side, side) > budget as f64 {
         side -= m;
@@ -71,23 +42,11 @@ pub(crate) fn tile_for_budget(
     side.max(lo)
 }
 
-/// Largest tile a file's network should see. Self-attention relates every
-/// position of a tile to every other, and its memory grows with the square
-/// of the tokens, so flow models are held to twice the training patch, but
-/// never below 512 (512 when the file does not record it). The floor is
-/// measured: the shipped flow model, trained on 64-pixel crops, scores
-/// 29.45 dB on the demo's x100 capture in tiles of 128 (overlap 32), 29.92
-/// in tiles of 256 and 30.03 as one 768 x 512 tile: small tiles cost more
-/// at their borders than a softmax over more tokens than in training does.
-/// The convolutional denoiser is limited by memory alone.
+/// Largest tile a file's network should see: the network's own cap
+/// ([`Architecture::tile_cap`]), from the training patch the file records
+/// (flow models: twice the patch, clamped to 512..2048, 512 unrecorded).
 pub(crate) fn tile_cap(meta: &crate::weights::WeightMeta) -> usize {
-    match meta.arch {
-        Architecture::SidUnet(_) => 8192,
-        Architecture::Sr3(_) => meta
-            .training
-            .as_ref()
-            .map_or(512, |t| (2 * t.patch).clamp(512, 2048)),
-    }
+    meta.arch.tile_cap(meta.training.as_ref().map(|t| t.patch))
 }
 
 /// Estimated peak bytes of a training step on `batch` crops of `patch` x
@@ -138,8 +97,7 @@ pub fn auto_tile(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::sr3::Sr3Config;
-    use crate::unet::SidUnetConfig;
+    use crate::arch::{SidUnetConfig, Sr3Config};
 
     #[test]
     fn tiles_grow_with_memory_and_stay_aligned() {

@@ -3,10 +3,10 @@
 //! runs. Commands hold it as `Box<dyn Restore>` so that they are not generic
 //! over burn's backends.
 
+use crate::arch::Net;
 use crate::backend::{on_device, DeviceKind, OnBackend};
 use crate::error::{NnError, Result};
 use crate::flow::sample::{Sampler, SamplerKind};
-use crate::net::Net;
 use crate::ops::PgrfOps;
 use crate::weights::{self, WeightMeta};
 use burn::tensor::backend::Backend;
@@ -105,7 +105,7 @@ impl<B: PgrfOps> Restorer<B> {
         choice: SamplerChoice,
         device: B::Device,
     ) -> Result<Self> {
-        let (net, meta) = weights::load_bytes::<B>(path, bytes, &device)?;
+        let (net, meta) = crate::model::load_bytes::<B>(path, bytes, &device)?;
         let t2 = choice.t2.or(meta.t2).unwrap_or(UNSEARCHED_T2);
         Self::new(net, meta, choice, t2, device)
     }
@@ -154,16 +154,14 @@ impl<B: PgrfOps> Restore for Restorer<B> {
     }
 
     fn sampler(&self) -> Option<Sampler> {
-        match self.net {
-            Net::Spc(_) => None,
-            Net::Pgrf(_) => Some(self.sampler),
-        }
+        self.net.sampled().then_some(self.sampler)
     }
 
     fn samples(&self) -> usize {
-        match self.net {
-            Net::Spc(_) => 0,
-            Net::Pgrf(_) => self.samples,
+        if self.net.sampled() {
+            self.samples
+        } else {
+            0
         }
     }
 
@@ -173,10 +171,7 @@ impl<B: PgrfOps> Restore for Restorer<B> {
     }
 
     fn side_multiple(&self) -> usize {
-        match &self.meta.arch {
-            weights::Architecture::SidUnet(_) => 16,
-            weights::Architecture::Sr3(c) => c.side_multiple(),
-        }
+        self.meta.arch.side_multiple()
     }
 
     fn restore(&self, input: ArrayView3<f32>, x0s: &[ArrayView3<f32>]) -> Result<Array3<f32>> {
@@ -187,30 +182,23 @@ impl<B: PgrfOps> Restore for Restorer<B> {
             )));
         }
         let cond = self.tensor(input);
-        let out = match &self.net {
-            Net::Spc(n) => n.forward(cond),
-            Net::Pgrf(n) => {
-                if x0s.len() != self.samples {
-                    return Err(NnError::Invalid(format!(
-                        "{} start fields for {} samples",
-                        x0s.len(),
-                        self.samples
-                    )));
-                }
-                let mut acc: Option<Tensor<B, 4>> = None;
-                for x0 in x0s {
-                    if x0.dim() != (c, h, w) {
-                        return Err(NnError::Invalid("X0 and input differ in shape".into()));
-                    }
-                    let y = self.sampler.run(n, cond.clone(), self.tensor(*x0));
-                    acc = Some(match acc {
-                        None => y,
-                        Some(a) => a + y,
-                    });
-                }
-                acc.expect("samples >= 1") / self.samples as f32
+        if self.net.sampled() {
+            if x0s.len() != self.samples {
+                return Err(NnError::Invalid(format!(
+                    "{} start fields for {} samples",
+                    x0s.len(),
+                    self.samples
+                )));
             }
-        };
+            for x0 in x0s {
+                if x0.dim() != (c, h, w) {
+                    return Err(NnError::Invalid("X0 and input differ in shape".into()));
+                }
+            }
+        }
+        let out = self
+            .net
+            .restore_tile(cond, x0s.len(), |k| self.tensor(x0s[k]), self.sampler);
         let v: Vec<f32> = out
             .into_data()
             .to_vec()

@@ -15,10 +15,10 @@ mod pth_write;
 pub mod sid_names;
 pub mod torch_file;
 
+use crate::arch::{Architecture, SidUnetConfig};
 use crate::error::{NnError, Result};
 use crate::named::NamedTensor;
-use crate::unet::SidUnetConfig;
-use crate::weights::{self, Architecture, ImportedFrom, NoiseSource, WeightMeta};
+use crate::weights::{self, ImportedFrom, NoiseSource, WeightMeta};
 use std::collections::BTreeMap;
 use std::path::Path;
 
@@ -275,23 +275,8 @@ pub fn export(
     tensors: &BTreeMap<String, NamedTensor>,
     pth: bool,
 ) -> Result<Exported> {
-    let (named, naming, residual): (Vec<(String, &NamedTensor)>, _, _) = match &meta.arch {
-        Architecture::SidUnet(c) => {
-            let mut v = Vec::new();
-            for (t, p) in sid_names::pairs() {
-                let x = tensors.get(&p).ok_or_else(|| {
-                    NnError::Invalid(format!("the weight file has no {p} (not a SID U-Net?)"))
-                })?;
-                v.push((t, x));
-            }
-            (v, "UNetSeeInDark's names (conv1_1 .. conv10_1)", c.residual)
-        }
-        Architecture::Sr3(c) => (
-            tensors.iter().map(|(n, t)| (n.clone(), t)).collect(),
-            "pgrf's SR3 names (bench/sr3_reference.py loads them)",
-            c.residual,
-        ),
-    };
+    let (named, naming) = meta.arch.export_names(tensors)?;
+    let residual = meta.arch.residual();
     let bytes = if pth {
         pth_write::encode(&named).map_err(NnError::Invalid)?
     } else {

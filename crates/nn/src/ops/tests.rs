@@ -300,9 +300,9 @@ fn fused_adam_matches_burns_adam_and_shares_its_records() {
 /// over 8 Adam steps).
 #[test]
 fn training_curves_match_burns() {
-    use crate::sr3::Sr3Config;
+    use crate::arch::sid_unet::SidUnetConfig;
+    use crate::arch::sr3::Sr3Config;
     use crate::step::{denoiser_step, flow_step};
-    use crate::unet::SidUnetConfig;
     use burn::optim::adaptor::OptimizerAdaptor;
     let device = Default::default();
     let noisy = random([2, 4, 32, 32], 60).clamp(-1.0, 1.0) * 0.5 + 0.5;

@@ -8,7 +8,12 @@
 //! (zeros when the image is too small to reflect) and the output is cropped
 //! back, so any packed image size works.
 
+use super::network::NetworkConfig;
+use crate::config::{Method, TrainConfig};
+use crate::data::Extras;
+use crate::error::{NnError, Result as NnResult};
 use crate::layers::Layer;
+use crate::named::NamedTensor;
 use crate::ops::{self, PgrfOps};
 use burn::config::Config;
 use burn::module::Module;
@@ -18,6 +23,7 @@ use burn::nn::{LeakyRelu, LeakyReluConfig, PaddingConfig2d};
 use burn::tensor::backend::Backend;
 use burn::tensor::ops::PadMode;
 use burn::tensor::Tensor;
+use std::collections::BTreeMap;
 
 /// Multiple that input sides are padded to (2^4 for four poolings).
 const SIDE_MULTIPLE: usize = 16;
@@ -209,6 +215,115 @@ impl<B: Backend> SidUnet<B> {
     }
 }
 
+impl SidUnetConfig {
+    /// The network `pgrf train spc` builds from `c`: SID's defaults, the
+    /// width `c.width` when given (at least 1), residual as `c.residual`.
+    pub(crate) fn from_train_config(c: &TrainConfig) -> NnResult<SidUnetConfig> {
+        let cfg = SidUnetConfig::new().with_residual(c.residual);
+        let w = c.width.unwrap_or(cfg.width);
+        if w == 0 {
+            return Err(NnError::Config("--width must be at least 1".into()));
+        }
+        Ok(cfg.with_width(w))
+    }
+}
+
+impl NetworkConfig for SidUnetConfig {
+    fn method(&self) -> Method {
+        Method::Spc
+    }
+
+    fn describe(&self) -> String {
+        format!(
+            "SPC denoiser (SID U-Net, width {}{})",
+            self.width,
+            if self.residual { ", residual" } else { "" }
+        )
+    }
+
+    fn check(&self) -> NnResult<()> {
+        if self.width == 0 || self.in_channels != 4 || self.out_channels != 4 {
+            return Err(NnError::Config(format!(
+                "the SID U-Net needs a width of at least 1 and 4 planes in and out (got width {}, {} in, {} out)",
+                self.width, self.in_channels, self.out_channels
+            )));
+        }
+        if self.residual && self.in_channels != self.out_channels {
+            return Err(NnError::Config(format!(
+                "a residual SID U-Net needs as many output channels as input ({} vs {})",
+                self.out_channels, self.in_channels
+            )));
+        }
+        Ok(())
+    }
+
+    /// Exact: every convolution's weights and biases, counted from the widths.
+    fn min_params(&self) -> f64 {
+        let conv = |k: f64, a: f64, b: f64| k * k * a * b + b;
+        let w = self.width as f64;
+        let widths = [w, 2.0 * w, 4.0 * w, 8.0 * w, 16.0 * w];
+        let mut total = conv(1.0, w, self.out_channels as f64);
+        let mut a = self.in_channels as f64;
+        for &ch in &widths {
+            total += conv(3.0, a, ch) + conv(3.0, ch, ch);
+            a = ch;
+        }
+        for level in 0..4 {
+            let (hi, lo) = (widths[level + 1], widths[level]);
+            total += conv(2.0, hi, lo) + conv(3.0, 2.0 * lo, lo) + conv(3.0, lo, lo);
+        }
+        total
+    }
+
+    /// Measured (peak resident memory of `pgrf enhance --json` at two tile
+    /// sizes, the difference over the difference in pixels): width 32 took
+    /// 305 MiB at 512^2 and 804 MiB at 1024^2, ~670 B/px, 5.2 floats per
+    /// pixel per channel of width; rounded up by about a third.
+    fn bytes_per_pixel(&self) -> f64 {
+        7.0 * self.width as f64 * 4.0
+    }
+
+    fn attention_tokens(&self, _h: usize, _w: usize) -> usize {
+        0
+    }
+
+    fn side_multiple(&self) -> usize {
+        SIDE_MULTIPLE
+    }
+
+    /// The convolutional denoiser is limited by memory alone.
+    fn tile_cap(&self, _trained_patch: Option<usize>) -> usize {
+        8192
+    }
+
+    fn sampled(&self) -> bool {
+        false
+    }
+
+    fn extras(&self, _time_max: f32) -> Extras {
+        Extras::None
+    }
+
+    fn residual(&self) -> bool {
+        self.residual
+    }
+}
+
+/// The tensors of a weight file in UNetSeeInDark's names (SID's, ELD's and
+/// PMN's PyTorch code), for `pgrf export-weights`; the naming in words.
+pub(crate) fn export_names(
+    tensors: &BTreeMap<String, NamedTensor>,
+) -> NnResult<(Vec<(String, &NamedTensor)>, &'static str)> {
+    let mut v = Vec::new();
+    for (t, p) in crate::interop::sid_names::pairs() {
+        let x = tensors.get(&p).ok_or_else(|| {
+            NnError::Invalid(format!("the weight file has no {p} (not a SID U-Net?)"))
+        })?;
+        v.push((t, x));
+    }
+    Ok((v, "UNetSeeInDark's names (conv1_1 .. conv10_1)"))
+}
+
 /// Padding that brings `side` up to a multiple of 16.
 fn pad_to(side: usize) -> usize {
     (SIDE_MULTIPLE - side % SIDE_MULTIPLE) % SIDE_MULTIPLE
@@ -241,14 +356,14 @@ mod tests {
     }
 
     /// Parameters of the architecture, counted by hand in
-    /// [`crate::weights::Architecture::min_params`] (exact for this network):
+    /// [`crate::arch::Architecture::min_params`] (exact for this network):
     /// a k x k conv from a to b channels has k*k*a*b weights and b biases.
     fn expected_params(w: usize, cin: usize, cout: usize) -> usize {
         let c = SidUnetConfig::new()
             .with_width(w)
             .with_in_channels(cin)
             .with_out_channels(cout);
-        crate::weights::Architecture::SidUnet(c).min_params() as usize
+        crate::arch::Architecture::SidUnet(c).min_params() as usize
     }
 
     #[test]

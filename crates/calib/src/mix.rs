@@ -1,0 +1,157 @@
+//! The noise of synthetic pairs, built once for every command that makes
+//! them (`pgrf train`, `pgrf search`, `pgrf synth`): a camera profile or a
+//! weighted mix of profiles ([`pgrf_noise::mix::PairMix`]) with, for one
+//! sensor, its per-pixel calibration file applied. Here because this is the
+//! lowest crate that knows both the mix and the calibration.
+
+use crate::calibration::Calibration;
+use crate::error::CalibError;
+use pgrf_noise::mix::PairMix;
+use pgrf_noise::pair::{PairSpec, RatioSpec};
+use pgrf_noise::{ModelKind, NoiseError};
+use pgrf_raw::RawFrame;
+use std::path::{Path, PathBuf};
+
+/// What the pairs' noise is made of.
+#[derive(Clone, Debug)]
+pub struct MixSpec<'a> {
+    /// A profile (built-in name, darktable:"MAKER MODEL", dng:FILE or JSON
+    /// path) or a weighted mix `NAME[@WEIGHT],...`.
+    pub profile: &'a str,
+    /// The noise model.
+    pub model: ModelKind,
+    /// A fixed ISO (the first profile's), or None for drawn parameters.
+    pub iso: Option<u32>,
+    /// Without a fixed ISO: the ISO range the gain is drawn from.
+    pub iso_range: Option<(u32, u32)>,
+    /// The exposure ratios.
+    pub ratio: RatioSpec,
+    /// Captures without the camera's dark-level offset.
+    pub calibrated_dark_level: bool,
+    /// A per-pixel calibration file for the (single) sensor.
+    pub calibration: Option<&'a Path>,
+}
+
+/// The mix, and the identity of the calibration applied (camera, ISO, file
+/// name; [`Calibration::identity`]) when there was one.
+pub struct CalibratedMix {
+    /// The pairs' noise, one profile per capture.
+    pub mix: PairMix,
+    /// The calibration's identity, for the weight file's record.
+    pub calibration: Option<String>,
+}
+
+/// Why the noise could not be built; callers name their own flags around
+/// the first two.
+#[derive(Debug, thiserror::Error)]
+pub enum MixError {
+    /// A profile of the mix could not be read or parsed.
+    #[error(transparent)]
+    Profile(NoiseError),
+    /// A calibration (one sensor) was given with a mix of profiles.
+    #[error("{}: a calibration describes one sensor, not a mix of profiles ({mix})", path.display())]
+    CalibrationWithMix {
+        /// The calibration file.
+        path: PathBuf,
+        /// The mix, in words.
+        mix: String,
+    },
+    /// The calibration file could not be read.
+    #[error(transparent)]
+    Load(CalibError),
+    /// The calibration is of another camera, ISO or CFA layout than the frame.
+    #[error("{}: {source}", path.display())]
+    Mismatch {
+        /// The calibration file.
+        path: PathBuf,
+        /// What differs.
+        source: CalibError,
+    },
+    /// The calibration's size is not the frame's.
+    #[error("{}: calibration is {}x{}, the clean frame {}x{}", path.display(), calibration.0, calibration.1, frame.0, frame.1)]
+    Size {
+        /// The calibration file.
+        path: PathBuf,
+        /// Its width and height.
+        calibration: (usize, usize),
+        /// The frame's width and height.
+        frame: (usize, usize),
+    },
+    /// The calibration's maps could not be applied to the noise model.
+    #[error("--calib {}: {source}", path.display())]
+    Apply {
+        /// The calibration file.
+        path: PathBuf,
+        /// Why not.
+        source: CalibError,
+    },
+}
+
+/// The noise of `spec`: the profiles' mix with the calibration applied.
+pub fn build(spec: &MixSpec) -> Result<CalibratedMix, MixError> {
+    let mut mix = PairMix::build(
+        spec.profile,
+        spec.model,
+        spec.iso,
+        spec.iso_range,
+        spec.ratio,
+    )
+    .map_err(MixError::Profile)?;
+    mix.set_calibrated_dark_level(spec.calibrated_dark_level);
+    let mut calibration = None;
+    if let Some(path) = spec.calibration {
+        let described = mix.describe();
+        let Some(one) = mix.single_mut() else {
+            return Err(MixError::CalibrationWithMix {
+                path: path.to_path_buf(),
+                mix: described,
+            });
+        };
+        let cal = calibrate(one, path, None)?;
+        calibration = Some(cal.identity(path));
+    }
+    Ok(CalibratedMix { mix, calibration })
+}
+
+/// The frame a calibration must fit (`pgrf synth`: the clean frame whose
+/// pairs it makes), and whether another camera's or ISO's is taken anyway.
+#[derive(Clone, Copy)]
+pub struct FrameCheck<'a> {
+    /// The frame.
+    pub frame: &'a RawFrame,
+    /// Apply a calibration of another camera or ISO anyway.
+    pub force: bool,
+}
+
+/// Load the calibration file `path` and apply its maps, gain and row noise
+/// to `spec`; with `check`, first refuse one of another camera, ISO, CFA
+/// layout or size than the frame. Returns the calibration.
+pub fn calibrate(
+    spec: &mut PairSpec,
+    path: &Path,
+    check: Option<FrameCheck>,
+) -> Result<Calibration, MixError> {
+    let cal = Calibration::load(path).map_err(MixError::Load)?;
+    if let Some(FrameCheck { frame, force }) = check {
+        let mismatch = |source| MixError::Mismatch {
+            path: path.to_path_buf(),
+            source,
+        };
+        cal.check_matches(&frame.make, &frame.model, spec.iso, force)
+            .and_then(|()| cal.check_layout(frame))
+            .map_err(mismatch)?;
+        let (ph, pw) = frame.packed_dims();
+        if (cal.meta.height / 2, cal.meta.width / 2) != (ph, pw) {
+            return Err(MixError::Size {
+                path: path.to_path_buf(),
+                calibration: (cal.meta.width, cal.meta.height),
+                frame: (frame.width, frame.height),
+            });
+        }
+    }
+    cal.apply_to(spec).map_err(|source| MixError::Apply {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    Ok(cal)
+}

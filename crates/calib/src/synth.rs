@@ -1,0 +1,226 @@
+//! `pgrf synth`'s recipe: a clean RAW frame in, a simulated low-light
+//! capture of the same scene out, with the input's size, CFA and levels:
+//! by default the dark capture the camera would record (un-amplified, the
+//! exposure divided by the ratio), so that `pgrf enhance --ratio R` restores
+//! it; brightened, multiplied back by the ratio and clipped, as a network is
+//! fed it. The camera's profile sets the noise, a per-pixel calibration file
+//! (checked against the frame) replaces its maps. Here because it needs the
+//! calibration; the caller reads the frame and writes the result.
+
+use crate::mix::{calibrate, FrameCheck, MixError};
+use pgrf_noise::pair::{ExposureSpec, PairSpec, RatioSpec};
+use pgrf_noise::profile::DarkCurrent;
+use pgrf_noise::{CameraProfile, Components, DarkLaw, ModelKind, NoiseError};
+use pgrf_raw::{pack_normalized, unpack_normalized, RawError, RawFrame};
+use std::path::{Path, PathBuf};
+
+/// How to simulate the capture (`pgrf synth`'s flags).
+#[derive(Clone, Debug)]
+pub struct SynthConfig {
+    /// Camera profile: built-in name, darktable:"MAKER MODEL", dng:FILE or
+    /// a JSON file.
+    pub profile: String,
+    /// Exposure ratio (None: drawn from U(100, 300) by the seed).
+    pub ratio: Option<f32>,
+    /// ISO (None: the profile's only ISO, else the frame's, else
+    /// parameters drawn from the profile's ELD distribution).
+    pub iso: Option<u32>,
+    /// Noise model.
+    pub model: ModelKind,
+    /// The PGRF model's components, e.g. "P,G,H,Q,F,A".
+    pub components: String,
+    /// The "noD" ablation: global instead of per-pixel calibration.
+    pub global: bool,
+    /// ELD model with Gaussian instead of Tukey-lambda read noise.
+    pub gaussian_read: bool,
+    /// Exposure time of the capture, seconds (None: the frame's divided by
+    /// the ratio, else drawn).
+    pub exposure_time: Option<f32>,
+    /// Dark-current rate replacing the profile's, electrons per sqrt(s) or s.
+    pub dark_rate: Option<f64>,
+    /// Time law of the dark signal.
+    pub dark_law: DarkLaw,
+    /// Per-pixel calibration file, replacing the profile's maps, gain and
+    /// row noise.
+    pub calib: Option<PathBuf>,
+    /// Apply a calibration of another camera or ISO anyway.
+    pub force: bool,
+    /// Seed: the same frame, settings and seed give the same capture.
+    pub seed: u64,
+    /// Write the capture brightened by the ratio instead of dark.
+    pub brightened: bool,
+}
+
+/// The simulated capture and what it was made with.
+#[derive(Clone, Debug)]
+pub struct Synthesized {
+    /// The capture as a frame of the input's size, CFA and levels, its ISO,
+    /// exposure and (P-G model, dark) NoiseProfile set.
+    pub frame: RawFrame,
+    /// The exposure ratio used.
+    pub ratio: f32,
+    /// The capture's exposure time, seconds.
+    pub exposure_s: f32,
+    /// The ISO, when one was set (else parameters were drawn).
+    pub iso: Option<u32>,
+    /// The PGRF components used.
+    pub components: Components,
+    /// K, the system gain, DN per electron.
+    pub k: f64,
+    /// The read noise's scale in DN (Tukey-lambda's for ELD's default).
+    pub read_dn: f64,
+    /// The row noise's sigma in DN.
+    pub row_dn: f64,
+}
+
+/// Why no capture could be made.
+#[derive(Debug, thiserror::Error)]
+pub enum SynthError {
+    /// A setting out of its range; the message names the flag and value.
+    #[error("{message}")]
+    BadSetting {
+        /// The flag, e.g. `--ratio`.
+        flag: &'static str,
+        /// The whole message.
+        message: String,
+    },
+    /// The profile, the components or the noise model refused.
+    #[error(transparent)]
+    Noise(#[from] NoiseError),
+    /// The frame could not be packed or unpacked.
+    #[error(transparent)]
+    Raw(#[from] RawError),
+    /// The calibration file could not be used.
+    #[error(transparent)]
+    Calibration(#[from] MixError),
+    /// Synthesis itself failed on the frame `path`.
+    #[error("{}: {source}", path.display())]
+    Synthesis {
+        /// The clean frame's file.
+        path: PathBuf,
+        /// Why.
+        source: NoiseError,
+    },
+}
+
+fn bad(flag: &'static str, message: String) -> SynthError {
+    SynthError::BadSetting { flag, message }
+}
+
+/// The profile of `c` with its dark current replaced when `c` says,
+/// after checking the numeric settings.
+fn profile(c: &SynthConfig) -> Result<CameraProfile, SynthError> {
+    let mut profile = CameraProfile::load(&c.profile)?;
+    if let Some(rate) = c.dark_rate {
+        if !(rate.is_finite() && rate >= 0.0) {
+            return Err(bad(
+                "--dark-rate",
+                format!("--dark-rate must be >= 0 electrons, got {rate}"),
+            ));
+        }
+        profile.dark_current = Some(DarkCurrent {
+            law: c.dark_law,
+            rate,
+        });
+    }
+    if let Some(r) = c.ratio {
+        if !(r.is_finite() && r > 0.0) {
+            return Err(bad(
+                "--ratio",
+                format!("--ratio must be a positive number, got {r}"),
+            ));
+        }
+    }
+    if let Some(t) = c.exposure_time {
+        if !(t.is_finite() && t >= 0.0) {
+            return Err(bad(
+                "--exposure-time",
+                format!("--exposure-time must be >= 0 seconds, got {t}"),
+            ));
+        }
+    }
+    Ok(profile)
+}
+
+/// Simulate the low-light capture of the clean frame `frame` (read from
+/// `path`, named in errors) as `c` says.
+pub fn synthesize(
+    frame: &RawFrame,
+    path: &Path,
+    c: &SynthConfig,
+) -> Result<Synthesized, SynthError> {
+    let profile = profile(c)?;
+    let components = Components::parse(&c.components)?;
+    let clean = pack_normalized(frame, true)?;
+
+    let only_iso = profile.only_iso();
+    let mut spec = PairSpec::new(profile, c.model);
+    spec.components = components;
+    spec.global = c.global;
+    spec.tukey = !c.gaussian_read;
+    spec.iso = c.iso.or(only_iso).or(frame.iso);
+    spec.ratio = match c.ratio {
+        Some(r) => RatioSpec::Fixed(r),
+        None => RatioSpec::default(),
+    };
+    // The ratio must be known to derive the exposure from the file's.
+    let (ratio, _) = spec.conditions(c.seed)?;
+    spec.ratio = RatioSpec::Fixed(ratio);
+    spec.exposure = match (c.exposure_time, frame.exposure_s) {
+        (Some(t), _) => ExposureSpec::Fixed(t),
+        (None, Some(t)) => ExposureSpec::Fixed((t / ratio as f64) as f32),
+        (None, None) => ExposureSpec::default(),
+    };
+    if let Some(cal) = &c.calib {
+        let check = FrameCheck {
+            frame,
+            force: c.force,
+        };
+        calibrate(&mut spec, cal, Some(check))?;
+    }
+    let plane_rows = frame.cfa.offsets().map(|(r, _)| r);
+    let pair = spec
+        .synthesize(clean.view(), plane_rows, c.seed)
+        .map_err(|source| SynthError::Synthesis {
+            path: path.to_path_buf(),
+            source,
+        })?;
+
+    let noisy = if c.brightened {
+        pair.noisy.mapv(|v| v.clamp(0.0, 1.0))
+    } else {
+        pgrf_noise::capture::recorded(&pair.noisy, pair.ratio)
+    };
+    let mut out = unpack_normalized(noisy.view(), frame)?;
+    if let Some(iso) = spec.iso {
+        out.iso = Some(iso);
+    }
+    out.exposure_s = Some(pair.exposure_s as f64);
+    // The NoiseProfile of the capture written: exact for the P-G model
+    // (variance K x + sigma^2 in DN, normalised by the range; a brightened
+    // frame's is the ratio's square times the dark one's at the dark
+    // signal). The ELD and pgrf models add row noise, heavy tails and per-pixel
+    // maps that one (S, O) pair cannot state, so their DNGs carry none rather
+    // than a wrong one; nor does the clean frame's own tag survive.
+    out.noise_profile = (c.model == ModelKind::PoissonGaussian && !c.brightened).then(|| {
+        // The noise was drawn on the profile's scale and normalised by it.
+        let range = spec.dn_range();
+        let p = &pair.params;
+        vec![[p.k / range, (p.sigma_gauss / range).powi(2)]]
+    });
+    let p = &pair.params;
+    Ok(Synthesized {
+        frame: out,
+        ratio: pair.ratio,
+        exposure_s: pair.exposure_s,
+        iso: spec.iso,
+        components,
+        k: p.k,
+        read_dn: if c.model == ModelKind::Eld && !c.gaussian_read {
+            p.sigma_tukey
+        } else {
+            p.sigma_gauss
+        },
+        row_dn: p.sigma_row,
+    })
+}

@@ -1,0 +1,89 @@
+//! A network and its weight file: build the network a file's record
+//! describes and load its tensors into it, or write a network's parameters
+//! with a record. The file format itself is [`crate::weights`]'s; the
+//! networks are [`crate::arch`]'s.
+
+use crate::arch::{Net, Sr3Unet};
+use crate::error::{NnError, Result};
+use crate::weights::{self, WeightMeta};
+use burn::tensor::backend::Backend;
+use std::path::Path;
+
+impl<B: Backend> Net<B> {
+    /// Write the parameters and `meta` as a weight file at `path`, atomically
+    /// ([`crate::weights`]).
+    pub fn save(&self, path: &Path, meta: &WeightMeta) -> Result<()> {
+        let bytes = weights::encode(&self.parameters(), meta)?;
+        Ok(pgrf_core::write_atomic(path, &bytes)?)
+    }
+}
+
+/// Build the network the file describes and load its weights on `device`;
+/// every tensor must fit the recorded architecture by name and shape.
+pub fn load<B: Backend>(path: &Path, device: &B::Device) -> Result<(Net<B>, WeightMeta)> {
+    load_bytes(path, &weights::read_bytes(path)?, device)
+}
+
+/// [`load`] from a weight file's bytes (weights built into the binary);
+/// `path` names them in errors.
+pub(crate) fn load_bytes<B: Backend>(
+    path: &Path,
+    bytes: &[u8],
+    device: &B::Device,
+) -> Result<(Net<B>, WeightMeta)> {
+    let (meta, tensors) = weights::from_bytes(bytes, path)?;
+    let held: u64 = tensors.values().map(|t| t.values.len() as u64).sum();
+    let needed = meta.arch.min_params();
+    if needed > held as f64 {
+        return Err(NnError::SizeMismatch(format!(
+            "{}: weights do not fit {}: it has at least {needed:.0} parameters, the file holds {held} values",
+            path.display(),
+            meta.arch.describe()
+        )));
+    }
+    let fit = |e: String| {
+        NnError::SizeMismatch(format!(
+            "{}: weights do not fit {}: {e}",
+            path.display(),
+            meta.arch.describe()
+        ))
+    };
+    let net = meta
+        .arch
+        .init::<B>(device)
+        .map_err(|e| NnError::Config(format!("{}: {e}", path.display())))?
+        .assign(&tensors, device)
+        .map_err(fit)?;
+    Ok((net, meta))
+}
+
+/// Load a file that must hold the SPC denoiser.
+#[cfg(test)]
+pub(crate) fn load_denoiser<B: Backend>(
+    path: &Path,
+    device: &B::Device,
+) -> Result<(crate::arch::SidUnet<B>, WeightMeta)> {
+    match load::<B>(path, device)? {
+        (Net::Spc(n), m) => Ok((n, m)),
+        (_, m) => Err(NnError::WrongMethod {
+            path: path.to_path_buf(),
+            wanted: crate::Method::Spc,
+            found: format!("a {}", m.arch.describe()),
+        }),
+    }
+}
+
+/// Load a file that must hold the PGRF flow model.
+pub(crate) fn load_flow<B: Backend>(
+    path: &Path,
+    device: &B::Device,
+) -> Result<(Sr3Unet<B>, WeightMeta)> {
+    match load::<B>(path, device)? {
+        (Net::Pgrf(n), m) => Ok((n, m)),
+        (_, m) => Err(NnError::WrongMethod {
+            path: path.to_path_buf(),
+            wanted: crate::Method::Pgrf,
+            found: format!("an {}", m.arch.describe()),
+        }),
+    }
+}
