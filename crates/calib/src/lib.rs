@@ -15,5 +15,6 @@ pub mod stack;
 mod stats;
 
 pub use calibrate::{calibrate, CalibrateInput, CalibrationRun};
-pub use calibration::{CalibMaps, CalibMeta, Calibration, GainMethod};
-pub use error::{CalibError, Result};
+pub use calibration::{CalibMaps, CalibMeta, Calibration};
+pub use error::{CalibError, FrameField, Result};
+pub use estimate::GainMethod;
