@@ -10,6 +10,7 @@ mod calibration;
 mod error;
 pub mod estimate;
 pub mod masters;
+pub mod outputs;
 mod ppcc;
 pub mod stack;
 mod stats;
@@ -18,3 +19,7 @@ pub use calibrate::{calibrate, CalibrateInput, CalibrationRun};
 pub use calibration::{CalibMaps, CalibMeta, Calibration};
 pub use error::{CalibError, FrameField, Result};
 pub use estimate::GainMethod;
+pub use outputs::{
+    calibrate_to_files, CalibrateConfig, CalibrateOutcome, DarktableOutcome, DarktableOutput,
+    ReportOutput, RunHooks,
+};
