@@ -1,7 +1,7 @@
 //! One calibration run: read the stacks, estimate, assemble the file.
 
 use crate::calibration::{CalibMaps, CalibMeta, Calibration};
-use crate::error::{invalid, Result};
+use crate::error::{CalibError, Result};
 use crate::estimate::{
     defect, defects, estimate_bias, estimate_dark, estimate_gain, BiasEstimate, DarkEstimate,
     GainEstimate,
@@ -313,11 +313,12 @@ fn check_temperatures(sets: &[&[(PathBuf, f32)]], tolerance: f32) -> Result<Opti
         .max_by(|a, b| (a.1 - med).abs().total_cmp(&(b.1 - med).abs()))
         .expect("not empty");
     if (worst.1 - med).abs() > tolerance {
-        return Err(invalid(format!(
-            "{}: taken at {:.1} °C, the frames' median is {med:.1} °C; frames more than {tolerance} °C apart are not one calibration (dark current doubles every 5-7 °C): shoot at one temperature, or allow more with --temperature-tolerance",
-            worst.0.display(),
-            worst.1
-        )));
+        return Err(CalibError::TemperatureSpread {
+            file: worst.0.clone(),
+            temperature_c: worst.1,
+            median_c: med,
+            tolerance,
+        });
     }
     Ok(Some(med))
 }
@@ -379,10 +380,11 @@ pub fn calibrate(input: &CalibrateInput, progress: &dyn Progress) -> Result<Cali
     let mut key = bias_stack.key.clone();
     if let (Some(want), Some(got)) = (input.iso, key.iso) {
         if want != got {
-            return Err(invalid(format!(
-                "bias frames are ISO {got} ({}), --iso asked for {want}",
-                input.bias[0].display()
-            )));
+            return Err(CalibError::StackIso {
+                file: input.bias[0].clone(),
+                found: got,
+                asked: want,
+            });
         }
     }
     if key.iso.is_none() {

@@ -1,7 +1,8 @@
 //! The calibration file: per-pixel maps in safetensors plus one JSON record of
 //! how they were measured, and its conversion into the noise model's maps.
 
-use crate::error::{invalid, Result};
+use crate::error::{CalibError, Result};
+use crate::estimate::{defect, GainMethod};
 use ndarray::Array3;
 use pgrf_core::number::shown;
 use pgrf_noise::mapfile::write_maps;
@@ -225,28 +226,6 @@ impl CalibMeta {
     }
 }
 
-/// How the system gain K was estimated.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
-pub enum GainMethod {
-    /// Photon transfer: the slope of temporal variance over mean signal
-    /// across flat levels.
-    #[serde(rename = "ptc")]
-    PhotonTransfer,
-    /// Eq. 3.15 at the brightest level: temporal variance / mean signal
-    /// (one level, or a failed transfer fit).
-    #[serde(rename = "var/mean")]
-    VarOverMean,
-}
-
-impl std::fmt::Display for GainMethod {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(match self {
-            GainMethod::PhotonTransfer => "ptc",
-            GainMethod::VarOverMean => "var/mean",
-        })
-    }
-}
-
 /// The record writes the law's name, or "none" without dark frames.
 mod law_or_none {
     use pgrf_noise::DarkLaw;
@@ -336,14 +315,14 @@ impl CalibMaps {
         v
     }
 
-    /// The maps of a file, by name: the four required ones must be there,
-    /// and a name pgrf does not know is refused.
-    fn from_named(
-        mut maps: BTreeMap<String, Array3<f32>>,
-    ) -> std::result::Result<CalibMaps, String> {
+    /// The maps of a file (`path`, for messages), by name: the four
+    /// required ones must be there, and a name pgrf does not know is refused.
+    fn from_named(mut maps: BTreeMap<String, Array3<f32>>, path: &Path) -> Result<CalibMaps> {
         let mut need = |n: &str| {
-            maps.remove(n)
-                .ok_or_else(|| format!("calibration has no '{n}' map"))
+            maps.remove(n).ok_or_else(|| CalibError::MissingMap {
+                path: path.to_path_buf(),
+                map: n.into(),
+            })
         };
         let out = CalibMaps {
             fixed_pattern: need("fixed_pattern")?,
@@ -357,7 +336,10 @@ impl CalibMaps {
             dark_offset: maps.remove("dark_offset"),
         };
         if let Some(n) = maps.keys().next() {
-            return Err(format!("unknown map '{n}' in a calibration file"));
+            return Err(CalibError::UnknownMap {
+                path: path.to_path_buf(),
+                map: n.clone(),
+            });
         }
         Ok(out)
     }
@@ -368,7 +350,7 @@ impl Calibration {
     /// tensor per map (named as [`CalibMaps::named`]) and the record as JSON
     /// metadata.
     pub fn save(&self, path: &Path) -> Result<()> {
-        let meta = serde_json::to_value(&self.meta).map_err(|e| invalid(e.to_string()))?;
+        let meta = serde_json::to_value(&self.meta).map_err(CalibError::EncodeRecord)?;
         let views: Vec<(&str, ndarray::ArrayView3<f32>)> = self
             .maps
             .named()
@@ -383,7 +365,10 @@ impl Calibration {
     /// calibrations, maps whose shape disagrees with the record, unknown maps
     /// and invalid values.
     pub fn load(path: &Path) -> Result<Calibration> {
-        let bytes = std::fs::read(path).map_err(|e| invalid(format!("{}: {e}", path.display())))?;
+        let bytes = std::fs::read(path).map_err(|error| CalibError::Read {
+            path: path.to_path_buf(),
+            error,
+        })?;
         Calibration::from_bytes(&bytes, path)
     }
 
@@ -392,30 +377,38 @@ impl Calibration {
     /// allocates from is checked here, where the file enters, so a hostile
     /// file is one error and never a panic or a silently wrong frame.
     pub fn from_bytes(bytes: &[u8], path: &Path) -> Result<Calibration> {
-        let at = |e: String| invalid(format!("{}: {e}", path.display()));
         let (meta, maps) = pgrf_noise::mapfile::decode_maps(bytes, path)?;
         if meta.get("kind").and_then(|k| k.as_str()) != Some("pgrf-calibration") {
-            return Err(at("not a pgrf calibration file".into()));
+            return Err(CalibError::NotCalibration {
+                path: path.to_path_buf(),
+            });
         }
+        let bad_record = |reason: String| CalibError::BadRecord {
+            path: path.to_path_buf(),
+            reason,
+        };
         let meta: CalibMeta =
-            serde_json::from_value(meta).map_err(|e| at(format!("bad calibration record: {e}")))?;
-        meta.check()
-            .map_err(|e| at(format!("bad calibration record: {e}")))?;
+            serde_json::from_value(meta).map_err(|e| bad_record(e.to_string()))?;
+        meta.check().map_err(bad_record)?;
         let shape = [4, meta.height / 2, meta.width / 2];
         for (name, a) in &maps {
             if a.shape() != shape {
-                return Err(at(format!(
-                    "map '{name}' has shape {:?}, the record says {:?}",
-                    a.shape(),
-                    shape
-                )));
+                return Err(CalibError::MapShape {
+                    path: path.to_path_buf(),
+                    map: name.clone(),
+                    shape: a.shape().to_vec(),
+                    expected: shape,
+                });
             }
         }
-        let maps = CalibMaps::from_named(maps).map_err(at)?;
+        let maps = CalibMaps::from_named(maps, path)?;
         let c = Calibration { meta, maps };
         c.to_pixel_maps()?
             .check_values()
-            .map_err(|e| at(e.to_string()))?;
+            .map_err(|error| CalibError::MapValues {
+                path: path.to_path_buf(),
+                error,
+            })?;
         Ok(c)
     }
 
@@ -432,17 +425,16 @@ impl Calibration {
         }
         let m = &self.meta;
         if (m.make.as_str(), m.model.as_str()) != (make, model) {
-            return Err(invalid(format!(
-                "calibration is of '{} {}', the frame is from '{make} {model}' (use --force to apply it anyway)",
-                m.make, m.model
-            )));
+            return Err(CalibError::WrongCamera {
+                calibration: format!("{} {}", m.make, m.model),
+                frame: format!("{make} {model}"),
+            });
         }
         if m.iso.is_some() && iso.is_some() && m.iso != iso {
-            return Err(invalid(format!(
-                "calibration is for ISO {}, the frame is ISO {} (use --force to apply it anyway)",
-                m.iso.unwrap_or(0),
-                iso.unwrap_or(0)
-            )));
+            return Err(CalibError::WrongIso {
+                calibration: m.iso.unwrap_or(0),
+                frame: iso.unwrap_or(0),
+            });
         }
         Ok(())
     }
@@ -453,11 +445,10 @@ impl Calibration {
     /// Not overridable, unlike the camera check.
     pub fn check_layout(&self, frame: &pgrf_raw::RawFrame) -> Result<()> {
         if self.meta.cfa != frame.layout() {
-            return Err(invalid(format!(
-                "calibration is of a {} sensor, the frame's layout is {}",
-                self.meta.cfa,
-                frame.layout()
-            )));
+            return Err(CalibError::WrongLayout {
+                calibration: self.meta.cfa.clone(),
+                frame: frame.layout().into(),
+            });
         }
         Ok(())
     }
@@ -487,10 +478,7 @@ impl Calibration {
     /// on another scale). The ISO is taken from the calibration when unset.
     pub fn apply_to(&self, spec: &mut pgrf_noise::pair::PairSpec) -> Result<()> {
         if spec.kind != pgrf_noise::ModelKind::Pgrf {
-            return Err(invalid(format!(
-                "a calibration applies to the pgrf noise model (per-pixel maps), not {:?}",
-                spec.kind
-            )));
+            return Err(CalibError::WrongModel { kind: spec.kind });
         }
         let m = &self.meta;
         let black = m.black.iter().map(|&b| b as f64).sum::<f64>() / 4.0;
@@ -515,9 +503,7 @@ impl Calibration {
     /// the dark signal stays for the denoiser.
     pub fn dark_shading_dn(&self, exposure_s: f64) -> Result<Array3<f32>> {
         if !(exposure_s.is_finite() && exposure_s >= 0.0) {
-            return Err(invalid(format!(
-                "exposure time must be a non-negative number of seconds, got {exposure_s}"
-            )));
+            return Err(CalibError::BadExposure { exposure_s });
         }
         let law = self.meta.dark_law.unwrap_or(DarkLaw::Sqrt);
         let dn_per_rate = law.electrons(1.0, exposure_s) * self.meta.k;
@@ -541,7 +527,6 @@ impl Calibration {
     /// the calibration's size (checked by the caller with the rest of the
     /// calibration).
     pub fn correct_defects(&self, frame: &mut pgrf_raw::RawFrame) -> usize {
-        use crate::estimate::defect;
         let d = &self.maps.defects;
         let (_, ph, pw) = d.dim();
         if (2 * ph, 2 * pw) != (frame.height, frame.width) {

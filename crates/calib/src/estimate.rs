@@ -15,8 +15,7 @@
 //!   by `choose_dark_law`; E(N) = K2 E(N_RS), K2 = 1 + N_FP, as a rate in
 //!   electrons: `dark_rate`.
 
-use crate::calibration::GainMethod;
-use crate::error::{invalid, Result};
+use crate::error::{CalibError, Result};
 use crate::ppcc::ppcc;
 use crate::stack::Stack;
 use ndarray::{Array3, Zip};
@@ -118,10 +117,9 @@ pub(crate) fn read_sigma(var: &Array3<f64>, shared: f64) -> Array3<f32> {
 /// (`read_sigma`), row noise and frame offset drift
 /// (`PixelStats::row_and_frame_variance`), DSNU, PPCC.
 pub fn estimate_bias(stack: &Stack, black: [f32; 4]) -> Result<BiasEstimate> {
-    let g = stack
-        .groups
-        .first()
-        .ok_or_else(|| invalid("bias stack is empty"))?;
+    let g = stack.groups.first().ok_or_else(|| CalibError::EmptyStack {
+        stack: "bias".into(),
+    })?;
     let (mean, var) = (g.stats.mean(), g.stats.var());
     let (row_var, frame_var) = g.stats.row_and_frame_variance();
     let fixed_pattern = fixed_pattern(&mean, black);
@@ -160,6 +158,28 @@ pub fn estimate_bias(stack: &Stack, black: [f32; 4]) -> Result<BiasEstimate> {
         ppcc_pixels,
         ppcc_pooled: ppcc(&pooled),
     })
+}
+
+/// How the system gain K was estimated.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub enum GainMethod {
+    /// Photon transfer: the slope of temporal variance over mean signal
+    /// across flat levels.
+    #[serde(rename = "ptc")]
+    PhotonTransfer,
+    /// Eq. 3.15 at the brightest level: temporal variance / mean signal
+    /// (one level, or a failed transfer fit).
+    #[serde(rename = "var/mean")]
+    VarOverMean,
+}
+
+impl std::fmt::Display for GainMethod {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            GainMethod::PhotonTransfer => "ptc",
+            GainMethod::VarOverMean => "var/mean",
+        })
+    }
 }
 
 /// One flat level of the photon-transfer curve.
@@ -384,10 +404,9 @@ pub(crate) fn estimate_gain(flat: &Stack, bias: &BiasEstimate) -> Result<GainEst
             .fold(0.0, |acc, a, b| acc + (a - b))
             / n;
         if g.pair_vars.is_empty() {
-            return Err(invalid(format!(
-                "flat frames at {} s: no pair of frames (the gain needs two frames per level)",
-                g.exposure_s
-            )));
+            return Err(CalibError::NoFlatPair {
+                exposure_s: g.exposure_s,
+            });
         }
         let var_dn2 = g.pair_vars.iter().sum::<f64>() / g.pair_vars.len() as f64 - bias_var;
         let black = bias.mean.mean().unwrap_or(0.0);
@@ -398,10 +417,10 @@ pub(crate) fn estimate_gain(flat: &Stack, bias: &BiasEstimate) -> Result<GainEst
         .sqrt()
             / sm.abs().max(f64::MIN_POSITIVE);
         if mean_dn <= 0.0 {
-            return Err(invalid(format!(
-                "flat frames at {} s are not brighter than the bias frames (mean {mean_dn:.2} DN above bias)",
-                g.exposure_s
-            )));
+            return Err(CalibError::FlatNotBrighter {
+                exposure_s: g.exposure_s,
+                mean_dn,
+            });
         }
         let level = PtcLevel {
             exposure_s: g.exposure_s,
@@ -431,13 +450,17 @@ pub(crate) fn estimate_gain(flat: &Stack, bias: &BiasEstimate) -> Result<GainEst
     let (bm, bv, bi) = match (bright, clipped_note) {
         (Some(b), _) => b,
         (None, Some((t, clipped))) => {
-            return Err(invalid(format!(
-                "flat frames at {t} s are saturated: {:.1} % of pixels reach the white level {} within 3 sigma (a clipped flat has too little variance, and the gain comes out wrong or negative); every flat level is, so lower the light or the exposure",
-                100.0 * clipped,
-                flat.key.white
-            )))
+            return Err(CalibError::SaturatedFlats {
+                exposure_s: t,
+                clipped,
+                white: flat.key.white,
+            })
         }
-        (None, None) => return Err(invalid("flat stack is empty")),
+        (None, None) => {
+            return Err(CalibError::EmptyStack {
+                stack: "flat".into(),
+            })
+        }
     };
     let bright_level = levels[bi];
     // Per-frame normalisation of the per-pixel variance: a change of the
@@ -509,9 +532,7 @@ pub(crate) fn estimate_gain(flat: &Stack, bias: &BiasEstimate) -> Result<GainEst
         ));
     }
     if !(k.is_finite() && k > 0.0) {
-        return Err(invalid(format!(
-            "system gain estimate {k} is not positive: are the flat frames lit and unsaturated?"
-        )));
+        return Err(CalibError::BadGain { k });
     }
     Ok(GainEstimate {
         k,
@@ -713,10 +734,11 @@ pub(crate) fn dark_rate(a: f64, k: f64) -> f32 {
 pub(crate) fn estimate_dark(dark: &Stack, bias: &BiasEstimate, k: f64) -> Result<DarkEstimate> {
     let exposures: Vec<f64> = dark.groups.iter().map(|g| g.exposure_s).collect();
     if exposures.len() < 2 {
-        return Err(invalid(format!(
-            "dark stack has one exposure time ({} s); fitting a dark-current law needs at least 2",
-            exposures.first().copied().unwrap_or(0.0)
-        )));
+        return Err(CalibError::TooFewExposures {
+            stack: "dark".into(),
+            exposure_s: exposures.first().copied().unwrap_or(0.0),
+            needed: 2,
+        });
     }
     let w: Vec<f64> = dark.groups.iter().map(|g| g.files.len() as f64).collect();
     // Per group, the dark signal of every pixel: mean minus the bias mean.

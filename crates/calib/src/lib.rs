@@ -11,11 +11,17 @@ mod error;
 pub mod estimate;
 pub mod masters;
 pub mod mix;
+pub mod outputs;
 mod ppcc;
 pub mod stack;
 mod stats;
 pub mod synth;
 
 pub use calibrate::{calibrate, CalibrateInput, CalibrationRun};
-pub use calibration::{CalibMaps, CalibMeta, Calibration, GainMethod};
-pub use error::{CalibError, Result};
+pub use calibration::{CalibMaps, CalibMeta, Calibration};
+pub use error::{CalibError, FrameField, Result};
+pub use estimate::GainMethod;
+pub use outputs::{
+    calibrate_to_files, CalibrateConfig, CalibrateOutcome, DarktableOutcome, DarktableOutput,
+    ReportOutput, RunHooks,
+};

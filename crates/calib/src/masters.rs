@@ -4,7 +4,7 @@
 //! PixInsight take as master bias, dark and flat: FITS (32-bit float, the
 //! mean unrounded) when the frames were FITS, DNG otherwise.
 
-use crate::error::{invalid, Result};
+use crate::error::{CalibError, Result};
 use crate::stack::{FrameKey, Stack};
 use ndarray::Array3;
 use pgrf_raw::{unpack_u16, RawFrame};
@@ -51,7 +51,7 @@ impl Master {
     pub fn frame(&self, key: &FrameKey) -> Result<RawFrame> {
         let white = key.white as f32;
         let packed = self.mean.mapv(|v| v.round().clamp(0.0, white) as u16);
-        unpack_u16(packed.view(), &self.template(key)?).map_err(|e| invalid(e.to_string()))
+        unpack_u16(packed.view(), &self.template(key)?).map_err(|e| self.refused(e))
     }
 
     /// An empty frame of the calibrated camera with this master's metadata.
@@ -64,7 +64,7 @@ impl Master {
             key.black,
             key.white,
         )
-        .map_err(|e| invalid(e.to_string()))?;
+        .map_err(|e| self.refused(e))?;
         f.mono = key.mono;
         f.iso = key.iso;
         f.exposure_s = Some(self.exposure_s);
@@ -91,7 +91,15 @@ impl Master {
             _ => "Master Flat",
         };
         pgrf_raw::encode_fits_master(&template, &mosaic, kind, self.frames, Some(1.0 / k))
-            .map_err(|e| invalid(e.to_string()))
+            .map_err(|e| self.refused(e))
+    }
+
+    /// The RAW layer's refusal of this master.
+    fn refused(&self, error: pgrf_raw::RawError) -> CalibError {
+        CalibError::Master {
+            master: self.name.clone(),
+            error,
+        }
     }
 }
 

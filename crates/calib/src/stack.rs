@@ -7,7 +7,7 @@
 //! exposure group) exposure; the first that does not is named in the error,
 //! and nothing is written.
 
-use crate::error::{invalid, Result};
+use crate::error::{CalibError, FrameField, Result};
 use crate::stats::PixelStats;
 use pgrf_raw::{decode_file, pack_u16, Cfa, LevelOverrides, RawFrame};
 use std::path::PathBuf;
@@ -58,38 +58,27 @@ impl FrameKey {
         }
     }
 
-    /// Why `other` (from `file`) cannot join a stack described by `self`.
-    fn mismatch(&self, other: &FrameKey) -> Option<String> {
+    /// Why `other` cannot join a stack described by `self`: what differs,
+    /// the stack's value and `other`'s.
+    fn mismatch(&self, other: &FrameKey) -> Option<(FrameField, String, String)> {
         if (self.width, self.height) != (other.width, other.height) {
-            return Some(format!(
-                "size {}x{} differs from the other frames' {}x{}",
-                other.width, other.height, self.width, self.height
-            ));
+            let size = |k: &FrameKey| format!("{}x{}", k.width, k.height);
+            return Some((FrameField::Size, size(self), size(other)));
         }
         if (self.cfa, self.mono) != (other.cfa, other.mono) {
-            return Some(format!(
-                "CFA {} differs from the other frames' {}",
-                other.layout(),
-                self.layout()
-            ));
+            return Some((FrameField::Cfa, self.layout().into(), other.layout().into()));
         }
         if self.iso != other.iso {
             let s = |i: Option<u32>| {
                 i.map(|v| format!("ISO {v}"))
                     .unwrap_or_else(|| "no ISO".into())
             };
-            return Some(format!(
-                "{} differs from the other frames' {}",
-                s(other.iso),
-                s(self.iso)
-            ));
+            return Some((FrameField::Iso, s(self.iso), s(other.iso)));
         }
         if (self.make.as_str(), self.model.as_str()) != (other.make.as_str(), other.model.as_str())
         {
-            return Some(format!(
-                "camera '{} {}' differs from the other frames' '{} {}'",
-                other.make, other.model, self.make, self.model
-            ));
+            let camera = |k: &FrameKey| format!("{} {}", k.make, k.model);
+            return Some((FrameField::Camera, camera(self), camera(other)));
         }
         None
     }
@@ -242,12 +231,11 @@ pub struct ReadOptions<'a> {
 /// Decode and accumulate `files`.
 pub fn read_stack(files: &[PathBuf], opt: &ReadOptions) -> Result<Stack> {
     if files.len() < 2 && opt.per_exposure >= 2 {
-        return Err(invalid(format!(
-            "{} stack has {} frame{}; per-pixel variance needs at least 2",
-            opt.kind,
-            files.len(),
-            if files.len() == 1 { "" } else { "s" }
-        )));
+        return Err(CalibError::TooFewFrames {
+            stack: opt.kind.into(),
+            count: files.len(),
+            needed: 2,
+        });
     }
     let (tx, rx) = std::sync::mpsc::sync_channel::<Result<(usize, RawFrame)>>(2);
     let next = std::sync::atomic::AtomicUsize::new(0);
@@ -308,13 +296,14 @@ pub fn read_stack(files: &[PathBuf], opt: &ReadOptions) -> Result<Stack> {
             let k = FrameKey::of(&frame);
             match &key {
                 Some(want) => {
-                    if let Some(why) = want.mismatch(&k) {
-                        return Err(invalid(format!(
-                            "{}: {} ({} stack)",
-                            file.display(),
-                            why,
-                            opt.kind
-                        )));
+                    if let Some((what, expected, found)) = want.mismatch(&k) {
+                        return Err(CalibError::MismatchedFrame {
+                            file: file.clone(),
+                            stack: opt.kind.into(),
+                            what,
+                            expected,
+                            found,
+                        });
                     }
                 }
                 None => key = Some(k),
@@ -324,11 +313,10 @@ pub fn read_stack(files: &[PathBuf], opt: &ReadOptions) -> Result<Stack> {
             }
             let t = frame.exposure_s;
             if opt.need_exposure && t.is_none() {
-                return Err(invalid(format!(
-                    "{}: no exposure time in the file's metadata ({} frames are grouped by exposure)",
-                    file.display(),
-                    opt.kind
-                )));
+                return Err(CalibError::NoExposure {
+                    file: file.clone(),
+                    stack: opt.kind.into(),
+                });
             }
             let t = t.unwrap_or(0.0);
             let packed = pack_u16(&frame)?;
@@ -340,12 +328,12 @@ pub fn read_stack(files: &[PathBuf], opt: &ReadOptions) -> Result<Stack> {
                 Some(s) => s,
                 None => {
                     if opt.single_exposure && !groups.is_empty() {
-                        return Err(invalid(format!(
-                            "{}: exposure {t} s differs from the other {} frames' {} s",
-                            file.display(),
-                            opt.kind,
-                            groups[0].exposure_s
-                        )));
+                        return Err(CalibError::MixedExposure {
+                            file: file.clone(),
+                            stack: opt.kind.into(),
+                            expected: groups[0].exposure_s,
+                            found: t,
+                        });
                     }
                     groups.push(Group {
                         exposure_s: t,
@@ -389,13 +377,12 @@ pub fn read_stack(files: &[PathBuf], opt: &ReadOptions) -> Result<Stack> {
         }
         for g in &groups {
             if g.files.len() < opt.per_exposure {
-                return Err(invalid(format!(
-                    "{} stack: only one frame at exposure {} s ({}); each exposure needs at least {} (its per-pixel variance is measured)",
-                    opt.kind,
-                    g.exposure_s,
-                    g.files[0].display(),
-                    opt.per_exposure
-                )));
+                return Err(CalibError::TooFewAtExposure {
+                    stack: opt.kind.into(),
+                    exposure_s: g.exposure_s,
+                    file: g.files[0].clone(),
+                    needed: opt.per_exposure,
+                });
             }
         }
         for g in &mut groups {
@@ -403,7 +390,9 @@ pub fn read_stack(files: &[PathBuf], opt: &ReadOptions) -> Result<Stack> {
         }
         groups.sort_by(|a, b| a.exposure_s.total_cmp(&b.exposure_s));
         Ok(Stack {
-            key: key.ok_or_else(|| invalid(format!("{} stack is empty", opt.kind)))?,
+            key: key.ok_or_else(|| CalibError::EmptyStack {
+                stack: opt.kind.into(),
+            })?,
             groups,
             tap,
             temperatures,

@@ -47,12 +47,13 @@ impl DarkCapture {
     /// levels and metadata, with this capture's ISO and exposure.
     pub fn take(&self, clean: &RawFrame) -> Result<RawFrame> {
         if !(self.ratio.is_finite() && self.ratio > 0.0) {
-            return Err(NoiseError::Invalid(format!(
-                "ratio must be a positive number, got {}",
-                self.ratio
-            )));
+            return Err(NoiseError::Setting {
+                name: "ratio",
+                must: "a positive number",
+                value: self.ratio,
+            });
         }
-        let raw = |e: pgrf_raw::RawError| NoiseError::Invalid(e.to_string());
+        let raw = |error: pgrf_raw::RawError| NoiseError::Frame { error };
         let mut spec = PairSpec::new(self.profile.clone(), self.model);
         spec.iso = Some(self.iso);
         spec.ratio = RatioSpec::Fixed(self.ratio);

@@ -52,9 +52,10 @@ impl Components {
                 'F' => &mut c.fixed_pattern,
                 'A' => &mut c.dark,
                 o => {
-                    return Err(NoiseError::Invalid(format!(
-                        "unknown noise component '{o}' in '{s}' (use P, G, H, Q, F, A)"
-                    )))
+                    return Err(NoiseError::UnknownComponent {
+                        component: o,
+                        list: s.into(),
+                    })
                 }
             };
             *flag = true;

@@ -10,6 +10,7 @@
 #![warn(missing_docs)]
 
 pub mod capture;
+pub mod catalog;
 mod components;
 pub mod darktable;
 mod error;

@@ -10,7 +10,10 @@ use std::collections::BTreeMap;
 use std::path::Path;
 
 fn err(path: &Path, reason: impl std::fmt::Display) -> NoiseError {
-    NoiseError::Invalid(format!("{}: {reason}", path.display()))
+    NoiseError::MapsFile {
+        path: path.to_path_buf(),
+        reason: reason.to_string(),
+    }
 }
 
 /// Write `maps` and `meta` (a JSON document) atomically to `path`.

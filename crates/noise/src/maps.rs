@@ -70,9 +70,11 @@ impl Map {
             Map::Pixel(a) => {
                 let (ph, pw) = (a.shape()[1], a.shape()[2]);
                 if y + h > ph || x + w > pw {
-                    return Err(NoiseError::Invalid(format!(
-                        "crop {h}x{w} at ({y}, {x}) leaves the {ph}x{pw} map"
-                    )));
+                    return Err(NoiseError::CropOutside {
+                        at: (y, x),
+                        size: (h, w),
+                        map: (ph, pw),
+                    });
                 }
                 let v = a.slice(ndarray::s![.., y..y + h, x..x + w]);
                 Ok(Map::Pixel(Arc::new(v.as_standard_layout().into_owned())))
@@ -89,29 +91,30 @@ impl Map {
         }
     }
 
-    fn check(&self, name: &str, shape: (usize, usize), nonneg: bool) -> Result<()> {
+    fn check(&self, name: &'static str, shape: (usize, usize), nonneg: bool) -> Result<()> {
         let bad = |v: f32| !v.is_finite() || (nonneg && v < 0.0);
-        let what = if nonneg { "finite and >= 0" } else { "finite" };
+        let must = if nonneg { "finite and >= 0" } else { "finite" };
         match self {
-            Map::Scalar(v) if bad(*v) => Err(NoiseError::Invalid(format!(
-                "{name} must be {what}, got {v}"
-            ))),
-            Map::Plane(v) if v.iter().any(|x| bad(*x)) => Err(NoiseError::Invalid(format!(
-                "{name} must be {what}, got {v:?}"
-            ))),
+            Map::Scalar(v) if bad(*v) => Err(NoiseError::Setting {
+                name,
+                must,
+                value: *v,
+            }),
+            Map::Plane(v) if v.iter().any(|x| bad(*x)) => Err(NoiseError::PlaneSetting {
+                name,
+                must,
+                value: *v,
+            }),
             Map::Pixel(a) => {
                 if a.shape() != [4, shape.0, shape.1] {
-                    return Err(NoiseError::Invalid(format!(
-                        "{name} map has shape {:?}, the image packs to [4, {}, {}]",
-                        a.shape(),
-                        shape.0,
-                        shape.1
-                    )));
+                    return Err(NoiseError::MapShape {
+                        map: name,
+                        shape: a.shape().to_vec(),
+                        packed: shape,
+                    });
                 }
                 if !a.is_standard_layout() {
-                    return Err(NoiseError::Invalid(format!(
-                        "{name} map is not in standard layout"
-                    )));
+                    return Err(NoiseError::MapLayout { map: name });
                 }
                 Ok(())
             }
@@ -122,9 +125,7 @@ impl Map {
 
 fn check_fp(min_fp: f32) -> Result<()> {
     if min_fp < -1.0 {
-        return Err(NoiseError::Invalid(format!(
-            "n_fp must be >= -1 (1 + N_FP >= 0), min is {min_fp}"
-        )));
+        return Err(NoiseError::FixedPatternBelow { min: min_fp });
     }
     Ok(())
 }
@@ -181,10 +182,13 @@ impl PixelMaps {
             if let Map::Pixel(a) = m {
                 if let Some((pos, v)) = a.iter().enumerate().find(|(_, v)| !(lo..=hi).contains(*v))
                 {
-                    return Err(NoiseError::Invalid(format!(
-                        "{name} map has an invalid value {} at flat index {pos} (must be in {lo}..={hi})",
-                        pgrf_core::number::shown(*v as f64)
-                    )));
+                    return Err(NoiseError::MapValue {
+                        map: name,
+                        value: *v,
+                        index: pos,
+                        lo,
+                        hi,
+                    });
                 }
             }
         }

@@ -37,7 +37,10 @@ pub struct ProfileEntry {
 /// Parse `NAME[@WEIGHT],...`; refuses empty entries and weights that are
 /// not positive numbers.
 pub fn parse_profiles(text: &str) -> Result<Vec<ProfileEntry>> {
-    let bad = |why: String| NoiseError::Invalid(format!("profile list {text:?}: {why}"));
+    let bad = |reason: String| NoiseError::ProfileList {
+        list: text.into(),
+        reason,
+    };
     let entries = parse_weighted(text).map_err(|e| {
         bad(match e {
             WeightedError::Empty => {

@@ -287,40 +287,43 @@ impl NoiseModel {
     fn validate(&self, clean: &ArrayView3<f32>, c: &Capture) -> Result<()> {
         let s = clean.shape();
         if s.len() != 3 || s[0] != 4 || s[1] == 0 || s[2] == 0 {
-            return Err(NoiseError::Invalid(format!(
-                "clean image must be packed (4, H, W), got {s:?}"
-            )));
+            return Err(NoiseError::ImageShape { shape: s.to_vec() });
         }
         if !(c.ratio.is_finite() && c.ratio > 0.0) {
-            return Err(NoiseError::Invalid(format!(
-                "exposure ratio must be > 0, got {}",
-                c.ratio
-            )));
+            return Err(NoiseError::Setting {
+                name: "exposure ratio",
+                must: "> 0",
+                value: c.ratio,
+            });
         }
         if !(c.exposure_s.is_finite() && c.exposure_s >= 0.0) {
-            return Err(NoiseError::Invalid(format!(
-                "exposure time must be >= 0 s, got {}",
-                c.exposure_s
-            )));
+            return Err(NoiseError::Setting {
+                name: "exposure time",
+                must: ">= 0 s",
+                value: c.exposure_s,
+            });
         }
         if !(self.k.is_finite() && self.k > 0.0) {
-            return Err(NoiseError::Invalid(format!(
-                "system gain K must be > 0, got {}",
-                self.k
-            )));
+            return Err(NoiseError::Setting {
+                name: "system gain K",
+                must: "> 0",
+                value: self.k,
+            });
         }
-        for (what, v) in [
+        for (name, value) in [
             ("row sigma", self.row_sigma),
             ("quantisation step", self.quant_step),
         ] {
-            if !(v.is_finite() && v >= 0.0) {
-                return Err(NoiseError::Invalid(format!("{what} must be >= 0, got {v}")));
+            if !(value.is_finite() && value >= 0.0) {
+                return Err(NoiseError::Setting {
+                    name,
+                    must: ">= 0",
+                    value,
+                });
             }
         }
         if c.plane_rows.iter().any(|&r| r > 1) {
-            return Err(NoiseError::Invalid(
-                "plane_rows holds row parities (0 or 1)".into(),
-            ));
+            return Err(NoiseError::PlaneRows { rows: c.plane_rows });
         }
         self.maps.check((s[1], s[2]))
     }
@@ -422,9 +425,7 @@ impl NoiseModel {
             }
         });
         if bad.into_inner() {
-            return Err(NoiseError::Invalid(
-                "non-finite value in the clean image or in a per-pixel map".into(),
-            ));
+            return Err(NoiseError::NonFinite);
         }
         Ok(Array3::from_shape_vec((4, ph, pw), out).expect("shape"))
     }

@@ -206,9 +206,7 @@ impl PairSpec {
     /// what the profile knows.
     pub fn k_range(&self, lo: u32, hi: u32) -> Result<(f64, f64)> {
         if lo == 0 || hi < lo {
-            return Err(NoiseError::Invalid(format!(
-                "ISO range {lo}..{hi} must be positive and ordered"
-            )));
+            return Err(NoiseError::IsoRange { lo, hi });
         }
         let (a, b) = (
             self.profile.params_at_iso(lo)?.k,
@@ -225,9 +223,11 @@ impl PairSpec {
             RatioSpec::Fixed(r) => r,
             RatioSpec::Uniform { lo, hi } => {
                 if !(lo > 0.0 && hi >= lo) {
-                    return Err(NoiseError::Invalid(format!(
-                        "ratio range {lo}..{hi} is not positive and ordered"
-                    )));
+                    return Err(NoiseError::DrawRange {
+                        name: "ratio",
+                        lo,
+                        hi,
+                    });
                 }
                 lo + (hi - lo) * open01(&mut rng) as f32
             }
@@ -236,9 +236,11 @@ impl PairSpec {
             ExposureSpec::Fixed(t) => t,
             ExposureSpec::LogUniform { lo, hi } => {
                 if !(lo > 0.0 && hi >= lo) {
-                    return Err(NoiseError::Invalid(format!(
-                        "exposure range {lo}..{hi} is not positive and ordered"
-                    )));
+                    return Err(NoiseError::DrawRange {
+                        name: "exposure",
+                        lo,
+                        hi,
+                    });
                 }
                 (lo.ln() + (hi.ln() - lo.ln()) * open01(&mut rng) as f32).exp()
             }

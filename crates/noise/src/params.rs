@@ -34,37 +34,42 @@ impl CameraProfile {
         // A validated profile bounds its table and fits, but K = k_per_iso x
         // ISO can still leave every sensor's range at an ISO nobody shoots.
         if !(p.k.is_finite() && p.k > 0.0 && p.k <= MAX_GAIN) {
-            return Err(NoiseError::Invalid(format!(
-                "ISO {iso} gives a gain of {} DN/e- with the {} profile, beyond any sensor (at most {MAX_GAIN})",
-                pgrf_core::number::shown(p.k),
-                self.name
-            )));
+            return Err(NoiseError::GainBeyond {
+                iso,
+                k: p.k,
+                profile: self.name.clone(),
+                max: MAX_GAIN,
+            });
         }
         let scales = [p.sigma_tukey, p.sigma_gauss, p.sigma_row];
         if scales
             .iter()
             .any(|v| !(v.is_finite() && (0.0..=MAX_SIGMA_DN).contains(v)))
         {
-            return Err(NoiseError::Invalid(format!(
-                "ISO {iso} gives noise scales {scales:?} DN with the {} profile, beyond {MAX_SIGMA_DN}",
-                self.name
-            )));
+            return Err(NoiseError::ScalesBeyond {
+                iso,
+                scales,
+                profile: self.name.clone(),
+                max: MAX_SIGMA_DN,
+            });
         }
         Ok(p)
     }
 
     fn params_at_iso_unchecked(&self, iso: u32) -> Result<CaptureParams> {
         if iso == 0 {
-            return Err(NoiseError::Invalid("ISO must be positive".into()));
+            return Err(NoiseError::ZeroIso);
         }
         let t = &self.per_iso;
         if !t.is_empty() {
             let (lo, hi) = (t[0].iso, t[t.len() - 1].iso);
             if iso < lo || iso > hi {
-                return Err(NoiseError::Invalid(format!(
-                    "ISO {iso} is outside the range the {} profile was calibrated for ({lo}..={hi})",
-                    self.name
-                )));
+                return Err(NoiseError::IsoOutside {
+                    iso,
+                    profile: self.name.clone(),
+                    lo,
+                    hi,
+                });
             }
             let j = t.iter().position(|p| p.iso >= iso).expect("inside range");
             let (a, b) = if t[j].iso == iso {
@@ -93,10 +98,9 @@ impl CameraProfile {
             });
         }
         let Some(kpi) = self.k_per_iso else {
-            return Err(NoiseError::Invalid(format!(
-                "the {} profile has neither a per-ISO table nor a K-per-ISO relation; omit the ISO to sample K from its range",
-                self.name
-            )));
+            return Err(NoiseError::NoIsoRelation {
+                profile: self.name.clone(),
+            });
         };
         let k = kpi * iso as f64;
         let mut shapes = self.eld.tukey_shapes.clone();

@@ -10,7 +10,6 @@
 use crate::error::{NoiseError, Result};
 use pgrf_core::number::shown;
 use serde::{Deserialize, Serialize};
-use std::path::Path;
 
 /// Natural-log-linear fit of a noise scale against the system gain:
 /// ln(sigma) = slope * ln(K) + bias, with residual standard deviation `sigma`.
@@ -188,37 +187,6 @@ impl CameraProfile {
         BUILT_IN.iter().find(|(n, _)| *n == name).map(|(n, json)| {
             CameraProfile::from_json(n, json).expect("built-in profiles are valid")
         })
-    }
-
-    /// A built-in name, `dng:FILE.dng` (the file's NoiseProfile tag at its
-    /// ISO, [`crate::pg_profile`]), `darktable:MAKER MODEL` (a camera of
-    /// darktable's noiseprofiles.json, [`crate::darktable`]) or a path to a
-    /// JSON file, validated.
-    pub fn load(name_or_path: &str) -> Result<CameraProfile> {
-        if let Some(p) = Self::built_in(name_or_path) {
-            return Ok(p);
-        }
-        if let Some(file) = name_or_path.strip_prefix("dng:") {
-            return crate::pg_profile::from_dng(file);
-        }
-        if let Some(camera) = name_or_path.strip_prefix("darktable:") {
-            return crate::darktable::load(camera);
-        }
-        let path = Path::new(name_or_path);
-        if !path.exists() {
-            return Err(NoiseError::Profile {
-                name: name_or_path.to_string(),
-                reason: format!(
-                    "no such file, and not a built-in profile ({})",
-                    built_in_names().join(", ")
-                ),
-            });
-        }
-        let text = std::fs::read_to_string(path).map_err(|e| NoiseError::Profile {
-            name: name_or_path.to_string(),
-            reason: e.to_string(),
-        })?;
-        Self::from_json(name_or_path, &text)
     }
 
     /// Parse and validate a profile's JSON text (what [`CameraProfile::load`]

@@ -105,11 +105,7 @@ impl SensorSpec {
         let iso: u32 = name
             .strip_prefix("a7s2-iso")
             .and_then(|s| s.parse().ok())
-            .ok_or_else(|| {
-                NoiseError::Invalid(format!(
-                    "unknown sensor preset '{name}' (use a7s2-iso<ISO>, e.g. a7s2-iso1600)"
-                ))
-            })?;
+            .ok_or_else(|| NoiseError::UnknownPreset { name: name.into() })?;
         let profile = CameraProfile::built_in("sony-a7s2").expect("built-in");
         let p = profile.params_at_iso(iso)?;
         Ok(SensorSpec {
@@ -166,10 +162,10 @@ impl VirtualSensor {
     /// seed); refuses sizes that are odd or below 4 x 4.
     pub fn new(spec: SensorSpec) -> Result<VirtualSensor> {
         if spec.width < 4 || spec.height < 4 || spec.width % 2 == 1 || spec.height % 2 == 1 {
-            return Err(NoiseError::Invalid(format!(
-                "virtual sensor size {}x{} must be even and at least 4x4",
-                spec.width, spec.height
-            )));
+            return Err(NoiseError::SensorSize {
+                width: spec.width,
+                height: spec.height,
+            });
         }
         let (ph, pw) = (spec.height / 2, spec.width / 2);
         let s = spec.seed;
@@ -264,15 +260,15 @@ impl VirtualSensor {
             [sp.black; 4],
             sp.white,
         )
-        .map_err(|e| NoiseError::Invalid(e.to_string()))?;
+        .map_err(|error| NoiseError::Frame { error })?;
         let template = if sp.mono {
             RawFrame::from_mono(sp.width, sp.height, template.mosaic, sp.black, sp.white)
-                .map_err(|e| NoiseError::Invalid(e.to_string()))?
+                .map_err(|error| NoiseError::Frame { error })?
         } else {
             template
         };
         let mut f = pgrf_raw::unpack_u16(packed.view(), &template)
-            .map_err(|e| NoiseError::Invalid(e.to_string()))?;
+            .map_err(|error| NoiseError::Frame { error })?;
         f.iso = Some(sp.iso);
         f.exposure_s = Some(t as f64);
         f.temperature_c = sp.temperature_c;

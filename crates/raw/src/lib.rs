@@ -26,6 +26,7 @@ mod panic_guard;
 pub mod photo;
 mod preview;
 pub mod scene;
+pub mod stats;
 pub mod unprocess;
 
 /// Re-exported so callers use the same ndarray version as the packed arrays.

@@ -3,8 +3,8 @@
 use crate::input::InputArgs;
 use anyhow::Result;
 use clap::Args;
-use pgrf_raw::ndarray::Axis;
-use pgrf_raw::{pack_u16, RawFrame};
+use pgrf_raw::stats::{plane_stats, PlaneStats};
+use pgrf_raw::RawFrame;
 use serde::Serialize;
 use std::path::PathBuf;
 
@@ -17,16 +17,6 @@ pub struct InfoArgs {
     pub json: bool,
     #[command(flatten)]
     pub input: InputArgs,
-}
-
-#[derive(Serialize)]
-struct PlaneStats {
-    plane: &'static str,
-    min: u16,
-    max: u16,
-    mean: f64,
-    /// Share of samples at or above the white level.
-    saturated: f64,
 }
 
 #[derive(Serialize)]
@@ -55,33 +45,33 @@ struct Info<'a> {
     planes: Vec<PlaneStats>,
 }
 
-fn plane_stats(f: &RawFrame) -> Result<Vec<PlaneStats>> {
-    let p = pack_u16(f)?;
-    Ok((0..4)
-        .map(|c| {
-            let plane = p.index_axis(Axis(0), c);
-            let n = plane.len() as f64;
-            let (mut min, mut max, mut sum, mut sat) = (u16::MAX, 0u16, 0u64, 0usize);
-            for &v in plane.iter() {
-                min = min.min(v);
-                max = max.max(v);
-                sum += v as u64;
-                sat += (v as u32 >= f.white) as usize;
-            }
-            PlaneStats {
-                plane: f.plane_names()[c],
-                min,
-                max,
-                mean: sum as f64 / n,
-                saturated: sat as f64 / n,
-            }
-        })
-        .collect())
-}
-
 pub fn run(a: &InfoArgs) -> Result<()> {
     let f = a.input.open(&a.file)?;
-    let info = Info {
+    let info = info(a, &f)?;
+    if a.json {
+        println!("{}", serde_json::to_string(&info)?);
+        return Ok(());
+    }
+    print_header(&f, &info);
+    print_levels(a, &f);
+    print_colour(&f);
+    println!("plane       min     max     mean      saturated");
+    for s in &info.planes {
+        println!(
+            "  {:<8}{:<8}{:<8}{:<10.2}{:.4}%",
+            s.plane,
+            s.min,
+            s.max,
+            s.mean,
+            100.0 * s.saturated
+        );
+    }
+    Ok(())
+}
+
+/// What `--json` prints of `f`.
+fn info<'a>(a: &InfoArgs, f: &'a RawFrame) -> Result<Info<'a>> {
+    Ok(Info {
         file: a.file.display().to_string(),
         make: &f.make,
         model: &f.model,
@@ -101,13 +91,12 @@ pub fn run(a: &InfoArgs) -> Result<()> {
         orientation: f.orientation,
         visible_origin: [f.sensor_origin.0, f.sensor_origin.1],
         sensor_size: [f.sensor_size.0, f.sensor_size.1],
-        planes: plane_stats(&f)?,
-    };
-    if a.json {
-        println!("{}", serde_json::to_string(&info)?);
-        return Ok(());
-    }
-    let opt = |v: Option<String>| v.unwrap_or_else(|| "unknown".into());
+        planes: plane_stats(f)?,
+    })
+}
+
+/// The file, camera, geometry and layout (and a FITS file's header).
+fn print_header(f: &RawFrame, info: &Info) {
     println!("file        {}", info.file);
     let camera = [info.make, info.model]
         .into_iter()
@@ -150,6 +139,11 @@ pub fn run(a: &InfoArgs) -> Result<()> {
     } else {
         println!("orientation {} (EXIF)", f.orientation);
     }
+}
+
+/// Levels, ISO, exposure, temperature and the DNG noise profile.
+fn print_levels(a: &InfoArgs, f: &RawFrame) {
+    let opt = |v: Option<String>| v.unwrap_or_else(|| "unknown".into());
     let names = f.plane_names();
     println!(
         "black       {} {} {} {} {} {} {} {} DN{}",
@@ -183,6 +177,11 @@ pub fn run(a: &InfoArgs) -> Result<()> {
             pairs.join("; ")
         );
     }
+}
+
+/// White balance and colour matrices.
+fn print_colour(f: &RawFrame) {
+    let opt = |v: Option<String>| v.unwrap_or_else(|| "unknown".into());
     if !f.mono {
         println!(
             "wb          {}",
@@ -200,18 +199,6 @@ pub fn run(a: &InfoArgs) -> Result<()> {
             cm.illuminant, cm.xyz_to_cam
         );
     }
-    println!("plane       min     max     mean      saturated");
-    for s in &info.planes {
-        println!(
-            "  {:<8}{:<8}{:<8}{:<10.2}{:.4}%",
-            s.plane,
-            s.min,
-            s.max,
-            s.mean,
-            100.0 * s.saturated
-        );
-    }
-    Ok(())
 }
 
 fn or_dash(s: &str) -> &str {

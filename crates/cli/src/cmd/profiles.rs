@@ -51,15 +51,7 @@ fn list(a: &ListArgs) -> Result<()> {
     } else {
         None
     };
-    let builtins: Vec<(&str, ProfileView)> = pgrf_noise::profile::built_in_names()
-        .into_iter()
-        .map(|n| {
-            (
-                n,
-                pg_profile::view(&CameraProfile::built_in(n).expect("built-in")),
-            )
-        })
-        .collect();
+    let builtins = pgrf_noise::catalog::built_in_views();
     let width = builtins
         .iter()
         .map(|(_, v)| v.make.chars().count() + v.model.chars().count() + 1)
