@@ -25,6 +25,7 @@ pub mod backend;
 mod checkpoint;
 mod config;
 pub mod data;
+pub mod demo;
 mod error;
 pub mod flow;
 pub mod infer;
