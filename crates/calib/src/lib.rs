@@ -9,6 +9,7 @@ pub mod calibrate;
 mod calibration;
 mod error;
 pub mod estimate;
+pub mod light;
 pub mod masters;
 pub mod mix;
 pub mod outputs;

@@ -2,16 +2,26 @@
 //! low-light RAW literature computes them (scikit-image's PSNR and SSIM under
 //! the ELD protocol), so that numbers pgrf prints can sit in the same table as
 //! published ones. Dataset protocols (ELD, SID, paired lists) and comparison
-//! tables build on these.
+//! tables build on these; [`run_protocol`] runs a whole
+//! protocol from an [`EvalConfig`] over [`MethodUnderTest`]s (pgrf-nn's
+//! models implement it), and [`compare_files`] measures one file against
+//! another.
 //!
 //! No deep-learning framework here: plain `ndarray` arrays and rayon, like the
 //! physics crates, so the metrics can judge any producer's output.
 
 #![warn(missing_docs)]
 
+mod compare;
 pub mod dataset;
+pub mod evaluation;
+pub mod method;
 mod metrics;
 pub mod npy;
+
+pub use compare::{compare_files, CompareError, FileScores};
+pub use evaluation::{run_protocol, EvalConfig, EvalError, Evaluation, SyntheticSpec};
+pub use method::{CaseInfo, MethodUnderTest};
 
 pub use metrics::cast;
 pub use metrics::{

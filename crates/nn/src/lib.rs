@@ -47,6 +47,7 @@ pub mod backend;
 mod checkpoint;
 mod config;
 pub mod data;
+pub mod demo;
 mod error;
 #[cfg(feature = "clap")]
 pub mod flags;

@@ -11,37 +11,23 @@ use crate::progress::Bar;
 use crate::shipped;
 use anyhow::{bail, Context, Result};
 use clap::{Args, ValueEnum};
-use pgrf_core::NoProgress;
-use pgrf_eval::dataset::table::{summarise, Row};
-use pgrf_eval::{evaluate, Protocol, Scores};
+use pgrf_eval::dataset::table::summarise;
+use pgrf_eval::Scores;
 use pgrf_nn::backend::DeviceKind;
-use pgrf_nn::infer::prepare::network_input;
-use pgrf_nn::infer::restorer::describe_sampler;
-use pgrf_nn::infer::{restore_frame, Restore, SamplerChoice, Tiling};
-use pgrf_noise::capture::DarkCapture;
-use pgrf_noise::{CameraProfile, ModelKind};
-use pgrf_raw::scene::{render_demo, SceneLevels};
-use pgrf_raw::unpack_normalized;
-use pgrf_raw::{
-    decode_bytes, decode_file, pack_normalized, render_preview, write_dng, Cfa, DngOptions,
-    LevelOverrides, Preview, PreviewOptions, RawFrame,
+use pgrf_nn::demo::{
+    self, BoxError, Demo, DemoConfig, Models, PhotoSource, Scene as DemoScene, ISO, RATIOS,
 };
-use pgrf_report::{write_montage, Panel};
+use pgrf_nn::infer::{Restore, SamplerChoice};
 use serde_json::json;
 use std::path::{Path, PathBuf};
-use std::time::Instant;
 
-/// The two captures, as in ELD's test set.
-pub const RATIOS: [u32; 2] = [100, 200];
-/// Their ISO.
-pub const ISO: u32 = 1600;
-/// Exposure of the clean frame; the dark ones get this / ratio.
-const CLEAN_EXPOSURE_S: f64 = 1.0;
 /// The real photograph built into the binary (MIT, syoyo/tinydng; see
 /// `crates/cli/assets/README.md`).
 const PHOTO: &[u8] = include_bytes!("../../assets/canon550d_colorchart.dng");
 /// How the built-in photograph is named in messages and reports.
 const PHOTO_NAME: &str = "canon550d_colorchart.dng";
+/// Where it comes from, in the report.
+const PHOTO_CREDIT: &str = "built in; Canon EOS 550D, tinydng, MIT";
 /// The procedural scene's size when `--size` is not given.
 const PROCEDURAL_SIZE: &str = "1536x1024";
 
@@ -112,215 +98,79 @@ fn model(file: Option<&Path>, builtin: &str, method: &str, flag: &str) -> Result
     Ok(r)
 }
 
-/// One capture's results, in table order: noisy input, SPC, PGRF.
-struct Capture {
-    ratio: u32,
-    /// The simulated capture, as the camera wrote it.
-    dark: RawFrame,
-    /// What the denoisers and the noisy score saw: the capture minus its
-    /// calibrated dark level (before the ratio), for the noisy panel.
-    calibrated: RawFrame,
-    scores: [Scores; 3],
-    restored: [RawFrame; 2],
+fn models(a: &DemoArgs) -> Result<Models> {
+    Ok(Models {
+        spc: model(a.spc.as_deref(), "builtin:spc", "spc", "--spc")?,
+        pgrf: model(a.pgrf.as_deref(), "builtin:pgrf", "pgrf", "--pgrf")?,
+    })
 }
 
-/// The clean frame the demo starts from, and its description for the report.
-struct Clean {
-    frame: RawFrame,
-    what: String,
-}
-
-/// The even centre window of `frame` of `size` ("WxH"), or all of it.
-fn centre(frame: RawFrame, size: Option<&str>, name: &str) -> Result<RawFrame> {
-    let Some(size) = size else {
-        return Ok(frame);
-    };
-    let (w, h) = super::make_dataset::parse_size(size, 64)?;
-    if w > frame.width || h > frame.height {
-        bail!(
-            "--size {w}x{h} is larger than {name} ({}x{})",
-            frame.width,
-            frame.height
-        );
-    }
-    let (row, col) = ((frame.height - h) / 4 * 2, (frame.width - w) / 4 * 2);
-    Ok(frame.crop(row, col, h, w)?)
-}
-
-/// Load or render the clean frame (before any model is loaded or file written).
-fn clean_frame(a: &DemoArgs) -> Result<Clean> {
+/// What the demo starts from, as the flags say.
+fn scene(a: &DemoArgs) -> Result<DemoScene<'static>> {
     if a.photo.is_some() && a.scene != Scene::Photo {
         bail!("--photo goes with --scene photo");
     }
-    let (mut frame, what) = match a.scene {
+    Ok(match a.scene {
         Scene::Procedural => {
             let size = a.size.as_deref().unwrap_or(PROCEDURAL_SIZE);
-            let (w, h) = super::make_dataset::parse_size(size, 64)?;
-            let f = render_demo(w, h, a.seed, Cfa::Rggb, &SceneLevels::default())?;
-            let what = format!(
-                "procedural scene {w}x{h} (dead leaves, ColorChecker, ramp; seed {})",
-                a.seed
-            );
-            (f, what)
+            let (width, height) = super::make_dataset::parse_size(size, 64)?;
+            DemoScene::Procedural { width, height }
         }
-        Scene::Photo => {
-            let (frame, name) = match &a.photo {
-                Some(p) => (
-                    decode_file(p, &LevelOverrides::default())
-                        .with_context(|| format!("--photo {}", p.display()))?,
-                    p.display().to_string(),
-                ),
-                None => (
-                    decode_bytes(Path::new(PHOTO_NAME), PHOTO, &LevelOverrides::default())?,
-                    format!("{PHOTO_NAME} (built in; Canon EOS 550D, tinydng, MIT)"),
-                ),
-            };
-            let f = centre(frame, a.size.as_deref(), &name)?;
-            let what = format!("real photograph {name}, {}x{}", f.width, f.height);
-            (f, what)
-        }
-    };
-    frame.iso = Some(ISO);
-    frame.exposure_s = Some(CLEAN_EXPOSURE_S);
-    Ok(Clean { frame, what })
+        Scene::Photo => DemoScene::Photo {
+            source: match &a.photo {
+                Some(p) => PhotoSource::File(p.clone()),
+                None => PhotoSource::Bytes {
+                    name: PHOTO_NAME,
+                    credit: PHOTO_CREDIT,
+                    bytes: PHOTO,
+                },
+            },
+            size: match a.size.as_deref() {
+                Some(s) => Some(super::make_dataset::parse_size(s, 64)?),
+                None => None,
+            },
+        },
+    })
 }
 
 pub fn run(a: &DemoArgs) -> Result<()> {
-    let t0 = Instant::now();
     pgrf_nn::infer::check_tiling_args(a.tile, None)?;
     if !a.output.is_dir() {
         require_parent_dir(&a.output)?;
     }
-    let Clean { frame: clean, what } = clean_frame(a)?;
-    let spc = model(a.spc.as_deref(), "builtin:spc", "spc", "--spc")?;
-    let pgrf = model(a.pgrf.as_deref(), "builtin:pgrf", "pgrf", "--pgrf")?;
-    let profile = CameraProfile::built_in("sony-a7s2").context("no sony-a7s2 profile")?;
-    if !a.output.is_dir() {
-        std::fs::create_dir(&a.output)
-            .with_context(|| format!("creating output folder {}", a.output.display()))?;
-    }
-
-    // Steps: the reference, then per ratio capture + 2 models, then pictures.
-    let steps = Bar::new("demo", 2 + 3 * RATIOS.len() as u64, "steps", a.quiet);
-    let bar = steps.bar();
-    bar.enable_steady_tick(std::time::Duration::from_millis(200));
-    let reference = pack_normalized(&clean, true)?;
-    bar.inc(1);
-
-    let protocol = Protocol::eld(false);
-    // Tiles as `pgrf enhance` chooses them (memory, and the flow model's
-    // cap at twice its training crop).
-    let tiling = Tiling {
-        tile: a.tile,
-        overlap: None,
+    let cfg = DemoConfig {
+        output: a.output.clone(),
+        scene: scene(a)?,
         seed: a.seed,
-        device: DeviceKind::Cpu,
+        tile: a.tile,
     };
-    let mut captures = Vec::new();
-    for (k, &ratio) in RATIOS.iter().enumerate() {
-        bar.set_message(format!("x{ratio}: simulating the capture"));
-        let dark_model = DarkCapture {
-            profile: profile.clone(),
-            model: ModelKind::Pgrf,
-            iso: ISO,
-            exposure_s: CLEAN_EXPOSURE_S / ratio as f64,
-            ratio: ratio as f32,
-            seed: a.seed.wrapping_mul(1_000_003).wrapping_add(k as u64 + 1),
-        };
-        let dark = dark_model.take(&clean)?;
-        // The simulated camera is calibrated: its black-level error at the
-        // ISO is known (bias frames), subtracted as `enhance --calib` does.
-        let dark_dn = dark_model.dark_level_dn(&clean)?;
-        let input = network_input(&dark, ratio as f32, Some(&dark_dn))?;
-        let noisy = evaluate(input.view(), reference.view(), &protocol)?;
-        bar.inc(1);
-        let run = |r: &dyn Restore, name: &str| -> Result<(Scores, RawFrame)> {
-            bar.set_message(format!("x{ratio}: {name}"));
-            let out = restore_frame(r, &dark, ratio as f32, Some(&dark_dn), &tiling, &NoProgress)?;
-            let s = evaluate(out.packed.output.view(), reference.view(), &protocol)?;
-            bar.inc(1);
-            Ok((s, out.frame))
-        };
-        let (spc_s, spc_f) = run(spc.as_ref(), "SPC")?;
-        let (pgrf_s, pgrf_f) = run(pgrf.as_ref(), "PGRF")?;
-        let calibrated = unpack_normalized(input.mapv(|v| v / ratio as f32).view(), &dark)?;
-        captures.push(Capture {
-            ratio,
-            dark,
-            calibrated,
-            scores: [noisy, spc_s, pgrf_s],
-            restored: [spc_f, pgrf_f],
-        });
-    }
-
-    bar.set_message("writing DNGs and the picture");
-    let dng = |f: &RawFrame, name: &str| -> Result<PathBuf> {
-        let p = a.output.join(name);
-        write_dng(f, &p, &DngOptions::default()).with_context(|| format!("{}", p.display()))?;
-        Ok(p)
+    let load = || models(a).map_err(BoxError::from);
+    let start = || {
+        // Steps: the reference, then per ratio capture + 2 models, then pictures.
+        let steps = Bar::new("demo", 0, "steps", a.quiet);
+        steps
+            .bar()
+            .enable_steady_tick(std::time::Duration::from_millis(200));
+        steps
     };
-    dng(&clean, "clean.dng")?;
-    for c in &captures {
-        dng(&c.dark, &format!("noisy_x{}.dng", c.ratio))?;
-        dng(&c.restored[0], &format!("spc_x{}.dng", c.ratio))?;
-        dng(&c.restored[1], &format!("pgrf_x{}.dng", c.ratio))?;
-    }
-    let picture = a.output.join("demo.png");
-    write_picture(&picture, &clean, &captures, a.scene)?;
-    bar.inc(1);
-    bar.finish_and_clear();
-    let seconds = t0.elapsed().as_secs_f64();
-
-    print_report(
-        a, &what, &*spc, &*pgrf, &captures, &protocol, &picture, seconds,
-    );
+    let d = demo::run(&cfg, load, start)?;
+    print_report(a, &d);
     if a.json {
         let mut obj = serde_json::Map::new();
-        for c in &captures {
+        for c in &d.captures {
             let s = |x: &Scores| json!({"psnr": x.psnr, "ssim": x.ssim});
             obj.insert(
                 format!("x{}", c.ratio),
                 json!({"noisy": s(&c.scores[0]), "spc": s(&c.scores[1]), "pgrf": s(&c.scores[2])}),
             );
         }
-        obj.insert("seconds".into(), json!(seconds));
+        obj.insert("seconds".into(), json!(d.seconds));
         println!("{}", serde_json::Value::Object(obj));
     }
     Ok(())
 }
 
-#[allow(clippy::too_many_arguments)]
-fn print_report(
-    a: &DemoArgs,
-    what: &str,
-    spc: &dyn Restore,
-    pgrf: &dyn Restore,
-    captures: &[Capture],
-    protocol: &Protocol,
-    picture: &Path,
-    seconds: f64,
-) {
-    const METHODS: [&str; 3] = ["noisy input", "SPC", "PGRF"];
-    let mut rows = Vec::new();
-    for c in captures {
-        for (m, s) in METHODS.iter().zip(&c.scores) {
-            rows.push(Row {
-                protocol: s.protocol.clone(),
-                id: "demo".into(),
-                group: c.ratio,
-                ratio: c.ratio as f32,
-                noisy: format!("noisy_x{}.dng", c.ratio),
-                reference: "clean.dng".into(),
-                method: (*m).into(),
-                psnr: s.psnr,
-                ssim: s.ssim,
-                gain: s.gain,
-                iso: None,
-                seed: None,
-                cast: None,
-            });
-        }
-    }
+fn print_report(a: &DemoArgs, d: &Demo) {
     // The table goes to stderr with the rest of the report when stdout
     // carries the JSON line, so scripts read exactly one line.
     let out = |s: &str| {
@@ -331,115 +181,29 @@ fn print_report(
         }
     };
     out(&format!(
-        "pgrf demo: {what}; dark captures x{} and x{} simulated with the Sony A7S2's noise \
+        "pgrf demo: {}; dark captures x{} and x{} simulated with the Sony A7S2's noise \
 (pgrf model, built-in profile) at ISO {ISO}, seed {}; the camera counts as calibrated: its black-level \
 error at the ISO is subtracted before the denoisers and the noisy score, as `pgrf enhance --calib` does",
-        RATIOS[0], RATIOS[1], a.seed
+        d.what, RATIOS[0], RATIOS[1], a.seed
     ));
-    let model_line = |name: &str, r: &dyn Restore, file: &Option<PathBuf>| {
-        let src = file
-            .as_ref()
+    let source = |file: &Option<PathBuf>| {
+        file.as_ref()
             .map(|p| p.display().to_string())
-            .unwrap_or_else(|| "built in".into());
-        format!(
-            "{name}: {} ({}), {src}",
-            r.meta().arch.describe(),
-            describe_sampler(r)
-        )
+            .unwrap_or_else(|| "built in".into())
     };
-    out(&model_line("SPC ", spc, &a.spc));
-    out(&model_line("PGRF", pgrf, &a.pgrf));
+    out(&format!("SPC : {}, {}", d.models[0], source(&a.spc)));
+    out(&format!("PGRF: {}, {}", d.models[1], source(&a.pgrf)));
     out(&format!(
         "protocol: whole frame, packed 4-channel (RGGB), each file's black/white levels; {}",
-        protocol.describe()
+        d.protocol.describe()
     ));
-    out(&summarise(&rows).text());
+    out(&summarise(&d.rows()).text());
     out(&format!(
-        "wrote {} (rows: x{} and x{}, whole frame and 2x crop; columns: clean, noisy, SPC, PGRF) and 7 DNGs in {} ({seconds:.1} s)",
-        picture.display(),
+        "wrote {} (rows: x{} and x{}, whole frame and 2x crop; columns: clean, noisy, SPC, PGRF) and 7 DNGs in {} ({:.1} s)",
+        d.picture.display(),
         RATIOS[0],
         RATIOS[1],
-        a.output.display()
+        a.output.display(),
+        d.seconds
     ));
-}
-
-/// The crop shown at 2x, a quarter of the frame each way: on the photograph
-/// the chart's middle patches and its printed lettering, on the procedural
-/// scene the lower left corner of the chart and the leaves around it.
-/// Returns `(row, col, h, w)` in preview pixels.
-fn crop_box(width: usize, height: usize, scene: Scene) -> (usize, usize, usize, usize) {
-    let (ch, cw) = (height / 4, width / 4);
-    match scene {
-        Scene::Photo => (height / 2, width * 11 / 20, ch, cw),
-        Scene::Procedural => (height * 2 / 5, width / 2, ch, cw),
-    }
-}
-
-fn crop_zoom(p: &Preview, (r0, c0, ch, cw): (usize, usize, usize, usize)) -> Preview {
-    let mut rgb = Vec::with_capacity(4 * ch * cw * 3);
-    for y in 0..2 * ch {
-        for x in 0..2 * cw {
-            let o = ((r0 + y / 2) * p.width + c0 + x / 2) * 3;
-            rgb.extend_from_slice(&p.rgb[o..o + 3]);
-        }
-    }
-    Preview {
-        width: 2 * cw,
-        height: 2 * ch,
-        rgb,
-        warnings: Vec::new(),
-    }
-}
-
-/// Per ratio two rows, the whole frame at half size and a crop at twice
-/// full size: clean, noisy (brightened by the ratio), SPC, PGRF.
-fn write_picture(path: &Path, clean: &RawFrame, captures: &[Capture], scene: Scene) -> Result<()> {
-    let half = PreviewOptions {
-        half: true,
-        ..PreviewOptions::default()
-    };
-    let full = PreviewOptions::default();
-    let views = |f: &RawFrame, gain: f32| -> Result<(Preview, Preview)> {
-        let whole = render_preview(
-            f,
-            &PreviewOptions {
-                gain,
-                ..half.clone()
-            },
-        )?;
-        let detail = render_preview(
-            f,
-            &PreviewOptions {
-                gain,
-                ..full.clone()
-            },
-        )?;
-        let b = crop_box(detail.width, detail.height, scene);
-        Ok((whole, crop_zoom(&detail, b)))
-    };
-    let (clean_whole, clean_crop) = views(clean, 1.0)?;
-    let mut rows = Vec::new();
-    for c in captures {
-        let caption = |name: &str, s: Option<&Scores>| match s {
-            Some(s) => format!("x{} {name}: {:.2} dB, SSIM {:.3}", c.ratio, s.psnr, s.ssim),
-            None => name.to_string(),
-        };
-        let (nw, nc) = views(&c.calibrated, c.ratio as f32)?;
-        let (sw, sc) = views(&c.restored[0], 1.0)?;
-        let (pw, pc) = views(&c.restored[1], 1.0)?;
-        let panel = |caption: String, image: Preview| Panel { caption, image };
-        rows.push(vec![
-            panel(caption("clean reference", None), clean_whole.clone()),
-            panel(caption("noisy", Some(&c.scores[0])), nw),
-            panel(caption("SPC", Some(&c.scores[1])), sw),
-            panel(caption("PGRF", Some(&c.scores[2])), pw),
-        ]);
-        rows.push(vec![
-            panel("clean, 2x crop".into(), clean_crop.clone()),
-            panel(format!("x{} noisy, 2x crop", c.ratio), nc),
-            panel(format!("x{} SPC, 2x crop", c.ratio), sc),
-            panel(format!("x{} PGRF, 2x crop", c.ratio), pc),
-        ]);
-    }
-    write_montage(path, &rows).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))
 }

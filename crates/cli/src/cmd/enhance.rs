@@ -9,13 +9,12 @@ use clap::Args;
 use pgrf_calib::Calibration;
 use pgrf_nn::backend::DeviceKind;
 use pgrf_nn::flow::sample::SamplerKind;
-use pgrf_nn::infer::prepare::ratio_from_exposure;
-use pgrf_nn::infer::restorer::describe_sampler;
-use pgrf_nn::infer::{restore_frame, Restore, SamplerChoice, Tiling};
-use pgrf_raw::{render_preview, write_dng, DngOptions, PreviewOptions};
-use serde::Serialize;
+use pgrf_nn::infer::enhance::{
+    describe_method, enhance_file, BoxError, CalibrationFile, EnhanceConfig, FileReport, Job,
+    RatioChoice,
+};
+use pgrf_nn::infer::{Restore, SamplerChoice, Tiling};
 use std::path::PathBuf;
-use std::time::Instant;
 
 #[derive(Args, Debug)]
 pub struct EnhanceArgs {
@@ -82,32 +81,8 @@ pub struct EnhanceArgs {
     pub input: InputArgs,
 }
 
-#[derive(Serialize)]
-struct FileReport {
-    input: String,
-    output: String,
-    png: Option<String>,
-    width: usize,
-    height: usize,
-    ratio: f32,
-    method: String,
-    nfe: usize,
-    tile: usize,
-    tiles: usize,
-    /// Pixels the calibration's defect map replaced (cosmetic correction).
-    defects_corrected: usize,
-    seconds: f64,
-    peak_rss_mib: Option<f64>,
-}
-
-/// Where one input's results go.
-struct Job {
-    input: PathBuf,
-    output: PathBuf,
-    png: Option<PathBuf>,
-}
-
-pub fn run(a: &EnhanceArgs) -> Result<()> {
+/// Refuse flag values no file can make right, before any work.
+fn check_flags(a: &EnhanceArgs) -> Result<()> {
     if let Some(r) = a.ratio {
         if !(r.is_finite() && r > 0.0) {
             bail!("--ratio must be a positive number, got {r}");
@@ -123,13 +98,69 @@ pub fn run(a: &EnhanceArgs) -> Result<()> {
             bail!("--t2 must be in [0, 1], got {t}");
         }
     }
-    pgrf_nn::infer::check_tiling_args(a.tile, a.overlap)?;
-    let jobs = plan_jobs(a)?;
-    a.device.check_available().map_err(anyhow::Error::msg)?;
+    Ok(pgrf_nn::infer::check_tiling_args(a.tile, a.overlap)?)
+}
+
+/// How every file is enhanced (the calibration loaded).
+fn config(a: &EnhanceArgs) -> Result<EnhanceConfig> {
     let calib = match &a.calib {
-        Some(p) => Some(Calibration::load(p).context("--calib")?),
+        Some(p) => Some(CalibrationFile {
+            path: p.clone(),
+            calibration: Calibration::load(p).context("--calib")?,
+        }),
         None => None,
     };
+    let ratio = match (a.ratio, a.target_exposure) {
+        (Some(r), _) => RatioChoice::Fixed(r),
+        (None, Some(seconds)) => RatioChoice::TargetExposure {
+            seconds,
+            iso: a.target_iso,
+        },
+        (None, None) => unreachable!("checked in check_flags"),
+    };
+    Ok(EnhanceConfig {
+        ratio,
+        calib,
+        force: a.force,
+        tiling: Tiling {
+            tile: a.tile,
+            overlap: a.overlap,
+            seed: a.seed,
+            device: a.device,
+        },
+    })
+}
+
+/// The model, the device and what the user should know about them; printed
+/// before the first image is processed, so that an input that fails at
+/// once still gives a single line.
+fn print_header(a: &EnhanceArgs, restorer: &dyn Restore) {
+    eprintln!(
+        "model: {}; device {}",
+        describe_method(restorer),
+        pgrf_nn::backend::describe(a.device)
+    );
+    if restorer.sampler().is_some() && restorer.meta().t2.is_none() && a.t2.is_none() {
+        eprintln!(
+            "note: {} has no searched t2; using {} (run `pgrf search` to find the best)",
+            a.model.display(),
+            pgrf_nn::infer::restorer::UNSEARCHED_T2
+        );
+    }
+    if restorer.meta().noise.calibrated_dark_level && a.calib.is_none() {
+        eprintln!(
+            "note: {} learned calibrated captures (dark level subtracted); without --calib \
+the file's black level is taken as exact, and an error in it tints dark areas",
+            a.model.display()
+        );
+    }
+}
+
+pub fn run(a: &EnhanceArgs) -> Result<()> {
+    check_flags(a)?;
+    let jobs = plan_jobs(a)?;
+    a.device.check_available().map_err(anyhow::Error::msg)?;
+    let cfg = config(a)?;
     let choice = SamplerChoice {
         kind: a.sampler,
         t2: a.t2,
@@ -137,49 +168,16 @@ pub fn run(a: &EnhanceArgs) -> Result<()> {
     };
     let restorer = crate::shipped::load_model(&a.model, choice, a.device)
         .with_context(|| format!("--model {}", a.model.display()))?;
-    let method = format!(
-        "{} ({})",
-        restorer.meta().arch.describe(),
-        describe_sampler(restorer.as_ref())
-    );
-    // Printed before the first image is processed, so that an input that
-    // fails at once still gives a single line.
     let header = std::cell::Cell::new(a.quiet);
     let print_header = || {
         if !header.replace(true) {
-            eprintln!(
-                "model: {method}; device {}",
-                pgrf_nn::backend::describe(a.device)
-            );
-            if restorer.sampler().is_some() && restorer.meta().t2.is_none() && a.t2.is_none() {
-                eprintln!(
-                    "note: {} has no searched t2; using {} (run `pgrf search` to find the best)",
-                    a.model.display(),
-                    pgrf_nn::infer::restorer::UNSEARCHED_T2
-                );
-            }
-            if restorer.meta().noise.calibrated_dark_level && a.calib.is_none() {
-                eprintln!(
-                    "note: {} learned calibrated captures (dark level subtracted); without --calib \
-the file's black level is taken as exact, and an error in it tints dark areas",
-                    a.model.display()
-                );
-            }
+            print_header(a, restorer.as_ref());
         }
     };
     let mut failed: Vec<(PathBuf, String)> = Vec::new();
     let n = jobs.len();
     for (i, job) in jobs.iter().enumerate() {
-        match enhance_one(
-            a,
-            job,
-            restorer.as_ref(),
-            calib.as_ref(),
-            &method,
-            i,
-            n,
-            &print_header,
-        ) {
+        match enhance_one(a, &cfg, job, restorer.as_ref(), (i, n), &print_header) {
             Ok(report) => {
                 if a.json {
                     println!("{}", serde_json::to_string(&report)?);
@@ -217,9 +215,9 @@ the file's black level is taken as exact, and an error in it tints dark areas",
     Ok(())
 }
 
-/// Expand folders, decide every output path, and check that the outputs can
-/// be written before any work starts.
-fn plan_jobs(a: &EnhanceArgs) -> Result<Vec<Job>> {
+/// The inputs: files as given, folders expanded; and whether a folder was
+/// among them.
+fn expand_inputs(a: &EnhanceArgs) -> Result<(Vec<PathBuf>, bool)> {
     let mut inputs = Vec::new();
     let mut had_dir = false;
     for p in &a.inputs {
@@ -232,6 +230,13 @@ fn plan_jobs(a: &EnhanceArgs) -> Result<Vec<Job>> {
             bail!("{}: no such file or folder", p.display());
         }
     }
+    Ok((inputs, had_dir))
+}
+
+/// Expand folders, decide every output path, and check that the outputs can
+/// be written before any work starts.
+fn plan_jobs(a: &EnhanceArgs) -> Result<Vec<Job>> {
+    let (mut inputs, had_dir) = expand_inputs(a)?;
     let single = inputs.len() == 1 && !had_dir;
     let is_dng = a
         .output
@@ -274,6 +279,12 @@ fn plan_jobs(a: &EnhanceArgs) -> Result<Vec<Job>> {
             a.output.display()
         );
     }
+    folder_jobs(a, inputs)
+}
+
+/// One job per input into the output folder (created if missing), keeping
+/// the input's name with a .dng extension.
+fn folder_jobs(a: &EnhanceArgs, inputs: Vec<PathBuf>) -> Result<Vec<Job>> {
     if !a.output.is_dir() {
         require_parent_dir(&a.output)?;
         std::fs::create_dir(&a.output)
@@ -306,109 +317,55 @@ fn plan_jobs(a: &EnhanceArgs) -> Result<Vec<Job>> {
         .collect()
 }
 
-#[allow(clippy::too_many_arguments)]
+/// Enhance file number `index` of `count` and say what was written.
 fn enhance_one(
     a: &EnhanceArgs,
+    cfg: &EnhanceConfig,
     job: &Job,
     restorer: &dyn Restore,
-    calib: Option<&Calibration>,
-    method: &str,
-    index: usize,
-    count: usize,
+    (index, count): (usize, usize),
     print_header: &dyn Fn(),
 ) -> Result<FileReport> {
-    let t0 = Instant::now();
-    let mut frame = a.input.open(&job.input)?;
-    frame
-        .require_cfa("pgrf enhance (its denoisers learned Bayer data)")
-        .with_context(|| format!("{}", job.input.display()))?;
-    let ratio = match (a.ratio, a.target_exposure) {
-        (Some(r), _) => r,
-        (None, Some(t)) => ratio_from_exposure(&frame, t, a.target_iso)?,
-        (None, None) => unreachable!("checked in run"),
-    };
-    let mut defects_fixed = 0;
-    let dark = match (calib, &a.calib) {
-        (Some(cal), Some(path)) => {
-            cal.check_matches(&frame.make, &frame.model, frame.iso, a.force)
-                .and_then(|()| cal.check_layout(&frame))
-                .with_context(|| format!("--calib {}", path.display()))?;
-            if (cal.meta.width, cal.meta.height) != (frame.width, frame.height) {
-                bail!(
-                    "--calib {}: calibration is {}x{}, the photo {}x{}",
-                    path.display(),
-                    cal.meta.width,
-                    cal.meta.height,
-                    frame.width,
-                    frame.height
-                );
-            }
-            let shading = cal.dark_shading_dn(frame.exposure_s.unwrap_or(0.0))?;
-            defects_fixed = cal.correct_defects(&mut frame);
-            Some(shading)
-        }
-        _ => None,
-    };
-    let tiling = Tiling {
-        tile: a.tile,
-        overlap: a.overlap,
-        seed: a.seed,
-        device: a.device,
-    };
-    print_header();
     let name = job
         .input
         .file_name()
         .map(|s| s.to_string_lossy().into_owned())
         .unwrap_or_default();
-    let bar = Bar::new(
-        format!("[{}/{count}] {name}", index + 1),
-        0,
-        "tiles",
-        a.quiet,
-    );
-    let mut restored = restore_frame(restorer, &frame, ratio, dark.as_ref(), &tiling, &bar)?;
-    let (tiles, tile) = (restored.packed.plan.count(), restored.packed.tile_side());
-    // The input's NoiseProfile describes the noisy input; what noise a
-    // network leaves is not known, so the output states none.
-    restored.frame.noise_profile = None;
-    write_dng(&restored.frame, &job.output, &DngOptions::default())?;
-    if let Some(png) = &job.png {
-        render_preview(&restored.frame, &PreviewOptions::default())?.write_png(png, 8)?;
-    }
-    let seconds = t0.elapsed().as_secs_f64();
+    let open = |p: &std::path::Path| a.input.open(p).map_err(BoxError::from);
+    let start = || {
+        print_header();
+        Bar::new(
+            format!("[{}/{count}] {name}", index + 1),
+            0,
+            "tiles",
+            a.quiet,
+        )
+    };
+    let r = enhance_file(cfg, restorer, job, open, start)?;
     if !a.quiet {
         eprintln!(
-            "wrote {}{}: {}x{}, ratio {ratio:.1}, {tiles} tile{} of {}, {seconds:.1} s{}",
-            job.output.display(),
-            job.png
+            "wrote {}{}: {}x{}, ratio {:.1}, {} tile{} of {}, {:.1} s{}",
+            r.output,
+            r.png
                 .as_ref()
-                .map(|p| format!(" and {}", p.display()))
+                .map(|p| format!(" and {p}"))
                 .unwrap_or_default(),
-            frame.width,
-            frame.height,
-            if tiles == 1 { "" } else { "s" },
-            tile,
-            if defects_fixed > 0 {
-                format!(", {defects_fixed} defective pixels corrected from their neighbours")
+            r.width,
+            r.height,
+            r.ratio,
+            r.tiles,
+            if r.tiles == 1 { "" } else { "s" },
+            r.tile,
+            r.seconds,
+            if r.defects_corrected > 0 {
+                format!(
+                    ", {} defective pixels corrected from their neighbours",
+                    r.defects_corrected
+                )
             } else {
                 String::new()
             },
         );
     }
-    Ok(FileReport {
-        input: job.input.display().to_string(),
-        output: job.output.display().to_string(),
-        png: job.png.as_ref().map(|p| p.display().to_string()),
-        width: frame.width,
-        height: frame.height,
-        ratio,
-        method: method.to_string(),
-        nfe: restorer.nfe(),
-        tile,
-        tiles,
-        defects_corrected: defects_fixed,
-        seconds,
-        peak_rss_mib: pgrf_core::mem::peak_rss_mib(),
-    })
+    Ok(r)
 }

@@ -8,20 +8,17 @@
 use crate::progress::Bar;
 use anyhow::{bail, Context, Result};
 use clap::{Args, ValueEnum};
-use pgrf_core::NoProgress;
-use pgrf_eval::dataset::run::{MethodFn, Outcome, RunOptions, Worst, NOISY};
-use pgrf_eval::dataset::synthetic::{self, Synthetic};
-use pgrf_eval::dataset::table::{csv, summarise};
-use pgrf_eval::dataset::{eld, pairs, sid, DatasetKind, Sample};
-use pgrf_eval::{cast, Protocol};
+use pgrf_eval::dataset::run::NOISY;
+use pgrf_eval::dataset::synthetic::{self, DEFAULT_ISOS, DEFAULT_RATIOS};
+use pgrf_eval::dataset::DatasetKind;
+use pgrf_eval::evaluation::BoxError;
+use pgrf_eval::{EvalConfig, MethodUnderTest, SyntheticSpec};
 use pgrf_nn::backend::DeviceKind;
-use pgrf_nn::infer::restorer::describe_sampler;
-use pgrf_nn::infer::{restore_packed, Restore, SamplerChoice, Tiling};
+use pgrf_nn::infer::enhance::describe_method;
+use pgrf_nn::infer::method::NetworkMethod;
+use pgrf_nn::infer::{SamplerChoice, Tiling};
 use pgrf_noise::ModelKind;
-use pgrf_raw::ndarray::{Array3, ArrayView3};
-use pgrf_raw::{render_preview, unpack_normalized, PreviewOptions};
-use pgrf_report::{write_montage, Panel};
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
 pub enum Baseline {
@@ -173,127 +170,6 @@ fn parse_white(a: &EvalArgs) -> Result<Option<u32>> {
     }
 }
 
-/// What a file-pair run measures, for the header's first line.
-fn pairs_description(a: &EvalArgs, samples: &[Sample]) -> String {
-    let what = match a.protocol {
-        DatasetKind::Eld => format!(
-            "ELD Sony A7S2, scenes {}: x100 = frames 4,9,14, x200 = frames 5,10,15, reference = nearest of frames 1,6,11,16, ratio = ISO x exposure of reference / noisy (EXIF)",
-            a.scenes
-        ),
-        DatasetKind::Sid => format!(
-            "SID Sony, {}: ratio = long / short exposure from file names, capped at 300; {}",
-            a.list
-                .as_ref()
-                .map(|p| p.display().to_string())
-                .unwrap_or_else(|| sid::DEFAULT_LIST.into()),
-            if a.keep_misaligned {
-                "misaligned 10034, 10045, 10172 kept"
-            } else {
-                "misaligned 10034, 10045, 10172 excluded"
-            }
-        ),
-        DatasetKind::Pairs => format!("pairs of {}", a.root[0].display()),
-        DatasetKind::Synthetic => "synthetic captures".into(),
-    };
-    format!("{what}; {} images", samples.len())
-}
-
-/// What a synthetic run measures, for the header's first line.
-fn synthetic_description(images: &[synthetic::Image], synth: &Synthetic) -> String {
-    let names: Vec<&str> = images.iter().map(|i| i.id.as_str()).collect();
-    format!(
-        "{} clean files ({}); {}; {} captures",
-        images.len(),
-        names.join(", "),
-        synth.describe(),
-        images.len() * synth.conditions.len()
-    )
-}
-
-/// The header: what is measured (`what`), how, and for synthetic runs the
-/// colour-cast definition.
-fn header(
-    a: &EvalArgs,
-    what: &str,
-    crop: Option<usize>,
-    correct: bool,
-    white: Option<u32>,
-) -> String {
-    let synthetic = a.protocol == DatasetKind::Synthetic;
-    let crop = match crop {
-        Some(c) => {
-            format!("centre {c}x{c} of the packed planes (input cropped before the network)")
-        }
-        None => "full image".into(),
-    };
-    let white = match white {
-        Some(w) => format!("white {w}"),
-        None => "white from each file".into(),
-    };
-    let input = if synthetic {
-        "capture = reference / ratio through the noise model, x ratio, minus its dark-level offset (the profile's black-level error at the ISO, calibrated), clamped [0,1]"
-    } else {
-        "input x ratio clamped [0,1]"
-    };
-    let mut s = format!(
-        "protocol {}: {what}; {crop}\nmeasure  packed R,G1,B,G2, black per channel from the files, {white}; {input}, reference clamped [0,1]; {}{}",
-        a.protocol,
-        Protocol::eld(correct).describe(),
-        if correct && a.noise_baseline == Baseline::Input {
-            format!("; `{NOISY}` without the correction (ELD's res_in)")
-        } else {
-            String::new()
-        }
-    );
-    if synthetic {
-        s.push_str(&format!("\ncast     {}", cast::DEFINITION));
-    }
-    s
-}
-
-/// The file-pair protocols take exactly one --root.
-fn one_root(a: &EvalArgs) -> Result<&Path> {
-    match a.root.as_slice() {
-        [r] => Ok(r),
-        r => bail!(
-            "--root: the {} protocol takes one folder or file, got {}",
-            a.protocol,
-            r.len()
-        ),
-    }
-}
-
-fn walk(a: &EvalArgs) -> Result<Vec<Sample>> {
-    let root = one_root(a)?;
-    Ok(match a.protocol {
-        DatasetKind::Eld => {
-            let scenes = eld::parse_scenes(&a.scenes).map_err(anyhow::Error::msg)?;
-            eld::walk(root, &scenes)?
-        }
-        DatasetKind::Sid => sid::walk(root, a.list.as_deref(), a.keep_misaligned)?,
-        DatasetKind::Pairs => pairs::walk(root)?,
-        DatasetKind::Synthetic => bail!("the synthetic protocol has no file pairs to walk"),
-    })
-}
-
-/// The synthetic recipe from --iso, --ratio, --profile, --noise and --seed.
-fn synthetic_recipe(a: &EvalArgs) -> Result<Synthetic> {
-    let isos = match &a.iso {
-        Some(t) => synthetic::parse_isos(t)?,
-        None => synthetic::DEFAULT_ISOS.to_vec(),
-    };
-    let ratios = match &a.ratio {
-        Some(t) => synthetic::parse_ratios(t)?,
-        None => synthetic::DEFAULT_RATIOS.to_vec(),
-    };
-    Ok(Synthetic::new(
-        a.profile.as_deref().unwrap_or("sony-a7s2"),
-        a.noise.unwrap_or_default(),
-        synthetic::grid(&isos, &ratios),
-        a.seed,
-    )?)
-}
-
 /// `--outputs NAME=DIR` entries, each folder checked to exist.
 fn parse_outputs(items: &[String]) -> Result<Vec<(String, PathBuf)>> {
     items
@@ -314,35 +190,42 @@ fn parse_outputs(items: &[String]) -> Result<Vec<(String, PathBuf)>> {
         .collect()
 }
 
-/// The outside method's restoration of case `key`: DIR/KEY.output.npy, of
-/// the input's shape (a larger file is refused before it is read).
-fn read_output(
-    dir: &Path,
-    key: &str,
-    input: ArrayView3<f32>,
-) -> std::result::Result<Array3<f32>, String> {
-    let path = dir.join(format!("{key}.output.npy"));
-    let out = pgrf_eval::npy::read(&path, 8 * input.len() as u64 + 65_536)?;
-    if out.dim() != input.dim() {
-        return Err(format!(
-            "{}: shape {:?}, the input is {:?}",
-            path.display(),
-            out.dim(),
-            input.dim()
-        ));
+/// The synthetic captures from --iso, --ratio, --profile, --noise and
+/// --seed; those flags are refused with the other protocols.
+fn synthetic_spec(a: &EvalArgs) -> Result<SyntheticSpec> {
+    if a.protocol != DatasetKind::Synthetic {
+        for (flag, given) in [
+            ("--iso", a.iso.is_some()),
+            ("--ratio", a.ratio.is_some()),
+            ("--profile", a.profile.is_some()),
+            ("--noise", a.noise.is_some()),
+        ] {
+            if given {
+                bail!("{flag} goes with --protocol synthetic only");
+            }
+        }
+        return Ok(SyntheticSpec::default());
     }
-    Ok(out)
+    Ok(SyntheticSpec {
+        isos: match &a.iso {
+            Some(t) => synthetic::parse_isos(t)?,
+            None => DEFAULT_ISOS.to_vec(),
+        },
+        ratios: match &a.ratio {
+            Some(t) => synthetic::parse_ratios(t)?,
+            None => DEFAULT_RATIOS.to_vec(),
+        },
+        profile: a.profile.clone().unwrap_or_else(|| "sony-a7s2".into()),
+        noise: a.noise.unwrap_or_default(),
+        seed: a.seed,
+    })
 }
 
-fn write_file(path: &Path, text: &str) -> Result<()> {
-    pgrf_core::write_atomic(path, text.as_bytes()).with_context(|| format!("{}", path.display()))
-}
-
-pub fn run(a: &EvalArgs) -> Result<()> {
+/// The evaluation the flags describe, every flag checked.
+fn config(a: &EvalArgs) -> Result<EvalConfig> {
     pgrf_nn::infer::check_tiling_args(a.tile, None)?;
     let crop = parse_crop(a)?;
     let white = parse_white(a)?;
-    let levels = pgrf_raw::LevelOverrides { black: None, white };
     let correct = match a.illuminance_correct {
         Some(v) => v == OnOff::On,
         None => a.protocol.default_correct(),
@@ -356,29 +239,39 @@ pub fn run(a: &EvalArgs) -> Result<()> {
             bail!("--dump {}: no such folder", d.display());
         }
     }
-    let outside = parse_outputs(&a.outputs)?;
-    let synthetic = a.protocol == DatasetKind::Synthetic;
-    if !synthetic {
-        for (flag, given) in [
-            ("--iso", a.iso.is_some()),
-            ("--ratio", a.ratio.is_some()),
-            ("--profile", a.profile.is_some()),
-            ("--noise", a.noise.is_some()),
-        ] {
-            if given {
-                bail!("{flag} goes with --protocol synthetic only");
-            }
-        }
-    }
-    // What is measured: file pairs, or clean files and the synthetic recipe.
-    let (samples, images, recipe) = if synthetic {
-        let recipe = synthetic_recipe(a)?;
-        (Vec::new(), synthetic::walk(&a.root)?, Some(recipe))
-    } else {
-        (walk(a)?, Vec::new(), None)
-    };
+    let outputs = parse_outputs(&a.outputs)?;
+    Ok(EvalConfig {
+        protocol: a.protocol,
+        roots: a.root.clone(),
+        scenes: a.scenes.clone(),
+        list: a.list.clone(),
+        keep_misaligned: a.keep_misaligned,
+        synthetic: synthetic_spec(a)?,
+        crop,
+        white,
+        correct,
+        baseline,
+        outputs,
+        dump: a.dump.clone(),
+        worst_count: a.worst_count,
+        csv: a.csv.clone(),
+        markdown: a.markdown.clone(),
+        worst: a.worst.clone(),
+    })
+}
+
+/// Every --model, named by its file stem (primed when taken), announced on
+/// stderr.
+fn load_models(a: &EvalArgs) -> Result<Vec<Box<dyn MethodUnderTest>>> {
     a.device.check_available().map_err(anyhow::Error::msg)?;
-    let mut models: Vec<(String, Box<dyn Restore>)> = Vec::new();
+    let tiling = Tiling {
+        tile: a.tile,
+        overlap: None,
+        seed: a.seed,
+        device: a.device,
+    };
+    let mut names: Vec<String> = Vec::new();
+    let mut models: Vec<Box<dyn MethodUnderTest>> = Vec::new();
     for m in &a.model {
         let r = crate::shipped::load_model(m, SamplerChoice::default(), a.device)
             .with_context(|| format!("--model {}", m.display()))?;
@@ -386,137 +279,25 @@ pub fn run(a: &EvalArgs) -> Result<()> {
             .file_stem()
             .map(|s| s.to_string_lossy().into_owned())
             .unwrap_or_else(|| m.display().to_string());
-        while models.iter().any(|(n, _)| *n == name) || name == NOISY {
+        while names.contains(&name) || name == NOISY {
             name.push('\'');
         }
         if !a.quiet {
-            eprintln!(
-                "model {name}: {} ({})",
-                r.meta().arch.describe(),
-                describe_sampler(r.as_ref())
-            );
+            eprintln!("model {name}: {}", describe_method(r.as_ref()));
         }
-        models.push((name, r));
+        names.push(name.clone());
+        models.push(Box::new(NetworkMethod::new(name, r, tiling)));
     }
-    let (what, cases, units) = match &recipe {
-        Some(r) => (
-            synthetic_description(&images, r),
-            images.len() * r.conditions.len(),
-            "captures",
-        ),
-        None => (pairs_description(a, &samples), samples.len(), "images"),
-    };
-    let head = header(a, &what, crop, correct, white);
-    let bar = Bar::new("eval", cases as u64, units, a.quiet);
-    let tiling = Tiling {
-        tile: a.tile,
-        overlap: None,
-        seed: a.seed,
-        device: a.device,
-    };
-    let mut closures: Vec<(String, Box<MethodFn>)> = models
-        .iter()
-        .map(|(name, r)| {
-            let f = Box::new(move |x: ArrayView3<f32>, _: &str| {
-                restore_packed(r.as_ref(), x, &tiling, &NoProgress)
-                    .map(|o| o.output)
-                    .map_err(|e| e.to_string())
-            }) as Box<MethodFn>;
-            (name.clone(), f)
-        })
-        .collect();
-    for (name, dir) in outside {
-        if closures.iter().any(|(n, _)| *n == name) || name == NOISY {
-            bail!("--outputs {name}=...: the name is taken by another column");
-        }
-        let f = Box::new(move |x: ArrayView3<f32>, key: &str| read_output(&dir, key, x))
-            as Box<MethodFn>;
-        closures.push((name, f));
-    }
-    let methods: Vec<(String, &MethodFn)> = closures
-        .iter()
-        .map(|(name, f)| (name.clone(), f.as_ref()))
-        .collect();
-    let opts = RunOptions {
-        crop,
-        levels,
-        correct,
-        baseline,
-        worst_count: a.worst_count,
-        cast: false,
-        dump: a.dump.clone(),
-    };
-    let Outcome { rows, worst, notes } = match &recipe {
-        Some(r) => synthetic::run(&images, r, &methods, &opts, &bar)?,
-        None => pgrf_eval::dataset::run::run(&samples, &methods, &opts, &bar)?,
-    };
-    let summary = summarise(&rows);
-    let head = std::iter::once(head)
-        .chain(notes.iter().map(|n| format!("note     {n}")))
-        .collect::<Vec<_>>()
-        .join("\n");
-    println!("{head}");
-    print!("{}", summary.text());
-    if let Some(p) = &a.csv {
-        write_file(p, &csv(&rows))?;
-        eprintln!("wrote {}", p.display());
-    }
-    if let Some(p) = &a.markdown {
-        let text = format!(
-            "{}\n\n{}",
-            head.lines()
-                .map(|l| format!("> {l}"))
-                .collect::<Vec<_>>()
-                .join("  \n"),
-            summary.markdown()
-        );
-        write_file(p, &text)?;
-        eprintln!("wrote {}", p.display());
-    }
-    let worst_path = a.worst.clone().or_else(|| {
-        a.csv.as_ref().map(|c| {
-            let stem = c.file_stem().unwrap_or_default().to_string_lossy();
-            c.with_file_name(format!("{stem}_worst.png"))
-        })
-    });
-    if let Some(p) = worst_path {
-        if !worst.is_empty() {
-            let mut cols: Vec<String> = Vec::new();
-            if !baseline {
-                cols.push(NOISY.into());
-            }
-            cols.extend(summary.methods.iter().cloned());
-            cols.push("reference".into());
-            write_worst(&worst, &cols, &p)?;
-            eprintln!(
-                "wrote {}: {} (columns: {})",
-                p.display(),
-                worst
-                    .iter()
-                    .map(|w| w.id.as_str())
-                    .collect::<Vec<_>>()
-                    .join(", "),
-                cols.join(", ")
-            );
-        }
-    }
-    Ok(())
+    Ok(models)
 }
 
-/// Rows of previews (one per worst image), each captioned with its image
-/// id and column name.
-fn write_worst(worst: &[Worst], cols: &[String], path: &Path) -> Result<()> {
-    let mut rows: Vec<Vec<Panel>> = Vec::new();
-    for w in worst {
-        let mut row = Vec::new();
-        for (t, col) in w.tiles.iter().zip(cols) {
-            let f = unpack_normalized(t.view(), &w.template)?;
-            row.push(Panel {
-                caption: format!("{}: {col}", w.id),
-                image: render_preview(&f, &PreviewOptions::default())?,
-            });
-        }
-        rows.push(row);
-    }
-    write_montage(path, &rows).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))
+pub fn run(a: &EvalArgs) -> Result<()> {
+    let cfg = config(a)?;
+    let load = || load_models(a).map_err(BoxError::from);
+    let bar = || Bar::new("eval", 0, "images", a.quiet);
+    let evaluation = pgrf_eval::run_protocol(&cfg, load, bar)?;
+    println!("{}", evaluation.header);
+    print!("{}", evaluation.summary.text());
+    evaluation.write(&cfg, &mut |line| eprintln!("{line}"))?;
+    Ok(())
 }

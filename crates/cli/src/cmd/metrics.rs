@@ -1,12 +1,10 @@
 //! `pgrf metrics`: raw-domain PSNR and SSIM of a result against its
 //! reference, under the ELD protocol the published tables use.
 
-use anyhow::{bail, Result};
+use anyhow::Result;
 use clap::Args;
-use pgrf_eval::{evaluate, Protocol};
-use pgrf_raw::{decode_file, pack_normalized, LevelOverrides, RawFrame};
 use serde::Serialize;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 #[derive(Args, Debug)]
 #[command(
@@ -40,42 +38,13 @@ struct Report {
     protocol: String,
 }
 
-fn describe(f: &RawFrame) -> String {
-    format!("{}x{} {}", f.width, f.height, f.cfa)
-}
-
-fn name(p: &Path) -> String {
-    p.display().to_string()
-}
-
 pub fn run(a: &MetricsArgs) -> Result<()> {
-    let o = LevelOverrides::default();
-    let (out, reference) = rayon::join(
-        || decode_file(&a.output, &o),
-        || decode_file(&a.reference, &o),
-    );
-    let (out, reference) = (out?, reference?);
-    if (out.width, out.height, out.cfa) != (reference.width, reference.height, reference.cfa) {
-        bail!(
-            "cannot compare {} ({}) with {} ({}): sizes or CFA phases differ",
-            name(&a.output),
-            describe(&out),
-            name(&a.reference),
-            describe(&reference)
-        );
-    }
-    let po = pack_normalized(&out, true)?;
-    let pr = pack_normalized(&reference, true)?;
-    let protocol = Protocol::eld(a.illuminance_correct);
-    let scores = evaluate(po.view(), pr.view(), &protocol)?;
+    let m = pgrf_eval::compare_files(&a.output, &a.reference, a.illuminance_correct)?;
     let report = Report {
-        psnr: scores.psnr.is_finite().then_some(scores.psnr),
-        ssim: scores.ssim,
-        gain: scores.gain,
-        protocol: format!(
-            "packed R,G1,B,G2, each file normalised by its own black/white levels, {}",
-            protocol.describe()
-        ),
+        psnr: m.scores.psnr.is_finite().then_some(m.scores.psnr),
+        ssim: m.scores.ssim,
+        gain: m.scores.gain,
+        protocol: m.protocol,
     };
     if a.json {
         println!("{}", serde_json::to_string(&report)?);

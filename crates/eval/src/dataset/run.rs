@@ -2,11 +2,13 @@
 //! measured under the protocol, to per-image rows (and the thumbnails of
 //! the worst images). `pgrf eval` only parses, calls this and prints.
 //!
-//! Methods are closures from a packed, amplified input to its restoration,
-//! so this crate needs no network framework: the CLI wraps its models.
+//! Methods are [`MethodUnderTest`]s, from a packed, amplified input to its
+//! restoration, so this crate needs no network framework: pgrf-nn wraps its
+//! models.
 
 use super::table::Row;
 use super::{centre_crop, load_pair, DatasetError, LoadedPair, Result, Sample};
+use crate::method::{CaseInfo, MethodUnderTest};
 use crate::metrics::{colour_cast, evaluate, CameraColour, MetricError, Protocol};
 use ndarray::{Array3, ArrayView3};
 use pgrf_core::Progress;
@@ -18,12 +20,6 @@ pub const NOISY: &str = "noisy input";
 /// Side of the centre thumbnails kept for the worst-images picture (packed
 /// pixels).
 pub(crate) const THUMB: usize = 128;
-
-/// A method under evaluation: packed `(4, h, w)` amplified input in [0, 1]
-/// and the case's key (what its `--dump` files are named after) to its
-/// restoration, or a one-line reason.
-pub type MethodFn<'a> =
-    dyn Fn(ArrayView3<f32>, &str) -> std::result::Result<Array3<f32>, String> + 'a;
 
 /// How a run measures.
 #[derive(Clone, Debug, Default)]
@@ -149,12 +145,12 @@ fn dump_case(
         .map_err(|e| at(e.to_string()))
 }
 
-/// Run `methods` (name and closure, in column order) over `samples`.
+/// Run `methods` (in column order) over `samples`.
 /// `progress` hears one `advance` per image and one `note` line with each
 /// image's scores.
 pub fn run(
     samples: &[Sample],
-    methods: &[(String, &MethodFn)],
+    methods: &[&dyn MethodUnderTest],
     opts: &RunOptions,
     progress: &dyn Progress,
 ) -> Result<Outcome> {
@@ -194,7 +190,7 @@ pub(crate) fn run_cases(
     n: usize,
     units: &str,
     mut load: impl FnMut(usize) -> Result<Case>,
-    methods: &[(String, &MethodFn)],
+    methods: &[&dyn MethodUnderTest],
     opts: &RunOptions,
     progress: &dyn Progress,
 ) -> Result<Outcome> {
@@ -217,8 +213,14 @@ pub(crate) fn run_cases(
         if opts.baseline {
             outputs.push((NOISY, input.clone()));
         }
-        for (name, f) in methods {
-            let out = f(input.view(), &case.key)
+        let info = CaseInfo {
+            key: &case.key,
+            ratio: pair.ratio,
+        };
+        for m in methods {
+            let name = m.name();
+            let out = m
+                .restore(input.view(), &info)
                 .map_err(|e| DatasetError(format!("{}: model {name}: {e}", case.source)))?;
             outputs.push((name, out));
         }

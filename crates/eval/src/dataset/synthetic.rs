@@ -35,9 +35,10 @@
 //! gives byte-identical numbers. Two clean files with the same name are
 //! refused.
 
-use super::run::{case_key, run_cases, Case, MethodFn, Outcome, RunOptions, Synthesis};
+use super::run::{case_key, run_cases, Case, Outcome, RunOptions, Synthesis};
 use super::table::Row;
 use super::{err, DatasetError, DatasetKind, LoadedPair, Result};
+use crate::method::MethodUnderTest;
 use ndarray::{Array3, ArrayView3};
 use pgrf_core::seed::mix64;
 use pgrf_core::Progress;
@@ -389,7 +390,7 @@ fn dedup(items: impl Iterator<Item = String>) -> Vec<String> {
 pub fn run(
     images: &[Image],
     synth: &Synthetic,
-    methods: &[(String, &MethodFn)],
+    methods: &[&dyn MethodUnderTest],
     opts: &RunOptions,
     progress: &dyn Progress,
 ) -> Result<Outcome> {
@@ -665,6 +666,7 @@ mod tests {
 
     #[test]
     fn a_run_covers_every_image_condition_and_method_reproducibly() {
+        use crate::method::{CaseInfo, FnMethod};
         use pgrf_core::NoProgress;
         use pgrf_raw::chart::{render_chart, ChartSpec};
         let d = std::env::temp_dir().join(format!("pgrf-synth-run-{}", std::process::id()));
@@ -688,7 +690,7 @@ mod tests {
         )
         .unwrap();
         // A 3x3 box blur per plane: a "denoiser" that must beat the input.
-        let blur = |x: ArrayView3<f32>, _: &str| -> std::result::Result<Array3<f32>, String> {
+        let blur = |x: ArrayView3<f32>, _: &CaseInfo| -> std::result::Result<Array3<f32>, String> {
             let (c, h, w) = x.dim();
             Ok(Array3::from_shape_fn((c, h, w), |(p, i, j)| {
                 let (mut s, mut n) = (0.0, 0.0);
@@ -701,7 +703,11 @@ mod tests {
                 s / n
             }))
         };
-        let methods: Vec<(String, &MethodFn)> = vec![("blur".into(), &blur)];
+        let blur = FnMethod {
+            name: "blur".into(),
+            f: blur,
+        };
+        let methods: Vec<&dyn MethodUnderTest> = vec![&blur];
         let opts = RunOptions {
             baseline: true,
             worst_count: 2,
@@ -735,10 +741,13 @@ mod tests {
         let b = run(&images, &synth, &methods, &opts, &NoProgress).unwrap();
         assert_eq!(a.rows, b.rows);
         // A failing method is an error naming the file and condition.
-        let fail = |_: ArrayView3<f32>, _: &str| -> std::result::Result<Array3<f32>, String> {
-            Err("out of memory".into())
+        let fail = FnMethod {
+            name: "bad".into(),
+            f: |_: ArrayView3<f32>, _: &CaseInfo| -> std::result::Result<Array3<f32>, String> {
+                Err("out of memory".into())
+            },
         };
-        let methods: Vec<(String, &MethodFn)> = vec![("bad".into(), &fail)];
+        let methods: Vec<&dyn MethodUnderTest> = vec![&fail];
         let e = run(&images, &synth, &methods, &opts, &NoProgress)
             .err()
             .unwrap()
@@ -755,7 +764,7 @@ mod tests {
         let p = d.join("plain").join("plain.dng");
         std::fs::create_dir_all(p.parent().unwrap()).unwrap();
         pgrf_raw::write_dng(&plain, &p, &Default::default()).unwrap();
-        let methods: Vec<(String, &MethodFn)> = vec![];
+        let methods: Vec<&dyn MethodUnderTest> = vec![];
         let o = run(&walk(&[p]).unwrap(), &synth, &methods, &opts, &NoProgress).unwrap();
         assert_eq!(o.rows.len(), 2);
         let c = o.rows[0].cast.unwrap();

@@ -1,0 +1,94 @@
+//! What an evaluation measures: a method under test, from a packed,
+//! normalised and amplified input to its restoration. This crate sits below
+//! the network crate, so it cannot name the models; pgrf-nn implements
+//! [`MethodUnderTest`] for its restorers, and restorations made outside pgrf
+//! are read back from `.npy` files ([`SavedOutputs`]).
+
+use ndarray::{Array3, ArrayView3};
+use std::path::{Path, PathBuf};
+
+/// What a method is told about the case it restores.
+#[derive(Clone, Copy, Debug)]
+pub struct CaseInfo<'a> {
+    /// The case's file-name-safe key (what its `--dump` files are named
+    /// after, [`crate::dataset::run::case_key`]).
+    pub key: &'a str,
+    /// The exposure ratio the input was amplified by.
+    pub ratio: f32,
+}
+
+/// A method under evaluation: one column of the table.
+pub trait MethodUnderTest {
+    /// Its column name in tables, CSV and the worst-images picture.
+    fn name(&self) -> &str;
+
+    /// The restoration of `input` (packed `(4, h, w)` R, G1, B, G2,
+    /// normalised, multiplied by `case.ratio` and clamped to [0, 1]), of the
+    /// same shape, or a one-line reason.
+    fn restore(&self, input: ArrayView3<f32>, case: &CaseInfo<'_>) -> Result<Array3<f32>, String>;
+}
+
+/// A closure as a method: for methods computed in place (and tests).
+pub struct FnMethod<F> {
+    /// The column name.
+    pub name: String,
+    /// The restoration.
+    pub f: F,
+}
+
+impl<F> MethodUnderTest for FnMethod<F>
+where
+    F: Fn(ArrayView3<f32>, &CaseInfo<'_>) -> Result<Array3<f32>, String>,
+{
+    fn name(&self) -> &str {
+        &self.name
+    }
+
+    fn restore(&self, input: ArrayView3<f32>, case: &CaseInfo<'_>) -> Result<Array3<f32>, String> {
+        (self.f)(input, case)
+    }
+}
+
+/// Restorations made outside pgrf (`pgrf eval --outputs NAME=DIR`): case
+/// `KEY` is read from `DIR/KEY.output.npy`, packed `(4, H, W)` float32 or
+/// float64 of the input's shape.
+pub struct SavedOutputs {
+    name: String,
+    dir: PathBuf,
+}
+
+impl SavedOutputs {
+    /// The column `name`, read from folder `dir`.
+    pub fn new(name: impl Into<String>, dir: impl Into<PathBuf>) -> SavedOutputs {
+        SavedOutputs {
+            name: name.into(),
+            dir: dir.into(),
+        }
+    }
+}
+
+impl MethodUnderTest for SavedOutputs {
+    fn name(&self) -> &str {
+        &self.name
+    }
+
+    fn restore(&self, input: ArrayView3<f32>, case: &CaseInfo<'_>) -> Result<Array3<f32>, String> {
+        read_output(&self.dir, case.key, input)
+    }
+}
+
+/// The outside method's restoration of case `key`: DIR/KEY.output.npy, of
+/// the input's shape (a larger file is refused before it is read).
+fn read_output(dir: &Path, key: &str, input: ArrayView3<f32>) -> Result<Array3<f32>, String> {
+    let path = dir.join(format!("{key}.output.npy"));
+    let out = crate::npy::read(&path, 8 * input.len() as u64 + 65_536)?;
+    if out.dim() != input.dim() {
+        return Err(format!(
+            "{}: shape {:?}, the input is {:?}",
+            path.display(),
+            out.dim(),
+            input.dim()
+        ));
+    }
+    Ok(out)
+}

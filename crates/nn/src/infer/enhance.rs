@@ -1,0 +1,223 @@
+//! `pgrf enhance`'s recipe for one file: open the dark photo, check it is a
+//! Bayer mosaic, find the exposure ratio, apply a calibration (dark
+//! shading, defect correction; pgrf-calib's [`Calibration::prepare_light`]),
+//! restore it tile by tile, write the linear DNG and the sRGB preview, and
+//! report what was done. Which files go where is the caller's policy.
+
+use super::prepare::ratio_from_exposure;
+use super::restorer::describe_sampler;
+use super::{restore_frame, Restore, Tiling};
+use crate::error::NnError;
+use pgrf_calib::light::LightError;
+use pgrf_calib::{CalibError, Calibration};
+use pgrf_core::Progress;
+use pgrf_raw::{render_preview, write_dng, DngOptions, PreviewOptions, RawError, RawFrame};
+use serde::Serialize;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// An error from outside this crate (opening the input), kept whole.
+pub type BoxError = Box<dyn std::error::Error + Send + Sync>;
+
+/// Why a file could not be enhanced.
+#[derive(Debug, thiserror::Error)]
+pub enum EnhanceError {
+    /// The input could not be opened (the opener's error, unchanged).
+    #[error(transparent)]
+    Open(BoxError),
+    /// The input is not a Bayer mosaic (the networks learned Bayer data).
+    #[error("{}", path.display())]
+    NotBayer {
+        /// The input.
+        path: PathBuf,
+        /// What the frame is.
+        #[source]
+        source: RawError,
+    },
+    /// The calibration does not fit the photo.
+    #[error("--calib {}", path.display())]
+    Calibration {
+        /// The calibration file.
+        path: PathBuf,
+        /// How it does not fit.
+        #[source]
+        source: LightError,
+    },
+    /// The calibration's dark shading for the photo's exposure time.
+    #[error(transparent)]
+    Shading(CalibError),
+    /// The ratio from the exposure, or the restoration.
+    #[error(transparent)]
+    Network(#[from] NnError),
+    /// The DNG or the preview could not be made or written.
+    #[error(transparent)]
+    Write(#[from] RawError),
+}
+
+/// How bright the result is made.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum RatioChoice {
+    /// The input is multiplied by this exposure ratio.
+    Fixed(f32),
+    /// Brightened to this exposure: target / the file's exposure time (x
+    /// `iso` / the file's ISO when given).
+    TargetExposure {
+        /// The target exposure in seconds.
+        seconds: f64,
+        /// The target exposure's ISO (None: the file's).
+        iso: Option<u32>,
+    },
+}
+
+/// A calibration and the file it came from (named in its errors).
+pub struct CalibrationFile {
+    /// The file.
+    pub path: PathBuf,
+    /// Its contents.
+    pub calibration: Calibration,
+}
+
+/// How every file of a run is enhanced.
+pub struct EnhanceConfig {
+    /// The exposure ratio, or how to find it.
+    pub ratio: RatioChoice,
+    /// Subtract this calibration's dark shading and correct its defects.
+    pub calib: Option<CalibrationFile>,
+    /// Apply a calibration of another camera or ISO anyway.
+    pub force: bool,
+    /// Tiles, start-noise seed and device.
+    pub tiling: Tiling,
+}
+
+/// Where one input's results go.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Job {
+    /// The dark photo.
+    pub input: PathBuf,
+    /// The DNG to write.
+    pub output: PathBuf,
+    /// The sRGB preview to write, if any.
+    pub png: Option<PathBuf>,
+}
+
+/// What was done to one file (`pgrf enhance --json` prints it).
+#[derive(Clone, Debug, Serialize)]
+pub struct FileReport {
+    /// The input.
+    pub input: String,
+    /// The DNG written.
+    pub output: String,
+    /// The preview written.
+    pub png: Option<String>,
+    /// Width in pixels.
+    pub width: usize,
+    /// Height in pixels.
+    pub height: usize,
+    /// The exposure ratio applied.
+    pub ratio: f32,
+    /// The network and its sampler.
+    pub method: String,
+    /// Network evaluations per tile.
+    pub nfe: usize,
+    /// The largest tile's side in packed pixels.
+    pub tile: usize,
+    /// The tiles run.
+    pub tiles: usize,
+    /// Pixels the calibration's defect map replaced (cosmetic correction).
+    pub defects_corrected: usize,
+    /// Seconds for the file, opening included.
+    pub seconds: f64,
+    /// The process's peak resident memory so far.
+    pub peak_rss_mib: Option<f64>,
+}
+
+/// The network and its sampler, in one phrase ("SID U-Net ... (one pass)").
+pub fn describe_method(restorer: &dyn Restore) -> String {
+    format!(
+        "{} ({})",
+        restorer.meta().arch.describe(),
+        describe_sampler(restorer)
+    )
+}
+
+/// The exposure ratio of `frame` as `choice` says.
+fn ratio_of(frame: &RawFrame, choice: RatioChoice) -> Result<f32, NnError> {
+    match choice {
+        RatioChoice::Fixed(r) => Ok(r),
+        RatioChoice::TargetExposure { seconds, iso } => ratio_from_exposure(frame, seconds, iso),
+    }
+}
+
+/// The calibration's dark shading for `frame` (its defects corrected in
+/// place), and how many defects were corrected.
+fn calibrate(
+    cfg: &EnhanceConfig,
+    frame: &mut RawFrame,
+) -> Result<(Option<ndarray::Array3<f32>>, usize), EnhanceError> {
+    let Some(c) = &cfg.calib else {
+        return Ok((None, 0));
+    };
+    match c.calibration.prepare_light(frame, cfg.force) {
+        Ok(p) => Ok((Some(p.dark_dn), p.defects_corrected)),
+        Err(LightError::Shading(e)) => Err(EnhanceError::Shading(e)),
+        Err(source) => Err(EnhanceError::Calibration {
+            path: c.path.clone(),
+            source,
+        }),
+    }
+}
+
+/// Enhance `job.input` with `restorer`: opened by `open`, prepared as `cfg`
+/// says, restored (`start` is called once the file is ready, and the
+/// progress it returns hears the tiles), written to `job.output` (and
+/// `job.png`).
+pub fn enhance_file<P: Progress>(
+    cfg: &EnhanceConfig,
+    restorer: &dyn Restore,
+    job: &Job,
+    open: impl FnOnce(&Path) -> Result<RawFrame, BoxError>,
+    start: impl FnOnce() -> P,
+) -> Result<FileReport, EnhanceError> {
+    let t0 = Instant::now();
+    let mut frame = open(&job.input).map_err(EnhanceError::Open)?;
+    frame
+        .require_cfa("pgrf enhance (its denoisers learned Bayer data)")
+        .map_err(|source| EnhanceError::NotBayer {
+            path: job.input.clone(),
+            source,
+        })?;
+    let ratio = ratio_of(&frame, cfg.ratio)?;
+    let (dark, defects_corrected) = calibrate(cfg, &mut frame)?;
+    let progress = start();
+    let mut restored = restore_frame(
+        restorer,
+        &frame,
+        ratio,
+        dark.as_ref(),
+        &cfg.tiling,
+        &progress,
+    )?;
+    let (tiles, tile) = (restored.packed.plan.count(), restored.packed.tile_side());
+    // The input's NoiseProfile describes the noisy input; what noise a
+    // network leaves is not known, so the output states none.
+    restored.frame.noise_profile = None;
+    write_dng(&restored.frame, &job.output, &DngOptions::default())?;
+    if let Some(png) = &job.png {
+        render_preview(&restored.frame, &PreviewOptions::default())?.write_png(png, 8)?;
+    }
+    Ok(FileReport {
+        input: job.input.display().to_string(),
+        output: job.output.display().to_string(),
+        png: job.png.as_ref().map(|p| p.display().to_string()),
+        width: frame.width,
+        height: frame.height,
+        ratio,
+        method: describe_method(restorer),
+        nfe: restorer.nfe(),
+        tile,
+        tiles,
+        defects_corrected,
+        seconds: t0.elapsed().as_secs_f64(),
+        peak_rss_mib: pgrf_core::mem::peak_rss_mib(),
+    })
+}

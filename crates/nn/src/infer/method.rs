@@ -1,0 +1,38 @@
+//! A network as a method under test of pgrf-eval (which sits below this
+//! crate and cannot name the models): the packed, amplified input restored
+//! tile by tile as `pgrf enhance` restores a frame.
+
+use super::{restore_packed, Restore, Tiling};
+use ndarray::{Array3, ArrayView3};
+use pgrf_core::NoProgress;
+use pgrf_eval::{CaseInfo, MethodUnderTest};
+
+/// A loaded restorer under a column name, tiled as `tiling` says.
+pub struct NetworkMethod {
+    name: String,
+    restorer: Box<dyn Restore>,
+    tiling: Tiling,
+}
+
+impl NetworkMethod {
+    /// `restorer` as column `name`.
+    pub fn new(name: impl Into<String>, restorer: Box<dyn Restore>, tiling: Tiling) -> Self {
+        NetworkMethod {
+            name: name.into(),
+            restorer,
+            tiling,
+        }
+    }
+}
+
+impl MethodUnderTest for NetworkMethod {
+    fn name(&self) -> &str {
+        &self.name
+    }
+
+    fn restore(&self, input: ArrayView3<f32>, _case: &CaseInfo<'_>) -> Result<Array3<f32>, String> {
+        restore_packed(self.restorer.as_ref(), input, &self.tiling, &NoProgress)
+            .map(|o| o.output)
+            .map_err(|e| e.to_string())
+    }
+}
