@@ -20,13 +20,14 @@ use pgrf_nn::infer::restorer::describe_sampler;
 use pgrf_nn::infer::{restore_frame, Restore, SamplerChoice, Tiling};
 use pgrf_noise::capture::DarkCapture;
 use pgrf_noise::{CameraProfile, ModelKind};
-use pgrf_raw::scene::{render_demo, SceneLevels};
 use pgrf_raw::unpack_normalized;
 use pgrf_raw::{
     decode_bytes, decode_file, pack_normalized, render_preview, write_dng, Cfa, DngOptions,
     LevelOverrides, Preview, PreviewOptions, RawFrame,
 };
 use pgrf_report::{write_montage, Panel};
+use pgrf_scenes::demo::render_demo;
+use pgrf_scenes::SceneLevels;
 use serde_json::json;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
