@@ -9,11 +9,11 @@ use common::{one_line_error, pgrf, s};
 use pgrf_nn::backend::{Cpu, DeviceKind};
 use pgrf_nn::infer::prepare::network_input;
 use pgrf_nn::infer::{restore_image, ImageOptions, SamplerChoice};
-use pgrf_raw::scene::{render_frame, SceneKind, SceneLevels, SceneSpec};
 use pgrf_raw::{
     decode_file, pack_normalized, unpack_normalized, write_dng, Cfa, DngOptions, LevelOverrides,
     RawFrame,
 };
+use pgrf_scenes::scene::{render_frame, SceneKind, SceneLevels, SceneSpec};
 use serde_json::Value;
 use std::path::{Path, PathBuf};
 

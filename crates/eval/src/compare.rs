@@ -84,7 +84,7 @@ pub fn compare_files(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use pgrf_raw::chart::{render_chart, ChartSpec};
+    use pgrf_scenes::chart::{render_chart, ChartSpec};
 
     #[test]
     fn files_are_compared_only_when_they_match() {

@@ -24,6 +24,7 @@ pub mod pg_profile;
 mod poisson;
 pub mod profile;
 pub mod sensor;
+pub mod sensor_stacks;
 mod tukey;
 
 pub use components::Components;

@@ -3,7 +3,8 @@
 
 use pgrf_noise::capture::DarkCapture;
 use pgrf_noise::{CameraProfile, ModelKind};
-use pgrf_raw::{pack_normalized, render_frame, Cfa, SceneKind, SceneLevels, SceneSpec};
+use pgrf_raw::{pack_normalized, Cfa};
+use pgrf_scenes::{render_frame, SceneKind, SceneLevels, SceneSpec};
 
 fn capture(ratio: f32, seed: u64) -> DarkCapture {
     DarkCapture {

@@ -51,7 +51,7 @@ impl Cfa {
     }
 
     /// Packed plane (R=0, G1=1, B=2, G2=3) of the pixel at (row, col).
-    pub(crate) fn plane_at(self, row: usize, col: usize) -> usize {
+    pub fn plane_at(self, row: usize, col: usize) -> usize {
         let cell = (row & 1, col & 1);
         let off = self.offsets();
         (0..4)

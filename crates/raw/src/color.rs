@@ -82,7 +82,7 @@ pub fn xyz_from_camera(xyz_to_cam: &[[f32; 3]; 3]) -> Option<Mat3> {
 
 /// sRGB opto-electronic transfer function (linear [0,1] -> encoded [0,1]).
 #[inline]
-pub(crate) fn srgb_encode(x: f32) -> f32 {
+pub fn srgb_encode(x: f32) -> f32 {
     let x = x.clamp(0.0, 1.0);
     if x <= 0.003_130_8 {
         12.92 * x
@@ -93,7 +93,7 @@ pub(crate) fn srgb_encode(x: f32) -> f32 {
 
 /// Inverse of [`srgb_encode`]: encoded [0,1] -> linear [0,1].
 #[inline]
-pub(crate) fn srgb_decode(e: f32) -> f32 {
+pub fn srgb_decode(e: f32) -> f32 {
     let e = e.clamp(0.0, 1.0);
     if e <= 0.040_449_936 {
         e / 12.92

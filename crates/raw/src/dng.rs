@@ -54,15 +54,13 @@ impl Default for DngOptions {
 pub fn encode_dng(frame: &RawFrame, opts: &DngOptions) -> Result<Vec<u8>> {
     frame.check_levels()?;
     if frame.mosaic.len() != frame.width * frame.height {
-        return Err(RawError::Invalid(
-            "frame mosaic length does not match its size".into(),
-        ));
+        return Err(RawError::MosaicInconsistent);
     }
     if frame.width > u16::MAX as usize || frame.height > u16::MAX as usize {
-        return Err(RawError::Invalid(format!(
-            "frame {}x{} is too large for a DNG active-area tag",
-            frame.width, frame.height
-        )));
+        return Err(RawError::TooLargeForDng {
+            width: frame.width,
+            height: frame.height,
+        });
     }
     let image = rawler_image(frame);
     let exif = exif_for(frame);
@@ -104,7 +102,10 @@ pub fn encode_dng(frame: &RawFrame, opts: &DngOptions) -> Result<Vec<u8>> {
         Ok(buf.into_inner())
     })
     .and_then(|r| r)
-    .map_err(|e| RawError::Invalid(format!("DNG encoding failed: {e}")))
+    .map_err(|reason| RawError::Encode {
+        format: "DNG",
+        reason,
+    })
 }
 
 /// Encode `frame` as DNG (same pixels, CFA, levels, colour matrices, white

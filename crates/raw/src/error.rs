@@ -37,10 +37,259 @@ pub enum RawError {
         /// What about it pgrf cannot handle, on one line.
         reason: String,
     },
-    /// Arguments or in-memory data that cannot work: bad levels or geometry,
-    /// a buffer of the wrong length, an encoder failure.
-    #[error("invalid input: {0}")]
-    Invalid(String),
+    /// A frame with no pixels.
+    #[error("invalid input: empty frame {width}x{height}")]
+    EmptyFrame {
+        /// Width given, pixels.
+        width: usize,
+        /// Height given, pixels.
+        height: usize,
+    },
+    /// Samples for a new frame that are not `width * height` of them.
+    #[error("invalid input: mosaic has {samples} samples, {width}x{height} needs {needed}")]
+    MosaicSize {
+        /// Samples given.
+        samples: usize,
+        /// Width given, pixels.
+        width: usize,
+        /// Height given, pixels.
+        height: usize,
+        /// `width * height`.
+        needed: usize,
+    },
+    /// New pixel data for a frame that holds a different number of samples.
+    #[error("invalid input: new mosaic has {samples} samples, frame has {expected}")]
+    MosaicReplaced {
+        /// Samples given.
+        samples: usize,
+        /// Samples of the frame.
+        expected: usize,
+    },
+    /// A frame whose mosaic length disagrees with its own width and height
+    /// (its public fields were changed apart).
+    #[error("invalid input: frame mosaic length does not match its size")]
+    MosaicInconsistent,
+    /// A monochrome frame given to something that needs a colour filter
+    /// array; `what` names that ("the SPC denoiser").
+    #[error(
+        "invalid input: a monochrome frame (no colour filter array); {what} requires a Bayer CFA mosaic"
+    )]
+    NeedsCfa {
+        /// What requires the CFA.
+        what: String,
+    },
+    /// A black level that is negative or not a number.
+    #[error(
+        "invalid input: black level of plane {plane} is {black}; it must be a finite value >= 0"
+    )]
+    BadBlack {
+        /// The plane (R, G1, B, G2).
+        plane: &'static str,
+        /// Its black level, DN.
+        black: f32,
+    },
+    /// A black level at or above the white level.
+    #[error(
+        "invalid input: black level {black} of plane {plane} is not below the white level {white}"
+    )]
+    BlackNotBelowWhite {
+        /// The plane (R, G1, B, G2).
+        plane: &'static str,
+        /// Its black level, DN.
+        black: f32,
+        /// The white level, DN.
+        white: u32,
+    },
+    /// A white level above 65535.
+    #[error("invalid input: white level {white} exceeds the 16-bit range")]
+    WhiteTooHigh {
+        /// The white level, DN.
+        white: u32,
+    },
+    /// Black levels given as neither one value nor four.
+    #[error("invalid input: black level needs 1 or 4 values (R,G1,B,G2), got {count}")]
+    BlackCount {
+        /// How many were given.
+        count: usize,
+    },
+    /// A crop with an odd offset or size, which would split CFA cells.
+    #[error(
+        "invalid input: crop {width}x{height} at ({row}, {col}): offsets and sizes must be even (whole CFA cells)"
+    )]
+    CropOdd {
+        /// Top row of the window.
+        row: usize,
+        /// Left column of the window.
+        col: usize,
+        /// Height of the window.
+        height: usize,
+        /// Width of the window.
+        width: usize,
+    },
+    /// A crop that is empty or reaches past the frame.
+    #[error(
+        "invalid input: crop {width}x{height} at ({row}, {col}) is not inside the {frame_width}x{frame_height} frame"
+    )]
+    CropOutside {
+        /// Top row of the window.
+        row: usize,
+        /// Left column of the window.
+        col: usize,
+        /// Height of the window.
+        height: usize,
+        /// Width of the window.
+        width: usize,
+        /// The frame's width.
+        frame_width: usize,
+        /// The frame's height.
+        frame_height: usize,
+    },
+    /// A frame with no complete 2x2 cell to pack.
+    #[error(
+        "invalid input: frame {width}x{height} is too small to pack (needs at least one 2x2 cell)"
+    )]
+    TooSmallToPack {
+        /// The frame's width.
+        width: usize,
+        /// The frame's height.
+        height: usize,
+    },
+    /// A packed array whose shape is not the one the frame packs to.
+    #[error(
+        "invalid input: packed array has shape {shape:?}, frame {width}x{height} packs to [4, {packed_height}, {packed_width}]"
+    )]
+    PackedShape {
+        /// The array's shape.
+        shape: Vec<usize>,
+        /// The frame's width.
+        width: usize,
+        /// The frame's height.
+        height: usize,
+        /// Rows of each packed plane.
+        packed_height: usize,
+        /// Columns of each packed plane.
+        packed_width: usize,
+    },
+    /// A packed array holding NaN, which has no DN to write.
+    #[error("invalid input: packed image contains NaN (first at flat index {index})")]
+    PackedNan {
+        /// Flat index of the first NaN.
+        index: usize,
+    },
+    /// A frame too wide or tall for DNG's 16-bit active-area tag.
+    #[error("invalid input: frame {width}x{height} is too large for a DNG active-area tag")]
+    TooLargeForDng {
+        /// The frame's width.
+        width: usize,
+        /// The frame's height.
+        height: usize,
+    },
+    /// An encoder that failed on data it was given; `format` names it
+    /// ("DNG", "PNG").
+    #[error("invalid input: {format} encoding failed: {reason}")]
+    Encode {
+        /// The file format being encoded.
+        format: &'static str,
+        /// The encoder's complaint.
+        reason: String,
+    },
+    /// A PNG bit depth other than 8 or 16.
+    #[error("invalid input: PNG bit depth must be 8 or 16, got {bits}")]
+    PngBits {
+        /// The depth asked for.
+        bits: u8,
+    },
+    /// A preview gain that is not a positive number.
+    #[error("invalid input: preview gain must be a positive number, got {gain}")]
+    BadGain {
+        /// The gain given.
+        gain: f32,
+    },
+    /// A headerless dump's bit depth outside 1..=16.
+    #[error("invalid input: bit depth {bits} is outside 1..=16")]
+    BadBits {
+        /// The depth given.
+        bits: u32,
+    },
+    /// A headerless dump's size whose byte count overflows.
+    #[error("invalid input: frame size overflows")]
+    SizeOverflow {
+        /// Width given, pixels.
+        width: usize,
+        /// Height given, pixels.
+        height: usize,
+    },
+    /// An image to encode as FITS with a side of 0.
+    #[error("invalid input: FITS image of {width}x{height} pixels: both sides must be at least 1")]
+    FitsEmpty {
+        /// Width given, pixels.
+        width: usize,
+        /// Height given, pixels.
+        height: usize,
+    },
+    /// Samples to encode that are not `width * height` of them.
+    #[error("invalid input: {samples} samples do not make a {width}x{height} image")]
+    SampleCount {
+        /// Samples given.
+        samples: usize,
+        /// Width given, pixels.
+        width: usize,
+        /// Height given, pixels.
+        height: usize,
+    },
+    /// A FITS master with NaN or infinite values.
+    #[error(
+        "invalid input: {bad} of {samples} samples are NaN or infinite; a FITS master must hold finite values"
+    )]
+    NonFiniteMaster {
+        /// How many are not finite.
+        bad: usize,
+        /// Samples in all.
+        samples: usize,
+    },
+    /// A master whose value count does not match its template frame.
+    #[error("invalid input: master has {values} values, a {width}x{height} frame needs {needed}")]
+    MasterSize {
+        /// Values given.
+        values: usize,
+        /// The template's width.
+        width: usize,
+        /// The template's height.
+        height: usize,
+        /// `width * height`.
+        needed: usize,
+    },
+    /// A FITS header card given for a keyword the encoder writes itself
+    /// (SIMPLE, BITPIX, NAXISn, BZERO, ...) or that is not a value card.
+    #[error(
+        "invalid input: FITS card {key}: the encoder writes this keyword itself or it is not a value card"
+    )]
+    FitsReservedKey {
+        /// The keyword.
+        key: String,
+    },
+    /// A FITS keyword given twice.
+    #[error("invalid input: FITS card {key} is given twice")]
+    FitsDuplicateKey {
+        /// The keyword.
+        key: String,
+    },
+    /// A FITS card that cannot be written: a bad keyword, a value or
+    /// comment that is not printable ASCII or not finite, or a card longer
+    /// than 80 characters; `reason` says which.
+    #[error("invalid input: FITS card {key:?}: {reason}")]
+    FitsCard {
+        /// The keyword.
+        key: String,
+        /// What is wrong with the card.
+        reason: String,
+    },
+    /// An output name whose extension names no format pgrf writes frames in.
+    #[error("{path}: unknown frame format: name the output .dng, or .fits, .fit or .fts for FITS")]
+    UnknownExtension {
+        /// The output file.
+        path: PathBuf,
+    },
     /// An output file that could not be written atomically.
     #[error(transparent)]
     Write(#[from] pgrf_core::WriteError),

@@ -60,6 +60,7 @@ use crate::panic_guard;
 use fitsrs::card::Value;
 use fitsrs::hdu::header::ValueMap;
 use fitsrs::{Fits, Pixels, HDU};
+use serde::Serialize;
 use std::io::Cursor;
 use std::path::Path;
 
@@ -115,6 +116,24 @@ pub struct FitsImage {
     /// How samples that were not 16-bit integers were brought to u16 (for
     /// example "BITPIX -32 in 0..1 scaled by 65535"), for `pgrf info`;
     /// `None` for BITPIX 16 read as stored.
+    pub conversion: Option<String>,
+}
+
+/// What a FITS frame's header says that the other fields of a [`RawFrame`](crate::RawFrame) do not
+/// hold: kept so `pgrf info` can show it and calibration can compare its
+/// gain with the header's. It is the one field of a [`RawFrame`](crate::RawFrame)
+/// that only a FITS file fills ([`RawFrame::fits`](crate::RawFrame::fits)).
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct FitsHeader {
+    /// BITPIX of the file (8, 16, 32, -32, -64).
+    pub bitpix: i32,
+    /// EGAIN: electrons per ADU as the camera driver states it.
+    pub egain_e_per_adu: Option<f64>,
+    /// GAIN: in most drivers (ZWO, QHY) a gain setting, not electrons per ADU.
+    pub gain_setting: Option<f64>,
+    /// DATE-OBS, as written.
+    pub date_obs: Option<String>,
+    /// How samples that were not unsigned 16-bit integers became DN.
     pub conversion: Option<String>,
 }
 
@@ -228,10 +247,10 @@ pub fn encode_fits_f32(
     check_geometry(width, height, data.len())?;
     let bad = data.iter().filter(|v| !v.is_finite()).count();
     if bad > 0 {
-        return Err(RawError::Invalid(format!(
-            "{bad} of {} samples are NaN or infinite; a FITS master must hold finite values",
-            data.len()
-        )));
+        return Err(RawError::NonFiniteMaster {
+            bad,
+            samples: data.len(),
+        });
     }
     let mut out = header(-32, width, height, &[], cards)?;
     out.reserve(padded(data.len() * 4));
@@ -845,14 +864,14 @@ fn padded(len: usize) -> usize {
 
 fn check_geometry(width: usize, height: usize, len: usize) -> Result<()> {
     if width == 0 || height == 0 {
-        return Err(RawError::Invalid(format!(
-            "FITS image of {width}x{height} pixels: both sides must be at least 1"
-        )));
+        return Err(RawError::FitsEmpty { width, height });
     }
     if width.checked_mul(height) != Some(len) {
-        return Err(RawError::Invalid(format!(
-            "{len} samples do not make a {width}x{height} image"
-        )));
+        return Err(RawError::SampleCount {
+            samples: len,
+            width,
+            height,
+        });
     }
     Ok(())
 }
@@ -915,16 +934,10 @@ fn header(
     let mut seen = std::collections::HashSet::new();
     for c in cards {
         if reserved(&c.key) {
-            return Err(RawError::Invalid(format!(
-                "FITS card {}: the encoder writes this keyword itself or it is not a value card",
-                c.key
-            )));
+            return Err(RawError::FitsReservedKey { key: c.key.clone() });
         }
         if !seen.insert(c.key.as_str()) {
-            return Err(RawError::Invalid(format!(
-                "FITS card {} is given twice",
-                c.key
-            )));
+            return Err(RawError::FitsDuplicateKey { key: c.key.clone() });
         }
     }
     let mut out = Vec::with_capacity(BLOCK);
@@ -938,7 +951,10 @@ fn header(
 
 /// One 80-character card in the FITS fixed format.
 fn format_card(c: &FitsCard) -> Result<String> {
-    let bad = |why: String| RawError::Invalid(format!("FITS card {:?}: {why}", c.key));
+    let bad = |reason: String| RawError::FitsCard {
+        key: c.key.clone(),
+        reason,
+    };
     if c.key.is_empty()
         || c.key.len() > 8
         || !c

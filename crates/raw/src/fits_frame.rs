@@ -11,28 +11,10 @@
 //! are TOP-DOWN with no offsets, so a round trip keeps rows and phase.
 
 use crate::error::{RawError, Result};
-use crate::fits::{encode_fits_f32, encode_fits_u16, read_fits, FitsCard, FitsValue};
+use crate::fits::{encode_fits_f32, encode_fits_u16, read_fits, FitsCard, FitsHeader, FitsValue};
 use crate::frame::{LevelOverrides, RawFrame};
 use pgrf_core::write_atomic;
-use serde::Serialize;
 use std::path::Path;
-
-/// What a FITS header says that the other fields of a [`RawFrame`] do not
-/// hold: kept so `pgrf info` can show it and calibration can compare its
-/// gain with the header's.
-#[derive(Clone, Debug, Default, PartialEq, Serialize)]
-pub struct FitsHeader {
-    /// BITPIX of the file (8, 16, 32, -32, -64).
-    pub bitpix: i32,
-    /// EGAIN: electrons per ADU as the camera driver states it.
-    pub egain_e_per_adu: Option<f64>,
-    /// GAIN: in most drivers (ZWO, QHY) a gain setting, not electrons per ADU.
-    pub gain_setting: Option<f64>,
-    /// DATE-OBS, as written.
-    pub date_obs: Option<String>,
-    /// How samples that were not unsigned 16-bit integers became DN.
-    pub conversion: Option<String>,
-}
 
 /// The frame of FITS file `bytes` (`path` names it in errors), with
 /// `overrides` applied to its levels.
@@ -170,13 +152,12 @@ pub fn encode_fits_master(
     egain: Option<f64>,
 ) -> Result<Vec<u8>> {
     if mosaic.len() != template.width * template.height {
-        return Err(RawError::Invalid(format!(
-            "master has {} values, a {}x{} frame needs {}",
-            mosaic.len(),
-            template.width,
-            template.height,
-            template.width * template.height
-        )));
+        return Err(RawError::MasterSize {
+            values: mosaic.len(),
+            width: template.width,
+            height: template.height,
+            needed: template.width * template.height,
+        });
     }
     let mut cards = frame_cards(template);
     cards.retain(|c| c.key != "EGAIN");

@@ -7,6 +7,7 @@
 
 use crate::cfa::Cfa;
 use crate::error::{RawError, Result};
+use crate::fits::FitsHeader;
 use serde::Serialize;
 
 /// XYZ -> camera RGB matrix (DNG `ColorMatrix`) and the illuminant it was measured under.
@@ -78,8 +79,9 @@ pub struct RawFrame {
     /// back into DNGs of this frame ([`crate::container::noise_profile`]).
     pub noise_profile: Option<Vec<[f64; 2]>>,
     /// What a FITS file's header said beyond the fields above (None for
-    /// camera RAW files).
-    pub fits: Option<crate::fits_frame::FitsHeader>,
+    /// camera RAW files): the one place for FITS-only data, so the fields
+    /// above are those every RAW has.
+    pub fits: Option<FitsHeader>,
     /// The decoder's EXIF record, carried into DNGs written from this frame so
     /// lens, date and exposure tags survive a round trip.
     pub(crate) exif: Option<rawler::decoders::RawMetadata>,
@@ -107,16 +109,15 @@ impl RawFrame {
         white: u32,
     ) -> Result<Self> {
         if width == 0 || height == 0 {
-            return Err(RawError::Invalid(format!("empty frame {width}x{height}")));
+            return Err(RawError::EmptyFrame { width, height });
         }
         if mosaic.len() != width * height {
-            return Err(RawError::Invalid(format!(
-                "mosaic has {} samples, {}x{} needs {}",
-                mosaic.len(),
+            return Err(RawError::MosaicSize {
+                samples: mosaic.len(),
                 width,
                 height,
-                width * height
-            )));
+                needed: width * height,
+            });
         }
         let frame = RawFrame {
             width,
@@ -182,9 +183,9 @@ impl RawFrame {
     /// refusal the same way.
     pub fn require_cfa(&self, what: &str) -> Result<()> {
         if self.mono {
-            return Err(RawError::Invalid(format!(
-                "a monochrome frame (no colour filter array); {what} requires a Bayer CFA mosaic"
-            )));
+            return Err(RawError::NeedsCfa {
+                what: what.to_string(),
+            });
         }
         Ok(())
     }
@@ -205,24 +206,21 @@ impl RawFrame {
     pub(crate) fn check_levels(&self) -> Result<()> {
         for (c, &b) in self.black.iter().enumerate() {
             if !b.is_finite() || b < 0.0 {
-                return Err(RawError::Invalid(format!(
-                    "black level of plane {} is {b}; it must be a finite value >= 0",
-                    crate::cfa::PLANE_NAMES[c]
-                )));
+                return Err(RawError::BadBlack {
+                    plane: crate::cfa::PLANE_NAMES[c],
+                    black: b,
+                });
             }
             if b >= self.white as f32 {
-                return Err(RawError::Invalid(format!(
-                    "black level {b} of plane {} is not below the white level {}",
-                    crate::cfa::PLANE_NAMES[c],
-                    self.white
-                )));
+                return Err(RawError::BlackNotBelowWhite {
+                    plane: crate::cfa::PLANE_NAMES[c],
+                    black: b,
+                    white: self.white,
+                });
             }
         }
         if self.white > u16::MAX as u32 {
-            return Err(RawError::Invalid(format!(
-                "white level {} exceeds the 16-bit range",
-                self.white
-            )));
+            return Err(RawError::WhiteTooHigh { white: self.white });
         }
         Ok(())
     }
@@ -262,19 +260,26 @@ impl RawFrame {
             .iter()
             .all(|v| v.is_multiple_of(2))
         {
-            return Err(RawError::Invalid(format!(
-                "crop {width}x{height} at ({row}, {col}): offsets and sizes must be even (whole CFA cells)"
-            )));
+            return Err(RawError::CropOdd {
+                row,
+                col,
+                height,
+                width,
+            });
         }
         if height == 0
             || width == 0
             || row.checked_add(height).is_none_or(|e| e > self.height)
             || col.checked_add(width).is_none_or(|e| e > self.width)
         {
-            return Err(RawError::Invalid(format!(
-                "crop {width}x{height} at ({row}, {col}) is not inside the {}x{} frame",
-                self.width, self.height
-            )));
+            return Err(RawError::CropOutside {
+                row,
+                col,
+                height,
+                width,
+                frame_width: self.width,
+                frame_height: self.height,
+            });
         }
         let mut mosaic = Vec::with_capacity(height * width);
         for r in row..row + height {
@@ -294,11 +299,10 @@ impl RawFrame {
     /// denoiser or a noise synthesiser produces.
     pub(crate) fn with_mosaic(&self, mosaic: Vec<u16>) -> Result<Self> {
         if mosaic.len() != self.mosaic.len() {
-            return Err(RawError::Invalid(format!(
-                "new mosaic has {} samples, frame has {}",
-                mosaic.len(),
-                self.mosaic.len()
-            )));
+            return Err(RawError::MosaicReplaced {
+                samples: mosaic.len(),
+                expected: self.mosaic.len(),
+            });
         }
         let mut f = self.clone();
         f.mosaic = mosaic;
@@ -312,15 +316,13 @@ pub(crate) fn black_per_plane(values: &[f32]) -> Result<[f32; 4]> {
     match values {
         [v] => Ok([*v; 4]),
         [r, g1, b, g2] => Ok([*r, *g1, *b, *g2]),
-        other => Err(RawError::Invalid(format!(
-            "black level needs 1 or 4 values (R,G1,B,G2), got {}",
-            other.len()
-        ))),
+        other => Err(RawError::BlackCount { count: other.len() }),
     }
 }
 
-/// Smallest bit depth that holds `white`.
-pub(crate) fn bits_for(white: u32) -> u32 {
+/// Smallest bit depth that holds `white`: what a frame declares when only
+/// its levels are known (synthetic frames, headerless dumps).
+pub fn bits_for(white: u32) -> u32 {
     (32 - white.leading_zeros()).max(1)
 }
 

@@ -38,17 +38,17 @@ pub fn read_headerless(path: &Path, spec: &HeaderlessSpec) -> Result<RawFrame> {
         ));
     }
     if !(1..=16).contains(&spec.bits) {
-        return Err(RawError::Invalid(format!(
-            "bit depth {} is outside 1..=16",
-            spec.bits
-        )));
+        return Err(RawError::BadBits { bits: spec.bits });
     }
     let bytes = std::fs::read(path).map_err(|e| RawError::io(path, e))?;
     let want = spec
         .width
         .checked_mul(spec.height)
         .and_then(|n| n.checked_mul(2))
-        .ok_or_else(|| RawError::Invalid("frame size overflows".into()))?;
+        .ok_or(RawError::SizeOverflow {
+            width: spec.width,
+            height: spec.height,
+        })?;
     if bytes.len() != want {
         return Err(RawError::decode(
             path,

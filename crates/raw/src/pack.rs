@@ -101,9 +101,7 @@ pub fn unpack_u16(packed: ArrayView3<u16>, template: &RawFrame) -> Result<RawFra
 pub fn unpack_normalized(packed: ArrayView3<f32>, template: &RawFrame) -> Result<RawFrame> {
     check_shape(packed.shape(), template)?;
     if let Some(pos) = packed.iter().position(|v| v.is_nan()) {
-        return Err(RawError::Invalid(format!(
-            "packed image contains NaN (first at flat index {pos})"
-        )));
+        return Err(RawError::PackedNan { index: pos });
     }
     let mut dn = Array3::<u16>::zeros(packed.raw_dim());
     for plane in 0..4 {
@@ -121,15 +119,13 @@ pub fn unpack_normalized(packed: ArrayView3<f32>, template: &RawFrame) -> Result
 fn packed_dims_checked(frame: &RawFrame) -> Result<(usize, usize)> {
     let (ph, pw) = frame.packed_dims();
     if ph == 0 || pw == 0 {
-        return Err(RawError::Invalid(format!(
-            "frame {}x{} is too small to pack (needs at least one 2x2 cell)",
-            frame.width, frame.height
-        )));
+        return Err(RawError::TooSmallToPack {
+            width: frame.width,
+            height: frame.height,
+        });
     }
     if frame.mosaic.len() != frame.width * frame.height {
-        return Err(RawError::Invalid(
-            "frame mosaic length does not match its size".into(),
-        ));
+        return Err(RawError::MosaicInconsistent);
     }
     Ok((ph, pw))
 }
@@ -137,10 +133,13 @@ fn packed_dims_checked(frame: &RawFrame) -> Result<(usize, usize)> {
 fn check_shape(shape: &[usize], template: &RawFrame) -> Result<()> {
     let (ph, pw) = packed_dims_checked(template)?;
     if shape != [4, ph, pw] {
-        return Err(RawError::Invalid(format!(
-            "packed array has shape {:?}, frame {}x{} packs to [4, {ph}, {pw}]",
-            shape, template.width, template.height
-        )));
+        return Err(RawError::PackedShape {
+            shape: shape.to_vec(),
+            width: template.width,
+            height: template.height,
+            packed_height: ph,
+            packed_width: pw,
+        });
     }
     Ok(())
 }

@@ -63,10 +63,7 @@ pub struct Preview {
 /// camera -> sRGB matrix, sRGB curve, EXIF orientation.
 pub fn render_preview(frame: &RawFrame, opts: &PreviewOptions) -> Result<Preview> {
     if !opts.gain.is_finite() || opts.gain <= 0.0 {
-        return Err(RawError::Invalid(format!(
-            "preview gain must be a positive number, got {}",
-            opts.gain
-        )));
+        return Err(RawError::BadGain { gain: opts.gain });
     }
     frame.check_levels()?;
     if frame.mono {
@@ -217,13 +214,12 @@ impl Preview {
                     .collect();
                 enc.write_image(&buf, w, h, image::ExtendedColorType::Rgb16)
             }
-            b => {
-                return Err(RawError::Invalid(format!(
-                    "PNG bit depth must be 8 or 16, got {b}"
-                )))
-            }
+            b => return Err(RawError::PngBits { bits: b }),
         };
-        res.map_err(|e| RawError::Invalid(format!("PNG encoding failed: {e}")))?;
+        res.map_err(|e| RawError::Encode {
+            format: "PNG",
+            reason: e.to_string(),
+        })?;
         Ok(out)
     }
 

@@ -2,8 +2,8 @@
 
 use anyhow::{bail, Result};
 use clap::Args;
-use pgrf_raw::chart::{chart_display_gain, render_chart, ChartSpec};
 use pgrf_raw::{write_dng, Cfa, DngOptions};
+use pgrf_scenes::chart::{chart_display_gain, render_chart, ChartSpec};
 use std::path::PathBuf;
 
 #[derive(Args, Debug)]

@@ -5,7 +5,7 @@
 use crate::input::InputArgs;
 use anyhow::Result;
 use clap::Args;
-use pgrf_raw::{write_dng, write_fits_frame, Compression, DngOptions};
+use pgrf_raw::{write_frame, Compression, DngOptions, FrameFormat};
 use std::path::PathBuf;
 
 #[derive(Args, Debug)]
@@ -33,22 +33,13 @@ pub fn run(a: &ConvertArgs) -> Result<()> {
         },
         ..Default::default()
     };
-    let fits = a
-        .output
-        .extension()
-        .and_then(|e| e.to_str())
-        .is_some_and(|e| ["fits", "fit", "fts"].contains(&e.to_ascii_lowercase().as_str()));
-    if fits {
-        write_fits_frame(&frame, &a.output)?;
-        if frame.black.iter().any(|&b| b != 0.0) {
-            eprintln!(
-                "pgrf: warning: FITS has no black-level keyword: the black level {:?} is not in {}; give --black when reading it",
-                frame.black,
-                a.output.display()
-            );
-        }
-    } else {
-        write_dng(&frame, &a.output, &opts)?;
+    let format = write_frame(&frame, &a.output, &opts)?;
+    if format == FrameFormat::Fits && frame.black.iter().any(|&b| b != 0.0) {
+        eprintln!(
+            "pgrf: warning: FITS has no black-level keyword: the black level {:?} is not in {}; give --black when reading it",
+            frame.black,
+            a.output.display()
+        );
     }
     eprintln!(
         "wrote {} ({} x {} {}, black {:?}, white {})",

@@ -11,8 +11,8 @@
 use super::{eld, sid, DatasetError, Result};
 use pgrf_noise::capture::DarkCapture;
 use pgrf_noise::{CameraProfile, ModelKind};
-use pgrf_raw::scene::{render_frame, SceneKind, SceneLevels, SceneSpec};
 use pgrf_raw::{write_dng, Cfa, DngOptions, RawFrame};
+use pgrf_scenes::scene::{render_frame, SceneKind, SceneLevels, SceneSpec};
 use std::path::{Path, PathBuf};
 
 /// Which benchmark's layout to write.

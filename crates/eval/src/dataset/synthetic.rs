@@ -9,7 +9,7 @@
 //! 1. the clean reference is the file packed R, G1, B, G2, normalised by its
 //!    own black and white levels and clipped to [0, 1] (a photo is first
 //!    downscaled 2x and unprocessed into the Sony A7S2's camera space,
-//!    [`pgrf_raw::unprocess`]);
+//!    [`pgrf_scenes::unprocess`]);
 //! 2. the dark capture is synthesised from it by [`PairSpec::synthesize`]
 //!    with the camera profile's parameters at that ISO and the fixed ratio:
 //!    the reference, taken as the profile camera's normalised signal, is
@@ -44,8 +44,8 @@ use pgrf_core::seed::mix64;
 use pgrf_core::Progress;
 use pgrf_noise::pair::{PairSpec, RatioSpec};
 use pgrf_noise::{CameraProfile, ModelKind};
-use pgrf_raw::unprocess::{unprocess, CameraSpace};
 use pgrf_raw::{decode_file, pack_normalized, LevelOverrides, RawFrame};
+use pgrf_scenes::unprocess::{unprocess, CameraSpace};
 use std::path::{Path, PathBuf};
 
 /// The default ISOs of the grid.
@@ -181,9 +181,9 @@ impl Image {
                 .map_err(|x| DatasetError(format!("{}: {x}", self.path.display())))?;
             return Ok(frame);
         }
-        let photo = pgrf_raw::photo::read_photo(&self.path)
+        let photo = pgrf_scenes::photo::read_photo(&self.path)
             .and_then(|p| p.downscale(2))
-            .map_err(e)?;
+            .map_err(|x| DatasetError(x.to_string()))?;
         unprocess(&photo, &CameraSpace::sony_a7s2(), 1.0)
             .map_err(|x| DatasetError(format!("{}: {x}", self.path.display())))
     }
@@ -668,7 +668,7 @@ mod tests {
     fn a_run_covers_every_image_condition_and_method_reproducibly() {
         use crate::method::{CaseInfo, FnMethod};
         use pgrf_core::NoProgress;
-        use pgrf_raw::chart::{render_chart, ChartSpec};
+        use pgrf_scenes::chart::{render_chart, ChartSpec};
         let d = std::env::temp_dir().join(format!("pgrf-synth-run-{}", std::process::id()));
         let _ = std::fs::remove_dir_all(&d);
         std::fs::create_dir_all(&d).unwrap();

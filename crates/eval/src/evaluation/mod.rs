@@ -261,7 +261,7 @@ mod tests {
     use crate::method::{CaseInfo, FnMethod};
     use ndarray::{Array3, ArrayView3};
     use pgrf_core::NoProgress;
-    use pgrf_raw::chart::{render_chart, ChartSpec};
+    use pgrf_scenes::chart::{render_chart, ChartSpec};
 
     fn identity() -> Box<dyn MethodUnderTest> {
         Box::new(FnMethod {

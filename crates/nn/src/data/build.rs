@@ -18,8 +18,8 @@ use crate::data::photos::{is_photo, PhotoFolder, PhotoOptions};
 use crate::data::source::{Folder, Source};
 use crate::error::{NnError, Result};
 use pgrf_core::weighted::{parse_weighted, WeightedError};
-use pgrf_raw::unprocess::CameraSpace;
 use pgrf_raw::{decode_file, LevelOverrides};
+use pgrf_scenes::unprocess::CameraSpace;
 use std::path::{Path, PathBuf};
 
 /// One entry of the `data` setting.

@@ -373,7 +373,7 @@ mod tests {
         }
         let open = || {
             let opts = PhotoOptions {
-                camera: pgrf_raw::unprocess::CameraSpace::sony_a7s2(),
+                camera: pgrf_scenes::unprocess::CameraSpace::sony_a7s2(),
                 downscale: 2,
                 inverse_tone: false,
                 wb_spread: crate::data::photos::WB_SPREAD,

@@ -1,7 +1,7 @@
 //! Ordinary photographs as clean training images (Brooks et al., CVPR 2019,
 //! "Unprocessing Images for Learned Raw Denoising"): each crop is
 //! unprocessed into the target camera's RAW space by
-//! [`pgrf_raw::unprocess::unprocess_packed`], with the camera's colour
+//! [`pgrf_scenes::unprocess::unprocess_packed`], with the camera's colour
 //! varied per crop so that a network learns noise, not one camera's
 //! colours or one set of scenes' white balance.
 //!
@@ -26,8 +26,8 @@ use crate::data::cache::BudgetCache;
 use crate::data::crop::Crop;
 use crate::error::{NnError, Result};
 use pgrf_core::seed::mix64;
-use pgrf_raw::photo::read_photo;
-use pgrf_raw::unprocess::{unprocess_packed, CameraSpace, EncodedPhoto, Unprocessing};
+use pgrf_scenes::photo::read_photo;
+use pgrf_scenes::unprocess::{unprocess_packed, CameraSpace, EncodedPhoto, Unprocessing};
 use rand::{Rng, SeedableRng};
 use rand_xoshiro::Xoshiro256PlusPlus;
 use rayon::prelude::*;

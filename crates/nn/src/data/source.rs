@@ -14,7 +14,8 @@ use crate::data::photos::PhotoFolder;
 use crate::error::{NnError, Result};
 use pgrf_core::seed::mix64;
 use pgrf_raw::ndarray::{s, Array3};
-use pgrf_raw::{decode_file, pack_u16, LevelOverrides, RawFrame, SceneKind, SceneSpec};
+use pgrf_raw::{decode_file, pack_u16, LevelOverrides, RawFrame};
+use pgrf_scenes::{SceneKind, SceneSpec};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
@@ -182,7 +183,7 @@ impl Source {
             Source::Procedural => {
                 let spec = SceneSpec::new(SceneKind::DeadLeaves, 2 * patch, 2 * patch, scene_seed);
                 Ok(Crop {
-                    clean: pgrf_raw::render_packed(&spec),
+                    clean: pgrf_scenes::render_packed(&spec),
                     plane_rows: pgrf_raw::Cfa::Rggb.offsets().map(|(r, _)| r),
                     origin: (0, 0),
                     image: (patch, patch),

@@ -94,9 +94,12 @@ pub enum DemoError {
         /// Why not.
         reason: String,
     },
-    /// Decoding, rendering, packing or previewing a frame.
+    /// Decoding, packing or previewing a frame.
     #[error(transparent)]
     Raw(#[from] RawError),
+    /// Rendering the procedural scene.
+    #[error(transparent)]
+    Scene(#[from] pgrf_scenes::SceneError),
     /// Simulating a capture.
     #[error(transparent)]
     Noise(#[from] NoiseError),

@@ -4,7 +4,8 @@
 //! clean exposure.
 
 use super::{DemoError, CLEAN_EXPOSURE_S, ISO};
-use pgrf_raw::scene::{render_demo, SceneLevels};
+use pgrf_scenes::demo::render_demo;
+use pgrf_scenes::SceneLevels;
 use pgrf_raw::{decode_bytes, decode_file, Cfa, LevelOverrides, RawFrame};
 use std::path::{Path, PathBuf};
 

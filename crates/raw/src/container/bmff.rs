@@ -4,9 +4,10 @@
 //! format of their own (sizes, nesting, tables), so they are walked here;
 //! the TIFF structures they hold are walked by `tiff`.
 
+use super::limits::{too_many_pixels, MAX_BOXES};
 use super::makernote::Notes;
+use super::order::Order;
 use super::tiff::{check_tiff, SUB_IFD_TAGS};
-use super::{too_many_pixels, Order, MAX_BOXES};
 
 /// More CMT boxes than a CR3 has (4): rawler parses the TIFF structure of
 /// each it meets, and so does this walk.

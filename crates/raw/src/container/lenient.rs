@@ -14,7 +14,7 @@
 //! [`Values`] also bounds what all the entries rawler keeps add up to: 4,096
 //! entries that each claim the whole file would make it hold 4,096 copies.
 
-use super::Order;
+use super::order::Order;
 
 /// rawler stops reading an IFD's entries after this many (formats/tiff/ifd.rs).
 const RAWLER_MAX_ENTRIES: usize = 4096;

@@ -6,8 +6,8 @@
 //! it; the layouts are kept here, apart from the generic IFD walk.
 
 use super::lenient::Values;
+use super::order::Order;
 use super::tiff::{find_entry, Entry, Walk};
-use super::Order;
 
 /// Which MakerNotes of a TIFF structure rawler parses.
 #[derive(Clone, Copy)]

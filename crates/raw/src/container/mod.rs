@@ -50,14 +50,18 @@
 //! MakerNotes the way each of rawler's decoders does, `raf` and `mrw` find
 //! the TIFF structures inside Fujifilm's and Minolta's containers, `bmff`
 //! walks ISO BMFF boxes and a CR3's metadata, and `qtk` bounds QuickTake
-//! dimensions. This module holds what they share: the public limits, the
-//! byte-order reader, the pixel bound, and [`check`], which picks the
-//! checks by the file's magic.
+//! dimensions. What they share lives in two modules of its own, so none of
+//! them imports this one: `limits` (the public limits and the pixel bound)
+//! and `order` (the byte-order reader). This module holds [`check`], which
+//! picks the checks by the file's magic, and the tag look-ups pgrf makes
+//! after it.
 
 mod bmff;
 mod lenient;
+mod limits;
 mod makernote;
 mod mrw;
+mod order;
 mod qtk;
 mod raf;
 mod tiff;
@@ -65,46 +69,12 @@ mod tiff;
 use bmff::check_bmff;
 use makernote::Notes;
 use mrw::check_mrw;
+use order::Order;
 use qtk::check_qtk;
 use raf::check_raf;
 use tiff::{check_tiff, SUB_IFD_TAGS};
 
-/// More pixels than any camera sensor (the largest pixel-shift modes give
-/// ~400 MP); at 2 bytes per sample a decode of this many is 1.2 GB.
-pub const MAX_PIXELS: u64 = 600_000_000;
-/// More IFDs than any camera writes.
-pub const MAX_IFDS: usize = 1024;
-/// More entries than any IFD has.
-pub const MAX_ENTRIES: usize = 4096;
-/// More strip and tile offsets and counts (and sub-IFD offsets), summed
-/// over the file, than any camera writes (a 400 MP image in 256 x 256 tiles
-/// has 6,100 tiles).
-pub const MAX_LISTED: u64 = 1 << 22;
-/// More boxes than a CR3 (about 70 of them) or a Canon RAW movie has.
-pub const MAX_BOXES: usize = 1 << 16;
-
-/// Byte order of the file.
-#[derive(Clone, Copy)]
-struct Order(bool);
-
-impl Order {
-    fn u16(self, b: &[u8], at: usize) -> Option<u16> {
-        let s: [u8; 2] = b.get(at..at + 2)?.try_into().ok()?;
-        Some(if self.0 {
-            u16::from_le_bytes(s)
-        } else {
-            u16::from_be_bytes(s)
-        })
-    }
-    fn u32(self, b: &[u8], at: usize) -> Option<u32> {
-        let s: [u8; 4] = b.get(at..at + 4)?.try_into().ok()?;
-        Some(if self.0 {
-            u32::from_le_bytes(s)
-        } else {
-            u32::from_be_bytes(s)
-        })
-    }
-}
+pub use limits::{MAX_BOXES, MAX_ENTRIES, MAX_IFDS, MAX_LISTED, MAX_PIXELS};
 
 /// Check the container of `bytes` (see the module documentation); `Ok` for
 /// files of no format checked here. The message names the problem, for one
@@ -227,18 +197,6 @@ pub fn noise_profile(bytes: &[u8], planes: usize) -> Result<Option<Vec<[f64; 2]>
         pairs.push([s, o]);
     }
     Ok(Some(pairs))
-}
-
-/// The megapixels of a `w` x `h` image, when more than [`MAX_PIXELS`].
-fn too_many_pixels(w: u64, h: u64) -> Option<String> {
-    let pixels = w.saturating_mul(h);
-    (pixels > MAX_PIXELS).then(|| {
-        format!(
-            "a {w} x {h} image ({:.0} megapixels), more than any camera makes ({} MP)",
-            pixels as f64 / 1e6,
-            MAX_PIXELS / 1_000_000
-        )
-    })
 }
 
 /// Builders of test files that the tests of several formats share.

@@ -2,8 +2,8 @@
 //! IFD rawler parses. The chain is checked here, for the step that would
 //! make rawler loop; the IFD is walked by `tiff`.
 
+use super::order::Order;
 use super::tiff::walk_ifds;
-use super::Order;
 
 /// A Minolta MRW is a chain of blocks (4-byte name, big-endian length) up to
 /// the pixel data, whose offset minus 8 is at byte 4. rawler parses the IFD

@@ -2,7 +2,8 @@
 //! dimensions rawler allocates before it decodes. They are bounded here by
 //! [`MAX_PIXELS`](super::MAX_PIXELS) and by the pixel data the file holds.
 
-use super::{too_many_pixels, Order};
+use super::limits::too_many_pixels;
+use super::order::Order;
 
 /// The most pixels one byte of QuickTake pixel data can describe: the
 /// QuickTake 100's codes take 3 bits per pixel, and the densest of RADC's

@@ -4,8 +4,8 @@
 //! MakerNote by `makernote`.
 
 use super::makernote::Notes;
+use super::order::Order;
 use super::tiff::check_tiff;
-use super::Order;
 
 /// A RAF's TIFF structures also reach IFDs through Fujifilm's tag 0xF000.
 const RAF_SUB_IFD_TAGS: [u16; 5] = [330, 34665, 34853, 40965, 0xF000];

@@ -5,8 +5,9 @@
 //! structures; the MakerNotes it collects are walked by `makernote`.
 
 use super::lenient::{self, Blob, Values};
+use super::limits::{too_many_pixels, MAX_ENTRIES, MAX_IFDS, MAX_LISTED};
 use super::makernote::{check_makernote, NoteLayout, Notes};
-use super::{too_many_pixels, Order, MAX_ENTRIES, MAX_IFDS, MAX_LISTED};
+use super::order::Order;
 
 pub(super) const SUB_IFD_TAGS: [u16; 4] = [330, 34665, 34853, 40965];
 /// The tags rawler's TIFF reader parses as sub-IFDs of the root chain's

@@ -2,9 +2,10 @@
 //! the ColorChecker's camera values, the ramp is linear, and the frame's
 //! statistics are those of a well-exposed photo.
 
-use pgrf_raw::chart::{patch_camera_rgb, A7S2_D65_MATRIX};
-use pgrf_raw::scene::{render_demo, DemoLayout, DEMO_CHART_EXPOSURE, DEMO_RAMP_TOP};
-use pgrf_raw::{pack_normalized, Cfa, SceneLevels};
+use pgrf_raw::{pack_normalized, Cfa};
+use pgrf_scenes::chart::{patch_camera_rgb, A7S2_D65_MATRIX};
+use pgrf_scenes::demo::{render_demo, DemoLayout, DEMO_CHART_EXPOSURE, DEMO_RAMP_TOP};
+use pgrf_scenes::SceneLevels;
 
 const W: usize = 384;
 const H: usize = 256;

@@ -3,13 +3,12 @@
 //! along the bottom. One frame shows the three things a denoiser can ruin:
 //! fine detail, colour, and smooth tones.
 
-use super::{
+use crate::chart::patch_camera_rgb;
+use crate::error::{Result, SceneError};
+use crate::scene::{
     a7s2_neutral, frame_from_values, plane_lut, Scene, SceneKind, SceneLevels, SceneSpec, CHANNEL,
 };
-use crate::cfa::Cfa;
-use crate::chart::patch_camera_rgb;
-use crate::error::{RawError, Result};
-use crate::frame::RawFrame;
+use pgrf_raw::{Cfa, RawFrame};
 
 /// Light of a perfect white reflector on the chart (strongest channel): the
 /// white patch lands near 0.7, bright but far from clipping.
@@ -105,9 +104,7 @@ pub fn render_demo(
     levels: &SceneLevels,
 ) -> Result<RawFrame> {
     if width < 64 || height < 64 || !width.is_multiple_of(2) || !height.is_multiple_of(2) {
-        return Err(RawError::Invalid(format!(
-            "demo scene size {width}x{height}: width and height must be even and at least 64"
-        )));
+        return Err(SceneError::DemoSize { width, height });
     }
     let spec = SceneSpec::new(SceneKind::DeadLeaves, width, height, seed);
     let scene = Scene::new(&spec);

@@ -2,10 +2,9 @@
 //! the RGB, packed and frame renderers.
 
 use pgrf_raw::ndarray::{Array3, Axis};
-use pgrf_raw::scene::{render_packed_cfa, render_rgb, Scene};
-use pgrf_raw::{
-    pack_normalized, render_frame, render_packed, Cfa, SceneKind, SceneLevels, SceneSpec,
-};
+use pgrf_raw::{pack_normalized, Cfa};
+use pgrf_scenes::scene::{render_packed_cfa, render_rgb, Scene};
+use pgrf_scenes::{render_frame, render_packed, SceneKind, SceneLevels, SceneSpec};
 use sha2::{Digest, Sha256};
 use std::time::Instant;
 

@@ -3,8 +3,8 @@
 //! with an area filter, which averages away JPEG blocks and the camera's own
 //! demosaicing before [`crate::unprocess`] turns them into a RAW mosaic.
 
-use crate::color::{srgb_decode, srgb_encode};
-use crate::error::{RawError, Result};
+use crate::error::{Result, SceneError};
+use pgrf_raw::color::{srgb_decode, srgb_encode};
 use std::path::Path;
 
 /// A decoded photo: `height` rows of `width` pixels, R, G, B interleaved,
@@ -24,7 +24,7 @@ pub struct Photo {
 /// to unprocess: a camera's three channels cannot be told apart).
 pub fn read_photo(path: &Path) -> Result<Photo> {
     use image::ImageDecoder as _;
-    let fail = |reason: String| RawError::Decode {
+    let fail = |reason: String| SceneError::Photo {
         path: path.to_path_buf(),
         reason,
     };
@@ -69,10 +69,11 @@ impl Photo {
     /// partial block is dropped). `factor` 1 returns a copy.
     pub fn downscale(&self, factor: usize) -> Result<Photo> {
         if factor == 0 || self.width / factor == 0 || self.height / factor == 0 {
-            return Err(RawError::Invalid(format!(
-                "cannot downscale a {}x{} photo by {factor}",
-                self.width, self.height
-            )));
+            return Err(SceneError::Downscale {
+                width: self.width,
+                height: self.height,
+                factor,
+            });
         }
         if factor == 1 {
             return Ok(self.clone());

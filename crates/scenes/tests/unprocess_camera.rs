@@ -3,9 +3,9 @@
 
 mod common;
 
-use pgrf_raw::photo::Photo;
-use pgrf_raw::unprocess::{unprocess, CameraSpace};
 use pgrf_raw::{decode_file, render_preview, LevelOverrides, PreviewOptions};
+use pgrf_scenes::photo::Photo;
+use pgrf_scenes::unprocess::{unprocess, CameraSpace};
 
 #[test]
 #[cfg_attr(not(shared_data), ignore = "needs ../shared/data")]

@@ -23,18 +23,14 @@
 
 mod cover;
 mod deadleaves;
-mod demo;
 mod leaf;
 
-pub use demo::{render_demo, DemoLayout, DEMO_CHART_EXPOSURE, DEMO_RAMP_TOP};
-
-use crate::cfa::Cfa;
 use crate::chart::A7S2_D65_MATRIX;
-use crate::color::SRGB_TO_XYZ;
-use crate::error::{RawError, Result};
-use crate::frame::{bits_for, ColorMatrix, RawFrame};
+use crate::error::{Result, SceneError};
 use deadleaves::DeadLeaves;
 use ndarray::Array3;
+use pgrf_raw::color::SRGB_TO_XYZ;
+use pgrf_raw::{bits_for, Cfa, ColorMatrix, RawFrame};
 use std::fmt;
 use std::str::FromStr;
 
@@ -272,16 +268,16 @@ impl Scene {
 }
 
 /// Colour channel (0 R, 1 G, 2 B) of each packed plane R, G1, B, G2.
-const CHANNEL: [usize; 4] = [0, 1, 2, 1];
+pub(crate) const CHANNEL: [usize; 4] = [0, 1, 2, 1];
 
 /// Packed plane of each position in the 2x2 cell, `[row & 1][col & 1]`.
-fn plane_lut(cfa: Cfa) -> [[usize; 2]; 2] {
+pub(crate) fn plane_lut(cfa: Cfa) -> [[usize; 2]; 2] {
     std::array::from_fn(|r| std::array::from_fn(|c| cfa.plane_at(r, c)))
 }
 
 /// Scale mosaic values in [0, 1] into `levels`, round to DN and wrap them in
 /// a frame with the metadata every procedural scene carries.
-fn frame_from_values(
+pub(crate) fn frame_from_values(
     spec: &SceneSpec,
     cfa: Cfa,
     levels: &SceneLevels,
@@ -289,12 +285,11 @@ fn frame_from_values(
 ) -> Result<RawFrame> {
     let (h, w) = (spec.height, spec.width);
     if levels.bits < bits_for(levels.white) || levels.bits > 16 {
-        return Err(RawError::Invalid(format!(
-            "{} bits cannot hold white level {} (needs {}..=16)",
-            levels.bits,
-            levels.white,
-            bits_for(levels.white)
-        )));
+        return Err(SceneError::BitsForWhite {
+            bits: levels.bits,
+            white: levels.white,
+            needed: bits_for(levels.white),
+        });
     }
     let range: [f32; 4] = std::array::from_fn(|p| levels.white as f32 - levels.black[p]);
     let planes = plane_lut(cfa);

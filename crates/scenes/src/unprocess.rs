@@ -4,16 +4,16 @@
 //! natural images of any camera without clean RAWs of it.
 //!
 //! Each step inverts one step of pgrf's own preview pipeline
-//! ([`crate::render_preview`]), so that unprocessing and then previewing
+//! ([`pgrf_raw::render_preview`]), so that unprocessing and then previewing
 //! gives the photo back: inverse sRGB transfer, inverse camera -> sRGB
 //! matrix (from the camera's DNG colour matrix), inverse white balance
 //! (division by the camera's white-balance multipliers), an exposure factor,
 //! then the camera's CFA phase and black/white levels.
 
-use crate::color::{camera_from_srgb, srgb_decode};
-use crate::error::{RawError, Result};
+use crate::error::{Result, SceneError};
 use crate::photo::Photo;
-use crate::{Cfa, ColorMatrix, RawFrame};
+use pgrf_raw::color::{camera_from_srgb, srgb_decode};
+use pgrf_raw::{Cfa, ColorMatrix, RawFrame};
 use rayon::prelude::*;
 
 /// The camera an image is unprocessed into: its colour, mosaic and levels.
@@ -50,16 +50,11 @@ impl CameraSpace {
     /// white balance, CFA and levels. Refused (with the reason) when the
     /// file has no colour matrix or no white balance.
     pub fn of(frame: &RawFrame) -> Result<CameraSpace> {
-        let cm = frame.color_matrix().ok_or_else(|| {
-            RawError::Invalid(
-                "the camera file has no colour matrix: cannot unprocess into its space".into(),
-            )
+        let cm = frame.color_matrix().ok_or(SceneError::NoCameraSpace {
+            missing: "colour matrix",
         })?;
-        let wb = frame.wb.ok_or_else(|| {
-            RawError::Invalid(
-                "the camera file has no as-shot white balance: cannot unprocess into its space"
-                    .into(),
-            )
+        let wb = frame.wb.ok_or(SceneError::NoCameraSpace {
+            missing: "as-shot white balance",
         })?;
         Ok(CameraSpace {
             xyz_to_cam: cm.xyz_to_cam,
@@ -94,11 +89,7 @@ impl Unprocessing {
     /// `camera`'s own matrix and white balance at `exposure`, no tone curve;
     /// refused when the matrix cannot be used.
     pub fn plain(camera: &CameraSpace, exposure: f32) -> Result<Unprocessing> {
-        let m = camera_from_srgb(&camera.xyz_to_cam).ok_or_else(|| {
-            RawError::Invalid(
-                "unprocess: the colour matrix cannot be used (a row sums to zero)".into(),
-            )
-        })?;
+        let m = camera_from_srgb(&camera.xyz_to_cam).ok_or(SceneError::UnusableMatrix)?;
         let u = Unprocessing {
             cam_from_srgb: m.map(|row| row.map(|v| v as f32)),
             wb: camera.wb,
@@ -113,21 +104,15 @@ impl Unprocessing {
     /// multipliers, non-finite matrix entries).
     pub fn check(&self) -> Result<()> {
         if !(self.exposure.is_finite() && self.exposure > 0.0) {
-            return Err(RawError::Invalid(format!(
-                "unprocess: exposure must be a positive number, got {}",
-                self.exposure
-            )));
+            return Err(SceneError::BadExposure {
+                exposure: self.exposure,
+            });
         }
         if self.wb.iter().any(|g| !(g.is_finite() && *g > 0.0)) {
-            return Err(RawError::Invalid(format!(
-                "unprocess: white-balance multipliers must be positive, got {:?}",
-                self.wb
-            )));
+            return Err(SceneError::BadWhiteBalance { wb: self.wb });
         }
         if self.cam_from_srgb.iter().flatten().any(|v| !v.is_finite()) {
-            return Err(RawError::Invalid(
-                "unprocess: the colour matrix has a non-finite entry".into(),
-            ));
+            return Err(SceneError::NonFiniteMatrix);
         }
         Ok(())
     }
@@ -159,10 +144,11 @@ pub fn unprocess(photo: &Photo, camera: &CameraSpace, exposure: f32) -> Result<R
     let u = Unprocessing::plain(camera, exposure)?;
     let (rgb, width, height) = (&photo.rgb, photo.width, photo.height);
     if width < 2 || height < 2 || rgb.len() != width * height * 3 {
-        return Err(RawError::Invalid(format!(
-            "unprocess: {} values for a {width}x{height} RGB image",
-            rgb.len()
-        )));
+        return Err(SceneError::PhotoSize {
+            values: rgb.len(),
+            width,
+            height,
+        });
     }
     let mut mosaic = vec![0u16; width * height];
     mosaic
@@ -265,12 +251,13 @@ pub fn unprocess_packed(
 ) -> Result<ndarray::Array3<f32>> {
     u.check()?;
     if patch == 0 || y + 2 * patch > img.height || x + 2 * patch > img.width {
-        return Err(RawError::Invalid(format!(
-            "unprocess: a {0}x{0} window at ({y}, {x}) does not fit a {1}x{2} photo",
-            2 * patch,
-            img.width,
-            img.height
-        )));
+        return Err(SceneError::WindowOutside {
+            y,
+            x,
+            side: 2 * patch,
+            width: img.width,
+            height: img.height,
+        });
     }
     let lut = decode_table(u.inverse_tone);
     let offsets = camera.cfa.offsets();
@@ -292,7 +279,7 @@ pub fn unprocess_packed(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::{render_preview, PreviewOptions};
+    use pgrf_raw::{render_preview, PreviewOptions};
 
     /// The Sony A7S2's D65 matrix and a daylight white balance, as the
     /// built-in profile and chart use.

@@ -8,10 +8,9 @@
 //! to work on before the procedural scenes of a later stage exist. It is
 //! noise-free on purpose: noise belongs to the noise models.
 
-use crate::cfa::Cfa;
-use crate::color::{Mat3, SRGB_TO_XYZ};
 use crate::error::Result;
-use crate::frame::{ColorMatrix, RawFrame};
+use pgrf_raw::color::{Mat3, SRGB_TO_XYZ};
+use pgrf_raw::{Cfa, ColorMatrix, RawFrame};
 
 /// ColorChecker Classic patches as 8-bit sRGB (D65), row by row; the
 /// commonly published BabelColor averages.
@@ -214,7 +213,7 @@ pub fn chart_display_gain(spec: &ChartSpec) -> f32 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::preview::{render_preview, PreviewOptions};
+    use pgrf_raw::{render_preview, PreviewOptions};
 
     #[test]
     fn chart_preview_reproduces_colorchecker_srgb() {
