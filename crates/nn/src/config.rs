@@ -56,7 +56,7 @@ impl std::fmt::Display for Method {
 
 /// Every training setting, the one type behind the `--config` TOML file,
 /// `pgrf train`'s flags (with the `clap` feature: each field's doc comment
-/// is its flag's help, and [`crate::flags::TrainFlags`] overlays the flags a
+/// is its flag's help, and `flags::TrainFlags` overlays the flags a
 /// user gave), the record in the weight file and the checkpoint's run.
 /// `None` means "derived": from the network configuration's own default
 /// (`width`, SR3 sizes), from another setting (`val_patch` from `patch`,
