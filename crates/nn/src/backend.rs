@@ -84,7 +84,7 @@ pub(crate) trait OnTrainBackend {
 
 /// Run `job` on the inference backend of `kind` (refused without CUDA).
 pub fn on_device<J: OnBackend>(kind: DeviceKind, job: J) -> crate::Result<J::Output> {
-    kind.check_available().map_err(crate::NnError::Invalid)?;
+    kind.check_available().map_err(crate::NnError::Device)?;
     match kind {
         DeviceKind::Cpu => job.run::<Cpu>(Default::default()),
         #[cfg(feature = "cuda")]
@@ -99,7 +99,7 @@ pub(crate) fn on_train_device<J: OnTrainBackend>(
     kind: DeviceKind,
     job: J,
 ) -> crate::Result<J::Output> {
-    kind.check_available().map_err(crate::NnError::Invalid)?;
+    kind.check_available().map_err(crate::NnError::Device)?;
     match kind {
         DeviceKind::Cpu => job.run::<CpuTrain>(Default::default()),
         #[cfg(feature = "cuda")]

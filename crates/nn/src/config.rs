@@ -56,7 +56,7 @@ impl std::fmt::Display for Method {
 
 /// Every training setting, the one type behind the `--config` TOML file,
 /// `pgrf train`'s flags (with the `clap` feature: each field's doc comment
-/// is its flag's help, and [`crate::flags::TrainFlags`] overlays the flags a
+/// is its flag's help, and `flags::TrainFlags` overlays the flags a
 /// user gave), the record in the weight file and the checkpoint's run.
 /// `None` means "derived": from the network configuration's own default
 /// (`width`, SR3 sizes), from another setting (`val_patch` from `patch`,
@@ -261,8 +261,12 @@ impl Default for TrainConfig {
     }
 }
 
-fn invalid(what: impl std::fmt::Display) -> NnError {
-    NnError::Config(what.to_string())
+/// A setting `flag` refused, `message` saying why (naming the flag).
+fn bad(flag: &'static str, message: impl Into<String>) -> NnError {
+    NnError::BadSetting {
+        flag,
+        message: message.into(),
+    }
 }
 
 /// The files a training run writes, resolved from the configuration.
@@ -345,7 +349,7 @@ impl TrainConfig {
     /// Parse a TOML file's text (any subset of the keys; unknown keys are
     /// refused with their name).
     pub fn from_toml(text: &str) -> Result<TrainConfig> {
-        toml::from_str(text).map_err(|e| invalid(e.message()))
+        toml::from_str(text).map_err(|e| NnError::Config(e.message().to_string()))
     }
 
     /// The whole configuration as TOML (unset optional keys left out).
@@ -356,11 +360,12 @@ impl TrainConfig {
     /// This configuration with the keys of `over` (e.g. the flags a user
     /// gave) replacing its own; `over` is checked like a file.
     pub fn overlay<T: Serialize>(&self, over: &T) -> Result<TrainConfig> {
-        let mut base = toml::Table::try_from(self).map_err(invalid)?;
-        let top = toml::Table::try_from(over).map_err(invalid)?;
+        let table = |e: toml::ser::Error| NnError::Config(e.to_string());
+        let mut base = toml::Table::try_from(self).map_err(table)?;
+        let top = toml::Table::try_from(over).map_err(table)?;
         base.extend(top);
         base.try_into::<TrainConfig>()
-            .map_err(|e| invalid(e.message()))
+            .map_err(|e| NnError::Config(e.message().to_string()))
     }
 
     /// The ISO range as (low, high), checked: two positive ISOs, ordered,
@@ -372,13 +377,14 @@ impl TrainConfig {
         match r.as_slice() {
             [lo, hi] if *lo > 0 && hi >= lo => {
                 if self.iso.is_some() {
-                    return Err(invalid("give --iso or --iso-range, not both"));
+                    return Err(bad("--iso-range", "give --iso or --iso-range, not both"));
                 }
                 Ok(Some((*lo, *hi)))
             }
-            _ => Err(invalid(format!(
-                "--iso-range takes two positive ISOs, low first (got {r:?})"
-            ))),
+            _ => Err(bad(
+                "--iso-range",
+                format!("--iso-range takes two positive ISOs, low first (got {r:?})"),
+            )),
         }
     }
 
@@ -390,36 +396,47 @@ impl TrainConfig {
     /// Checks that need no files: sizes, the ratio range.
     pub fn validate(&self) -> Result<()> {
         if self.patch < 8 || self.batch == 0 {
-            return Err(invalid(format!(
-                "--patch must be at least 8 and --batch at least 1 (got {}, {})",
-                self.patch, self.batch
-            )));
+            return Err(bad(
+                "--patch",
+                format!(
+                    "--patch must be at least 8 and --batch at least 1 (got {}, {})",
+                    self.patch, self.batch
+                ),
+            ));
         }
         let (lo, hi) = (self.ratio_min, self.ratio_max);
         if !(lo > 0.0 && hi >= lo && hi.is_finite()) {
-            return Err(invalid(format!(
-                "ratio range {lo}..{hi} must be positive and ordered"
-            )));
+            return Err(bad(
+                "--ratio-min",
+                format!("ratio range {lo}..{hi} must be positive and ordered"),
+            ));
         }
         if let Some(c) = self.clip_grad {
             if !(c.is_finite() && c > 0.0) {
-                return Err(invalid(format!(
+                return Err(bad(
+                    "--clip-grad",
+                    format!(
                     "--clip-grad must be a positive number (the largest gradient norm), got {c}"
-                )));
+                ),
+                ));
             }
         }
         if self.photo_downscale == 0 {
-            return Err(invalid("--photo-downscale must be at least 1"));
+            return Err(bad(
+                "--photo-downscale",
+                "--photo-downscale must be at least 1",
+            ));
         }
         let w = self.photo_wb_spread;
         if !(w.is_finite() && (1.0..=4.0).contains(&w)) {
-            return Err(invalid(format!(
-                "--photo-wb-spread must be between 1 (no variation) and 4, got {w}"
-            )));
+            return Err(bad(
+                "--photo-wb-spread",
+                format!("--photo-wb-spread must be between 1 (no variation) and 4, got {w}"),
+            ));
         }
         let t = self.time_max;
         if !(t.is_finite() && t > 0.0 && t <= 1.0) {
-            return Err(invalid(format!(
+            return Err(bad("--time-max", format!(
                 "--time-max must be in (0, 1] (the flow's training times are drawn from U(0, time-max)), got {t}"
             )));
         }

@@ -82,7 +82,56 @@ pub enum NnError {
     /// The pairs' noise could not be built (calibration file, profiles).
     #[error(transparent)]
     Calibration(pgrf_calib::mix::MixError),
-    /// Any other refused input, on one line.
+    /// A clean training or validation file that cannot be used (unreadable,
+    /// too small for the crops); a caller may leave it out.
+    #[error("{}: {reason}", path.display())]
+    BadData {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong with it.
+        reason: String,
+    },
+    /// A file a run writes (its log) that could not be written.
+    #[error("{}: {reason}", path.display())]
+    Output {
+        /// The file.
+        path: PathBuf,
+        /// Why not.
+        reason: String,
+    },
+    /// Training diverged: the loss is no longer a finite number.
+    #[error("loss became {loss} at step {step}; lower the learning rate or set clip_grad")]
+    Diverged {
+        /// The step whose loss it was.
+        step: u64,
+        /// The loss (NaN or infinite).
+        loss: f32,
+    },
+    /// A weight file without a tensor the operation needs.
+    #[error("the weight file has no {name} ({hint})")]
+    MissingTensor {
+        /// The tensor's name.
+        name: String,
+        /// What its absence suggests.
+        hint: &'static str,
+    },
+    /// A network input holding a NaN or an infinity.
+    #[error("network input holds a non-finite value (flat index {index})")]
+    NonFiniteInput {
+        /// The first such value's flat index.
+        index: usize,
+    },
+    /// A network output holding a NaN (damaged weights).
+    #[error("the network produced NaN (flat index {index}); the weight file may be damaged")]
+    NanOutput {
+        /// The first NaN's flat index.
+        index: usize,
+    },
+    /// From scoring outputs (pgrf-eval).
+    #[error(transparent)]
+    Metric(#[from] pgrf_eval::MetricError),
+    /// Any other refused input, on one line: internal failures (encoding a
+    /// record, a worker thread gone) whose message is all there is.
     #[error("{0}")]
     Invalid(String),
     /// From reading or writing a RAW file.

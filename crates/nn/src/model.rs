@@ -63,9 +63,10 @@ pub(crate) fn load_denoiser<B: Backend>(
     path: &Path,
     device: &B::Device,
 ) -> Result<(crate::arch::SidUnet<B>, WeightMeta)> {
-    match load::<B>(path, device)? {
-        (Net::Spc(n), m) => Ok((n, m)),
-        (_, m) => Err(NnError::WrongMethod {
+    let (net, m) = load::<B>(path, device)?;
+    match net.into_denoiser() {
+        Some(n) => Ok((n, m)),
+        None => Err(NnError::WrongMethod {
             path: path.to_path_buf(),
             wanted: crate::Method::Spc,
             found: format!("a {}", m.arch.describe()),
@@ -78,9 +79,10 @@ pub(crate) fn load_flow<B: Backend>(
     path: &Path,
     device: &B::Device,
 ) -> Result<(Sr3Unet<B>, WeightMeta)> {
-    match load::<B>(path, device)? {
-        (Net::Pgrf(n), m) => Ok((n, m)),
-        (_, m) => Err(NnError::WrongMethod {
+    let (net, m) = load::<B>(path, device)?;
+    match net.into_flow() {
+        Some(n) => Ok((n, m)),
+        None => Err(NnError::WrongMethod {
             path: path.to_path_buf(),
             wanted: crate::Method::Pgrf,
             found: format!("an {}", m.arch.describe()),

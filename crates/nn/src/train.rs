@@ -315,8 +315,11 @@ impl Log {
                 }
             }
         }
-        let mut file = std::fs::File::create(path)
-            .map_err(|e| NnError::Invalid(format!("{}: {e}", path.display())))?;
+        let output = |e: std::io::Error| NnError::Output {
+            path: path.clone(),
+            reason: e.to_string(),
+        };
+        let mut file = std::fs::File::create(path).map_err(output)?;
         let header = if json {
             String::new()
         } else {
@@ -324,7 +327,7 @@ impl Log {
         };
         file.write_all(header.as_bytes())
             .and_then(|_| file.write_all(kept.as_bytes()))
-            .map_err(|e| NnError::Invalid(format!("{}: {e}", path.display())))?;
+            .map_err(output)?;
         Ok(Log {
             file: Some(file),
             json,
@@ -358,15 +361,16 @@ fn train<B: PgrfAutodiff>(
 ) -> Result<Outcome> {
     let s = j.config;
     if s.batch == 0 || s.patch == 0 {
-        return Err(NnError::Invalid(
-            "batch and patch must be at least 1".into(),
-        ));
+        return Err(NnError::BadSetting {
+            flag: "--batch",
+            message: "batch and patch must be at least 1".into(),
+        });
     }
     if !(s.lr > 0.0 && s.lr.is_finite()) {
-        return Err(NnError::Invalid(format!(
-            "learning rate must be > 0, got {}",
-            s.lr
-        )));
+        return Err(NnError::BadSetting {
+            flag: "--lr",
+            message: format!("learning rate must be > 0, got {}", s.lr),
+        });
     }
     let arch_json = serde_json::to_value(&j.arch).map_err(|e| NnError::Invalid(e.to_string()))?;
     let mut net: Net<B> = j.arch.init_seeded(device, s.seed)?;
@@ -398,24 +402,31 @@ fn train<B: PgrfAutodiff>(
         let ck = checkpoint::load(&j.outputs.checkpoint)?;
         let st = &ck.state;
         if st.task != j.arch.method() || st.arch != arch_json {
-            return Err(NnError::Invalid(format!(
-                "{}: checkpoint is of another network ({} {}), not this configuration",
-                j.outputs.checkpoint.display(),
-                st.task,
-                st.arch
-            )));
+            return Err(NnError::WrongArchitecture {
+                path: j.outputs.checkpoint.clone(),
+                message: format!(
+                    "{}: checkpoint is of another network ({} {}), not this configuration",
+                    j.outputs.checkpoint.display(),
+                    st.task,
+                    st.arch
+                ),
+            });
         }
         if (st.seed, st.batch, st.patch) != (s.seed, s.batch, s.patch) {
-            return Err(NnError::Invalid(format!(
-                "{}: checkpoint was made with seed {}, batch {}, patch {}; resume with the same",
-                j.outputs.checkpoint.display(),
-                st.seed,
-                st.batch,
-                st.patch
-            )));
+            return Err(NnError::BadSetting {
+                flag: "--resume",
+                message: format!(
+                    "{}: checkpoint was made with seed {}, batch {}, patch {}; resume with the same",
+                    j.outputs.checkpoint.display(),
+                    st.seed,
+                    st.batch,
+                    st.patch
+                ),
+            });
         }
-        let bad = |e: burn::record::RecorderError| {
-            NnError::Invalid(format!("{}: {e}", j.outputs.checkpoint.display()))
+        let bad = |e: burn::record::RecorderError| NnError::BadFile {
+            path: j.outputs.checkpoint.clone(),
+            reason: e.to_string(),
         };
         net = net.load_record(recorder.load(ck.model, device).map_err(bad)?);
         optim = optim.load_record(recorder.load(ck.optim, device).map_err(bad)?);
@@ -488,9 +499,7 @@ fn train<B: PgrfAutodiff>(
         );
         let value: f32 = loss.clone().into_scalar().elem();
         if !value.is_finite() {
-            return Err(NnError::Invalid(format!(
-                "loss became {value} at step {step}; lower the learning rate or set clip_grad"
-            )));
+            return Err(NnError::Diverged { step, loss: value });
         }
         let grads = GradientsParams::from_grads(loss.backward(), &net);
         net = optim.step(lr, net, grads);

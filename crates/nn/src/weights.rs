@@ -294,12 +294,15 @@ pub fn require_arch(path: &Path, arch: &Architecture) -> Result<WeightMeta> {
 pub(crate) fn check_arch(path: &Path, meta: &WeightMeta, arch: &Architecture) -> Result<()> {
     let json = |a: &Architecture| serde_json::to_value(a).ok();
     if json(&meta.arch) != json(arch) {
-        return Err(NnError::Invalid(format!(
-            "--init {}: holds {}, not the {} this configuration trains",
-            path.display(),
-            meta.arch.describe(),
-            arch.describe()
-        )));
+        return Err(NnError::WrongArchitecture {
+            path: path.to_path_buf(),
+            message: format!(
+                "--init {}: holds {}, not the {} this configuration trains",
+                path.display(),
+                meta.arch.describe(),
+                arch.describe()
+            ),
+        });
     }
     Ok(())
 }

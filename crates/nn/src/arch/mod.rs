@@ -204,6 +204,22 @@ impl<B: Backend> Net<B> {
     pub(crate) fn sampled(&self) -> bool {
         matches!(self, Net::Pgrf(_))
     }
+
+    /// The SPC denoiser, if this is one.
+    pub fn into_denoiser(self) -> Option<SidUnet<B>> {
+        match self {
+            Net::Spc(n) => Some(n),
+            _ => None,
+        }
+    }
+
+    /// The PGRF velocity field, if this is one.
+    pub fn into_flow(self) -> Option<Sr3Unet<B>> {
+        match self {
+            Net::Pgrf(n) => Some(n),
+            _ => None,
+        }
+    }
 }
 
 impl<B: PgrfOps> Net<B> {

@@ -316,8 +316,9 @@ pub(crate) fn export_names(
 ) -> NnResult<(Vec<(String, &NamedTensor)>, &'static str)> {
     let mut v = Vec::new();
     for (t, p) in crate::interop::sid_names::pairs() {
-        let x = tensors.get(&p).ok_or_else(|| {
-            NnError::Invalid(format!("the weight file has no {p} (not a SID U-Net?)"))
+        let x = tensors.get(&p).ok_or_else(|| NnError::MissingTensor {
+            name: p.clone(),
+            hint: "not a SID U-Net?",
         })?;
         v.push((t, x));
     }

@@ -113,7 +113,7 @@ pub(crate) fn make_sample(
         // window of the calibrated sensor.
         let (mh, mw) = maps.pixel_shape().unwrap_or((s.patch, s.patch));
         if mh < s.patch || mw < s.patch {
-            return Err(NnError::Invalid(format!(
+            return Err(NnError::SizeMismatch(format!(
                 "calibration maps pack to {mh}x{mw}, smaller than the {0}x{0} patch",
                 s.patch
             )));

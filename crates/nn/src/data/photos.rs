@@ -82,10 +82,11 @@ pub struct PhotoFolder {
 }
 
 fn load(path: &Path, downscale: usize) -> Result<EncodedPhoto> {
-    let photo = read_photo(path).map_err(|e| NnError::Invalid(e.to_string()))?;
-    let small = photo
-        .downscale(downscale)
-        .map_err(|e| NnError::Invalid(format!("{}: {e}", path.display())))?;
+    let photo = read_photo(path)?;
+    let small = photo.downscale(downscale).map_err(|e| NnError::BadData {
+        path: path.to_path_buf(),
+        reason: e.to_string(),
+    })?;
     Ok(EncodedPhoto::from_photo(&small))
 }
 
@@ -101,28 +102,30 @@ impl PhotoFolder {
         patch: usize,
         budget_mib: usize,
     ) -> Result<(PhotoFolder, Vec<String>)> {
-        let mut plain =
-            Unprocessing::plain(&opts.camera, 1.0).map_err(|e| NnError::Invalid(e.to_string()))?;
+        let mut plain = Unprocessing::plain(&opts.camera, 1.0)?;
         plain.inverse_tone = opts.inverse_tone;
         if opts.downscale == 0 {
-            return Err(NnError::Invalid(
-                "the photo downscale must be at least 1".into(),
-            ));
+            return Err(NnError::BadSetting {
+                flag: "--photo-downscale",
+                message: "the photo downscale must be at least 1".into(),
+            });
         }
         let loaded: Vec<Result<EncodedPhoto>> = files
             .par_iter()
             .map(|p| {
                 let img = load(p, opts.downscale)?;
                 if img.width < 2 * patch || img.height < 2 * patch {
-                    return Err(NnError::Invalid(format!(
-                        "{}: {}x{} after the {}x downscale, smaller than the {}x{} pixels a {patch}x{patch} packed crop needs",
-                        p.display(),
-                        img.width,
-                        img.height,
-                        opts.downscale,
-                        2 * patch,
-                        2 * patch
-                    )));
+                    return Err(NnError::BadData {
+                        path: p.clone(),
+                        reason: format!(
+                            "{}x{} after the {}x downscale, smaller than the {}x{} pixels a {patch}x{patch} packed crop needs",
+                            img.width,
+                            img.height,
+                            opts.downscale,
+                            2 * patch,
+                            2 * patch
+                        ),
+                    });
                 }
                 Ok(img)
             })
@@ -141,10 +144,10 @@ impl PhotoFolder {
             }
         }
         if kept.is_empty() {
-            return Err(NnError::Invalid(format!(
-                "no usable photo to train on ({} skipped)",
-                warnings.len()
-            )));
+            return Err(NnError::BadSetting {
+                flag: "--data",
+                message: format!("no usable photo to train on ({} skipped)", warnings.len()),
+            });
         }
         Ok((
             PhotoFolder {
@@ -215,18 +218,23 @@ impl PhotoFolder {
         let img = self.get(i)?;
         let side = 2 * patch;
         if img.width < side || img.height < side {
-            return Err(NnError::Invalid(format!(
-                "{}: {}x{} pixels, smaller than the {side}x{side} a {patch}x{patch} crop needs",
-                self.files[i].display(),
-                img.width,
-                img.height
-            )));
+            return Err(NnError::BadData {
+                path: self.files[i].clone(),
+                reason: format!(
+                    "{}x{} pixels, smaller than the {side}x{side} a {patch}x{patch} crop needs",
+                    img.width, img.height
+                ),
+            });
         }
         let y = (((img.height - side + 1) as f64 * fy) as usize).min(img.height - side);
         let x = (((img.width - side + 1) as f64 * fx) as usize).min(img.width - side);
         let u = self.unprocessing(seed);
-        let clean = unprocess_packed(&img, (y, x), patch, &self.opts.camera, &u)
-            .map_err(|e| NnError::Invalid(format!("{}: {e}", self.files[i].display())))?;
+        let clean = unprocess_packed(&img, (y, x), patch, &self.opts.camera, &u).map_err(|e| {
+            NnError::BadData {
+                path: self.files[i].clone(),
+                reason: e.to_string(),
+            }
+        })?;
         Ok(Crop {
             clean,
             plane_rows: self.opts.camera.cfa.offsets().map(|(r, _)| r),

@@ -70,7 +70,10 @@ impl Folder {
     /// list; files are only read when first drawn (see [`Folder::check`]).
     pub fn new(files: Vec<PathBuf>, levels: LevelOverrides, budget_mib: usize) -> Result<Folder> {
         if files.is_empty() {
-            return Err(NnError::Invalid("no clean RAW files to train on".into()));
+            return Err(NnError::BadSetting {
+                flag: "--data",
+                message: "no clean RAW files to train on".into(),
+            });
         }
         Ok(Folder {
             files,
@@ -94,7 +97,10 @@ impl Folder {
         let load = || {
             let frame = decode_file(path, &self.levels)
                 .and_then(|f| f.require_cfa("training").map(|()| f))
-                .map_err(|e| NnError::Invalid(format!("{}: {e}", path.display())))?;
+                .map_err(|e| NnError::BadData {
+                    path: path.clone(),
+                    reason: e.to_string(),
+                })?;
             Packed::from_frame(&frame)
         };
         self.cache.get_or_load(i, load, |p| p.planes.len() * 2)
@@ -113,10 +119,12 @@ impl Folder {
         for (i, path) in self.files.iter().enumerate() {
             let (h, w) = self.shape(i)?;
             if h < patch || w < patch {
-                return Err(NnError::Invalid(format!(
-                    "{}: packs to {h}x{w}, smaller than the {patch}x{patch} training patch",
-                    path.display()
-                )));
+                return Err(NnError::BadData {
+                    path: path.clone(),
+                    reason: format!(
+                        "packs to {h}x{w}, smaller than the {patch}x{patch} training patch"
+                    ),
+                });
             }
         }
         Ok(())
@@ -194,10 +202,10 @@ impl Source {
                 let img = f.get(i)?;
                 let (h, w) = img.shape();
                 if h < patch || w < patch {
-                    return Err(NnError::Invalid(format!(
-                        "{}: packs to {h}x{w}, smaller than the {patch}x{patch} patch",
-                        f.files[i].display()
-                    )));
+                    return Err(NnError::BadData {
+                        path: f.files[i].clone(),
+                        reason: format!("packs to {h}x{w}, smaller than the {patch}x{patch} patch"),
+                    });
                 }
                 let y = ((h - patch + 1) as f64 * fy) as usize;
                 let x = ((w - patch + 1) as f64 * fx) as usize;

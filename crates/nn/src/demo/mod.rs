@@ -14,6 +14,7 @@ mod picture;
 mod scene;
 
 use crate::infer::enhance::describe_method;
+pub use crate::infer::enhance::BoxError;
 use crate::infer::prepare::network_input;
 use crate::infer::{restore_frame, Restore, Tiling};
 use crate::{DeviceKind, NnError};
@@ -36,9 +37,6 @@ pub const ISO: u32 = 1600;
 pub const CLEAN_EXPOSURE_S: f64 = 1.0;
 /// The columns of the demo's table, in order.
 pub const METHODS: [&str; 3] = ["noisy input", "SPC", "PGRF"];
-
-/// An error from outside this crate (loading the models), kept whole.
-pub type BoxError = Box<dyn std::error::Error + Send + Sync>;
 
 /// Why the demo stopped.
 #[derive(Debug, thiserror::Error)]

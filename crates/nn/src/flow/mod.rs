@@ -15,7 +15,7 @@
 //! | eq. 4.10 XZ = v(X0, T, 0) + X0 | `sample::first_stage` (crate-internal) |
 //! | eq. 4.11-4.12 XM = v(t2 XZ + (1 - t2) X0, T, t2) + X0 | `sample::second_stage` (crate-internal) |
 //! | two-stage sampler (Algorithm 3's core) | [`sample::two_stage`] |
-//! | sampling search (Algorithm 2) | [`search::run`], [`search::store_t2`] |
+//! | sampling search (Algorithm 2) | [`search::run`] (`pgrf search`'s recipe), [`search::measure`], [`search::store_t2`] |
 //!
 //! The training step that applies the loss with an optimiser is
 //! [`crate::step::flow_step`]; the training loop is [`crate::train`];

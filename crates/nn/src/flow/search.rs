@@ -35,15 +35,17 @@ use std::path::{Path, PathBuf};
 /// The candidate times {s, 2s, .., ns} with ns <= 1 (1 included when s divides it).
 pub(crate) fn grid(step: f64) -> Result<Vec<f64>> {
     if !(step.is_finite() && step > 0.0 && step <= 1.0) {
-        return Err(NnError::Invalid(format!(
-            "--step must be in (0, 1], got {step}"
-        )));
+        return Err(NnError::BadSetting {
+            flag: "--step",
+            message: format!("--step must be in (0, 1], got {step}"),
+        });
     }
     let n = (1.0 / step + 1e-9).floor() as usize;
     if n > 1000 {
-        return Err(NnError::Invalid(format!(
-            "--step {step} gives {n} candidates; use at least 0.001"
-        )));
+        return Err(NnError::BadSetting {
+            flag: "--step",
+            message: format!("--step {step} gives {n} candidates; use at least 0.001"),
+        });
     }
     Ok((1..=n).map(|i| i as f64 * step).collect())
 }
@@ -98,10 +100,13 @@ impl SearchOptions {
     pub fn times(&self) -> Result<Vec<f64>> {
         let times = grid(self.step)?;
         if self.samples == 0 || self.samples > MAX_SAMPLES {
-            return Err(NnError::Invalid(format!(
-                "--samples must be from 1 to {MAX_SAMPLES}, got {}",
-                self.samples
-            )));
+            return Err(NnError::BadSetting {
+                flag: "--samples",
+                message: format!(
+                    "--samples must be from 1 to {MAX_SAMPLES}, got {}",
+                    self.samples
+                ),
+            });
         }
         Ok(times)
     }
@@ -380,9 +385,10 @@ pub(crate) fn search_with<B: PgrfOps>(
     let (patch, list) = (pairs.patch, pairs.pairs.as_slice());
     let count = list.len();
     if count == 0 {
-        return Err(NnError::Invalid(
-            "no validation pairs: --pairs/--procedural must be at least 1".into(),
-        ));
+        return Err(NnError::BadSetting {
+            flag: "--pairs",
+            message: "no validation pairs: --pairs/--procedural must be at least 1".into(),
+        });
     }
     let protocol = &opts.protocol;
     let n_t = times.len();
@@ -502,17 +508,19 @@ fn average<B: PgrfOps>(
 }
 
 fn metric(e: pgrf_eval::MetricError) -> NnError {
-    NnError::Invalid(e.to_string())
+    NnError::Metric(e)
 }
 
 fn view(v: &[f32], patch: usize) -> Result<ArrayView3<'_, f32>> {
     ArrayView3::from_shape((4, patch, patch), v)
-        .map_err(|_| NnError::Invalid("validation pair of the wrong size".into()))
+        .map_err(|_| NnError::SizeMismatch("validation pair of the wrong size".into()))
 }
 
 fn to_tensor<B: PgrfOps>(v: &[f32], patch: usize, device: &B::Device) -> Result<Tensor<B, 4>> {
     if v.len() != 4 * patch * patch {
-        return Err(NnError::Invalid("validation pair of the wrong size".into()));
+        return Err(NnError::SizeMismatch(
+            "validation pair of the wrong size".into(),
+        ));
     }
     Ok(Tensor::from_data(
         TensorData::new(v.to_vec(), [1, 4, patch, patch]),
@@ -526,7 +534,7 @@ fn to_array<B: PgrfOps>(t: Tensor<B, 4>, patch: usize) -> Result<Array3<f32>> {
         .to_vec()
         .map_err(|e| NnError::Invalid(format!("reading the network output: {e:?}")))?;
     Array3::from_shape_vec((4, patch, patch), v)
-        .map_err(|e| NnError::Invalid(format!("network output shape: {e}")))
+        .map_err(|e| NnError::SizeMismatch(format!("network output shape: {e}")))
 }
 
 #[cfg(test)]

@@ -16,7 +16,8 @@ use serde::Serialize;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-/// An error from outside this crate (opening the input), kept whole.
+/// An error from outside this crate (opening an input, loading models),
+/// kept whole with its chain of causes.
 pub type BoxError = Box<dyn std::error::Error + Send + Sync>;
 
 /// Why a file could not be enhanced.

@@ -83,7 +83,7 @@ pub fn restore_packed(
         let need = super::memory::tile_bytes(&r.meta().arch, plan.rows.len, plan.cols.len)
             + super::memory::fixed_bytes(r, ph, pw) as f64;
         pgrf_core::mem::check_fits(&format!("--tile {}", opts.tile), need).map_err(|e| {
-            NnError::Invalid(format!(
+            NnError::TooLarge(format!(
                 "{e}; leave --tile out (pgrf would use {}) or give a smaller one",
                 auto_tile(DeviceKind::Cpu, r, ph, pw)
             ))

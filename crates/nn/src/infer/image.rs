@@ -39,6 +39,11 @@ pub const MIN_TILE: usize = 144;
 /// 44.1 dB (overlap 32) and 46.2 dB (48) instead of 49.5 (64).
 pub const MIN_OVERLAP: usize = DEFAULT_OVERLAP;
 
+/// A tiling setting `flag` refused, `message` saying why.
+fn bad(flag: &'static str, message: String) -> NnError {
+    NnError::BadSetting { flag, message }
+}
+
 /// A tile or overlap the user gave, checked against [`MIN_TILE`] and
 /// [`MIN_OVERLAP`] before any work (the commands call it with their
 /// arguments, [`super::restore_packed`] again with its [`super::Tiling`]).
@@ -46,12 +51,12 @@ pub const MIN_OVERLAP: usize = DEFAULT_OVERLAP;
 /// of 100 fits in one of 144 too.
 pub fn check_tiling_args(tile: Option<usize>, overlap: Option<usize>) -> Result<()> {
     if let Some(t) = tile.filter(|&t| t < MIN_TILE) {
-        return Err(NnError::Invalid(format!(
+        return Err(bad("--tile", format!(
             "--tile {t} is below {MIN_TILE}: smaller tiles make the result depend on the tiling (its PSNR against one whole-frame pass falls below 50 dB; README, \"Tiling\"); give --tile {MIN_TILE} or more, or leave it out"
         )));
     }
     if let Some(o) = overlap.filter(|&o| o < MIN_OVERLAP) {
-        return Err(NnError::Invalid(format!(
+        return Err(bad("--overlap", format!(
             "--overlap {o} is below {MIN_OVERLAP}: with less the tiles' borders show in the result (README, \"Tiling\"); give --overlap {MIN_OVERLAP} or more, or leave it out"
         )));
     }
@@ -83,9 +88,7 @@ pub fn restore_image(
 ) -> Result<Array3<f32>> {
     let (c, h, w) = input.dim();
     if let Some(pos) = input.iter().position(|v| !v.is_finite()) {
-        return Err(NnError::Invalid(format!(
-            "network input holds a non-finite value (flat index {pos})"
-        )));
+        return Err(NnError::NonFiniteInput { index: pos });
     }
     let plan = plan_for(h, w, opts, r.side_multiple())?;
     let x0s: Vec<Array3<f32>> = (0..r.samples() as u64)
@@ -99,9 +102,7 @@ pub fn restore_image(
         Ok(y)
     })?;
     if let Some(pos) = out.iter().position(|v| v.is_nan()) {
-        return Err(NnError::Invalid(format!(
-            "the network produced NaN (flat index {pos}); the weight file may be damaged"
-        )));
+        return Err(NnError::NanOutput { index: pos });
     }
     out.mapv_inplace(|v| v.clamp(0.0, 1.0));
     Ok(out)
@@ -129,7 +130,7 @@ pub fn plan_for(h: usize, w: usize, opts: &ImageOptions, multiple: usize) -> Res
     let m = multiple.max(1);
     let o = opts.overlap;
     if opts.tile < m.max(4) && opts.tile < h.max(w) {
-        return Err(NnError::Invalid(format!(
+        return Err(bad("--tile", format!(
             "tile {} is too small: tiles are at least {} packed pixels (and a multiple of the network's {m})",
             opts.tile,
             m.max(4)
@@ -142,7 +143,7 @@ pub fn plan_for(h: usize, w: usize, opts: &ImageOptions, multiple: usize) -> Res
         } else {
             format!(" (rounded down to {tile}, a multiple of the network's {m})")
         };
-        return Err(NnError::Invalid(format!(
+        return Err(bad("--tile", format!(
             "tile {}{rounded} is too small for overlap {o}: a tile must be at least 2x its overlap; give a tile of at least {} or a smaller overlap",
             opts.tile,
             (2 * o).div_ceil(m) * m

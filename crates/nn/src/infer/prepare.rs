@@ -19,9 +19,10 @@ pub fn network_input(
     dark_dn: Option<&Array3<f32>>,
 ) -> Result<Array3<f32>> {
     if !(ratio.is_finite() && ratio > 0.0) {
-        return Err(NnError::Invalid(format!(
-            "the exposure ratio must be a positive number, got {ratio}"
-        )));
+        return Err(NnError::BadSetting {
+            flag: "--ratio",
+            message: format!("the exposure ratio must be a positive number, got {ratio}"),
+        });
     }
     let mut x = pack_normalized(frame, false)?;
     if let Some(dark) = dark_dn {
@@ -56,23 +57,31 @@ pub fn ratio_from_exposure(
     target_exposure_s: f64,
     target_iso: Option<u32>,
 ) -> Result<f32> {
-    let t = frame.exposure_s.filter(|t| *t > 0.0).ok_or_else(|| {
-        NnError::Invalid("the file records no exposure time; give --ratio instead".into())
-    })?;
+    let t = frame
+        .exposure_s
+        .filter(|t| *t > 0.0)
+        .ok_or_else(|| NnError::BadSetting {
+            flag: "--ratio",
+            message: "the file records no exposure time; give --ratio instead".into(),
+        })?;
     let iso = frame.iso.filter(|i| *i > 0);
     let gain = match (target_iso, iso) {
         (None, _) => 1.0,
         (Some(ti), Some(i)) => ti as f64 / i as f64,
         (Some(_), None) => {
-            return Err(NnError::Invalid(
-                "the file records no ISO; --target-iso needs it (or give --ratio)".into(),
-            ))
+            return Err(NnError::BadSetting {
+                flag: "--target-iso",
+                message: "the file records no ISO; --target-iso needs it (or give --ratio)".into(),
+            })
         }
     };
     if !(target_exposure_s.is_finite() && target_exposure_s > 0.0) {
-        return Err(NnError::Invalid(format!(
-            "--target-exposure must be a positive number of seconds, got {target_exposure_s}"
-        )));
+        return Err(NnError::BadSetting {
+            flag: "--target-exposure",
+            message: format!(
+                "--target-exposure must be a positive number of seconds, got {target_exposure_s}"
+            ),
+        });
     }
     Ok((target_exposure_s / t * gain) as f32)
 }

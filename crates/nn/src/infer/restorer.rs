@@ -122,10 +122,16 @@ impl<B: PgrfOps> Restorer<B> {
         device: B::Device,
     ) -> Result<Self> {
         if !(0.0..=1.0).contains(&t2) {
-            return Err(NnError::Invalid(format!("t2 must be in [0, 1], got {t2}")));
+            return Err(NnError::BadSetting {
+                flag: "--t2",
+                message: format!("t2 must be in [0, 1], got {t2}"),
+            });
         }
         if choice.samples == 0 {
-            return Err(NnError::Invalid("--samples must be at least 1".into()));
+            return Err(NnError::BadSetting {
+                flag: "--samples",
+                message: "--samples must be at least 1".into(),
+            });
         }
         let sampler = match choice.kind {
             SamplerKind::TwoStage => Sampler::TwoStage { t2 },
@@ -177,14 +183,14 @@ impl<B: PgrfOps> Restore for Restorer<B> {
     fn restore(&self, input: ArrayView3<f32>, x0s: &[ArrayView3<f32>]) -> Result<Array3<f32>> {
         let (c, h, w) = input.dim();
         if c != 4 {
-            return Err(NnError::Invalid(format!(
+            return Err(NnError::SizeMismatch(format!(
                 "the networks take 4 packed planes, got {c}"
             )));
         }
         let cond = self.tensor(input);
         if self.net.sampled() {
             if x0s.len() != self.samples {
-                return Err(NnError::Invalid(format!(
+                return Err(NnError::SizeMismatch(format!(
                     "{} start fields for {} samples",
                     x0s.len(),
                     self.samples
@@ -192,7 +198,7 @@ impl<B: PgrfOps> Restore for Restorer<B> {
             }
             for x0 in x0s {
                 if x0.dim() != (c, h, w) {
-                    return Err(NnError::Invalid("X0 and input differ in shape".into()));
+                    return Err(NnError::SizeMismatch("X0 and input differ in shape".into()));
                 }
             }
         }
@@ -204,7 +210,7 @@ impl<B: PgrfOps> Restore for Restorer<B> {
             .to_vec()
             .map_err(|e| NnError::Invalid(format!("reading the network output: {e:?}")))?;
         Array3::from_shape_vec((c, h, w), v)
-            .map_err(|e| NnError::Invalid(format!("network output shape: {e}")))
+            .map_err(|e| NnError::SizeMismatch(format!("network output shape: {e}")))
     }
 }
 

@@ -43,9 +43,12 @@ impl AxisPlan {
         // the handover ramps of successive neighbours never overlap and no
         // pixel is blended from more than two tiles.
         if overlap == 0 || 2 * overlap > tile {
-            return Err(NnError::Invalid(format!(
-                "tile overlap {overlap} must be between 1 and half the tile ({tile})"
-            )));
+            return Err(NnError::BadSetting {
+                flag: "--overlap",
+                message: format!(
+                    "tile overlap {overlap} must be between 1 and half the tile ({tile})"
+                ),
+            });
         }
         let stride = tile - overlap;
         let mut starts = Vec::new();
