@@ -137,6 +137,9 @@ pub enum NnError {
     /// From reading or writing a RAW file.
     #[error(transparent)]
     Raw(#[from] pgrf_raw::RawError),
+    /// From decoding or unprocessing a photo (pgrf-scenes).
+    #[error(transparent)]
+    Scene(#[from] pgrf_scenes::SceneError),
     /// From the noise model or a profile.
     #[error(transparent)]
     Noise(#[from] pgrf_noise::NoiseError),
