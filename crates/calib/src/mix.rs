@@ -58,14 +58,14 @@ pub enum MixError {
     },
     /// The calibration file could not be read.
     #[error(transparent)]
-    Load(CalibError),
+    Load(Box<CalibError>),
     /// The calibration is of another camera, ISO or CFA layout than the frame.
     #[error("{}: {source}", path.display())]
     Mismatch {
         /// The calibration file.
         path: PathBuf,
         /// What differs.
-        source: CalibError,
+        source: Box<CalibError>,
     },
     /// The calibration's size is not the frame's.
     #[error("{}: calibration is {}x{}, the clean frame {}x{}", path.display(), calibration.0, calibration.1, frame.0, frame.1)]
@@ -83,7 +83,7 @@ pub enum MixError {
         /// The calibration file.
         path: PathBuf,
         /// Why not.
-        source: CalibError,
+        source: Box<CalibError>,
     },
 }
 
@@ -131,11 +131,11 @@ pub fn calibrate(
     path: &Path,
     check: Option<FrameCheck>,
 ) -> Result<Calibration, MixError> {
-    let cal = Calibration::load(path).map_err(MixError::Load)?;
+    let cal = Calibration::load(path).map_err(|e| MixError::Load(Box::new(e)))?;
     if let Some(FrameCheck { frame, force }) = check {
         let mismatch = |source| MixError::Mismatch {
             path: path.to_path_buf(),
-            source,
+            source: Box::new(source),
         };
         cal.check_matches(&frame.make, &frame.model, spec.iso, force)
             .and_then(|()| cal.check_layout(frame))
@@ -151,7 +151,7 @@ pub fn calibrate(
     }
     cal.apply_to(spec).map_err(|source| MixError::Apply {
         path: path.to_path_buf(),
-        source,
+        source: Box::new(source),
     })?;
     Ok(cal)
 }

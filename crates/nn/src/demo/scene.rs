@@ -4,9 +4,9 @@
 //! clean exposure.
 
 use super::{DemoError, CLEAN_EXPOSURE_S, ISO};
+use pgrf_raw::{decode_bytes, decode_file, Cfa, LevelOverrides, RawFrame};
 use pgrf_scenes::demo::render_demo;
 use pgrf_scenes::SceneLevels;
-use pgrf_raw::{decode_bytes, decode_file, Cfa, LevelOverrides, RawFrame};
 use std::path::{Path, PathBuf};
 
 /// Where a photograph comes from.

@@ -42,11 +42,11 @@ pub enum EnhanceError {
         path: PathBuf,
         /// How it does not fit.
         #[source]
-        source: LightError,
+        source: Box<LightError>,
     },
     /// The calibration's dark shading for the photo's exposure time.
     #[error(transparent)]
-    Shading(CalibError),
+    Shading(Box<CalibError>),
     /// The ratio from the exposure, or the restoration.
     #[error(transparent)]
     Network(#[from] NnError),
@@ -160,10 +160,10 @@ fn calibrate(
     };
     match c.calibration.prepare_light(frame, cfg.force) {
         Ok(p) => Ok((Some(p.dark_dn), p.defects_corrected)),
-        Err(LightError::Shading(e)) => Err(EnhanceError::Shading(e)),
+        Err(LightError::Shading(e)) => Err(EnhanceError::Shading(Box::new(e))),
         Err(source) => Err(EnhanceError::Calibration {
             path: c.path.clone(),
-            source,
+            source: Box::new(source),
         }),
     }
 }
