@@ -80,7 +80,7 @@ pub fn xyz_from_camera(xyz_to_cam: &[[f32; 3]; 3]) -> Option<Mat3> {
     Some(mul(&SRGB_TO_XYZ, &srgb_from_camera(xyz_to_cam)?))
 }
 
-/// sRGB opto-electronic transfer function (linear [0,1] -> encoded [0,1]).
+/// sRGB opto-electronic transfer function (linear [0, 1] -> encoded [0, 1]).
 #[inline]
 pub fn srgb_encode(x: f32) -> f32 {
     let x = x.clamp(0.0, 1.0);
@@ -91,7 +91,7 @@ pub fn srgb_encode(x: f32) -> f32 {
     }
 }
 
-/// Inverse of [`srgb_encode`]: encoded [0,1] -> linear [0,1].
+/// Inverse of [`srgb_encode`]: encoded [0, 1] -> linear [0, 1].
 #[inline]
 pub fn srgb_decode(e: f32) -> f32 {
     let e = e.clamp(0.0, 1.0);
