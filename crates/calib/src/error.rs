@@ -338,12 +338,6 @@ pub enum FrameField {
 /// Result of every fallible function of the calibration crate.
 pub type Result<T> = std::result::Result<T, CalibError>;
 
-/// [`CalibError::Invalid`]: for refusals whose message is all there is.
-#[allow(dead_code)]
-pub(crate) fn invalid(msg: impl Into<String>) -> CalibError {
-    CalibError::Invalid(msg.into())
-}
-
 fn plural(n: &usize) -> &'static str {
     if *n == 1 {
         ""
