@@ -20,7 +20,8 @@
 
 use libfuzzer_sys::fuzz_target;
 use pgrf_nn::infer::restorer::{load_bytes, SamplerChoice};
-use pgrf_nn::weights::{self, Architecture};
+use pgrf_nn::weights;
+use pgrf_nn::Architecture;
 use pgrf_nn::DeviceKind;
 use std::path::Path;
 
