@@ -223,7 +223,7 @@ pub(crate) fn save<B: burn::tensor::backend::Backend, M: burn::module::Module<B>
 
 /// Parse weight-file bytes into the record (checked to be a weight file
 /// this pgrf reads) and the named tensors (checked to be finite); `path`
-/// names them in errors. What [`read`] and [`load`] do with a file's
+/// names them in errors. What [`read`] and [`load`](crate::model::load) do with a file's
 /// bytes, without building a network: the byte-level entry point for
 /// weights built into the binary and for fuzzing.
 pub fn from_bytes(

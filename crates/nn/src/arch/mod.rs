@@ -8,7 +8,7 @@
 //! Each network file owns its configuration (and how `pgrf train`'s
 //! settings make one), its initialisation, its parameters (named by their
 //! field path, [`crate::named`]), its memory estimate and what restoring a
-//! tile with it needs ([`network::NetworkConfig`]). [`Architecture`] is the
+//! tile with it needs (`network::NetworkConfig`). [`Architecture`] is the
 //! configuration as a weight file records it; [`Net`] the built network.
 //! Adding a network: see the crate documentation.
 
