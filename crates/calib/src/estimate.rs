@@ -49,7 +49,7 @@ pub struct BiasEstimate {
     pub(crate) ppcc_pooled: f64,
 }
 
-/// The fixed pattern (the pixel's constant offset, inferred eq. 3.12): the
+/// The fixed pattern (the pixel's constant offset, section 3.2.2, not numbered in the paper): the
 /// per-pixel temporal mean of the bias frames minus the black level of its
 /// plane, in DN. `mean` is `(4, h, w)` including black.
 pub(crate) fn fixed_pattern(mean: &Array3<f64>, black: [f32; 4]) -> Array3<f32> {
@@ -104,8 +104,8 @@ pub(crate) fn highpass_variance(map: &Array3<f32>) -> f64 {
     kept.iter().map(|v| (v - m).powi(2)).sum::<f64>() / (n - 1.0).max(1.0) * 25.0 / 24.0
 }
 
-/// The source-follower (read) noise sigma_r of N_r per pixel (inferred
-/// eq. 3.13): sqrt(Var(bias) - sigma_H^2), the per-pixel temporal variance
+/// The source-follower (read) noise sigma_r of N_r per pixel (section
+/// 3.2.2, not numbered in the paper): sqrt(Var(bias) - sigma_H^2), the per-pixel temporal variance
 /// of the bias frames with the row-noise variance removed (and the
 /// whole-frame offset drift's, which moves every pixel alike): `shared` is
 /// their sum, DN^2; clamped at 0; in DN.
@@ -708,7 +708,7 @@ pub(crate) fn choose_dark_law(t: &[f64], y: &[f64], w: &[f64]) -> (DarkLaw, bool
     )
 }
 
-/// The dark signal of every pixel at one exposure time (inferred eq. 3.16):
+/// The dark signal of every pixel at one exposure time (eq. 3.16):
 /// the dark frames' temporal mean minus the bias frames' (fixed pattern and
 /// black cancel), DN, flattened in packed order.
 pub(crate) fn dark_signal(dark_mean: &Array3<f64>, bias_mean: &Array3<f64>) -> Vec<f64> {
@@ -721,7 +721,7 @@ pub(crate) fn dark_signal(dark_mean: &Array3<f64>, bias_mean: &Array3<f64>) -> V
 
 /// The pixel's dark-current rate in electrons per unit of g(t) (sqrt(s) or
 /// s) from its fitted dark-signal slope `a` (DN per unit of g(t)) and the
-/// gain K (inferred eq. 3.17, E(N) = K2 E(N_RS) with K2 = 1 + N_FP): the
+/// gain K (eq. 3.17, E(N) = K2 E(N_RS) with K2 = 1 + N_FP): the
 /// dark signal's mean is K rate g(t) with the pixel's K2 absorbed into its
 /// rate, so rate = a / K (clamped at 0).
 pub(crate) fn dark_rate(a: f64, k: f64) -> f32 {

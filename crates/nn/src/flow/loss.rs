@@ -1,9 +1,9 @@
-//! The rectified-flow training objective (Algorithm 1's loss): the L1
+//! The rectified-flow training objective (eq. 4.9, Algorithm 1's loss): the L1
 //! distance between the network's velocity v(Xt, T, t) and the path's
 //! constant velocity X1 - X0,
 //!
 //! ```text
-//! L = | (X1 - X0) - v(Xt, T, t) |_1,  Xt = t X1 + (1 - t) X0 (eq. 4.9),
+//! L = | (X1 - X0) - v(Xt, T, t) |_1,  Xt = t X1 + (1 - t) X0 (eq. 4.1, 4.5),
 //! ```
 //!
 //! averaged over pixels and batch items. T is the condition (the synthetic

@@ -9,7 +9,7 @@
 //!
 //! | paper | here |
 //! |---|---|
-//! | eq. 4.9 path Xt = t X1 + (1 - t) X0 | [`interpolate`] |
+//! | eq. 4.1, 4.5 path Xt = t X1 + (1 - t) X0 | [`interpolate`] |
 //! | loss \|X1 - X0 - v(Xt, T, t)\|_1 | [`flow_loss`] |
 //! | X0 ~ N(0, I), t ~ U(0, 1) (Algorithm 1) | `draw::fill_start`, `draw::draw_time` (crate-internal) |
 //! | eq. 4.10 XZ = v(X0, T, 0) + X0 | `sample::first_stage` (crate-internal) |

@@ -1,4 +1,4 @@
-//! The straight path of the rectified flow (paper eq. 4.9):
+//! The straight path of the rectified flow (paper eq. 4.1, 4.5):
 //! Xt = t X1 + (1 - t) X0, from the start X0 ~ N(0, I) at t = 0 to the clean
 //! image X1 at t = 1. Its velocity dXt/dt = X1 - X0 is constant along the
 //! path; that is the target the network v(Xt, T, t) learns ([`super::loss`]).
@@ -10,7 +10,7 @@
 use burn::tensor::backend::Backend;
 use burn::tensor::Tensor;
 
-/// Xt = t X1 + (1 - t) X0 (eq. 4.9), with one time t per batch item.
+/// Xt = t X1 + (1 - t) X0 (eq. 4.1, 4.5), with one time t per batch item.
 ///
 /// - `x1`: X1, the end of the path: the clean image in training, the
 ///   first-stage estimate XZ in the two-stage sampler (eq. 4.11);

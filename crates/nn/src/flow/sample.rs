@@ -10,7 +10,7 @@
 //!   of X1 (a single Euler step over the whole path); on its own it is the
 //!   one-step sampler;
 //! - eq. 4.11, inside the second stage (`second_stage`, crate-internal):
-//!   Xt2 = t2 XZ + (1 - t2) X0 re-enters the straight path (eq. 4.9,
+//!   Xt2 = t2 XZ + (1 - t2) X0 re-enters the straight path (eq. 4.1,
 //!   [`super::interpolate`]) at the searched time t2;
 //! - eq. 4.12, the second stage: XM = v(Xt2, T, t2) + X0 is the result.
 //!
@@ -60,7 +60,7 @@ pub(crate) fn first_stage<B: PgrfOps>(
     net.velocity(x0.clone(), cond, times::<B>(n, 0.0, &device)) + x0
 }
 
-/// Second stage, eq. 4.11-4.12: Xt2 = t2 XZ + (1 - t2) X0 (eq. 4.9 at t2),
+/// Second stage, eq. 4.11-4.12: Xt2 = t2 XZ + (1 - t2) X0 (eq. 4.1 at t2),
 /// then XM = v(Xt2, T, t2) + X0. `xz` is the first stage's XZ.
 pub(crate) fn second_stage<B: PgrfOps>(
     net: &impl Velocity<B>,
