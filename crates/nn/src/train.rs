@@ -70,7 +70,8 @@ pub struct Trained {
 
 /// `pgrf train`'s recipe: train `method`'s network as `config` says
 /// (already merged and checked, [`TrainConfig::check_for`]), from scratch or,
-/// with `resume`, from the checkpoint. Before any step: the device, the
+/// with `resume`, from the checkpoint. Before any step: the checkpoint a
+/// resumed run needs (first, before any costly work), the device, the
 /// network (and `init`'s weights) and the memory a step needs are checked,
 /// the pairs' noise is built, the clean sources are opened (`warn` hears each
 /// file left out), the validation pairs are made, and one line saying what
@@ -87,6 +88,15 @@ pub fn run(
 ) -> Result<Trained> {
     let c = config;
     let outputs = c.outputs()?;
+    if resume && !outputs.checkpoint.exists() {
+        return Err(NnError::BadSetting {
+            flag: "--resume",
+            message: format!(
+                "--resume: no checkpoint at {}",
+                outputs.checkpoint.display()
+            ),
+        });
+    }
     c.device.check_available().map_err(NnError::Device)?;
     let arch = c.architecture(method)?;
     if let Some(init) = &c.init {
@@ -143,15 +153,6 @@ pub fn run(
         ratio: [lo, hi],
         calibrated_dark_level: c.calibrated_dark_level,
     };
-    if resume && !outputs.checkpoint.exists() {
-        return Err(NnError::BadSetting {
-            flag: "--resume",
-            message: format!(
-                "--resume: no checkpoint at {}",
-                outputs.checkpoint.display()
-            ),
-        });
-    }
     progress.note(&header(c, &arch, &sources.train, &mix, &noise));
     let job = Job {
         config: c,
