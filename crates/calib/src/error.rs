@@ -10,12 +10,24 @@ use std::path::PathBuf;
 /// Why a calibration could not be made, read, written or applied.
 #[derive(Debug, thiserror::Error)]
 pub enum CalibError {
+    /// An output that may not be written (missing folder, an input, named
+    /// twice).
+    #[error(transparent)]
+    Path(#[from] pgrf_core::paths::PathError),
+    /// An option's value that no input can make right (named by `flag`).
+    #[error("{message}")]
+    BadOption {
+        /// The option, e.g. "--masters".
+        flag: &'static str,
+        /// What was wrong, on one line.
+        message: String,
+    },
     /// A frame could not be decoded or packed.
-    #[error("{0}")]
+    #[error(transparent)]
     Raw(#[from] pgrf_raw::RawError),
     /// The maps file could not be read or written, or the maps are invalid
     /// for the noise model.
-    #[error("{0}")]
+    #[error(transparent)]
     Noise(#[from] pgrf_noise::NoiseError),
     /// A stack with fewer frames than its per-pixel variance needs.
     #[error("{stack} stack has {count} frame{}; per-pixel variance needs at least {needed}", plural(.count))]

@@ -9,8 +9,11 @@ pub mod calibrate;
 mod calibration;
 mod error;
 pub mod estimate;
+#[cfg(feature = "clap")]
+pub mod flags;
 pub mod light;
 pub mod masters;
+mod messages;
 pub mod mix;
 pub mod outputs;
 mod ppcc;

@@ -4,13 +4,14 @@
 //!
 //! The report's plots are drawn by pgrf-report, which sits beside this crate
 //! (neither depends on the other), so the caller draws them, at the point of
-//! the run this module gives it ([`RunHooks::write_report`]); where a
-//! program may write (inputs not overwritten, no output named twice) is the
-//! caller's rule too ([`RunHooks::check_outputs`]).
+//! the run this module gives it ([`RunHooks::write_report`]). Outputs are
+//! checked before any frame is read ([`pgrf_core::paths::check_outputs`]:
+//! inputs not overwritten, no output named twice).
 
 use crate::calibrate::{calibrate, CalibrateInput, CalibrationRun};
 use crate::error::{CalibError, Result};
 use crate::masters::defect_picture;
+use pgrf_core::paths::check_outputs;
 use pgrf_core::Progress;
 use pgrf_noise::darktable::{Export, NoiseProfiles, VARIANCE_FACTOR};
 use std::path::{Path, PathBuf};
@@ -58,15 +59,6 @@ pub struct DarktableOutput {
 pub trait RunHooks {
     /// The caller's error; the run's own errors convert into it.
     type Error: From<CalibError>;
-    /// Refuse outputs (each with the option that named it) that clash with
-    /// `inputs` or with each other; called before the frames are read, and
-    /// for the master frames (whose names the frames give) before any is
-    /// written.
-    fn check_outputs(
-        &self,
-        outputs: &[(&str, &Path)],
-        inputs: &[&Path],
-    ) -> std::result::Result<(), Self::Error>;
     /// Draw the report into `dir` (it exists); called after the master
     /// frames and before the darktable entry and the calibration file.
     /// Returns how many files it wrote.
@@ -153,7 +145,7 @@ pub fn calibrate_to_files<H: RunHooks>(
     };
     let mut outputs = vec![("-o", config.output.as_path()), (flag, &darktable_file)];
     outputs.extend(report_files.iter().map(|p| ("--report", p.as_path())));
-    hooks.check_outputs(&outputs, &inputs)?;
+    check_outputs(&outputs, &inputs).map_err(CalibError::from)?;
     let input = CalibrateInput {
         masters: config.masters.is_some(),
         ..input.clone()
@@ -162,7 +154,7 @@ pub fn calibrate_to_files<H: RunHooks>(
     progress.finish();
     let entry = darktable_entry(config, &run, existing.as_deref())?;
     let masters = match &config.masters {
-        Some(dir) => Some(write_masters(dir, &run, &inputs, &config.output, hooks)?),
+        Some(dir) => Some(write_masters(dir, &run, &inputs, &config.output)?),
         None => None,
     };
     let report = match &config.report {
@@ -229,13 +221,12 @@ fn create_folder(dir: &Path, what: &'static str) -> Result<()> {
 /// The master frames and the defect picture into `dir` (created if
 /// missing), each checked against the inputs and `output` before any is
 /// written; returns how many masters were written.
-fn write_masters<H: RunHooks>(
+fn write_masters(
     dir: &Path,
     run: &CalibrationRun,
     inputs: &[&Path],
     output: &Path,
-    hooks: &H,
-) -> std::result::Result<usize, H::Error> {
+) -> Result<usize> {
     let ext = if run.key.fits { "fits" } else { "dng" };
     let files: Vec<PathBuf> = run
         .masters
@@ -246,7 +237,7 @@ fn write_masters<H: RunHooks>(
     if dir.is_dir() {
         let mut outputs = vec![("-o", output)];
         outputs.extend(files.iter().map(|f| ("--masters", f.as_path())));
-        hooks.check_outputs(&outputs, inputs)?;
+        check_outputs(&outputs, inputs)?;
     }
     create_folder(dir, "the masters folder")?;
     let meta = &run.calibration.meta;

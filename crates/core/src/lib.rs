@@ -1,5 +1,5 @@
 //! Framework-free basics that every pgrf crate shares, so that each exists
-//! once: atomic file writes, the robust statistics helper, seeding of
+//! once: atomic file writes and the checks on output paths, the robust statistics helper, seeding of
 //! thread-count-independent random streams, the progress interface the
 //! libraries report through, the safetensors + JSON record format used by
 //! calibration files and weight files, and the process's memory figures.
@@ -13,6 +13,7 @@ pub mod exit;
 pub mod mem;
 pub mod number;
 pub mod panic_guard;
+pub mod paths;
 mod progress;
 pub mod record;
 pub mod seed;

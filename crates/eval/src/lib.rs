@@ -15,6 +15,8 @@
 mod compare;
 pub mod dataset;
 pub mod evaluation;
+#[cfg(feature = "clap")]
+pub mod flags;
 pub mod method;
 mod metrics;
 pub mod npy;

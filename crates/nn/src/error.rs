@@ -53,14 +53,14 @@ pub enum NnError {
     },
     /// A file given with a flag that could not be used: the flag and the
     /// file name the underlying error.
-    #[error("{flag} {}: {source}", path.display())]
+    #[error("{flag} {}: {cause}", path.display())]
     Input {
         /// The flag, e.g. `--model`.
         flag: &'static str,
         /// The file.
         path: PathBuf,
         /// What went wrong with it.
-        source: Box<NnError>,
+        cause: Box<NnError>,
     },
     /// A weight file holding another network than the one the operation
     /// needs (a denoiser given to the flow's search, `--init` of another
@@ -99,6 +99,17 @@ pub enum NnError {
         /// Why not.
         reason: String,
     },
+    /// An input named on the command line that is neither a file nor a
+    /// folder.
+    #[error("{}: no such file or folder", .0.display())]
+    NoSuchInput(PathBuf),
+    /// An output that may not be written (missing folder, an input, named
+    /// twice).
+    #[error(transparent)]
+    Path(#[from] pgrf_core::paths::PathError),
+    /// A plot that could not be drawn or written (one line from pgrf-report).
+    #[error("{0}")]
+    Plot(String),
     /// Training diverged: the loss is no longer a finite number.
     #[error("loss became {loss} at step {step}; lower the learning rate or set clip_grad")]
     Diverged {

@@ -23,7 +23,7 @@ pub struct ConvertArgs {
 }
 
 pub fn run(a: &ConvertArgs) -> Result<()> {
-    crate::output::check_outputs(&[("-o", &a.output)], &[&a.file])?;
+    pgrf_core::paths::check_outputs(&[("-o", &a.output)], &[&a.file])?;
     let frame = a.input.open(&a.file)?;
     let opts = DngOptions {
         compression: if a.uncompressed {

@@ -6,11 +6,11 @@
 //! is a PSNR/SSIM table under the ELD protocol, the DNGs, and one picture
 //! with everything side by side.
 
-use crate::output::require_parent_dir;
 use crate::progress::Bar;
 use crate::shipped;
 use anyhow::{bail, Context, Result};
 use clap::{Args, ValueEnum};
+use pgrf_core::paths::require_parent_dir;
 use pgrf_eval::dataset::table::summarise;
 use pgrf_eval::Scores;
 use pgrf_nn::backend::DeviceKind;

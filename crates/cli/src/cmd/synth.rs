@@ -90,7 +90,7 @@ pub fn run(a: &SynthArgs) -> Result<()> {
     }
     let mut inputs = vec![a.clean.as_path(), std::path::Path::new(&a.profile)];
     inputs.extend(a.calib.as_deref());
-    crate::output::check_outputs(&outputs, &inputs)?;
+    pgrf_core::paths::check_outputs(&outputs, &inputs)?;
     if let Some(g) = a.png_gain {
         if !(g.is_finite() && g > 0.0) {
             bail!("--png-gain must be a positive number, got {g}");

@@ -49,7 +49,7 @@ pub fn run(a: &TrainArgs) -> Result<()> {
     let out = config.outputs()?;
     let inputs = config.input_files();
     let inputs: Vec<&std::path::Path> = inputs.iter().map(|p| p.as_path()).collect();
-    crate::output::check_outputs(
+    pgrf_core::paths::check_outputs(
         &[
             ("-o", &out.weights),
             ("--checkpoint", &out.checkpoint),

@@ -31,7 +31,7 @@ pub fn run_import(a: &ImportArgs) -> Result<()> {
             a.arch
         );
     }
-    crate::output::check_outputs(&[("-o", &a.output)], &[&a.file])?;
+    pgrf_core::paths::check_outputs(&[("-o", &a.output)], &[&a.file])?;
     let imported = interop::import_sid(&a.file, a.from, a.key.as_deref())?;
     let bytes = imported.encode()?;
     pgrf_core::write_atomic(&a.output, &bytes)
@@ -95,7 +95,7 @@ pub fn run_export(a: &ExportArgs) -> Result<()> {
             a.output.display()
         ),
     };
-    crate::output::check_outputs(&[("-o", &a.output)], &[&a.model])?;
+    pgrf_core::paths::check_outputs(&[("-o", &a.output)], &[&a.model])?;
     let (meta, tensors) = pgrf_nn::weights::read(&a.model)?;
     let out = interop::export(&meta, &tensors, pth)?;
     pgrf_core::write_atomic(&a.output, &out.bytes)

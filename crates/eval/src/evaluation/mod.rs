@@ -33,6 +33,14 @@ pub enum EvalError {
     /// The methods could not be loaded (the caller's error, unchanged).
     #[error(transparent)]
     Methods(BoxError),
+    /// A flag's value that no input can make right (named by `flag`).
+    #[error("{message}")]
+    BadOption {
+        /// The flag, e.g. "--crop".
+        flag: &'static str,
+        /// What was wrong, on one line.
+        message: String,
+    },
     /// An `--outputs` column whose name another column already has.
     #[error("--outputs {0}=...: the name is taken by another column")]
     ColumnTaken(String),

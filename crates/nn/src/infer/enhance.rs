@@ -2,7 +2,8 @@
 //! Bayer mosaic, find the exposure ratio, apply a calibration (dark
 //! shading, defect correction; pgrf-calib's [`Calibration::prepare_light`]),
 //! restore it tile by tile, write the linear DNG and the sRGB preview, and
-//! report what was done. Which files go where is the caller's policy.
+//! report what was done. Which files go where: [`jobs::plan_jobs`]; the
+//! flags: [`flags::EnhanceFlags`] (the `clap` feature).
 
 use super::prepare::ratio_from_exposure;
 use super::restorer::describe_sampler;
@@ -15,6 +16,10 @@ use pgrf_raw::{render_preview, write_dng, DngOptions, PreviewOptions, RawError, 
 use serde::Serialize;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
+
+#[cfg(feature = "clap")]
+pub mod flags;
+pub mod jobs;
 
 /// An error from outside this crate (opening an input, loading models),
 /// kept whole with its chain of causes.
@@ -35,6 +40,9 @@ pub enum EnhanceError {
         #[source]
         source: RawError,
     },
+    /// The calibration file could not be read.
+    #[error("--calib")]
+    LoadCalibration(#[source] Box<CalibError>),
     /// The calibration does not fit the photo.
     #[error("--calib {}", path.display())]
     Calibration {
@@ -130,6 +138,24 @@ pub struct FileReport {
     pub seconds: f64,
     /// The process's peak resident memory so far.
     pub peak_rss_mib: Option<f64>,
+}
+
+impl FileReport {
+    /// What was written, on one line (`pgrf enhance` prints it).
+    pub fn line(&self) -> String {
+        let plural = if self.tiles == 1 { "" } else { "s" };
+        let png = (self.png.as_ref())
+            .map(|p| format!(" and {p}"))
+            .unwrap_or_default();
+        let defects = match self.defects_corrected {
+            0 => String::new(),
+            n => format!(", {n} defective pixels corrected from their neighbours"),
+        };
+        format!(
+            "wrote {}{png}: {}x{}, ratio {:.1}, {} tile{plural} of {}, {:.1} s{defects}",
+            self.output, self.width, self.height, self.ratio, self.tiles, self.tile, self.seconds,
+        )
+    }
 }
 
 /// The network and its sampler, in one phrase ("SID U-Net ... (one pass)").

@@ -13,8 +13,10 @@
 //! [`SearchRequest`] it makes validation pairs like the model's training
 //! pairs (its record's noise, the calibration given, clean RAWs, photos or
 //! procedural scenes), measures ([`measure`], [`SearchOutcome`]) and writes
-//! the chosen t2 into the weight file ([`store_t2`]) unless told not to.
-//! `pgrf search` is that call plus printing.
+//! the chosen t2 into the weight file ([`store_t2`]) unless told not to,
+//! after drawing PSNR against t. `pgrf search` is its flags
+//! ([`flags::SearchArgs`], the `clap` feature), that call and printing
+//! ([`Searched::table`], [`Searched::json`]).
 
 use super::sample::{first_stage, second_stage, two_stage, Velocity};
 use crate::backend::{on_device, DeviceKind, OnBackend};
@@ -31,6 +33,10 @@ use pgrf_core::Progress;
 use pgrf_eval::{evaluate, Protocol};
 use pgrf_noise::pair::RatioSpec;
 use std::path::{Path, PathBuf};
+
+#[cfg(feature = "clap")]
+pub mod flags;
+mod report;
 
 /// The candidate times {s, 2s, .., ns} with ns <= 1 (1 included when s divides it).
 pub(crate) fn grid(step: f64) -> Result<Vec<f64>> {
@@ -164,6 +170,8 @@ pub struct SearchRequest {
     pub calib: Option<PathBuf>,
     /// Measure only, leaving the weight file as it is.
     pub dry_run: bool,
+    /// The PNG plot of PSNR against t (its folder is checked first).
+    pub plot: PathBuf,
     /// Grid, averaging study, seed (of the pairs too), device, protocol.
     pub options: SearchOptions,
 }
@@ -196,15 +204,19 @@ pub struct Searched {
 /// pairs were made (its record's profile or mix, ISO or ISO range, ratios;
 /// `iso` and `ratio` override; `calib` applied; photos unprocessed as its
 /// recorded configuration says; `warn` hears each file skipped), refuses
-/// pairs that would not fit in memory, measures ([`measure`]) and, unless
-/// `dry_run`, stores the best t2 ([`store_t2`]).
+/// pairs that would not fit in memory, measures ([`measure`]), draws the
+/// plot and, unless `dry_run`, stores the best t2 ([`store_t2`]).
 pub fn run(req: &SearchRequest, progress: &dyn Progress, warn: &dyn Fn(&str)) -> Result<Searched> {
-    // Bad --step or --samples are refused before any costly work.
+    // Bad --step, --samples or --plot are refused before any costly work.
     req.options.times()?;
+    pgrf_core::paths::require_parent_dir(&req.plot).map_err(|e| NnError::BadSetting {
+        flag: "--plot",
+        message: format!("--plot: {e}"),
+    })?;
     let meta = weights::read_meta(&req.model).map_err(|e| NnError::Input {
         flag: "--model",
         path: req.model.clone(),
-        source: Box::new(e),
+        cause: Box::new(e),
     })?;
     if !meta.arch.sampled() {
         return Err(NnError::WrongArchitecture {
@@ -261,7 +273,7 @@ pub fn run(req: &SearchRequest, progress: &dyn Progress, warn: &dyn Fn(&str)) ->
         MixError::Profile(e) => NnError::Input {
             flag: "--model",
             path: req.model.clone(),
-            source: Box::new(NnError::Config(format!("its noise record: {e}"))),
+            cause: Box::new(NnError::Config(format!("its noise record: {e}"))),
         },
         MixError::CalibrationWithMix { path, mix } => NnError::BadSetting {
             flag: "--calib",
@@ -308,6 +320,7 @@ pub fn run(req: &SearchRequest, progress: &dyn Progress, warn: &dyn Fn(&str)) ->
         .map_err(|e| NnError::TooLarge(format!("{e}; give a smaller --patch or fewer pairs")))?;
     let val = ValSet::build(&source, &built.mix, p, count, req.options.seed)?;
     let outcome = measure(&req.model, &val, &req.options, progress)?;
+    report::write_plot(req, &outcome)?;
     if !req.dry_run {
         store_t2(&req.model, outcome.best_t2)?;
     }

@@ -1,0 +1,97 @@
+//! What `pgrf calibrate` says about a finished run: its lines for the
+//! terminal and its global results as one JSON record, made here so that
+//! every caller of the recipe reports a run the same way.
+
+use crate::outputs::{CalibrateConfig, CalibrateOutcome, DarktableOutcome};
+use crate::CalibrationRun;
+use std::path::Path;
+
+impl CalibrateOutcome {
+    /// What the run wrote and found, one line each, for stderr: notes,
+    /// the files written, warnings and dropped frames, then the global
+    /// results.
+    pub fn messages(&self, config: &CalibrateConfig) -> Vec<String> {
+        let mut lines = Vec::new();
+        if let DarktableOutcome::Skipped { lack } = &self.darktable {
+            lines.push(format!(
+                "pgrf: note: the frames {lack}: no darktable noise profile written"
+            ));
+        }
+        if let (Some(n), Some(dir)) = (self.masters, &config.masters) {
+            lines.push(format!(
+                "wrote {n} master frames and defects.png in {}",
+                dir.display()
+            ));
+        }
+        if let (Some(n), Some(r)) = (self.report, &config.report) {
+            lines.push(format!("wrote report: {n} files in {}", r.dir.display()));
+        }
+        if let DarktableOutcome::Written {
+            path,
+            replaced,
+            name,
+        } = &self.darktable
+        {
+            let replacing = match replaced {
+                0 => String::new(),
+                n => format!(", replacing {n} entry of that camera at that ISO"),
+            };
+            lines.push(format!(
+                "wrote {}: darktable noise-profile entry \"{name}\"{replacing} (darktable reads the file with: darktable --noiseprofiles {})",
+                path.display(),
+                path.display()
+            ));
+        }
+        let m = &self.run.calibration.meta;
+        lines.extend(m.warnings.iter().map(|w| format!("pgrf: warning: {w}")));
+        lines.extend(
+            m.rejected_frames
+                .iter()
+                .map(|r| format!("pgrf: note: dropped {r}")),
+        );
+        lines.push(format!(
+            "wrote {}: K {:.4} DN/e- ({}), read sigma median {:.3} DN, row sigma {:.3} DN, DSNU {:.3} DN, dark law {}, {} hot / {} dead pixels",
+            config.output.display(),
+            m.k,
+            m.k_method,
+            m.read_sigma_median,
+            m.row_sigma,
+            m.dsnu,
+            crate::calibrate::law_label(m.dark_law, m.dark_offset),
+            m.hot_pixels,
+            m.dead_pixels
+        ));
+        lines
+    }
+}
+
+impl CalibrationRun {
+    /// The run's global results as one JSON record (`pgrf calibrate
+    /// --json`), naming the calibration file `output`.
+    pub fn json_record(&self, output: &Path) -> serde_json::Value {
+        let m = &self.calibration.meta;
+        serde_json::json!({
+            "K": m.k,
+            "K_method": m.k_method,
+            "row_sigma": m.row_sigma,
+            "read_sigma_median": m.read_sigma_median,
+            "dsnu": m.dsnu,
+            "prnu": m.prnu,
+            "dark_law": crate::calibrate::law_name(m.dark_law),
+            "dark_r2_sqrt": m.dark_r2_sqrt,
+            "dark_r2_linear": m.dark_r2_linear,
+            "dark_rate_mean": m.dark_rate_mean,
+            "dark_offset": m.dark_offset,
+            "dark_offset_mean": m.dark_offset_mean,
+            "K_without_pairs": self.gain.k_without_pairs,
+            "noise_profile": self.noise_profile(),
+            "cfa": m.layout(),
+            "temperature_c": m.temperature_c,
+            "warnings": m.warnings,
+            "rejected_frames": m.rejected_frames,
+            "hot_pixels": m.hot_pixels,
+            "dead_pixels": m.dead_pixels,
+            "output": output.display().to_string(),
+        })
+    }
+}

@@ -1,0 +1,178 @@
+//! `pgrf enhance`'s flags (the `clap` feature), their checks, the
+//! configuration and jobs they make, and the notes printed before the first
+//! file: kept beside the recipe, so a new option is added in one crate.
+
+use super::jobs::{plan_jobs, Previews};
+use super::{CalibrationFile, EnhanceConfig, EnhanceError, Job, RatioChoice};
+use crate::backend::DeviceKind;
+use crate::error::NnError;
+use crate::flow::sample::SamplerKind;
+use crate::infer::restorer::UNSEARCHED_T2;
+use crate::infer::{check_tiling_args, Restore, SamplerChoice, Tiling};
+use pgrf_calib::Calibration;
+use std::path::PathBuf;
+
+/// `pgrf enhance`'s flags (the input-opening options are the caller's).
+#[derive(clap::Args, Debug)]
+pub struct EnhanceFlags {
+    /// Noisy RAW files, or folders of them.
+    #[arg(required = true)]
+    pub inputs: Vec<PathBuf>,
+    /// Weight file from `pgrf train` (SPC denoiser or PGRF flow model).
+    #[arg(long, short = 'm')]
+    pub model: PathBuf,
+    /// Exposure ratio: the input is multiplied by it before denoising.
+    #[arg(long, conflicts_with = "target_exposure", allow_hyphen_values = true)]
+    pub ratio: Option<f32>,
+    /// Instead of --ratio: the exposure (seconds) to brighten to; the ratio is
+    /// target / the file's exposure time (x --target-iso / the file's ISO).
+    #[arg(long)]
+    pub target_exposure: Option<f64>,
+    /// With --target-exposure: the ISO of the target exposure (default: the file's).
+    #[arg(long, requires = "target_exposure")]
+    pub target_iso: Option<u32>,
+    /// Calibration file (`pgrf calibrate`): subtract its fixed pattern and
+    /// mean dark current before amplifying.
+    #[arg(long)]
+    pub calib: Option<PathBuf>,
+    /// Apply a calibration of another camera or ISO anyway.
+    #[arg(long)]
+    pub force: bool,
+    /// Output DNG (one input file), or folder for the results (created if its
+    /// parent exists); files keep their names with a .dng extension.
+    #[arg(short, long)]
+    pub output: PathBuf,
+    /// Also write an sRGB preview: to this .png with one input, next to each
+    /// DNG without a value.
+    #[arg(long, num_args = 0..=1)]
+    #[allow(clippy::option_option)]
+    pub png: Option<Option<PathBuf>>,
+    /// Tile side in packed pixels, at least 144 when the frame is tiled (default: from available memory on the CPU, 1024 on CUDA).
+    #[arg(long)]
+    pub tile: Option<usize>,
+    /// Minimum overlap of neighbouring tiles, packed pixels, at least 64 [default: 64].
+    #[arg(long)]
+    pub overlap: Option<usize>,
+    /// cpu, or cuda (needs a build with `--features cuda`).
+    #[arg(long, default_value = "cpu")]
+    pub device: DeviceKind,
+    /// Flow model sampler: two-stage (the paper's, 2 evaluations), one-step, or euler:N.
+    #[arg(long, default_value = "two-stage")]
+    pub sampler: SamplerKind,
+    /// Second time of the two-stage sampler (default: the file's searched t2).
+    #[arg(long, allow_hyphen_values = true)]
+    pub t2: Option<f32>,
+    /// Flow model: average this many samples from different start noise.
+    #[arg(long, default_value_t = 1)]
+    pub samples: usize,
+    /// Seed of the flow model's start noise.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// One JSON line per file on stdout.
+    #[arg(long)]
+    pub json: bool,
+    /// No progress bar or notes.
+    #[arg(long, short)]
+    pub quiet: bool,
+}
+
+fn refused(flag: &'static str, message: String) -> NnError {
+    NnError::BadSetting { flag, message }
+}
+
+impl EnhanceFlags {
+    /// Refuse flag values no file can make right, before any work; then
+    /// expand folders and plan every output ([`plan_jobs`]).
+    pub fn jobs(&self) -> Result<Vec<Job>, NnError> {
+        if let Some(r) = self.ratio {
+            if !(r.is_finite() && r > 0.0) {
+                return Err(refused(
+                    "--ratio",
+                    format!("--ratio must be a positive number, got {r}"),
+                ));
+            }
+        }
+        if self.ratio.is_none() && self.target_exposure.is_none() {
+            return Err(refused(
+                "--ratio",
+                "give the exposure ratio (--ratio R) or a target exposure (--target-exposure SECONDS)".into(),
+            ));
+        }
+        if let Some(t) = self.t2 {
+            if !(0.0..=1.0).contains(&t) {
+                return Err(refused("--t2", format!("--t2 must be in [0, 1], got {t}")));
+            }
+        }
+        check_tiling_args(self.tile, self.overlap)?;
+        let previews = match &self.png {
+            None => Previews::None,
+            Some(None) => Previews::BesideEach,
+            Some(Some(p)) => Previews::At(p),
+        };
+        plan_jobs(&self.inputs, &self.output, previews)
+    }
+
+    /// How every file is enhanced (the calibration loaded).
+    pub fn config(&self) -> Result<EnhanceConfig, EnhanceError> {
+        let calib = match &self.calib {
+            Some(p) => Some(CalibrationFile {
+                path: p.clone(),
+                calibration: Calibration::load(p)
+                    .map_err(|e| EnhanceError::LoadCalibration(Box::new(e)))?,
+            }),
+            None => None,
+        };
+        let ratio = match (self.ratio, self.target_exposure) {
+            (Some(r), _) => RatioChoice::Fixed(r),
+            (None, seconds) => RatioChoice::TargetExposure {
+                seconds: seconds.expect("checked in jobs()"),
+                iso: self.target_iso,
+            },
+        };
+        Ok(EnhanceConfig {
+            ratio,
+            calib,
+            force: self.force,
+            tiling: Tiling {
+                tile: self.tile,
+                overlap: self.overlap,
+                seed: self.seed,
+                device: self.device,
+            },
+        })
+    }
+
+    /// The flow model's sampler as the flags choose it.
+    pub fn sampler(&self) -> SamplerChoice {
+        SamplerChoice {
+            kind: self.sampler,
+            t2: self.t2,
+            samples: self.samples,
+        }
+    }
+
+    /// What the user should know about the model and device, printed
+    /// before the first image is processed (so that an input that fails at
+    /// once still gives a single line).
+    pub fn notes(&self, restorer: &dyn Restore) -> Vec<String> {
+        let mut lines = vec![format!(
+            "model: {}; device {}",
+            super::describe_method(restorer),
+            crate::backend::describe(self.device)
+        )];
+        if restorer.sampler().is_some() && restorer.meta().t2.is_none() && self.t2.is_none() {
+            lines.push(format!(
+                "note: {} has no searched t2; using {UNSEARCHED_T2} (run `pgrf search` to find the best)",
+                self.model.display(),
+            ));
+        }
+        if restorer.meta().noise.calibrated_dark_level && self.calib.is_none() {
+            lines.push(format!(
+                "note: {} learned calibrated captures (dark level subtracted); without --calib \
+the file's black level is taken as exact, and an error in it tints dark areas",
+                self.model.display()
+            ));
+        }
+        lines
+    }
+}

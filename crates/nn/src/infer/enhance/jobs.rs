@@ -1,0 +1,148 @@
+//! Which files `pgrf enhance` writes where: inputs (files, and folders
+//! expanded) to output paths, every path checked before any work, so that a
+//! typo costs a second and no input is ever written over.
+
+use super::Job;
+use crate::error::NnError;
+use pgrf_core::paths::{require_parent_dir, same_file};
+use std::collections::HashSet;
+use std::path::{Path, PathBuf};
+
+/// Where the previews go: none, next to each DNG, or (one input) this PNG.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Previews<'a> {
+    /// No previews.
+    None,
+    /// Next to each DNG, with a .png extension.
+    BesideEach,
+    /// This file (one input only).
+    At(&'a Path),
+}
+
+fn refused(flag: &'static str, message: String) -> NnError {
+    NnError::BadSetting { flag, message }
+}
+
+/// The inputs: files as given, folders expanded; and whether a folder was
+/// among them.
+fn expand_inputs(paths: &[PathBuf]) -> Result<(Vec<PathBuf>, bool), NnError> {
+    let mut inputs = Vec::new();
+    let mut had_dir = false;
+    for p in paths {
+        if p.is_dir() {
+            had_dir = true;
+            inputs.extend(pgrf_raw::files::list_files(p)?);
+        } else if p.is_file() {
+            inputs.push(p.clone());
+        } else {
+            return Err(NnError::NoSuchInput(p.clone()));
+        }
+    }
+    Ok((inputs, had_dir))
+}
+
+/// Expand folders, decide every output path (`output` is a .dng for one
+/// input file, else a folder, created if its parent exists), and check
+/// that the outputs can be written.
+pub fn plan_jobs(
+    paths: &[PathBuf],
+    output: &Path,
+    previews: Previews,
+) -> Result<Vec<Job>, NnError> {
+    let (mut inputs, had_dir) = expand_inputs(paths)?;
+    let single = inputs.len() == 1 && !had_dir;
+    let is_dng = output
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("dng"));
+    if let Previews::At(p) = previews {
+        if !p.extension().is_some_and(|e| e.eq_ignore_ascii_case("png")) {
+            return Err(refused("--png", format!(
+                "--png {}: expected a .png path (give --png after the input files, or without a value to write previews next to the DNGs)",
+                p.display()
+            )));
+        }
+        if !single {
+            return Err(refused(
+                "--png",
+                "--png PATH names one preview; with several inputs give --png without a value"
+                    .into(),
+            ));
+        }
+        require_parent_dir(p)?;
+    }
+    if single && is_dng {
+        require_parent_dir(output)?;
+        if same_file(output, &inputs[0]) {
+            return Err(refused(
+                "-o",
+                format!(
+                    "-o {} is the input file; write the result elsewhere",
+                    output.display()
+                ),
+            ));
+        }
+        let png = match previews {
+            Previews::None => None,
+            Previews::BesideEach => Some(output.with_extension("png")),
+            Previews::At(p) => Some(p.to_path_buf()),
+        };
+        return Ok(vec![Job {
+            input: inputs.remove(0),
+            output: output.to_path_buf(),
+            png,
+        }]);
+    }
+    if is_dng {
+        return Err(refused(
+            "-o",
+            format!(
+                "-o {}: several inputs need an output folder, not a .dng file",
+                output.display()
+            ),
+        ));
+    }
+    folder_jobs(inputs, output, previews != Previews::None)
+}
+
+/// One job per input into the output folder (created if missing), keeping
+/// the input's name with a .dng extension.
+fn folder_jobs(inputs: Vec<PathBuf>, folder: &Path, png: bool) -> Result<Vec<Job>, NnError> {
+    if !folder.is_dir() {
+        require_parent_dir(folder)?;
+        std::fs::create_dir(folder).map_err(|e| NnError::Output {
+            path: folder.to_path_buf(),
+            reason: format!("cannot create the output folder: {e}"),
+        })?;
+    }
+    let mut seen = HashSet::new();
+    inputs
+        .into_iter()
+        .map(|input| {
+            let stem = input
+                .file_stem()
+                .map(|s| s.to_string_lossy().into_owned())
+                .unwrap_or_else(|| "out".into());
+            let output = folder.join(format!("{stem}.dng"));
+            if !seen.insert(output.clone()) {
+                return Err(refused(
+                    "-o",
+                    format!(
+                        "two inputs would both be written to {} (same name in different folders)",
+                        output.display()
+                    ),
+                ));
+            }
+            if same_file(&output, &input) {
+                return Err(refused(
+                    "-o",
+                    format!(
+                        "{} would overwrite its input; choose another output folder",
+                        output.display()
+                    ),
+                ));
+            }
+            let png = png.then(|| output.with_extension("png"));
+            Ok(Job { input, output, png })
+        })
+        .collect()
+}
