@@ -288,6 +288,7 @@ pub fn run(a: &EnhanceArgs) -> Result<()> {
         tile,
         overlap: a.overlap,
         seed: 0,
+        noise: None,
     };
     let plan = plan_for(ph, pw, &opts, r.side_multiple())?;
     let tiles = plan.count();

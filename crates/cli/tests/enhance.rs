@@ -114,6 +114,7 @@ fn the_dng_keeps_the_input_and_holds_the_model_output() {
                 tile: 144,
                 overlap: 64,
                 seed: 0,
+                noise: None,
             },
             &pgrf_core::NoProgress,
         )
@@ -484,7 +485,7 @@ fn search_writes_the_best_t2_and_agrees_with_the_sampler() {
                 .to_owned()
         };
         let out = r
-            .restore(view(&p.noisy).view(), &[view(&p.x0).view()])
+            .restore(view(&p.noisy).view(), &[view(&p.x0).view()], None)
             .unwrap();
         mean += evaluate(out.view(), view(&p.clean).view(), &Protocol::eld(false))
             .unwrap()
@@ -615,4 +616,117 @@ fn the_calibrated_fixed_pattern_is_subtracted() {
     let err = one_line_error(&run(&bright, &c, &["--calib", s(&wrong)]));
     assert!(err.contains("32x48") && err.contains("64x48"), "{err}");
     assert!(!c.exists());
+}
+
+/// A noise-aware model (trained two steps with `--conditioning
+/// sigma-map`): `enhance` tells it the noise of each file and says where
+/// the numbers came from, `--noise` first, else the lookup (here a camera
+/// nothing knows: the frame's own estimate); the weight file records the
+/// conditioning; a malformed `--noise` is one line.
+#[test]
+fn a_noise_aware_model_is_told_the_noise_and_the_source_is_named() {
+    let dir = scratch("noise-aware");
+    let (chart, noisy, model) = (
+        dir.join("chart.dng"),
+        dir.join("noisy.dng"),
+        dir.join("m.safetensors"),
+    );
+    assert!(pgrf(&[
+        "chart",
+        "-o",
+        s(&chart),
+        "--width",
+        "256",
+        "--height",
+        "192"
+    ])
+    .status
+    .success());
+    let r = pgrf(&[
+        "synth",
+        s(&chart),
+        "--profile",
+        "sony-a7s2",
+        "--iso",
+        "3200",
+        "--ratio",
+        "50",
+        "--seed",
+        "1",
+        "-o",
+        s(&noisy),
+    ]);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    let r = pgrf(&[
+        "train",
+        "spc",
+        "--data",
+        "procedural",
+        "--steps",
+        "2",
+        "--batch",
+        "1",
+        "--patch",
+        "32",
+        "--width",
+        "4",
+        "--residual",
+        "--conditioning",
+        "sigma-map",
+        "-o",
+        s(&model),
+    ]);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    let meta = pgrf_nn::weights::read_meta(&model).unwrap();
+    assert_eq!(
+        meta.arch.conditioning(),
+        pgrf_nn::condition::Conditioning::SigmaMap
+    );
+
+    let run = |extra: &[&str], out: &Path| -> Value {
+        let mut args = vec![
+            "enhance",
+            s(&noisy),
+            "-m",
+            s(&model),
+            "--ratio",
+            "50",
+            "-o",
+            s(out),
+            "--json",
+        ];
+        args.extend_from_slice(extra);
+        let r = pgrf(&args);
+        assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+        serde_json::from_slice(&r.stdout).unwrap()
+    };
+    let j = run(&[], &dir.join("a.dng"));
+    let said = j["noise"].as_str().unwrap();
+    assert!(said.contains("estimated from the frame"), "{said}");
+    let j = run(&["--noise", "K=3,read=4,row=0.5"], &dir.join("b.dng"));
+    assert_eq!(
+        j["noise"],
+        "K 3.0000 DN/e-, read 4.000 DN, row 0.500 DN (--noise)"
+    );
+
+    let r = pgrf(&[
+        "enhance",
+        s(&noisy),
+        "-m",
+        s(&model),
+        "--ratio",
+        "50",
+        "-o",
+        s(&dir.join("c.dng")),
+        "--noise",
+        "K=3",
+    ]);
+    // A value clap refuses: its usage error (exit 2), first line pgrf's.
+    let err = String::from_utf8_lossy(&r.stderr);
+    assert_eq!(r.status.code(), Some(2), "{err}");
+    assert!(
+        err.starts_with("pgrf: error: ") && err.contains("give at least K=.. and read=.."),
+        "{err}"
+    );
+    assert!(!dir.join("c.dng").exists());
 }

@@ -233,7 +233,12 @@ fn weight_records_that_cannot_run_are_refused() {
     let chart = d.join("c.dng");
     common::chart(&chart, 128, 96);
     for (flow, key, value, needle) in [
-        (false, "in_channels", 0, "4 planes in and out"),
+        (
+            false,
+            "in_channels",
+            0,
+            "4 planes in (unconditioned) and 4 out",
+        ),
         (true, "inner_channels", 3, "must be even"),
         (true, "channel_mults", -1, "at least 1"),
     ] {

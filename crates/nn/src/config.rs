@@ -6,6 +6,7 @@
 //! Keys are the command-line flags with underscores (`--ratio-min` is
 //! `ratio_min`); a file may hold any subset and the flags override it.
 
+use crate::condition::Conditioning;
 use crate::error::{NnError, Result};
 use crate::schedule::Schedule;
 use pgrf_noise::ModelKind;
@@ -144,6 +145,10 @@ pub struct TrainConfig {
     /// Learn a correction: the SID U-Net adds its input to its output; the flow model adds T - Xt to its velocity (its first stage starts as the noisy input). Not the papers' design; converges far faster for small CPU-trained models.
     #[cfg_attr(feature = "clap", arg(long, action = clap::ArgAction::Set, num_args = 0..=1, default_missing_value = "true", default_value_t = false, hide_default_value = true))]
     pub residual: bool,
+    /// Tell the network how noisy its input is (MODELS.md, "Noise-aware models"): none (it guesses from the pixels), sigma-map (four more input planes, the noise standard deviation at each pixel) or k-sigma (the input mapped so that its noise is the same at every gain, the output mapped back) [default: none].
+    #[cfg_attr(feature = "clap", arg(long, value_enum, default_value_t = d().conditioning, hide_default_value = true))]
+    #[serde(skip_serializing_if = "is_unconditioned")]
+    pub conditioning: Conditioning,
     /// Start from this weight file's weights (a trained network of exactly this configuration, e.g. models/spc.safetensors) instead of fresh ones: fine-tuning on other data or conditions; the optimiser and the learning-rate schedule start afresh (a resumed run takes its weights from the checkpoint), and the output records the file and its training.
     #[cfg_attr(feature = "clap", arg(long))]
     pub init: Option<PathBuf>,
@@ -200,6 +205,12 @@ pub struct TrainConfig {
     pub device: crate::backend::DeviceKind,
 }
 
+/// Records of unconditioned runs stay as they were before conditioning
+/// existed (no `conditioning` key).
+fn is_unconditioned(c: &Conditioning) -> bool {
+    *c == Conditioning::None
+}
+
 /// The defaults the flags show (the same as [`TrainConfig::default`]).
 #[cfg(feature = "clap")]
 fn d() -> TrainConfig {
@@ -239,6 +250,7 @@ impl Default for TrainConfig {
             calibrated_dark_level: false,
             width: None,
             residual: false,
+            conditioning: Conditioning::None,
             init: None,
             inner_channels: None,
             channel_mults: None,

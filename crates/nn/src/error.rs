@@ -99,6 +99,20 @@ pub enum NnError {
         /// Why not.
         reason: String,
     },
+    /// A noise-conditioned model run without its input's noise level.
+    #[error("the model is {conditioning} conditioned: it needs the input's noise level (give --noise, --calib, or let pgrf find it)")]
+    NoNoiseLevel {
+        /// The conditioning's name.
+        conditioning: &'static str,
+    },
+    /// A noise level a network cannot be conditioned on.
+    #[error("noise level gain {gain}, floor {floor}: needs a positive gain and a floor >= 0, both finite")]
+    BadNoiseLevel {
+        /// Variance per unit of signal.
+        gain: f32,
+        /// Signal-independent variance.
+        floor: f32,
+    },
     /// An input named on the command line that is neither a file nor a
     /// folder.
     #[error("{}: no such file or folder", .0.display())]

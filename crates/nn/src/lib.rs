@@ -45,6 +45,7 @@
 pub mod arch;
 pub mod backend;
 mod checkpoint;
+pub mod condition;
 mod config;
 pub mod data;
 pub mod demo;

@@ -269,7 +269,7 @@ pub(crate) fn validate<B: PgrfOps>(net: &Net<B>, val: &ValSet, t2: f32, device: 
         let noisy = to_tensor::<B>(&pair.noisy, [1, 4, p, p], device);
         let x0 = to_tensor::<B>(&pair.x0, [1, 4, p, p], device);
         let out: Vec<f32> = net
-            .restore(noisy, x0, t2)
+            .restore(noisy, &[pair.level], x0, t2)
             .into_data()
             .convert::<f32>()
             .to_vec()
@@ -495,6 +495,7 @@ fn train<B: PgrfAutodiff>(
         let loss = net.loss(
             noisy,
             clean,
+            &batch.levels,
             || to_tensor::<B>(&batch.x0, shape, device),
             || Tensor::<B, 1>::from_data(TensorData::new(batch.t.clone(), [s.batch]), device),
         );

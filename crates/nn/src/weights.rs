@@ -190,6 +190,8 @@ fn fill_defaults(value: &mut serde_json::Value) {
         if let Some(c) = value.get_mut("config").and_then(|c| c.as_object_mut()) {
             c.entry("residual")
                 .or_insert(serde_json::Value::Bool(false));
+            c.entry("conditioning")
+                .or_insert(serde_json::Value::String("none".into()));
         }
     }
 }

@@ -72,6 +72,7 @@ fn check(r: &dyn Restore, name: &str) {
         tile: 1024,
         overlap: 16,
         seed: 3,
+        noise: None,
     };
     let whole = restore_image(r, x.view(), &whole_opts, &pgrf_core::NoProgress).unwrap();
     // One tile is the untiled network output itself (to 1e-5).
@@ -80,7 +81,7 @@ fn check(r: &dyn Restore, name: &str) {
         .collect();
     let views: Vec<ArrayView3<f32>> = x0s.iter().map(|a| a.view()).collect();
     let direct = r
-        .restore(x.view(), &views)
+        .restore(x.view(), &views, None)
         .unwrap()
         .mapv(|v| v.clamp(0.0, 1.0));
     let d = (&whole - &direct)
@@ -93,6 +94,7 @@ fn check(r: &dyn Restore, name: &str) {
         tile: 64,
         overlap: 16,
         seed: 3,
+        noise: None,
     };
     let plan = plan_for(h, w, &opts, r.side_multiple()).unwrap();
     assert!(plan.cols.count() >= 3, "{name}");
@@ -105,7 +107,7 @@ fn check(r: &dyn Restore, name: &str) {
         let sl = s![.., t.y..t.y + t.h, t.x..t.x + t.w];
         let xv: Vec<ArrayView3<f32>> = x0s.iter().map(|a| a.slice(sl)).collect();
         let out = r
-            .restore(x.slice(sl), &xv)
+            .restore(x.slice(sl), &xv, None)
             .unwrap()
             .mapv(|v| v.clamp(0.0, 1.0));
         let mut dst = sum.slice_mut(sl);

@@ -214,6 +214,10 @@ pub enum NoiseError {
     /// A setting refused with a message and nothing more to act on.
     #[error("invalid noise setting: {0}")]
     Invalid(String),
+    /// The frame's noise could not be estimated from its pixels (too few
+    /// unclipped flat blocks); the message says what was found.
+    #[error("blind noise estimate: {0}")]
+    Estimate(String),
     /// An output file could not be written.
     #[error(transparent)]
     Write(#[from] pgrf_core::WriteError),

@@ -14,6 +14,8 @@ pub mod catalog;
 mod components;
 pub mod darktable;
 mod error;
+pub mod estimate;
+pub mod lookup;
 pub mod mapfile;
 mod maps;
 pub mod mix;

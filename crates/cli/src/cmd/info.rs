@@ -3,6 +3,7 @@
 use crate::input::InputArgs;
 use anyhow::Result;
 use clap::Args;
+use pgrf_noise::lookup::{find_noise, KnownNoise};
 use pgrf_raw::stats::{plane_stats, PlaneStats};
 use pgrf_raw::RawFrame;
 use serde::Serialize;
@@ -37,6 +38,10 @@ struct Info<'a> {
     temperature_c: Option<f32>,
     /// The DNG NoiseProfile's (S, O) pairs, when the file has one.
     noise_profile: Option<&'a [[f64; 2]]>,
+    /// What a noise-aware model would be told of the frame's noise
+    /// (`pgrf_noise::lookup`): K, read and row noise in DN and the source,
+    /// or why none was found.
+    noise_parameters: serde_json::Value,
     /// FITS header fields beyond the common ones (FITS input only).
     fits: Option<&'a pgrf_raw::FitsHeader>,
     orientation: u16,
@@ -87,6 +92,12 @@ fn info<'a>(a: &InfoArgs, f: &'a RawFrame) -> Result<Info<'a>> {
         exposure_s: f.exposure_s,
         temperature_c: f.temperature_c,
         noise_profile: f.noise_profile.as_deref(),
+        noise_parameters: match find_noise(f, &KnownNoise::default()) {
+            Ok(n) => serde_json::json!({
+                "K": n.k, "read": n.read, "row": n.row, "source": n.source.to_string()
+            }),
+            Err(e) => serde_json::json!({ "error": e.to_string() }),
+        },
         fits: f.fits.as_ref(),
         orientation: f.orientation,
         visible_origin: [f.sensor_origin.0, f.sensor_origin.1],
@@ -176,6 +187,10 @@ fn print_levels(a: &InfoArgs, f: &RawFrame) {
             "noise       DNG NoiseProfile: {} (variance S x + O, x in [0, 1])",
             pairs.join("; ")
         );
+    }
+    match find_noise(f, &KnownNoise::default()) {
+        Ok(n) => println!("noise-aware models would use: {n}"),
+        Err(e) => println!("noise-aware models would use: nothing found ({e})"),
     }
 }
 

@@ -19,6 +19,7 @@ pub mod sr3;
 pub use sid_unet::{SidUnet, SidUnetConfig};
 pub use sr3::{Sr3Config, Sr3Unet};
 
+use crate::condition::{Conditioned, Conditioning, NoiseLevel};
 use crate::config::{Method, TrainConfig};
 use crate::data::Extras;
 use crate::error::{NnError, Result};
@@ -134,6 +135,12 @@ impl Architecture {
         self.spec().residual()
     }
 
+    /// How the network is told its input's noise level
+    /// ([`crate::condition`]).
+    pub fn conditioning(&self) -> Conditioning {
+        self.spec().conditioning()
+    }
+
     /// The tensors of a weight file under the names PyTorch code for this
     /// network knows (`pgrf export-weights`), and that naming in words.
     pub(crate) fn export_names<'a>(
@@ -223,33 +230,54 @@ impl<B: Backend> Net<B> {
 }
 
 impl<B: PgrfOps> Net<B> {
-    /// The denoised batch: one pass for SPC, the two-stage sampler at `t2`
-    /// for the flow model. `noisy` is T, `(n, 4, h, w)`; `x0` is X0, same
-    /// shape (ignored by SPC).
-    pub(crate) fn restore(&self, noisy: Tensor<B, 4>, x0: Tensor<B, 4>, t2: f32) -> Tensor<B, 4> {
+    /// How the network is told its input's noise level.
+    pub(crate) fn conditioning(&self) -> Conditioning {
         match self {
-            Net::Spc(n) => n.forward(noisy),
-            Net::Pgrf(n) => two_stage(n, noisy, x0, t2),
+            Net::Spc(n) => n.conditioning(),
+            Net::Pgrf(n) => n.conditioning(),
         }
     }
 
-    /// One restored tile `(1, 4, h, w)` from the condition `cond`: the
+    /// The denoised batch: one pass for SPC, the two-stage sampler at `t2`
+    /// for the flow model. `noisy` is T, `(n, 4, h, w)`, item i at noise
+    /// level `levels[i]` (unused, and may be empty, by an unconditioned
+    /// network); `x0` is X0, same shape (ignored by SPC).
+    pub(crate) fn restore(
+        &self,
+        noisy: Tensor<B, 4>,
+        levels: &[NoiseLevel],
+        x0: Tensor<B, 4>,
+        t2: f32,
+    ) -> Tensor<B, 4> {
+        let c = Conditioned::new(self.conditioning(), noisy, levels);
+        let y = match self {
+            Net::Spc(n) => n.forward(c.input.clone()),
+            Net::Pgrf(n) => two_stage(n, c.input.clone(), x0, t2),
+        };
+        c.input_units_of(y)
+    }
+
+    /// One restored tile `(1, 4, h, w)` from the condition `cond` at noise
+    /// level `level` (None only for an unconditioned network): the
     /// denoiser's one pass, or the mean of the flow model's `samples`
     /// samples with `sampler`, sample k starting from `x0(k)` (made one at a
     /// time, so only one start field is held).
     pub(crate) fn restore_tile(
         &self,
         cond: Tensor<B, 4>,
+        level: Option<NoiseLevel>,
         samples: usize,
         x0: impl Fn(usize) -> Tensor<B, 4>,
         sampler: Sampler,
     ) -> Tensor<B, 4> {
-        match self {
-            Net::Spc(n) => n.forward(cond),
+        let levels: Vec<NoiseLevel> = level.into_iter().collect();
+        let c = Conditioned::new(self.conditioning(), cond, &levels);
+        let y = match self {
+            Net::Spc(n) => n.forward(c.input.clone()),
             Net::Pgrf(n) => {
                 let mut acc: Option<Tensor<B, 4>> = None;
                 for k in 0..samples {
-                    let y = sampler.run(n, cond.clone(), x0(k));
+                    let y = sampler.run(n, c.input.clone(), x0(k));
                     acc = Some(match acc {
                         None => y,
                         Some(a) => a + y,
@@ -257,22 +285,161 @@ impl<B: PgrfOps> Net<B> {
                 }
                 acc.expect("samples >= 1") / samples as f32
             }
-        }
+        };
+        c.input_units_of(y)
     }
 
     /// The training loss of a batch: the denoiser's L1 ([`denoiser_loss`]),
     /// or the flow's ([`flow_loss`]) with the start X0 and times t, made only
-    /// when the network needs them.
+    /// when the network needs them. Item i is at noise level `levels[i]`
+    /// (unused by an unconditioned network). A k-sigma network's denoiser
+    /// loss is taken after its output is mapped back, and its flow loss in
+    /// the k-sigma domain divided by each item's scale: both in input units,
+    /// so that low-noise items (large scales) do not outweigh the rest.
     pub(crate) fn loss(
         &self,
         noisy: Tensor<B, 4>,
         clean: Tensor<B, 4>,
+        levels: &[NoiseLevel],
         x0: impl FnOnce() -> Tensor<B, 4>,
         t: impl FnOnce() -> Tensor<B, 1>,
     ) -> Tensor<B, 1> {
+        let kind = self.conditioning();
+        if kind == Conditioning::None {
+            return match self {
+                Net::Spc(n) => denoiser_loss(n, noisy, clean),
+                Net::Pgrf(n) => flow_loss(n, noisy, clean, x0(), t()),
+            };
+        }
+        let c = Conditioned::new(kind, noisy, levels);
         match self {
-            Net::Spc(n) => denoiser_loss(n, noisy, clean),
-            Net::Pgrf(n) => flow_loss(n, noisy, clean, x0(), t()),
+            Net::Spc(n) => crate::step::l1(c.input_units_of(n.forward(c.input.clone())), clean),
+            Net::Pgrf(n) => {
+                let x1 = c.domain_of(clean);
+                let (x0, t) = (x0(), t());
+                let xt = crate::flow::interpolate(x1.clone(), x0.clone(), t.clone());
+                let err = x1 - x0 - n.forward(xt, c.input.clone(), t);
+                match c.inverse_scale() {
+                    Some(s) => (err * s).abs().mean(),
+                    None => err.abs().mean(),
+                }
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::backend::Cpu;
+    use burn::tensor::{Distribution, TensorData};
+
+    fn config(conditioning: Conditioning) -> TrainConfig {
+        TrainConfig {
+            width: Some(4),
+            inner_channels: Some(8),
+            channel_mults: Some(vec![1, 2]),
+            res_blocks: Some(1),
+            attn_levels: Some(vec![]),
+            residual: true,
+            conditioning,
+            ..TrainConfig::default()
+        }
+    }
+
+    fn levels() -> Vec<NoiseLevel> {
+        vec![
+            NoiseLevel::from_dn(1.53, 3.2, 0.4, 15871.0, 100.0),
+            NoiseLevel::from_dn(0.2, 1.5, 0.2, 16383.0, 5.0),
+        ]
+    }
+
+    /// Every conditioning of both networks: the record names it, the first
+    /// layer reads its planes, the restored batch and the loss have the
+    /// plain shapes, and a fresh residual network restores its input
+    /// (the k-sigma map and its inverse cancel).
+    #[test]
+    fn conditioned_networks_take_their_planes_and_give_four() {
+        let device = Default::default();
+        let x = Tensor::<Cpu, 4>::random([2, 4, 16, 16], Distribution::Uniform(0.0, 1.0), &device);
+        let clean =
+            Tensor::<Cpu, 4>::random([2, 4, 16, 16], Distribution::Uniform(0.0, 1.0), &device);
+        for kind in [
+            Conditioning::None,
+            Conditioning::SigmaMap,
+            Conditioning::KSigma,
+        ] {
+            for method in [Method::Spc, Method::Pgrf] {
+                let arch = config(kind).architecture(method).unwrap();
+                assert_eq!(arch.conditioning(), kind);
+                let json = serde_json::to_value(&arch).unwrap();
+                assert_eq!(json["config"]["conditioning"], kind.name());
+                let base = if method == Method::Spc { 4 } else { 8 };
+                assert_eq!(
+                    json["config"]["in_channels"],
+                    base + kind.extra_channels(),
+                    "{kind:?} {method:?}"
+                );
+                let net = arch.init_seeded::<Cpu>(&device, 1).unwrap();
+                let x0 = Tensor::<Cpu, 4>::zeros([2, 4, 16, 16], &device);
+                let y = net.restore(x.clone(), &levels(), x0.clone(), 0.5);
+                assert_eq!(y.dims(), [2, 4, 16, 16]);
+                let d: f32 = (y - x.clone()).abs().max().into_scalar();
+                // A fresh residual field's two-stage sample is T exactly at
+                // both stages up to the flow's arithmetic.
+                assert!(
+                    d < 2e-4,
+                    "{kind:?} {method:?}: fresh residual net moved the input by {d}"
+                );
+                let t =
+                    Tensor::<Cpu, 1>::from_data(TensorData::new(vec![0.2f32, 0.7], [2]), &device);
+                let loss = net.loss(
+                    x.clone(),
+                    clean.clone(),
+                    &levels(),
+                    || x0.clone(),
+                    || t.clone(),
+                );
+                let v: f32 = loss.into_scalar();
+                assert!(v.is_finite() && v > 0.0, "{kind:?} {method:?}: loss {v}");
+            }
+        }
+    }
+
+    /// The denoiser's loss is taken in input units whatever the domain: a
+    /// fresh residual network's loss is |T - X1| for every conditioning.
+    #[test]
+    fn the_denoiser_loss_is_in_input_units_for_every_conditioning() {
+        let device = Default::default();
+        let x = Tensor::<Cpu, 4>::random([2, 4, 16, 16], Distribution::Uniform(0.0, 1.0), &device);
+        let clean =
+            Tensor::<Cpu, 4>::random([2, 4, 16, 16], Distribution::Uniform(0.0, 1.0), &device);
+        let want: f32 = (x.clone() - clean.clone()).abs().mean().into_scalar();
+        for kind in [
+            Conditioning::None,
+            Conditioning::SigmaMap,
+            Conditioning::KSigma,
+        ] {
+            let net = config(kind)
+                .architecture(Method::Spc)
+                .unwrap()
+                .init_seeded::<Cpu>(&device, 2)
+                .unwrap();
+            let zero = Tensor::<Cpu, 4>::zeros([2, 4, 16, 16], &device);
+            let t = Tensor::<Cpu, 1>::zeros([2], &device);
+            let got: f32 = net
+                .loss(
+                    x.clone(),
+                    clean.clone(),
+                    &levels(),
+                    || zero.clone(),
+                    || t.clone(),
+                )
+                .into_scalar();
+            assert!(
+                (got - want).abs() < 1e-4 * want,
+                "{kind:?}: {got} vs {want}"
+            );
         }
     }
 }

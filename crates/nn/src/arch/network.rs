@@ -4,6 +4,7 @@
 //! its own so that the network files and `arch/mod.rs` share it without
 //! importing each other.
 
+use crate::condition::Conditioning;
 use crate::config::Method;
 use crate::data::Extras;
 use crate::error::Result;
@@ -52,4 +53,7 @@ pub(crate) trait NetworkConfig {
     /// Whether the network adds a correction to its input (pgrf's
     /// residual parametrisation, not the papers').
     fn residual(&self) -> bool;
+
+    /// How the network is told its input's noise level.
+    fn conditioning(&self) -> Conditioning;
 }

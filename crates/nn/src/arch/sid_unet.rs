@@ -9,6 +9,7 @@
 //! back, so any packed image size works.
 
 use super::network::NetworkConfig;
+use crate::condition::Conditioning;
 use crate::config::{Method, TrainConfig};
 use crate::data::Extras;
 use crate::error::{NnError, Result as NnResult};
@@ -37,7 +38,8 @@ pub struct SidUnetConfig {
     /// `width * 2^k` channels, k = 0..4.
     #[config(default = 32)]
     pub width: usize,
-    /// Input planes: 4, the packed R, G1, B, G2 of the amplified noisy raw.
+    /// Input planes: 4, the packed R, G1, B, G2 of the amplified noisy raw,
+    /// plus the conditioning's planes (4 + `conditioning.extra_channels()`).
     #[config(default = 4)]
     pub in_channels: usize,
     /// Output planes: 4, the packed clean estimate (not clamped; inference
@@ -51,6 +53,10 @@ pub struct SidUnetConfig {
     /// for a few thousand steps on a CPU need.
     #[config(default = false)]
     pub residual: bool,
+    /// How the network is told its input's noise level
+    /// ([`crate::condition`]); absent in files written before it existed.
+    #[config(default = "Conditioning::None")]
+    pub conditioning: Conditioning,
 }
 
 #[derive(Module, Debug)]
@@ -105,6 +111,8 @@ pub struct SidUnet<B: Backend> {
     merge: Vec<DoubleConv<B>>,
     head: Conv2d<B>,
     residual: bool,
+    #[module(skip)]
+    conditioning: Conditioning,
 }
 
 impl SidUnetConfig {
@@ -147,16 +155,20 @@ impl SidUnetConfig {
                 Conv2dConfig::new([w, self.out_channels], [1, 1]).init(device)
             },
             residual: self.residual,
+            conditioning: self.conditioning,
         }
     }
 }
 
 impl<B: PgrfOps> SidUnet<B> {
-    /// `x`: `(batch, 4, H, W)` packed, normalised and amplified raw. Returns
-    /// the same shape.
+    /// `x`: `(batch, 4 + extra, H, W)` packed, normalised and amplified
+    /// raw, then the conditioning's planes ([`crate::condition`]). Returns
+    /// `(batch, 4, H, W)`; a residual network adds the first four planes.
     pub fn forward(&self, x: Tensor<B, 4>) -> Tensor<B, 4> {
-        let input = self.residual.then(|| x.clone());
         let [n, _, h, w] = x.dims();
+        let input = self
+            .residual
+            .then(|| x.clone().slice([0..n, 0..4, 0..h, 0..w]));
         let (ph, pw) = (pad_to(h), pad_to(w));
         let mode = if ph < h && pw < w {
             PadMode::Reflect
@@ -191,6 +203,11 @@ impl<B: PgrfOps> SidUnet<B> {
 }
 
 impl<B: Backend> SidUnet<B> {
+    /// How the network is told its input's noise level.
+    pub fn conditioning(&self) -> Conditioning {
+        self.conditioning
+    }
+
     /// The layers [`SidUnet::forward`] runs on a `(batch, 4, h, w)` input, in
     /// order, at the sizes they run at (after the padding to a multiple of
     /// 16), read from this network's modules; see [`crate::layers`]. Max
@@ -219,7 +236,10 @@ impl SidUnetConfig {
     /// The network `pgrf train spc` builds from `c`: SID's defaults, the
     /// width `c.width` when given (at least 1), residual as `c.residual`.
     pub(crate) fn from_train_config(c: &TrainConfig) -> NnResult<SidUnetConfig> {
-        let cfg = SidUnetConfig::new().with_residual(c.residual);
+        let cfg = SidUnetConfig::new()
+            .with_residual(c.residual)
+            .with_conditioning(c.conditioning)
+            .with_in_channels(4 + c.conditioning.extra_channels());
         let w = c.width.unwrap_or(cfg.width);
         if w == 0 {
             return Err(NnError::Config("--width must be at least 1".into()));
@@ -235,26 +255,26 @@ impl NetworkConfig for SidUnetConfig {
 
     fn describe(&self) -> String {
         format!(
-            "SPC denoiser (SID U-Net, width {}{})",
+            "SPC denoiser (SID U-Net, width {}{}{})",
             self.width,
-            if self.residual { ", residual" } else { "" }
+            if self.residual { ", residual" } else { "" },
+            conditioning_words(self.conditioning)
         )
     }
 
     fn check(&self) -> NnResult<()> {
-        if self.width == 0 || self.in_channels != 4 || self.out_channels != 4 {
+        let planes = 4 + self.conditioning.extra_channels();
+        if self.width == 0 || self.in_channels != planes || self.out_channels != 4 {
             return Err(NnError::Config(format!(
-                "the SID U-Net needs a width of at least 1 and 4 planes in and out (got width {}, {} in, {} out)",
-                self.width, self.in_channels, self.out_channels
-            )));
-        }
-        if self.residual && self.in_channels != self.out_channels {
-            return Err(NnError::Config(format!(
-                "a residual SID U-Net needs as many output channels as input ({} vs {})",
-                self.out_channels, self.in_channels
+                "the SID U-Net needs a width of at least 1, {planes} planes in ({}) and 4 out (got width {}, {} in, {} out)",
+                self.conditioning.describe(), self.width, self.in_channels, self.out_channels
             )));
         }
         Ok(())
+    }
+
+    fn conditioning(&self) -> Conditioning {
+        self.conditioning
     }
 
     /// Exact: every convolution's weights and biases, counted from the widths.
@@ -323,6 +343,15 @@ pub(crate) fn export_names(
         v.push((t, x));
     }
     Ok((v, "UNetSeeInDark's names (conv1_1 .. conv10_1)"))
+}
+
+/// ", sigma-map conditioned" and the like for descriptions; nothing for an
+/// unconditioned network (descriptions of older files stay as they were).
+pub(super) fn conditioning_words(c: Conditioning) -> String {
+    match c {
+        Conditioning::None => String::new(),
+        c => format!(", {} conditioned", c.name()),
+    }
 }
 
 /// Padding that brings `side` up to a multiple of 16.

@@ -10,6 +10,7 @@
 //! level 3 is the paper's 16 x 16 level.
 
 use super::network::NetworkConfig;
+use crate::condition::Conditioning;
 use crate::config::{Method, TrainConfig};
 use crate::data::Extras;
 use crate::error::{NnError, Result as NnResult};
@@ -38,8 +39,8 @@ const RESIDUAL_FLOOR: f32 = 0.1;
 /// [`Sr3Config::init`], which refuses configurations GroupNorm cannot run.
 #[derive(Config, Debug)]
 pub struct Sr3Config {
-    /// Input planes: the condition T (4 packed planes R, G1, B, G2) followed
-    /// by Xt (4), concatenated.
+    /// Input planes: the condition T (4 packed planes R, G1, B, G2, then
+    /// the conditioning's planes) followed by Xt (4), concatenated.
     #[config(default = 8)]
     pub in_channels: usize,
     /// Output planes: the velocity v(Xt, T, t), 4 packed planes.
@@ -78,6 +79,10 @@ pub struct Sr3Config {
     /// model trained for an hour on two CPU cores beat its noisy input.
     #[config(default = false)]
     pub residual: bool,
+    /// How the network is told its input's noise level
+    /// ([`crate::condition`]); absent in files written before it existed.
+    #[config(default = "Conditioning::None")]
+    pub conditioning: Conditioning,
 }
 
 impl Sr3Config {
@@ -89,10 +94,13 @@ impl Sr3Config {
                 "SR3 needs at least one level, one residual block and some channels".into(),
             );
         }
-        if self.in_channels != 8 || self.out_channels != 4 {
+        let planes = 8 + self.conditioning.extra_channels();
+        if self.in_channels != planes || self.out_channels != 4 {
             return Err(format!(
-                "pgrf's flow network takes 8 planes (T and Xt, packed) and gives 4, not {} and {}",
-                self.in_channels, self.out_channels
+                "pgrf's flow network takes {planes} planes (T and Xt, packed; {}) and gives 4, not {} and {}",
+                self.conditioning.describe(),
+                self.in_channels,
+                self.out_channels
             ));
         }
         if !self.inner_channels.is_multiple_of(2) {
@@ -219,6 +227,7 @@ impl Sr3Config {
             inner,
             levels,
             res_blocks: self.res_blocks,
+            conditioning: self.conditioning,
         })
     }
 }
@@ -250,7 +259,9 @@ impl Sr3Config {
             .with_attn_levels(attn)
             .with_norm_groups(groups)
             .with_dropout(c.dropout.unwrap_or(d.dropout))
-            .with_residual(c.residual);
+            .with_residual(c.residual)
+            .with_conditioning(c.conditioning)
+            .with_in_channels(8 + c.conditioning.extra_channels());
         cfg.validate()
             .map_err(|e| NnError::Config(format!("flow network: {e}")))?;
         Ok(cfg)
@@ -273,10 +284,11 @@ impl NetworkConfig for Sr3Config {
 
     fn describe(&self) -> String {
         format!(
-            "PGRF flow model (SR3, {} channels x {:?}{})",
+            "PGRF flow model (SR3, {} channels x {:?}{}{})",
             self.inner_channels,
             self.channel_mults,
-            if self.residual { ", residual" } else { "" }
+            if self.residual { ", residual" } else { "" },
+            super::sid_unet::conditioning_words(self.conditioning)
         )
     }
 
@@ -352,6 +364,10 @@ impl NetworkConfig for Sr3Config {
 
     fn residual(&self) -> bool {
         self.residual
+    }
+
+    fn conditioning(&self) -> Conditioning {
+        self.conditioning
     }
 }
 
@@ -528,6 +544,8 @@ pub struct Sr3Unet<B: Backend> {
     inner: usize,
     levels: usize,
     res_blocks: usize,
+    #[module(skip)]
+    conditioning: Conditioning,
 }
 
 /// Sinusoidal embedding of t (one value per batch item) into `dim` features:
@@ -546,14 +564,16 @@ fn time_embedding<B: Backend>(t: Tensor<B, 1>, dim: usize) -> Tensor<B, 2> {
 }
 
 impl<B: PgrfOps> Sr3Unet<B> {
-    /// v(Xt, T, t): `xt` and `cond` are `(batch, 4, H, W)`, `t` is `(batch)`.
+    /// v(Xt, T, t): `xt` is `(batch, 4, H, W)`, `cond` is `(batch, 4 +
+    /// extra, H, W)` (T, then the conditioning's planes), `t` is `(batch)`.
     /// Returns `(batch, 4, H, W)`; sides that are not multiples of
     /// 2^(levels-1) are padded by reflection (zeros if too small) and cropped back.
     pub fn forward(&self, xt: Tensor<B, 4>, cond: Tensor<B, 4>, t: Tensor<B, 1>) -> Tensor<B, 4> {
         let [n, _, h, w] = xt.dims();
         let skip = self.residual.then(|| {
             let scale = t.clone().neg().add_scalar(1.0).clamp_min(RESIDUAL_FLOOR);
-            (cond.clone() - xt.clone(), scale.reshape([n, 1, 1, 1]))
+            let planes = cond.clone().slice([0..n, 0..4, 0..h, 0..w]);
+            (planes - xt.clone(), scale.reshape([n, 1, 1, 1]))
         });
         let m = 1 << (self.levels - 1);
         let (ph, pw) = ((m - h % m) % m, (m - w % m) % m);
@@ -619,6 +639,11 @@ impl<B: PgrfOps> Sr3Unet<B> {
 }
 
 impl<B: Backend> Sr3Unet<B> {
+    /// How the network is told its input's noise level.
+    pub fn conditioning(&self) -> Conditioning {
+        self.conditioning
+    }
+
     /// The layers [`Sr3Unet::forward`] runs on `(batch, 4, h, w)` inputs, in
     /// order, at the sizes they run at (after the padding to a multiple of
     /// 2^(levels-1)), read from this network's modules; see

@@ -11,6 +11,7 @@
 //! orientation, and a transposed pair would teach the network column noise
 //! that no camera makes.
 
+use crate::condition::NoiseLevel;
 use crate::data::augment::Augment;
 use crate::data::source::Source;
 use crate::error::{NnError, Result};
@@ -48,6 +49,8 @@ pub(crate) struct Batch {
     pub(crate) t: Vec<f32>,
     /// Exposure ratio of each item.
     pub(crate) ratios: Vec<f32>,
+    /// Noise level of each item's input (what a conditioned network is told).
+    pub(crate) levels: Vec<NoiseLevel>,
 }
 
 /// How samples are drawn.
@@ -83,6 +86,9 @@ pub(crate) struct Sample {
     pub(crate) t: f32,
     /// The exposure ratio the pair was synthesised at.
     pub(crate) ratio: f32,
+    /// The noise level of `noisy`, from the parameters the pair was drawn
+    /// with.
+    pub(crate) level: NoiseLevel,
 }
 
 /// Sample `index` of the run: one (noisy, clean[, x0, t]) item.
@@ -138,12 +144,20 @@ pub(crate) fn make_sample(
             crate::flow::draw::training_start_and_time(&mut rng, noisy.len(), t_max)
         }
     };
+    let level = NoiseLevel::from_dn(
+        pair.params.k,
+        pair.params.sigma_gauss,
+        pair.params.sigma_row,
+        local.dn_range(),
+        pair.ratio as f64,
+    );
     Ok(Sample {
         noisy,
         clean,
         x0,
         t,
         ratio: pair.ratio,
+        level,
     })
 }
 
@@ -161,6 +175,7 @@ pub(crate) fn make_batch(
         x0: Vec::new(),
         t: Vec::new(),
         ratios: Vec::new(),
+        levels: Vec::new(),
     };
     for i in 0..n as u64 {
         let item = make_sample(source, mix, s, b * n as u64 + i)?;
@@ -171,6 +186,7 @@ pub(crate) fn make_batch(
             batch.t.push(item.t);
         }
         batch.ratios.push(item.ratio);
+        batch.levels.push(item.level);
     }
     Ok(batch)
 }

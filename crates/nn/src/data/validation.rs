@@ -2,6 +2,7 @@
 //! training stream, so the PSNR printed every N steps is measured on the
 //! same images throughout the run (and after a resume).
 
+use crate::condition::NoiseLevel;
 use crate::data::loader::{make_sample, Extras, SampleSpec};
 use crate::data::source::Source;
 use crate::error::Result;
@@ -24,6 +25,8 @@ pub struct ValPair {
     pub x0: Vec<f32>,
     /// The exposure ratio the pair was synthesised at.
     pub ratio: f32,
+    /// The noise level of `noisy` (what a conditioned network is told).
+    pub level: NoiseLevel,
 }
 
 /// The held-out pairs a run (or the sampling search) is scored on, all of
@@ -61,6 +64,7 @@ impl ValSet {
                     clean: item.clean,
                     x0: item.x0,
                     ratio: item.ratio,
+                    level: item.level,
                 })
             })
             .collect::<Result<Vec<_>>>()?;

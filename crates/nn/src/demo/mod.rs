@@ -234,6 +234,7 @@ impl Bench<'_> {
                 &dark,
                 ratio as f32,
                 Some(&dark_dn),
+                None,
                 &self.tiling,
                 &NoProgress,
             )?;

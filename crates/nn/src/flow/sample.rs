@@ -26,6 +26,7 @@
 
 use super::path::interpolate;
 use crate::arch::sr3::Sr3Unet;
+use crate::condition::Conditioning;
 use crate::ops::PgrfOps;
 use burn::tensor::Tensor;
 
@@ -35,11 +36,21 @@ use burn::tensor::Tensor;
 pub trait Velocity<B: PgrfOps> {
     /// v(X, T, t) for a batch: `x` and `cond` `(n, c, h, w)`, `t` `(n)`.
     fn velocity(&self, x: Tensor<B, 4>, cond: Tensor<B, 4>, t: Tensor<B, 1>) -> Tensor<B, 4>;
+
+    /// How the field is told its condition's noise level (the condition
+    /// the samplers pass is the conditioned one, [`crate::condition`]).
+    fn conditioning(&self) -> Conditioning {
+        Conditioning::None
+    }
 }
 
 impl<B: PgrfOps> Velocity<B> for Sr3Unet<B> {
     fn velocity(&self, x: Tensor<B, 4>, cond: Tensor<B, 4>, t: Tensor<B, 1>) -> Tensor<B, 4> {
         self.forward(x, cond, t)
+    }
+
+    fn conditioning(&self) -> Conditioning {
+        Sr3Unet::conditioning(self)
     }
 }
 

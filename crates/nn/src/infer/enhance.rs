@@ -8,10 +8,12 @@
 use super::prepare::ratio_from_exposure;
 use super::restorer::describe_sampler;
 use super::{restore_frame, Restore, Tiling};
+use crate::condition::NoiseLevel;
 use crate::error::NnError;
 use pgrf_calib::light::LightError;
 use pgrf_calib::{CalibError, Calibration};
 use pgrf_core::Progress;
+use pgrf_noise::lookup::{find_noise, range_of, FrameNoise, KnownNoise, NoiseFlag};
 use pgrf_raw::{render_preview, write_dng, DngOptions, PreviewOptions, RawError, RawFrame};
 use serde::Serialize;
 use std::path::{Path, PathBuf};
@@ -58,6 +60,10 @@ pub enum EnhanceError {
     /// The ratio from the exposure, or the restoration.
     #[error(transparent)]
     Network(#[from] NnError),
+    /// The frame's noise parameters could not be found (a noise-aware
+    /// model needs them).
+    #[error("noise parameters: {0}")]
+    Noise(pgrf_noise::NoiseError),
     /// The DNG or the preview could not be made or written.
     #[error(transparent)]
     Write(#[from] RawError),
@@ -96,6 +102,8 @@ pub struct EnhanceConfig {
     pub force: bool,
     /// Tiles, start-noise seed and device.
     pub tiling: Tiling,
+    /// The user's noise parameters (`--noise`), for a noise-aware model.
+    pub noise: Option<NoiseFlag>,
 }
 
 /// Where one input's results go.
@@ -138,6 +146,10 @@ pub struct FileReport {
     pub seconds: f64,
     /// The process's peak resident memory so far.
     pub peak_rss_mib: Option<f64>,
+    /// The noise parameters a noise-aware model was told, and their
+    /// source (None for a model that is not told).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub noise: Option<String>,
 }
 
 impl FileReport {
@@ -151,8 +163,11 @@ impl FileReport {
             0 => String::new(),
             n => format!(", {n} defective pixels corrected from their neighbours"),
         };
+        let noise = (self.noise.as_ref())
+            .map(|n| format!("; noise {n}"))
+            .unwrap_or_default();
         format!(
-            "wrote {}{png}: {}x{}, ratio {:.1}, {} tile{plural} of {}, {:.1} s{defects}",
+            "wrote {}{png}: {}x{}, ratio {:.1}, {} tile{plural} of {}, {:.1} s{defects}{noise}",
             self.output, self.width, self.height, self.ratio, self.tiles, self.tile, self.seconds,
         )
     }
@@ -215,12 +230,20 @@ pub fn enhance_file<P: Progress>(
         })?;
     let ratio = ratio_of(&frame, cfg.ratio)?;
     let (dark, defects_corrected) = calibrate(cfg, &mut frame)?;
+    let noise = match restorer.meta().arch.conditioning().needs_level() {
+        true => Some(frame_noise(cfg, &frame)?),
+        false => None,
+    };
+    let level = noise
+        .as_ref()
+        .map(|n| NoiseLevel::from_dn(n.k, n.read, n.row, range_of(&frame), ratio as f64));
     let progress = start();
     let mut restored = restore_frame(
         restorer,
         &frame,
         ratio,
         dark.as_ref(),
+        level,
         &cfg.tiling,
         &progress,
     )?;
@@ -246,5 +269,20 @@ pub fn enhance_file<P: Progress>(
         defects_corrected,
         seconds: t0.elapsed().as_secs_f64(),
         peak_rss_mib: pgrf_core::mem::peak_rss_mib(),
+        noise: noise.map(|n| n.to_string()),
     })
+}
+
+/// The frame's noise parameters for a noise-aware model: the calibration's,
+/// the user's, or what [`find_noise`] finds for the file.
+fn frame_noise(cfg: &EnhanceConfig, frame: &RawFrame) -> Result<FrameNoise, EnhanceError> {
+    let calibration = cfg.calib.as_ref().map(|c| {
+        let m = &c.calibration.meta;
+        (c.path.clone(), m.k, m.read_sigma_median, m.row_sigma)
+    });
+    let known = KnownNoise {
+        calibration,
+        flag: cfg.noise,
+    };
+    find_noise(frame, &known).map_err(EnhanceError::Noise)
 }

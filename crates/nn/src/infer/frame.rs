@@ -11,6 +11,7 @@ use super::prepare::network_input;
 use super::restorer::Restore;
 use super::tiles::TilePlan;
 use crate::backend::DeviceKind;
+use crate::condition::NoiseLevel;
 use crate::error::{NnError, Result};
 use ndarray::{Array3, ArrayView3};
 use pgrf_core::Progress;
@@ -44,6 +45,7 @@ impl Tiling {
                 overlap_for(round_tile(tile, ph.max(pw), r.side_multiple().max(1)))
             }),
             seed: self.seed,
+            noise: None,
         }
     }
 }
@@ -65,17 +67,22 @@ impl RestoredPacked {
 
 /// Restore a packed, amplified network input `(4, h, w)` in [0, 1] (as
 /// [`crate::infer::prepare::network_input`] makes it) with `r`, tiled as
-/// `tiling` says. `progress` hears one `start(tiles, "tiles")` and one
-/// `advance` per tile.
+/// `tiling` says; `noise` is the input's noise level (needed by a
+/// conditioned network). `progress` hears one `start(tiles, "tiles")` and
+/// one `advance` per tile.
 pub fn restore_packed(
     r: &dyn Restore,
     input: ArrayView3<f32>,
+    noise: Option<NoiseLevel>,
     tiling: &Tiling,
     progress: &dyn Progress,
 ) -> Result<RestoredPacked> {
     let (_, ph, pw) = input.dim();
     check_tiling_args(tiling.tile, tiling.overlap)?;
-    let opts = tiling.options(r, ph, pw);
+    let opts = ImageOptions {
+        noise,
+        ..tiling.options(r, ph, pw)
+    };
     let plan = plan_for(ph, pw, &opts, r.side_multiple())?;
     if tiling.tile.is_some() && tiling.device == DeviceKind::Cpu {
         // A tile the user chose is checked against the memory there is
@@ -109,17 +116,20 @@ pub struct RestoredFrame {
 /// Restore a dark capture `frame` brightened by `ratio` (the exposure
 /// ratio, positive), after subtracting `dark_dn` (a calibration's dark
 /// shading in DN above black, packed like the frame), with `r`, tiled as
-/// `tiling` says. `progress` hears the tiles as in [`restore_packed`].
+/// `tiling` says; `noise` is the brightened input's noise level (needed by
+/// a conditioned network). `progress` hears the tiles as in
+/// [`restore_packed`].
 pub fn restore_frame(
     r: &dyn Restore,
     frame: &RawFrame,
     ratio: f32,
     dark_dn: Option<&Array3<f32>>,
+    noise: Option<NoiseLevel>,
     tiling: &Tiling,
     progress: &dyn Progress,
 ) -> Result<RestoredFrame> {
     let input = network_input(frame, ratio, dark_dn)?;
-    let packed = restore_packed(r, input.view(), tiling, progress)?;
+    let packed = restore_packed(r, input.view(), noise, tiling, progress)?;
     let frame = unpack_normalized(packed.output.view(), frame)?;
     Ok(RestoredFrame {
         input,

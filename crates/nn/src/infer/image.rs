@@ -4,6 +4,7 @@
 use super::restorer::Restore;
 use super::start::start_noise;
 use super::tiles::{run_tiled, AxisPlan, TilePlan};
+use crate::condition::NoiseLevel;
 use crate::error::{NnError, Result};
 use ndarray::{Array3, ArrayView3};
 use pgrf_core::Progress;
@@ -17,6 +18,9 @@ pub struct ImageOptions {
     pub overlap: usize,
     /// Seed of the flow's X0 (sample k uses stream k).
     pub seed: u64,
+    /// The input's noise level, for a conditioned network (pixelwise, so
+    /// the same for every tile).
+    pub noise: Option<NoiseLevel>,
 }
 
 /// Default overlap: 64 packed pixels; a quarter of it on each side is
@@ -97,7 +101,7 @@ pub fn restore_image(
     let mut inputs = vec![input];
     inputs.extend(x0s.iter().map(|a| a.view()));
     let mut out = run_tiled(&inputs, c, &plan, |_, views| {
-        let y = r.restore(views[0], &views[1..])?;
+        let y = r.restore(views[0], &views[1..], opts.noise)?;
         progress.advance(1);
         Ok(y)
     })?;
@@ -177,6 +181,7 @@ mod tests {
             tile: 300,
             overlap: 64,
             seed: 0,
+            noise: None,
         };
         // 300 -> 288; 1424 rows need 7 tiles of 288 (stride 224), which
         // tiles of 272 also cover; 2128 columns need 10, also of 272.
@@ -215,6 +220,7 @@ mod tests {
                 tile,
                 overlap: o,
                 seed: 0,
+                noise: None,
             };
             let p = plan_for(1000, 800, &opts, 16);
             assert!(p.is_ok(), "tile {tile}, overlap {o}: {:?}", p.err());
@@ -224,6 +230,7 @@ mod tests {
                 tile,
                 overlap: overlap_for(round_tile(tile, 1000, 16)),
                 seed: 0,
+                noise: None,
             };
             let e = plan_for(1000, 800, &opts, 16).unwrap_err().to_string();
             assert!(
@@ -236,6 +243,7 @@ mod tests {
             tile: 100,
             overlap: 56,
             seed: 0,
+            noise: None,
         };
         let e = plan_for(1000, 800, &opts, 16).unwrap_err().to_string();
         assert!(

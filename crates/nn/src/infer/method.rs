@@ -31,8 +31,14 @@ impl MethodUnderTest for NetworkMethod {
     }
 
     fn restore(&self, input: ArrayView3<f32>, _case: &CaseInfo<'_>) -> Result<Array3<f32>, String> {
-        restore_packed(self.restorer.as_ref(), input, &self.tiling, &NoProgress)
-            .map(|o| o.output)
-            .map_err(|e| e.to_string())
+        restore_packed(
+            self.restorer.as_ref(),
+            input,
+            None,
+            &self.tiling,
+            &NoProgress,
+        )
+        .map(|o| o.output)
+        .map_err(|e| e.to_string())
     }
 }

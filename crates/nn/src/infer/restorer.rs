@@ -5,6 +5,7 @@
 
 use crate::arch::Net;
 use crate::backend::{on_device, DeviceKind, OnBackend};
+use crate::condition::NoiseLevel;
 use crate::error::{NnError, Result};
 use crate::flow::sample::{Sampler, SamplerKind};
 use crate::ops::PgrfOps;
@@ -53,8 +54,15 @@ pub trait Restore {
     /// The restored tile, `(4, h, w)` like `input` and not clamped, from
     /// `input` (T, packed, amplified, in [0, 1]) and one X0 per sample
     /// (none for the denoiser), each of `input`'s shape; the flow model's
-    /// samples are averaged.
-    fn restore(&self, input: ArrayView3<f32>, x0s: &[ArrayView3<f32>]) -> Result<Array3<f32>>;
+    /// samples are averaged. `level` is the input's noise level, which a
+    /// conditioned network needs ([`crate::condition`]) and an
+    /// unconditioned one ignores.
+    fn restore(
+        &self,
+        input: ArrayView3<f32>,
+        x0s: &[ArrayView3<f32>],
+        level: Option<NoiseLevel>,
+    ) -> Result<Array3<f32>>;
 
     /// Bytes the network's parameters occupy.
     fn weight_bytes(&self) -> u64;
@@ -180,8 +188,30 @@ impl<B: PgrfOps> Restore for Restorer<B> {
         self.meta.arch.side_multiple()
     }
 
-    fn restore(&self, input: ArrayView3<f32>, x0s: &[ArrayView3<f32>]) -> Result<Array3<f32>> {
+    fn restore(
+        &self,
+        input: ArrayView3<f32>,
+        x0s: &[ArrayView3<f32>],
+        level: Option<NoiseLevel>,
+    ) -> Result<Array3<f32>> {
         let (c, h, w) = input.dim();
+        let conditioning = self.meta.arch.conditioning();
+        if conditioning.needs_level() {
+            match level {
+                Some(l) if l.is_usable() => {}
+                Some(l) => {
+                    return Err(NnError::BadNoiseLevel {
+                        gain: l.gain,
+                        floor: l.floor,
+                    })
+                }
+                None => {
+                    return Err(NnError::NoNoiseLevel {
+                        conditioning: conditioning.name(),
+                    })
+                }
+            }
+        }
         if c != 4 {
             return Err(NnError::SizeMismatch(format!(
                 "the networks take 4 packed planes, got {c}"
@@ -202,9 +232,13 @@ impl<B: PgrfOps> Restore for Restorer<B> {
                 }
             }
         }
-        let out = self
-            .net
-            .restore_tile(cond, x0s.len(), |k| self.tensor(x0s[k]), self.sampler);
+        let out = self.net.restore_tile(
+            cond,
+            level,
+            x0s.len(),
+            |k| self.tensor(x0s[k]),
+            self.sampler,
+        );
         let v: Vec<f32> = out
             .into_data()
             .to_vec()

@@ -20,6 +20,7 @@
 
 use super::sample::{first_stage, second_stage, two_stage, Velocity};
 use crate::backend::{on_device, DeviceKind, OnBackend};
+use crate::condition::Conditioned;
 use crate::data::build::validation_source;
 use crate::data::source::Source;
 use crate::data::validation::ValSet;
@@ -427,14 +428,15 @@ pub(crate) fn search_with<B: PgrfOps>(
             *acc.1 += s.ssim / count as f64;
             Ok(())
         };
-        let cond = tensor(&pair.noisy)?;
+        let c = Conditioned::new(net.conditioning(), tensor(&pair.noisy)?, &[pair.level]);
+        let cond = c.input.clone();
         let x0 = tensor(&pair.x0)?;
         let xz = first_stage(net, cond.clone(), x0.clone());
-        score(xz.clone(), (&mut one.0, &mut one.1))?;
+        score(c.input_units_of(xz.clone()), (&mut one.0, &mut one.1))?;
         progress.advance(1);
         for (k, &t) in times.iter().enumerate() {
             let xm = second_stage(net, cond.clone(), x0.clone(), xz.clone(), t as f32);
-            score(xm, (&mut psnr[k], &mut ssim[k]))?;
+            score(c.input_units_of(xm), (&mut psnr[k], &mut ssim[k]))?;
             progress.advance(1);
         }
     }
@@ -487,7 +489,9 @@ fn average<B: PgrfOps>(
     let mut out: Vec<(usize, f64, f64)> = report.iter().map(|&k| (k, 0.0, 0.0)).collect();
     for (i, pair) in list.iter().enumerate() {
         let clean = view(&pair.clean, patch)?;
-        let cond = to_tensor::<B>(&pair.noisy, patch, device)?;
+        let noisy = to_tensor::<B>(&pair.noisy, patch, device)?;
+        let c = Conditioned::new(net.conditioning(), noisy, &[pair.level]);
+        let cond = c.input.clone();
         let mut sum: Option<Tensor<B, 4>> = None;
         for k in 1..=k_max.max(1) {
             let x0 = if k == 1 {
@@ -502,7 +506,7 @@ fn average<B: PgrfOps>(
                 );
                 to_tensor::<B>(field.as_slice().expect("standard layout"), patch, device)?
             };
-            let y = two_stage(net, cond.clone(), x0, t2 as f32);
+            let y = c.input_units_of(two_stage(net, cond.clone(), x0, t2 as f32));
             sum = Some(match sum {
                 None => y,
                 Some(s) => s + y,

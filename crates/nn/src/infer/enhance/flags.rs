@@ -10,6 +10,7 @@ use crate::flow::sample::SamplerKind;
 use crate::infer::restorer::UNSEARCHED_T2;
 use crate::infer::{check_tiling_args, Restore, SamplerChoice, Tiling};
 use pgrf_calib::Calibration;
+use pgrf_noise::lookup::NoiseFlag;
 use std::path::PathBuf;
 
 /// `pgrf enhance`'s flags (the input-opening options are the caller's).
@@ -65,6 +66,9 @@ pub struct EnhanceFlags {
     /// Flow model: average this many samples from different start noise.
     #[arg(long, default_value_t = 1)]
     pub samples: usize,
+    /// Noise parameters of the inputs for a noise-aware model, K=GAIN,read=SIGMA[,row=SIGMA] in DN per electron and DN on the files' scale [default: from --calib, else the file's DNG NoiseProfile, darktable's or a built-in profile of its camera at its ISO, else estimated from the frame].
+    #[arg(long, value_name = "K=..,read=..")]
+    pub noise: Option<NoiseFlag>,
     /// Seed of the flow model's start noise.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
@@ -133,6 +137,7 @@ impl EnhanceFlags {
             ratio,
             calib,
             force: self.force,
+            noise: self.noise,
             tiling: Tiling {
                 tile: self.tile,
                 overlap: self.overlap,
