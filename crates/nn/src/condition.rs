@@ -5,7 +5,7 @@
 //!
 //! The noise of an amplified, normalised input x (the network's input: a
 //! capture divided by its white - black, times the exposure ratio r) is
-//! signal-dependent: Var(x) = gain * E[x] + floor, with gain = r K / range
+//! signal-dependent: Var(x) = gain * E\[x\] + floor, with gain = r K / range
 //! (K in DN per electron) and floor = r^2 (sigma_read^2 + sigma_row^2) /
 //! range^2 ([`NoiseLevel`]). Two ways of giving it to a network
 //! ([`Conditioning`]):
@@ -16,7 +16,7 @@
 //! - **k-sigma** (Wang et al., "Practical Deep Raw Image Denoising on Mobile
 //!   Devices", ECCV 2020): the input mapped by x' = x g/gain + g floor/gain^2
 //!   (g = [`KSIGMA_REF_GAIN`]), in which the noise is Poisson-like with the
-//!   fixed gain g whatever the camera, ISO or ratio (Var(x') = g E[x']); the
+//!   fixed gain g whatever the camera, ISO or ratio (Var(x') = g E\[x'\]); the
 //!   network works in that domain and its output is mapped back.
 //!
 //! Both are per-pixel, so a conditioned network stays independent of how a
@@ -37,7 +37,7 @@ pub const KSIGMA_REF_GAIN: f32 = 0.01;
 const MIN_GAIN: f32 = 1e-8;
 
 /// The noise of an amplified, normalised network input: Var(x) = gain *
-/// E[x] + floor, in the input's units.
+/// E\[x\] + floor, in the input's units.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct NoiseLevel {
     /// Signal-dependent part: the variance per unit of signal (r K / range).
