@@ -479,3 +479,56 @@ fn standing_real_set_one_condition() {
     assert!(d.join("real_worst.png").is_file());
     std::fs::remove_dir_all(&d).unwrap();
 }
+
+/// A noise-aware model (two training steps, `--conditioning sigma-map`) is
+/// evaluated like any other: the simulated camera counts as calibrated, so
+/// the model is told each capture's true noise, and its column is measured
+/// at every condition.
+#[test]
+fn a_noise_aware_model_is_told_each_captures_noise() {
+    let (d, chart) = setup("noise-aware");
+    let model = d.join("aware.safetensors");
+    succeed(&[
+        "train",
+        "spc",
+        "--data",
+        "procedural",
+        "--steps",
+        "2",
+        "--batch",
+        "1",
+        "--patch",
+        "32",
+        "--width",
+        "4",
+        "--residual",
+        "--conditioning",
+        "sigma-map",
+        "-o",
+        s(&model),
+    ]);
+    let csv = d.join("e.csv");
+    succeed(&[
+        "eval",
+        "--protocol",
+        "synthetic",
+        "--root",
+        s(&chart),
+        "-m",
+        s(&model),
+        "--iso",
+        "1600,6400",
+        "--ratio",
+        "50",
+        "--csv",
+        s(&csv),
+        "--quiet",
+    ]);
+    let rows = lines(&std::fs::read_to_string(&csv).unwrap());
+    let measured: Vec<&Line> = rows.iter().filter(|l| l.method == "aware").collect();
+    assert_eq!(measured.len(), 2, "{rows:?}");
+    assert!(
+        measured.iter().all(|l| l.psnr.is_finite() && l.psnr > 10.0),
+        "{measured:?}"
+    );
+}

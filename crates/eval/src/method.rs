@@ -15,6 +15,26 @@ pub struct CaseInfo<'a> {
     pub key: &'a str,
     /// The exposure ratio the input was amplified by.
     pub ratio: f32,
+    /// The noise of the capture before amplification, as a noise-aware
+    /// method is told it: the synthetic protocol's simulated camera is
+    /// calibrated (its true parameters); a file's are what
+    /// `pgrf_noise::lookup::find_noise` finds for it.
+    pub noise: Option<&'a CaseNoise>,
+}
+
+/// A case's noise in DN on its files' scale, and where it came from.
+#[derive(Clone, Debug, PartialEq)]
+pub struct CaseNoise {
+    /// K, DN per electron.
+    pub k: f64,
+    /// Read noise, DN.
+    pub read: f64,
+    /// Row noise, DN.
+    pub row: f64,
+    /// white - black, DN: the scale of the three.
+    pub range: f64,
+    /// Where the numbers came from, in words.
+    pub source: String,
 }
 
 /// A method under evaluation: one column of the table.

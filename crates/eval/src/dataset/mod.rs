@@ -25,7 +25,9 @@ pub mod sid;
 pub mod synthetic;
 pub mod table;
 
+use crate::method::CaseNoise;
 use ndarray::{s, Array3, ArrayView3};
+use pgrf_noise::lookup::{find_noise, range_of, KnownNoise};
 use pgrf_raw::{decode_file, pack_normalized, LevelOverrides, RawFrame};
 use std::fmt;
 use std::path::{Path, PathBuf};
@@ -148,6 +150,8 @@ pub(crate) struct LoadedPair {
     /// Packed reference clamped to [0, 1].
     pub(crate) reference: Array3<f32>,
     pub(crate) ratio: f32,
+    /// The capture's noise as a noise-aware method is told it.
+    pub(crate) noise: Option<CaseNoise>,
 }
 
 /// (ISO x exposure) of a frame, for ELD's ratio.
@@ -197,11 +201,23 @@ pub(crate) fn load_pair(s: &Sample, levels: &LevelOverrides) -> Result<LoadedPai
     let mut input = pack_normalized(&n, false).map_err(|e| DatasetError(e.to_string()))?;
     input.mapv_inplace(|v| (v * ratio).clamp(0.0, 1.0));
     let reference = pack_normalized(&r, true).map_err(|e| DatasetError(e.to_string()))?;
+    // What the lookup finds for the noisy file (None where nothing can be
+    // found: only a noise-aware method needs it, and says so).
+    let noise = find_noise(&n, &KnownNoise::default())
+        .ok()
+        .map(|f| CaseNoise {
+            k: f.k,
+            read: f.read,
+            row: f.row,
+            range: range_of(&n),
+            source: f.source.to_string(),
+        });
     Ok(LoadedPair {
         reference_frame: r,
         input,
         reference,
         ratio,
+        noise,
     })
 }
 

@@ -216,6 +216,7 @@ pub(crate) fn run_cases(
         let info = CaseInfo {
             key: &case.key,
             ratio: pair.ratio,
+            noise: pair.noise.as_ref(),
         };
         for m in methods {
             let name = m.name();

@@ -38,6 +38,7 @@
 use super::run::{case_key, run_cases, Case, Outcome, RunOptions, Synthesis};
 use super::table::Row;
 use super::{err, DatasetError, DatasetKind, LoadedPair, Result};
+use crate::method::CaseNoise;
 use crate::method::MethodUnderTest;
 use ndarray::{Array3, ArrayView3};
 use pgrf_core::seed::mix64;
@@ -309,6 +310,22 @@ impl Synthetic {
         params.bias.map(|b| b * scale)
     }
 
+    /// What a noise-aware method is told of a capture drawn with `params`:
+    /// the simulated camera counts as calibrated, so its true parameters.
+    fn case_noise(&self, params: &pgrf_noise::CaptureParams) -> CaseNoise {
+        let read = match self.kind {
+            ModelKind::Eld => params.sigma_tukey,
+            _ => params.sigma_gauss,
+        };
+        CaseNoise {
+            k: params.k,
+            read,
+            row: params.sigma_row,
+            range: self.specs[0].dn_range(),
+            source: "the simulated camera's calibration".into(),
+        }
+    }
+
     /// The whole synthesised pair behind [`Synthetic::capture`], and its seed.
     fn synthesize(
         &self,
@@ -419,6 +436,7 @@ pub fn run(
         let plane_rows = frame.cfa.offsets().map(|(r, _)| r);
         let (pair, seed) = synth.synthesize(clean.view(), plane_rows, &img.id, ci)?;
         let input = synth.calibrated_input(&pair);
+        let noise = synth.case_noise(&pair.params);
         let synthesis = opts.dump.is_some().then(|| Synthesis {
             noise: synth.noise_record(&pair.params, c.ratio),
             capture: pair.noisy,
@@ -429,6 +447,7 @@ pub fn run(
                 input,
                 reference: clean.clone(),
                 ratio: c.ratio,
+                noise: Some(noise),
             },
             row: Row {
                 protocol: DatasetKind::Synthetic.name().into(),

@@ -3,6 +3,7 @@
 //! tile by tile as `pgrf enhance` restores a frame.
 
 use super::{restore_packed, Restore, Tiling};
+use crate::condition::NoiseLevel;
 use ndarray::{Array3, ArrayView3};
 use pgrf_core::NoProgress;
 use pgrf_eval::{CaseInfo, MethodUnderTest};
@@ -30,11 +31,13 @@ impl MethodUnderTest for NetworkMethod {
         &self.name
     }
 
-    fn restore(&self, input: ArrayView3<f32>, _case: &CaseInfo<'_>) -> Result<Array3<f32>, String> {
+    fn restore(&self, input: ArrayView3<f32>, case: &CaseInfo<'_>) -> Result<Array3<f32>, String> {
+        let level = (case.noise)
+            .map(|n| NoiseLevel::from_dn(n.k, n.read, n.row, n.range, case.ratio as f64));
         restore_packed(
             self.restorer.as_ref(),
             input,
-            None,
+            level,
             &self.tiling,
             &NoProgress,
         )
