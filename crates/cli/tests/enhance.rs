@@ -657,26 +657,7 @@ fn a_noise_aware_model_is_told_the_noise_and_the_source_is_named() {
         s(&noisy),
     ]);
     assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
-    let r = pgrf(&[
-        "train",
-        "spc",
-        "--data",
-        "procedural",
-        "--steps",
-        "2",
-        "--batch",
-        "1",
-        "--patch",
-        "32",
-        "--width",
-        "4",
-        "--residual",
-        "--conditioning",
-        "sigma-map",
-        "-o",
-        s(&model),
-    ]);
-    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    common::noise_aware_model(&model);
     let meta = pgrf_nn::weights::read_meta(&model).unwrap();
     assert_eq!(
         meta.arch.conditioning(),

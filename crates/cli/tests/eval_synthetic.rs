@@ -488,25 +488,7 @@ fn standing_real_set_one_condition() {
 fn a_noise_aware_model_is_told_each_captures_noise() {
     let (d, chart) = setup("noise-aware");
     let model = d.join("aware.safetensors");
-    succeed(&[
-        "train",
-        "spc",
-        "--data",
-        "procedural",
-        "--steps",
-        "2",
-        "--batch",
-        "1",
-        "--patch",
-        "32",
-        "--width",
-        "4",
-        "--residual",
-        "--conditioning",
-        "sigma-map",
-        "-o",
-        s(&model),
-    ]);
+    common::noise_aware_model(&model);
     let csv = d.join("e.csv");
     succeed(&[
         "eval",

@@ -90,3 +90,29 @@ pub fn chart(path: &Path, width: u32, height: u32) {
         String::from_utf8_lossy(&out.stderr)
     );
 }
+
+/// A tiny sigma-map conditioned SPC (`pgrf train spc --conditioning
+/// sigma-map`, two steps on procedural scenes) written to `path`: for
+/// tests of how noise-aware models are told their input's noise.
+pub fn noise_aware_model(path: &Path) {
+    let r = pgrf(&[
+        "train",
+        "spc",
+        "--data",
+        "procedural",
+        "--steps",
+        "2",
+        "--batch",
+        "1",
+        "--patch",
+        "32",
+        "--width",
+        "4",
+        "--residual",
+        "--conditioning",
+        "sigma-map",
+        "-o",
+        s(path),
+    ]);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+}
