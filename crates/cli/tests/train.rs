@@ -749,3 +749,95 @@ fn photos_train_mixed_with_procedural_and_a_broken_photo_is_one_warning() {
         assert!(!bad.exists());
     }
 }
+
+/// Issue 36's fine-tuning path: a blind network's weights start a
+/// sigma-map run (its record names the file), the moving average is what
+/// the file holds and is validated against the raw weights (log column,
+/// record), and a run stopped halfway resumes to the same bytes: the
+/// average is in the checkpoint. Starting from another network, and a decay
+/// outside (0, 1), are one-line errors.
+#[test]
+fn a_noise_aware_run_starts_from_blind_weights_and_its_average_resumes() {
+    let d = scratch("ema");
+    let blind = d.join("blind.safetensors");
+    let base = |steps: &'static str, out: &Path, extra: &[&str]| {
+        let mut a = vec![
+            "train",
+            "denoiser",
+            "--steps",
+            steps,
+            "--width",
+            "4",
+            "--residual",
+            "-o",
+        ];
+        a.push(s(out));
+        a.extend_from_slice(&["--schedule", "constant"]);
+        a.extend_from_slice(SMALL);
+        a.extend_from_slice(extra);
+        a.iter().map(|x| x.to_string()).collect::<Vec<String>>()
+    };
+    let run = |args: Vec<String>| pgrf(&args.iter().map(String::as_str).collect::<Vec<_>>());
+    summary(&run(base("3", &blind, &[])));
+    let aware: &[&str] = &[
+        "--conditioning",
+        "sigma-map",
+        "--init",
+        s(&blind),
+        "--ema",
+        "0.9",
+    ];
+    let full = d.join("full.safetensors");
+    let done = summary(&run(base("6", &full, aware)));
+    assert!(done["val_psnr"].as_f64().unwrap().is_finite());
+    let meta = record(&full);
+    assert_eq!(meta["config"]["conditioning"], "sigma-map");
+    assert_eq!(meta["config"]["in_channels"], 8);
+    assert_eq!(meta["training"]["config"]["ema"].as_f64(), Some(0.9));
+    assert_eq!(
+        meta["training"]["started_from"]["file"],
+        "blind.safetensors"
+    );
+    assert_eq!(meta["training"]["started_from"]["steps"], 3);
+    let (stored, raw) = (
+        meta["training"]["val_psnr"].as_f64().unwrap(),
+        meta["training"]["val_psnr_raw"].as_f64().unwrap(),
+    );
+    assert!(
+        stored.is_finite() && raw.is_finite() && stored != raw,
+        "{stored} {raw}"
+    );
+    let log = std::fs::read_to_string(full.with_extension("log.csv")).unwrap();
+    assert!(
+        log.starts_with("step,loss,lr,images_per_s,val_psnr,seconds,val_psnr_raw\n"),
+        "{log}"
+    );
+    let last = log.lines().last().unwrap();
+    assert!(last.starts_with("6,") && !last.ends_with(','), "{log}");
+
+    let half = d.join("half.safetensors");
+    summary(&run(base("3", &half, aware)));
+    let mut more = base("6", &half, aware);
+    more.push("--resume".into());
+    let resumed = summary(&run(more));
+    assert_eq!(resumed["steps_this_run"], 3);
+    let tensors = |p: &Path| {
+        let b = std::fs::read(p).unwrap();
+        let n = u64::from_le_bytes(b[..8].try_into().unwrap()) as usize;
+        b[8 + n..].to_vec()
+    };
+    assert!(tensors(&half) == tensors(&full), "resumed average differs");
+
+    let wide = d.join("wide.safetensors");
+    let mut other = base("6", &wide, aware);
+    other[5] = "8".into();
+    let err = one_line_error(&run(other));
+    assert!(
+        err.contains("without its noise conditioning") && err.contains("width 4"),
+        "{err}"
+    );
+    assert!(!wide.exists());
+    let bad = base("6", &wide, &["--ema", "1.5"]);
+    let err = one_line_error(&run(bad));
+    assert!(err.contains("--ema") && err.contains("(0, 1)"), "{err}");
+}

@@ -185,6 +185,10 @@ pub struct TrainConfig {
     /// Flow model: draw the training time t from U(0, TIME_MAX) instead of U(0, 1) (Algorithm 1), in (0, 1]: spend the training on the times the two-stage sampler uses (t = 0 and t2), e.g. 0.5; recorded in the weight file [default: 1]. The residual field's L1 loss weighs late times up to ten times more (MODELS.md, "The calibrated measure"); the Euler sampler and the search's t above it leave what the field learned.
     #[cfg_attr(feature = "clap", arg(long, default_value_t = d().time_max, hide_default_value = true))]
     pub time_max: f32,
+    /// Keep an exponential moving average of the weights with this decay per step, in (0, 1), e.g. 0.999 (the first steps use the smaller (1 + step) / (10 + step)): validation scores the average and the raw weights, and the weight file holds the average [default: none].
+    #[cfg_attr(feature = "clap", arg(long))]
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub ema: Option<f32>,
     /// Checkpoint every N steps [default: 1000].
     #[cfg_attr(feature = "clap", arg(long, default_value_t = d().checkpoint_every, hide_default_value = true))]
     pub checkpoint_every: u64,
@@ -263,6 +267,7 @@ impl Default for TrainConfig {
             val_patch: None,
             val_t2: 0.5,
             time_max: 1.0,
+            ema: None,
             checkpoint_every: 1000,
             checkpoint: None,
             log: None,
@@ -445,6 +450,14 @@ impl TrainConfig {
                 "--photo-wb-spread",
                 format!("--photo-wb-spread must be between 1 (no variation) and 4, got {w}"),
             ));
+        }
+        if let Some(d) = self.ema {
+            if !(d.is_finite() && d > 0.0 && d < 1.0) {
+                return Err(bad(
+                    "--ema",
+                    format!("--ema is the moving average's decay per step, in (0, 1) (e.g. 0.999), got {d}"),
+                ));
+            }
         }
         let t = self.time_max;
         if !(t.is_finite() && t > 0.0 && t <= 1.0) {

@@ -49,6 +49,7 @@ pub mod condition;
 mod config;
 pub mod data;
 pub mod demo;
+mod ema;
 mod error;
 #[cfg(feature = "clap")]
 pub mod flags;

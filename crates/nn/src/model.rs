@@ -57,6 +57,36 @@ pub(crate) fn load_bytes<B: Backend>(
     Ok((net, meta))
 }
 
+/// The weights of `path` as a network of `arch`, to start a run from
+/// (`--init`): the file's own network when it is `arch`, or its
+/// unconditioned form widened to take the noise planes
+/// ([`crate::arch::Architecture::widen_unconditioned`]). The flag says
+/// whether it was widened.
+pub(crate) fn load_init<B: Backend>(
+    path: &Path,
+    arch: &crate::arch::Architecture,
+    device: &B::Device,
+) -> Result<(Net<B>, WeightMeta, bool)> {
+    let bytes = weights::read_bytes(path)?;
+    let (meta, mut tensors) = weights::from_bytes(&bytes, path)?;
+    weights::check_arch(path, &meta, arch)?;
+    if !arch.widen_unconditioned(&meta.arch, &mut tensors) {
+        let (net, meta) = load_bytes::<B>(path, &bytes, device)?;
+        return Ok((net, meta, false));
+    }
+    let net = arch
+        .init::<B>(device)?
+        .assign(&tensors, device)
+        .map_err(|e| {
+            NnError::SizeMismatch(format!(
+                "{}: widened weights do not fit {}: {e}",
+                path.display(),
+                arch.describe()
+            ))
+        })?;
+    Ok((net, meta, true))
+}
+
 /// Load a file that must hold the SPC denoiser.
 #[cfg(test)]
 pub(crate) fn load_denoiser<B: Backend>(

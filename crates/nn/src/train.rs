@@ -13,6 +13,7 @@ use crate::checkpoint::{self, CheckpointState};
 use crate::config::{Method, TrainConfig, TrainOutputs};
 use crate::data::validation::{psnr, ValSet};
 use crate::data::{Loader, SampleSpec, Source};
+use crate::ema::Ema;
 use crate::error::{NnError, Result};
 use crate::ops::adam::PgrfAdam;
 use crate::ops::{PgrfAutodiff, PgrfOps};
@@ -282,6 +283,8 @@ pub(crate) fn validate<B: PgrfOps>(net: &Net<B>, val: &ValSet, t2: f32, device: 
 struct Log {
     file: Option<std::fs::File>,
     json: bool,
+    /// The run keeps a moving average: rows carry the raw weights' PSNR too.
+    ema: bool,
 }
 
 impl Log {
@@ -289,11 +292,14 @@ impl Log {
 
     /// Open the log; on resume keep only the rows up to the checkpoint's step
     /// (a crash after the last checkpoint leaves rows that will be redone).
-    fn open(path: Option<&PathBuf>, resume_step: Option<u64>) -> Result<Log> {
+    /// With a moving average (`ema`) the rows end with the raw weights'
+    /// validation PSNR (`val_psnr` is the average's).
+    fn open(path: Option<&PathBuf>, resume_step: Option<u64>, ema: bool) -> Result<Log> {
         let Some(path) = path else {
             return Ok(Log {
                 file: None,
                 json: false,
+                ema,
             });
         };
         let json = matches!(
@@ -321,10 +327,10 @@ impl Log {
             reason: e.to_string(),
         };
         let mut file = std::fs::File::create(path).map_err(output)?;
-        let header = if json {
-            String::new()
-        } else {
-            format!("{}\n", Self::HEADER)
+        let header = match (json, ema) {
+            (true, _) => String::new(),
+            (false, false) => format!("{}\n", Self::HEADER),
+            (false, true) => format!("{},val_psnr_raw\n", Self::HEADER),
         };
         file.write_all(header.as_bytes())
             .and_then(|_| file.write_all(kept.as_bytes()))
@@ -332,18 +338,37 @@ impl Log {
         Ok(Log {
             file: Some(file),
             json,
+            ema,
         })
     }
 
-    fn row(&mut self, step: u64, loss: f32, lr: f64, ips: f64, val: Option<f32>, secs: f64) {
+    /// One row; `val` is (stored weights' PSNR, raw weights' PSNR when a
+    /// moving average is kept), on validation steps.
+    fn row(
+        &mut self,
+        step: u64,
+        loss: f32,
+        lr: f64,
+        ips: f64,
+        val: Option<(f32, Option<f32>)>,
+        secs: f64,
+    ) {
         let Some(f) = self.file.as_mut() else { return };
+        let (v, raw) = (val.map(|v| v.0), val.and_then(|v| v.1));
         let line = if self.json {
-            serde_json::json!({"step": step, "loss": loss, "lr": lr, "images_per_s": ips,
-                "val_psnr": val, "seconds": secs})
-            .to_string()
+            let mut row = serde_json::json!({"step": step, "loss": loss, "lr": lr, "images_per_s": ips,
+                "val_psnr": v, "seconds": secs});
+            if self.ema {
+                row["val_psnr_raw"] = serde_json::json!(raw);
+            }
+            row.to_string()
         } else {
-            let v = val.map(|v| format!("{v:.4}")).unwrap_or_default();
-            format!("{step},{loss:.6},{lr:e},{ips:.3},{v},{secs:.2}")
+            let f4 = |x: Option<f32>| x.map(|x| format!("{x:.4}")).unwrap_or_default();
+            let mut line = format!("{step},{loss:.6},{lr:e},{ips:.3},{},{secs:.2}", f4(v));
+            if self.ema {
+                line.push_str(&format!(",{}", f4(raw)));
+            }
+            line
         };
         // A full disk should not kill hours of training: warn once via the row loss.
         let _ = writeln!(f, "{line}");
@@ -384,8 +409,13 @@ fn train<B: PgrfAutodiff>(
             &crate::weights::require_arch(path, &j.arch)?,
         )),
         Some(path) => {
-            let (trained, meta) = crate::model::load::<B>(path, device)?;
-            crate::weights::check_arch(path, &meta, &j.arch)?;
+            let (trained, meta, widened) = crate::model::load_init::<B>(path, &j.arch, device)?;
+            if widened {
+                progress.note(&format!(
+                    "starting from {}'s unconditioned weights: the noise planes' input weights start at zero",
+                    path.display()
+                ));
+            }
             net = trained;
             Some(StartedFrom::of(path, &meta))
         }
@@ -399,6 +429,7 @@ fn train<B: PgrfAutodiff>(
     let recorder = Rec::default();
 
     let (mut start, mut elapsed0, mut last_val) = (0u64, 0.0f64, None);
+    let mut saved_ema = None;
     if j.resume {
         let ck = checkpoint::load(&j.outputs.checkpoint)?;
         let st = &ck.state;
@@ -431,6 +462,7 @@ fn train<B: PgrfAutodiff>(
         };
         net = net.load_record(recorder.load(ck.model, device).map_err(bad)?);
         optim = optim.load_record(recorder.load(ck.optim, device).map_err(bad)?);
+        saved_ema = ck.ema;
         start = st.step;
         elapsed0 = st.elapsed_s;
         last_val = st.last_val_psnr;
@@ -439,7 +471,23 @@ fn train<B: PgrfAutodiff>(
             j.outputs.checkpoint.display()
         ));
     }
-    let mut log = Log::open(Some(&j.outputs.log), j.resume.then_some(start))?;
+    let mut ema = match (s.ema, saved_ema) {
+        (None, _) => None,
+        (Some(d), Some(bytes)) => Some(Ema::from_bytes(d, &bytes, &j.outputs.checkpoint)?),
+        (Some(d), None) => {
+            if j.resume {
+                progress.note(
+                    "the checkpoint holds no moving average: it starts from the resumed weights",
+                );
+            }
+            Some(Ema::start(d, net.parameters()))
+        }
+    };
+    let mut log = Log::open(
+        Some(&j.outputs.log),
+        j.resume.then_some(start),
+        ema.is_some(),
+    )?;
 
     let sample = SampleSpec {
         patch: s.patch,
@@ -456,6 +504,7 @@ fn train<B: PgrfAutodiff>(
     let mut step = start;
     let save_checkpoint = |net: &Net<B>,
                            optim: &OptimizerAdaptor<PgrfAdam, Net<B>, B>,
+                           ema: Option<&Ema>,
                            step: u64,
                            elapsed: f64,
                            last_loss: Option<f32>,
@@ -478,8 +527,22 @@ fn train<B: PgrfAutodiff>(
             last_loss,
             last_val_psnr: last_val,
         };
-        checkpoint::save(&j.outputs.checkpoint, &state, &model, &opt)
+        let ema = ema.map(Ema::to_bytes).transpose()?.unwrap_or_default();
+        checkpoint::save(&j.outputs.checkpoint, &state, &model, &opt, &ema)
     };
+    // Validation of the weights a run stores (the moving average when it
+    // keeps one) and, with an average, of the raw weights: (stored, raw).
+    let validate_both =
+        |net: &Net<B>, ema: Option<&Ema>, v: &ValSet| -> Result<(f32, Option<f32>)> {
+            let raw = validate(&net.valid(), v, s.val_t2, device);
+            Ok(match ema {
+                None => (raw, None),
+                Some(e) => {
+                    let avg = e.network::<B::InnerBackend>(&j.arch, device)?;
+                    (validate(&avg, v, s.val_t2, device), Some(raw))
+                }
+            })
+        };
 
     progress.start(s.steps, "steps");
     progress.set_position(start);
@@ -505,6 +568,9 @@ fn train<B: PgrfAutodiff>(
         }
         let grads = GradientsParams::from_grads(loss.backward(), &net);
         net = optim.step(lr, net, grads);
+        if let Some(e) = ema.as_mut() {
+            e.update(step, &net.parameters());
+        }
         step += 1;
         losses.push(value);
         window.0 += value as f64;
@@ -516,10 +582,14 @@ fn train<B: PgrfAutodiff>(
         let mut val_now = None;
         if let Some(v) = val {
             if s.val_every > 0 && step % s.val_every == 0 && step < s.steps {
-                let p = validate(&net.valid(), v, s.val_t2, device);
-                progress.note(&format!("step {step}: validation PSNR {p:.2} dB"));
+                let (p, raw) = validate_both(&net, ema.as_ref(), v)?;
+                progress.note(&format!(
+                    "step {step}: validation PSNR {p:.2} dB{}",
+                    raw.map(|r| format!(" (moving average; raw weights {r:.2} dB)"))
+                        .unwrap_or_default()
+                ));
                 last_val = Some(p);
-                val_now = Some(p);
+                val_now = Some((p, raw));
             }
         }
         // The last step's row is written after the final validation.
@@ -529,7 +599,15 @@ fn train<B: PgrfAutodiff>(
             window = (0.0, 0);
         }
         if s.checkpoint_every > 0 && step % s.checkpoint_every == 0 && step < s.steps {
-            save_checkpoint(&net, &optim, step, elapsed0 + secs, Some(value), last_val)?;
+            save_checkpoint(
+                &net,
+                &optim,
+                ema.as_ref(),
+                step,
+                elapsed0 + secs,
+                Some(value),
+                last_val,
+            )?;
         }
     }
     drop(loader);
@@ -539,9 +617,9 @@ fn train<B: PgrfAutodiff>(
     let mut final_val = None;
     if let Some(v) = val {
         if !interrupted {
-            let p = validate(&net.valid(), v, s.val_t2, device);
+            let (p, raw) = validate_both(&net, ema.as_ref(), v)?;
             val_psnr = Some(p);
-            final_val = Some(p);
+            final_val = Some((p, raw));
         }
         val_input_psnr = Some(
             v.pairs
@@ -560,6 +638,7 @@ fn train<B: PgrfAutodiff>(
     save_checkpoint(
         &net,
         &optim,
+        ema.as_ref(),
         step,
         elapsed0 + seconds,
         losses.last().copied(),
@@ -574,13 +653,19 @@ fn train<B: PgrfAutodiff>(
         data: s.data.clone(),
         final_loss,
         val_psnr,
+        val_psnr_raw: final_val.and_then(|(_, raw)| raw),
         seconds: elapsed0 + seconds,
         images_per_s,
         device: s.device.to_string(),
         config: Some(s.clone()),
         started_from,
     });
-    net.valid().save(&j.outputs.weights, &meta)?;
+    match &ema {
+        Some(e) => e
+            .network::<B::InnerBackend>(&j.arch, device)?
+            .save(&j.outputs.weights, &meta)?,
+        None => net.valid().save(&j.outputs.weights, &meta)?,
+    }
     progress.finish();
     Ok(Outcome {
         start_step: start,

@@ -59,8 +59,13 @@ pub struct TrainingSummary {
     pub data: String,
     /// Loss of the last step (L1, on [0, 1] data).
     pub final_loss: f32,
-    /// PSNR (dB) on the held-out validation pairs at the end of training.
+    /// PSNR (dB) on the held-out validation pairs at the end of training
+    /// (of the moving average when the run kept one: the weights stored).
     pub val_psnr: Option<f32>,
+    /// With a moving average (`ema`): the raw weights' PSNR on the same
+    /// pairs, the average's measured gain being `val_psnr` minus this.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub val_psnr_raw: Option<f32>,
     /// Training seconds, summed over resumed runs.
     pub seconds: f64,
     /// Training crops per second of the last run.
@@ -283,9 +288,10 @@ pub fn read_meta(path: &Path) -> Result<WeightMeta> {
     Ok(read(path)?.0)
 }
 
-/// The record of `path` when it holds a network of exactly `arch` (what a
-/// fine-tuning run's `--init` must name), else one line saying what it
-/// holds instead.
+/// The record of `path` when its network can start a run of `arch` (what a
+/// fine-tuning run's `--init` must name: the same network, or the same one
+/// without the noise conditioning, [`Architecture::can_start_from`]), else
+/// one line saying what it holds instead.
 pub fn require_arch(path: &Path, arch: &Architecture) -> Result<WeightMeta> {
     let meta = read_meta(path)?;
     check_arch(path, &meta, arch)?;
@@ -294,15 +300,19 @@ pub fn require_arch(path: &Path, arch: &Architecture) -> Result<WeightMeta> {
 
 /// [`require_arch`]'s comparison, for a record already read.
 pub(crate) fn check_arch(path: &Path, meta: &WeightMeta, arch: &Architecture) -> Result<()> {
-    let json = |a: &Architecture| serde_json::to_value(a).ok();
-    if json(&meta.arch) != json(arch) {
+    if !arch.can_start_from(&meta.arch) {
         return Err(NnError::WrongArchitecture {
             path: path.to_path_buf(),
             message: format!(
-                "--init {}: holds {}, not the {} this configuration trains",
+                "--init {}: holds {}, not the {} this configuration trains{}",
                 path.display(),
                 meta.arch.describe(),
-                arch.describe()
+                arch.describe(),
+                if arch.conditioning().extra_channels() > 0 {
+                    " (or the same network without its noise conditioning)"
+                } else {
+                    ""
+                }
             ),
         });
     }

@@ -153,6 +153,76 @@ impl Architecture {
         }
     }
 
+    /// This architecture without its conditioning: the network that reads
+    /// only the noisy planes (and, for the flow, Xt).
+    pub fn unconditioned(&self) -> Architecture {
+        let extra = self.conditioning().extra_channels();
+        match self {
+            Architecture::SidUnet(c) => Architecture::SidUnet(
+                c.clone()
+                    .with_conditioning(Conditioning::None)
+                    .with_in_channels(c.in_channels.saturating_sub(extra)),
+            ),
+            Architecture::Sr3(c) => Architecture::Sr3(
+                c.clone()
+                    .with_conditioning(Conditioning::None)
+                    .with_in_channels(c.in_channels.saturating_sub(extra)),
+            ),
+        }
+    }
+
+    /// Whether weights of `file`'s architecture can start a run of this one:
+    /// the same architecture, or (for a noise-aware one) the same network
+    /// without conditioning, which [`Architecture::widen_unconditioned`]
+    /// extends.
+    pub fn can_start_from(&self, file: &Architecture) -> bool {
+        let json = |a: &Architecture| serde_json::to_value(a).ok();
+        json(file) == json(self)
+            || (self.conditioning().extra_channels() > 0
+                && json(file) == json(&self.unconditioned()))
+    }
+
+    /// Make the tensors of an unconditioned network (`file`, this network
+    /// without its conditioning) fit this noise-aware one: the input
+    /// convolution gains the conditioning's input channels, with zero
+    /// weights, after the four noisy planes. The widened network computes
+    /// exactly what the unconditioned one did (the new planes are multiplied
+    /// by zero) and training then learns to use them: fine-tuning a trained
+    /// blind model costs far fewer steps than training a noise-aware one from
+    /// scratch. False (tensors untouched) when `file` is not that network.
+    pub fn widen_unconditioned(
+        &self,
+        file: &Architecture,
+        tensors: &mut BTreeMap<String, NamedTensor>,
+    ) -> bool {
+        let extra = self.conditioning().extra_channels();
+        let json = |a: &Architecture| serde_json::to_value(a).ok();
+        if extra == 0 || json(file) != json(&self.unconditioned()) {
+            return false;
+        }
+        let Some(t) = tensors.get_mut(self.spec().input_conv()) else {
+            return false;
+        };
+        let [o, i, kh, kw] = t.shape[..] else {
+            return false;
+        };
+        if i < 4 || t.values.len() != o * i * kh * kw {
+            return false;
+        }
+        let k = kh * kw;
+        let mut values = Vec::with_capacity(o * (i + extra) * k);
+        for row in t.values.chunks_exact(i * k) {
+            values.extend_from_slice(&row[..4 * k]);
+            values.extend(std::iter::repeat_n(0.0f32, extra * k));
+            values.extend_from_slice(&row[4 * k..]);
+        }
+        *t = NamedTensor {
+            shape: vec![o, i + extra, kh, kw],
+            values,
+        };
+        true
+    }
+
     /// A freshly initialised network of this architecture. Records come from
     /// files: what pgrf's 4-plane pipeline cannot run is refused before
     /// anything is built.
@@ -352,6 +422,64 @@ mod tests {
             NoiseLevel::from_dn(1.53, 3.2, 0.4, 15871.0, 100.0),
             NoiseLevel::from_dn(0.2, 1.5, 0.2, 16383.0, 5.0),
         ]
+    }
+
+    /// A blind network's weights start a sigma-map one that computes exactly
+    /// what the blind one did (the noise planes' input weights are zero),
+    /// for both networks; other networks, and the k-sigma transform (no
+    /// planes to add), are refused.
+    #[test]
+    fn widened_blind_weights_restore_as_before() {
+        let device = Default::default();
+        let n = 2 * 4 * 16 * 16;
+        let wave = |f: f32| -> Tensor<Cpu, 4> {
+            let v: Vec<f32> = (0..n).map(|i| 0.5 + 0.4 * (f * i as f32).sin()).collect();
+            Tensor::from_data(TensorData::new(v, [2, 4, 16, 16]), &device)
+        };
+        let (x, x0) = (wave(0.37), wave(1.91) - 0.5);
+        let blind_cfg = |kind| TrainConfig {
+            residual: false,
+            ..config(kind)
+        };
+        for method in [Method::Spc, Method::Pgrf] {
+            let blind = blind_cfg(Conditioning::None).architecture(method).unwrap();
+            let aware = blind_cfg(Conditioning::SigmaMap)
+                .architecture(method)
+                .unwrap();
+            assert!(aware.can_start_from(&blind) && aware.can_start_from(&aware));
+            assert!(!blind.can_start_from(&aware), "{method:?}");
+            let ksigma = blind_cfg(Conditioning::KSigma)
+                .architecture(method)
+                .unwrap();
+            assert!(!ksigma.can_start_from(&blind), "{method:?}");
+            let wider = TrainConfig {
+                width: Some(8),
+                inner_channels: Some(16),
+                ..blind_cfg(Conditioning::None)
+            }
+            .architecture(method)
+            .unwrap();
+            assert!(!aware.can_start_from(&wider), "{method:?}");
+
+            let net = blind.init_seeded::<Cpu>(&device, 36).unwrap();
+            let mut tensors = net.parameters();
+            assert!(!aware.widen_unconditioned(&wider, &mut tensors));
+            assert!(aware.widen_unconditioned(&blind, &mut tensors));
+            let widened = aware
+                .init::<Cpu>(&device)
+                .unwrap()
+                .assign(&tensors, &device)
+                .unwrap();
+            let a = net.restore(x.clone(), &[], x0.clone(), 0.5);
+            let b = widened.restore(x.clone(), &levels(), x0.clone(), 0.5);
+            let scale: f32 = a.clone().abs().max().into_scalar();
+            let d: f32 = (a - b).abs().max().into_scalar();
+            assert!(scale > 1e-3, "{method:?}: output {scale}");
+            assert!(
+                d <= 1e-5 * scale.max(1.0),
+                "{method:?}: widened net differs by {d}"
+            );
+        }
     }
 
     /// Every conditioning of both networks: the record names it, the first

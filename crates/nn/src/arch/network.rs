@@ -56,4 +56,11 @@ pub(crate) trait NetworkConfig {
 
     /// How the network is told its input's noise level.
     fn conditioning(&self) -> Conditioning;
+
+    /// The parameter name of the convolution that reads the input planes.
+    /// Both networks put the conditioning's planes right after the four
+    /// noisy ones, so that convolution's input channels 4..4 + extra are
+    /// the conditioning's (what [`super::Architecture::widen_unconditioned`]
+    /// relies on).
+    fn input_conv(&self) -> &'static str;
 }

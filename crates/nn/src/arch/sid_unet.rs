@@ -277,6 +277,10 @@ impl NetworkConfig for SidUnetConfig {
         self.conditioning
     }
 
+    fn input_conv(&self) -> &'static str {
+        "down.0.first.weight"
+    }
+
     /// Exact: every convolution's weights and biases, counted from the widths.
     fn min_params(&self) -> f64 {
         let conv = |k: f64, a: f64, b: f64| k * k * a * b + b;

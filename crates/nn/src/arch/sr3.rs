@@ -369,6 +369,10 @@ impl NetworkConfig for Sr3Config {
     fn conditioning(&self) -> Conditioning {
         self.conditioning
     }
+
+    fn input_conv(&self) -> &'static str {
+        "first.weight"
+    }
 }
 
 /// The tensors of a weight file for PyTorch (`pgrf export-weights`): pgrf's
