@@ -315,10 +315,6 @@ fn bad_input_gives_one_line_and_writes_nothing() {
             &["/nonexistent-dir", "does not exist"],
         ),
         (
-            vec![s(&noisy), "--model", s(&m), "-o", s(&out)],
-            &["--ratio"],
-        ),
-        (
             vec![
                 s(&noisy),
                 "--model",
@@ -710,4 +706,91 @@ fn a_noise_aware_model_is_told_the_noise_and_the_source_is_named() {
         "{err}"
     );
     assert!(!dir.join("c.dng").exists());
+}
+
+/// Without --ratio or --target-exposure the ratio is metered from the frame
+/// (issue 36, item 7): the report names it and how it was chosen, and it is
+/// the one `auto_ratio` computes, which brings the frame's mean level to
+/// 1/8 of white; `--ratio auto` is the same; a frame at black is refused.
+#[test]
+fn without_a_ratio_the_frame_is_metered_and_the_choice_printed() {
+    let d = scratch("auto");
+    let noisy = d.join("noisy.dng");
+    let input = dark_dng(&noisy, 128, 96, Cfa::Rggb, 5);
+    let m = model(&d, false, None);
+    let want = pgrf_nn::infer::prepare::auto_ratio(&input, None).unwrap();
+    assert!(want.ratio > 20.0 && want.ratio < 300.0, "{want:?}");
+    for extra in [&[][..], &["--ratio", "auto"][..]] {
+        let out = d.join("out.dng");
+        let mut args = vec![
+            "enhance",
+            s(&noisy),
+            "--model",
+            s(&m),
+            "-o",
+            s(&out),
+            "--json",
+        ];
+        args.extend_from_slice(extra);
+        let r = pgrf(&args);
+        assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+        let report: Value = serde_json::from_slice(&r.stdout).unwrap();
+        assert_eq!(report["ratio"].as_f64().unwrap() as f32, want.ratio);
+        let how = report["ratio_auto"].as_str().unwrap();
+        assert!(
+            how.starts_with("auto: mean level") && how.contains("0.125"),
+            "{how}"
+        );
+        std::fs::remove_file(&out).unwrap();
+    }
+    let plain = pgrf(&[
+        "enhance",
+        s(&noisy),
+        "--model",
+        s(&m),
+        "-o",
+        s(&d.join("p.dng")),
+    ]);
+    let text = format!(
+        "{}{}",
+        String::from_utf8_lossy(&plain.stdout),
+        String::from_utf8_lossy(&plain.stderr)
+    );
+    assert!(
+        text.contains(&format!("ratio {:.1} (auto: mean level", want.ratio)),
+        "{text}"
+    );
+
+    let word = pgrf(&[
+        "enhance",
+        s(&noisy),
+        "--model",
+        s(&m),
+        "--ratio",
+        "bright",
+        "-o",
+        s(&d.join("w.dng")),
+    ]);
+    let e = String::from_utf8_lossy(&word.stderr);
+    assert_eq!(word.status.code(), Some(2), "{e}");
+    assert!(
+        e.starts_with("pgrf: error: invalid value 'bright' for '--ratio") && e.contains("auto"),
+        "{e}"
+    );
+    let black = d.join("black.dng");
+    let mut f = input.clone();
+    f.mosaic.iter_mut().for_each(|v| *v = 512);
+    write_dng(&f, &black, &DngOptions::default()).unwrap();
+    let e = one_line_error(&pgrf(&[
+        "enhance",
+        s(&black),
+        "--model",
+        s(&m),
+        "-o",
+        s(&d.join("b.dng")),
+    ]));
+    assert!(
+        e.contains("no signal above black") && e.contains("--ratio"),
+        "{e}"
+    );
 }

@@ -132,6 +132,9 @@ pub struct EvalFlags {
     /// Synthetic: noise model, pgrf, eld or pg (default pgrf).
     #[arg(long)]
     pub noise: Option<ModelKind>,
+    /// Synthetic: hand the methods each capture as an uncalibrated camera writes it, its dark-level offset (the profile's black-level error) kept, instead of subtracted as a calibration would.
+    #[arg(long)]
+    pub uncalibrated: bool,
     /// No per-image progress lines on stderr.
     #[arg(long, short)]
     pub quiet: bool,
@@ -209,6 +212,7 @@ impl EvalFlags {
                 ("--ratio", self.ratio.is_some()),
                 ("--profile", self.profile.is_some()),
                 ("--noise", self.noise.is_some()),
+                ("--uncalibrated", self.uncalibrated),
             ] {
                 if given {
                     return Err(bad(
@@ -231,6 +235,7 @@ impl EvalFlags {
             profile: self.profile.clone().unwrap_or_else(|| "sony-a7s2".into()),
             noise: self.noise.unwrap_or_default(),
             seed: self.seed,
+            uncalibrated: self.uncalibrated,
         })
     }
 

@@ -174,6 +174,21 @@ mod tests {
             .unwrap()
             .params_at_iso(800)
             .is_err());
+        // The 5D Mark IV (the unseen camera of issue 36's measure): K per
+        // ISO puts ELD's gain range at ISO 100..6400, read and row noise at
+        // the centre of ELD's fits.
+        let c = CameraProfile::built_in("canon-eos5d4").unwrap();
+        let (lo, hi) = (
+            c.params_at_iso(100).unwrap(),
+            c.params_at_iso(6400).unwrap(),
+        );
+        assert!((lo.k / c.k_min - 1.0).abs() < 1e-12 && (hi.k / c.k_max - 1.0).abs() < 1e-12);
+        let want = (c.eld.gauss_scale.slope * hi.k.ln() + c.eld.gauss_scale.bias).exp();
+        assert!(
+            (hi.sigma_gauss / want - 1.0).abs() < 1e-12,
+            "{}",
+            hi.sigma_gauss
+        );
     }
 
     #[test]

@@ -61,6 +61,14 @@ fn list(a: &ListArgs) -> Result<()> {
     for (name, v) in &builtins {
         let isos = match (v.rows.first(), v.rows.last()) {
             (Some(lo), Some(hi)) => format!("ISO {}..{} ({} ISOs)", lo.iso, hi.iso, v.rows.len()),
+            _ if v.k_per_iso.is_some() => format!(
+                "no ISO table: K {:.4}..{:.4} DN/e-, ISO {:.0}..{:.0} at K = {} x ISO",
+                v.k_range.0,
+                v.k_range.1,
+                v.k_range.0 / v.k_per_iso.unwrap_or(1.0),
+                v.k_range.1 / v.k_per_iso.unwrap_or(1.0),
+                v.k_per_iso.unwrap_or(1.0)
+            ),
             _ => format!(
                 "no ISO table: K {:.4}..{:.4} DN/e- drawn as ELD draws it (omit --iso)",
                 v.k_range.0, v.k_range.1
@@ -219,7 +227,7 @@ fn show_fits(v: &ProfileView) {
         v.k_range.0,
         v.k_range.1,
         v.k_per_iso
-            .map(|k| format!("; K = {k} x ISO at a given ISO"))
+            .map(|k| format!("; K = {k} x ISO at a given --iso"))
             .unwrap_or_default()
     );
     for (what, (slope, bias, sd)) in ["read (Gaussian)", "read (Tukey)", "row"]

@@ -233,6 +233,9 @@ pub struct Synthetic {
     kind: ModelKind,
     /// One pair recipe per condition (ISO and ratio fixed).
     specs: Vec<PairSpec>,
+    /// Hand the methods the capture with its dark-level offset kept, as an
+    /// uncalibrated camera does ([`Synthetic::input`]).
+    pub uncalibrated: bool,
 }
 
 impl Synthetic {
@@ -268,6 +271,7 @@ impl Synthetic {
             profile: profile.to_string(),
             kind,
             specs,
+            uncalibrated: false,
         })
     }
 
@@ -283,7 +287,20 @@ impl Synthetic {
         k: usize,
     ) -> Result<(Array3<f32>, u64)> {
         let (pair, seed) = self.synthesize(clean, plane_rows, name, k)?;
-        Ok((self.calibrated_input(&pair), seed))
+        Ok((self.input(&pair), seed))
+    }
+
+    /// What the methods are handed: the calibrated input
+    /// ([`Synthetic::calibrated_input`]), or with `uncalibrated` the
+    /// amplified capture as the camera wrote it, dark-level offset kept,
+    /// clamped to [0, 1]: what `pgrf enhance` without `--calib` sees, and
+    /// what a network must not lift the black of (issue 36, item 3).
+    pub fn input(&self, pair: &pgrf_noise::pair::Pair) -> Array3<f32> {
+        if self.uncalibrated {
+            pair.noisy.mapv(|v| v.clamp(0.0, 1.0))
+        } else {
+            self.calibrated_input(pair)
+        }
     }
 
     /// What a calibrated camera hands the denoiser: the amplified capture
@@ -311,7 +328,9 @@ impl Synthetic {
     }
 
     /// What a noise-aware method is told of a capture drawn with `params`:
-    /// the simulated camera counts as calibrated, so its true parameters.
+    /// its true parameters, which a calibrated camera measures and which
+    /// `find_noise` reads, uncalibrated, from the camera's profile at its
+    /// ISO (the profile the capture was drawn from).
     fn case_noise(&self, params: &pgrf_noise::CaptureParams) -> CaseNoise {
         let read = match self.kind {
             ModelKind::Eld => params.sigma_tukey,
@@ -322,7 +341,11 @@ impl Synthetic {
             read,
             row: params.sigma_row,
             range: self.specs[0].dn_range(),
-            source: "the simulated camera's calibration".into(),
+            source: if self.uncalibrated {
+                "the simulated camera's profile at its ISO".into()
+            } else {
+                "the simulated camera's calibration".into()
+            },
         }
     }
 
@@ -378,12 +401,17 @@ impl Synthetic {
         let ratios: Vec<String> = dedup(self.conditions.iter().map(|c| c.ratio.to_string()));
         format!(
             "ISO {} x ratio {} ({} conditions), noise model {} of profile {} at each ISO; \
-             capture seed = mix64(mix64(mix64({} ^ fnv1a64(file name)) ^ ISO) ^ f32 bits of ratio)",
+             {}; capture seed = mix64(mix64(mix64({} ^ fnv1a64(file name)) ^ ISO) ^ f32 bits of ratio)",
             isos.join(","),
             ratios.join(","),
             self.conditions.len(),
             self.kind,
             self.profile,
+            if self.uncalibrated {
+                "uncalibrated (dark-level offset kept)"
+            } else {
+                "calibrated (dark-level offset subtracted)"
+            },
             self.seed
         )
     }
@@ -435,7 +463,7 @@ pub fn run(
         let c = synth.conditions[ci];
         let plane_rows = frame.cfa.offsets().map(|(r, _)| r);
         let (pair, seed) = synth.synthesize(clean.view(), plane_rows, &img.id, ci)?;
-        let input = synth.calibrated_input(&pair);
+        let input = synth.input(&pair);
         let noise = synth.case_noise(&pair.params);
         let synthesis = opts.dump.is_some().then(|| Synthesis {
             noise: synth.noise_record(&pair.params, c.ratio),
@@ -604,6 +632,17 @@ mod tests {
             off[0]
         );
         assert!(calibrated.abs() < 0.002, "calibrated input {calibrated}");
+        // Uncalibrated (`--uncalibrated`): the methods get the offset.
+        assert_eq!(s.input(&pair), s.calibrated_input(&pair));
+        let uncal = Synthetic {
+            uncalibrated: true,
+            ..s.clone()
+        };
+        let kept = mean(&uncal.input(&pair)) - 0.3;
+        assert!((kept - off[0]).abs() < 0.002, "uncalibrated input {kept}");
+        assert!(uncal
+            .describe()
+            .contains("uncalibrated (dark-level offset kept)"));
         let record = s.noise_record(&pair.params, pair.ratio);
         assert_eq!(record["offset"][2].as_f64().unwrap(), off[2]);
     }

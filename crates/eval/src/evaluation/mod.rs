@@ -80,6 +80,8 @@ pub struct SyntheticSpec {
     pub noise: ModelKind,
     /// The base of every capture's noise seed.
     pub seed: u64,
+    /// Keep each capture's dark-level offset (an uncalibrated camera).
+    pub uncalibrated: bool,
 }
 
 impl Default for SyntheticSpec {
@@ -90,6 +92,7 @@ impl Default for SyntheticSpec {
             profile: "sony-a7s2".into(),
             noise: ModelKind::default(),
             seed: 0,
+            uncalibrated: false,
         }
     }
 }
@@ -172,12 +175,13 @@ fn one_root(cfg: &EvalConfig) -> Result<&Path, DatasetError> {
 fn find_cases(cfg: &EvalConfig) -> Result<Cases, DatasetError> {
     if cfg.protocol == DatasetKind::Synthetic {
         let s = &cfg.synthetic;
-        let recipe = Synthetic::new(
+        let mut recipe = Synthetic::new(
             &s.profile,
             s.noise,
             synthetic::grid(&s.isos, &s.ratios),
             s.seed,
         )?;
+        recipe.uncalibrated = s.uncalibrated;
         return Ok(Cases::Synthetic(synthetic::walk(&cfg.roots)?, recipe));
     }
     let root = one_root(cfg)?;

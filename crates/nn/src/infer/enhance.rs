@@ -5,7 +5,7 @@
 //! report what was done. Which files go where: [`jobs::plan_jobs`]; the
 //! flags: [`flags::EnhanceFlags`] (the `clap` feature).
 
-use super::prepare::ratio_from_exposure;
+use super::prepare::{auto_ratio, ratio_from_exposure};
 use super::restorer::describe_sampler;
 use super::{restore_frame, Restore, Tiling};
 use crate::condition::NoiseLevel;
@@ -72,6 +72,10 @@ pub enum EnhanceError {
 /// How bright the result is made.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum RatioChoice {
+    /// Metered from the frame: its mean level brought to a fixed target
+    /// ([`crate::infer::prepare::auto_ratio`]); `--ratio auto`, and the
+    /// default when neither a ratio nor a target exposure is given.
+    Auto,
     /// The input is multiplied by this exposure ratio.
     Fixed(f32),
     /// Brightened to this exposure: target / the file's exposure time (x
@@ -132,6 +136,9 @@ pub struct FileReport {
     pub height: usize,
     /// The exposure ratio applied.
     pub ratio: f32,
+    /// How an automatic ratio was chosen (None when the user gave it).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub ratio_auto: Option<String>,
     /// The network and its sampler.
     pub method: String,
     /// Network evaluations per tile.
@@ -166,8 +173,11 @@ impl FileReport {
         let noise = (self.noise.as_ref())
             .map(|n| format!("; noise {n}"))
             .unwrap_or_default();
+        let auto = (self.ratio_auto.as_ref())
+            .map(|a| format!(" ({a})"))
+            .unwrap_or_default();
         format!(
-            "wrote {}{png}: {}x{}, ratio {:.1}, {} tile{plural} of {}, {:.1} s{defects}{noise}",
+            "wrote {}{png}: {}x{}, ratio {:.1}{auto}, {} tile{plural} of {}, {:.1} s{defects}{noise}",
             self.output, self.width, self.height, self.ratio, self.tiles, self.tile, self.seconds,
         )
     }
@@ -182,11 +192,23 @@ pub fn describe_method(restorer: &dyn Restore) -> String {
     )
 }
 
-/// The exposure ratio of `frame` as `choice` says.
-fn ratio_of(frame: &RawFrame, choice: RatioChoice) -> Result<f32, NnError> {
+/// The exposure ratio of `frame` as `choice` says (an automatic one
+/// metered after the calibration's `dark` shading), and how an automatic
+/// one was chosen.
+fn ratio_of(
+    frame: &RawFrame,
+    dark: Option<&ndarray::Array3<f32>>,
+    choice: RatioChoice,
+) -> Result<(f32, Option<String>), NnError> {
     match choice {
-        RatioChoice::Fixed(r) => Ok(r),
-        RatioChoice::TargetExposure { seconds, iso } => ratio_from_exposure(frame, seconds, iso),
+        RatioChoice::Fixed(r) => Ok((r, None)),
+        RatioChoice::TargetExposure { seconds, iso } => {
+            Ok((ratio_from_exposure(frame, seconds, iso)?, None))
+        }
+        RatioChoice::Auto => {
+            let a = auto_ratio(frame, dark)?;
+            Ok((a.ratio, Some(a.describe())))
+        }
     }
 }
 
@@ -228,8 +250,8 @@ pub fn enhance_file<P: Progress>(
             path: job.input.clone(),
             source,
         })?;
-    let ratio = ratio_of(&frame, cfg.ratio)?;
     let (dark, defects_corrected) = calibrate(cfg, &mut frame)?;
+    let (ratio, ratio_auto) = ratio_of(&frame, dark.as_ref(), cfg.ratio)?;
     let noise = match restorer.meta().arch.conditioning().needs_level() {
         true => Some(frame_noise(cfg, &frame)?),
         false => None,
@@ -262,6 +284,7 @@ pub fn enhance_file<P: Progress>(
         width: frame.width,
         height: frame.height,
         ratio,
+        ratio_auto,
         method: describe_method(restorer),
         nfe: restorer.nfe(),
         tile,

@@ -86,6 +86,99 @@ pub fn ratio_from_exposure(
     Ok((target_exposure_s / t * gain) as f32)
 }
 
+/// Where `--ratio auto` brings a frame: its mean level (black-subtracted,
+/// brightest 1 % left out) at 1/8 of white, three stops below clipping,
+/// about where a camera's metering puts an average scene in its raw data.
+pub const AUTO_TARGET: f64 = 0.125;
+/// The largest ratio `--ratio auto` picks: the top of the range the
+/// built-in models were trained on.
+pub const AUTO_MAX_RATIO: f32 = 300.0;
+
+/// The ratio `--ratio auto` picked for a frame, and why.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct AutoRatio {
+    /// The exposure ratio, in [1, [`AUTO_MAX_RATIO`]].
+    pub ratio: f32,
+    /// The frame's level it was computed from, fraction of white.
+    pub level: f64,
+}
+
+impl AutoRatio {
+    /// "auto: mean level 0.00131 of white brought to 0.125", with the
+    /// limit named when the ratio was held at it.
+    pub fn describe(&self) -> String {
+        let held = if self.ratio >= AUTO_MAX_RATIO {
+            format!(", held at the largest, {AUTO_MAX_RATIO}")
+        } else if self.ratio <= 1.0 {
+            ", held at 1 (the frame is not dark)".to_string()
+        } else {
+            String::new()
+        };
+        format!(
+            "auto: mean level {:.3e} of white brought to {AUTO_TARGET}{held}",
+            self.level
+        )
+    }
+}
+
+/// `--ratio auto`: the exposure ratio that brings the frame's mean level
+/// (each plane normalised by its black and white levels, minus `dark_dn`
+/// like [`network_input`], the brightest 1 % of a regular subsample left out
+/// so that a street lamp does not darken the night) to [`AUTO_TARGET`],
+/// within [1, [`AUTO_MAX_RATIO`]]. Refuses a frame with no signal above
+/// black (a lens-cap frame): no ratio makes it a photograph.
+pub fn auto_ratio(frame: &RawFrame, dark_dn: Option<&Array3<f32>>) -> Result<AutoRatio> {
+    let mut x = pack_normalized(frame, false)?;
+    if let Some(dark) = dark_dn {
+        if dark.shape() != x.shape() {
+            return Err(NnError::SizeMismatch(format!(
+                "dark shading packs to {:?}, the frame to {:?}",
+                dark.shape(),
+                x.shape()
+            )));
+        }
+        for (plane, (mut xp, dp)) in x
+            .axis_iter_mut(Axis(0))
+            .zip(dark.axis_iter(Axis(0)))
+            .enumerate()
+        {
+            let scale = 1.0 / (frame.white as f32 - frame.black[plane]);
+            xp.zip_mut_with(&dp, |v, &d| *v -= d * scale);
+        }
+    }
+    // Every 7th value (7 is prime to the plane and row sizes that matter:
+    // the subsample takes every plane and column phase).
+    let step = if x.len() > 1 << 20 { 7 } else { 1 };
+    let mut sample: Vec<f32> = x
+        .iter()
+        .step_by(step)
+        .copied()
+        .filter(|v| v.is_finite())
+        .collect();
+    if sample.is_empty() {
+        return Err(NnError::BadSetting {
+            flag: "--ratio",
+            message: "the frame has no pixels to measure; give --ratio".into(),
+        });
+    }
+    let keep = (sample.len() * 99).div_ceil(100).max(1);
+    let (low, _, _) = sample.select_nth_unstable_by(keep - 1, f32::total_cmp);
+    let kept = low.len() + 1;
+    let sum: f64 = low.iter().map(|&v| v as f64).sum::<f64>() + sample[keep - 1] as f64;
+    let level = sum / kept as f64;
+    // Below a millionth of white the mean is the noise's, not a scene's.
+    if !(level > 1e-6) {
+        return Err(NnError::BadSetting {
+            flag: "--ratio",
+            message: format!(
+                "--ratio auto: the frame has no signal above black (mean level {level:.2e} of white); give --ratio"
+            ),
+        });
+    }
+    let ratio = (AUTO_TARGET / level).clamp(1.0, AUTO_MAX_RATIO as f64) as f32;
+    Ok(AutoRatio { ratio, level })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -130,5 +223,48 @@ mod tests {
         let mut g = f.clone();
         g.exposure_s = None;
         assert!(ratio_from_exposure(&g, 1.0, None).is_err());
+    }
+}
+
+#[cfg(test)]
+mod auto_tests {
+    use super::*;
+    use pgrf_raw::Cfa;
+
+    /// A 64 x 64 frame at `level` of white above black 512 (white 16383),
+    /// with `lamps` pixels at white.
+    fn flat(level: f64, lamps: usize) -> RawFrame {
+        let v = 512 + (level * 15871.0).round() as u16;
+        let mut m = vec![v; 64 * 64];
+        for p in m.iter_mut().take(lamps) {
+            *p = 16383;
+        }
+        RawFrame::from_mosaic(64, 64, m, Cfa::Rggb, [512.0; 4], 16383).unwrap()
+    }
+
+    /// The ratio brings the mean to 1/8 of white; 1 % of lamps at white
+    /// change nothing (a plain mean would drop the ratio by ~6x); limits
+    /// and a frame at black.
+    #[test]
+    fn auto_ratio_meters_the_frame_and_ignores_lamps() {
+        let a = auto_ratio(&flat(0.001, 0), None).unwrap();
+        assert!((a.level - 16.0 / 15871.0).abs() < 1e-9, "{a:?}");
+        assert!((a.ratio as f64 - 0.125 / a.level).abs() < 1e-3, "{a:?}");
+        let lit = auto_ratio(&flat(0.001, 40), None).unwrap();
+        assert_eq!(lit.ratio, a.ratio);
+        assert_eq!(auto_ratio(&flat(0.3, 0), None).unwrap().ratio, 1.0);
+        let deep = auto_ratio(&flat(0.0001, 0), None).unwrap();
+        assert_eq!(deep.ratio, AUTO_MAX_RATIO);
+        assert!(
+            deep.describe().contains("held at the largest"),
+            "{}",
+            deep.describe()
+        );
+        let e = auto_ratio(&flat(0.0, 0), None).unwrap_err().to_string();
+        assert!(e.contains("no signal above black"), "{e}");
+        // Dark shading is subtracted first: 10 DN of it leaves 6 DN.
+        let dark = Array3::from_elem((4, 32, 32), 10.0f32);
+        let d = auto_ratio(&flat(0.001, 0), Some(&dark)).unwrap();
+        assert!((d.level - 6.0 / 15871.0).abs() < 1e-9, "{d:?}");
     }
 }

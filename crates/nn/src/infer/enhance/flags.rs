@@ -22,9 +22,14 @@ pub struct EnhanceFlags {
     /// Weight file from `pgrf train` (SPC denoiser or PGRF flow model).
     #[arg(long, short = 'm')]
     pub model: PathBuf,
-    /// Exposure ratio: the input is multiplied by it before denoising.
-    #[arg(long, conflicts_with = "target_exposure", allow_hyphen_values = true)]
-    pub ratio: Option<f32>,
+    /// Exposure ratio: the input is multiplied by it before denoising; `auto` (the default without --target-exposure) meters each frame, bringing its mean level (brightest 1 % left out) to 1/8 of white, ratio 1..300, and prints what it chose.
+    #[arg(
+        long,
+        conflicts_with = "target_exposure",
+        allow_hyphen_values = true,
+        value_name = "R|auto"
+    )]
+    pub ratio: Option<RatioFlag>,
     /// Instead of --ratio: the exposure (seconds) to brighten to; the ratio is
     /// target / the file's exposure time (x --target-iso / the file's ISO).
     #[arg(long)]
@@ -80,6 +85,28 @@ pub struct EnhanceFlags {
     pub quiet: bool,
 }
 
+/// `--ratio`: a number, or `auto`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum RatioFlag {
+    /// Meter the frame ([`RatioChoice::Auto`]).
+    Auto,
+    /// This exposure ratio.
+    Value(f32),
+}
+
+impl std::str::FromStr for RatioFlag {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        if s.eq_ignore_ascii_case("auto") {
+            return Ok(RatioFlag::Auto);
+        }
+        s.trim()
+            .parse::<f32>()
+            .map(RatioFlag::Value)
+            .map_err(|_| format!("expected a number or auto, got {s:?}"))
+    }
+}
+
 fn refused(flag: &'static str, message: String) -> NnError {
     NnError::BadSetting { flag, message }
 }
@@ -88,19 +115,13 @@ impl EnhanceFlags {
     /// Refuse flag values no file can make right, before any work; then
     /// expand folders and plan every output ([`plan_jobs`]).
     pub fn jobs(&self) -> Result<Vec<Job>, NnError> {
-        if let Some(r) = self.ratio {
+        if let Some(RatioFlag::Value(r)) = self.ratio {
             if !(r.is_finite() && r > 0.0) {
                 return Err(refused(
                     "--ratio",
-                    format!("--ratio must be a positive number, got {r}"),
+                    format!("--ratio must be a positive number or auto, got {r}"),
                 ));
             }
-        }
-        if self.ratio.is_none() && self.target_exposure.is_none() {
-            return Err(refused(
-                "--ratio",
-                "give the exposure ratio (--ratio R) or a target exposure (--target-exposure SECONDS)".into(),
-            ));
         }
         if let Some(t) = self.t2 {
             if !(0.0..=1.0).contains(&t) {
@@ -127,9 +148,10 @@ impl EnhanceFlags {
             None => None,
         };
         let ratio = match (self.ratio, self.target_exposure) {
-            (Some(r), _) => RatioChoice::Fixed(r),
-            (None, seconds) => RatioChoice::TargetExposure {
-                seconds: seconds.expect("checked in jobs()"),
+            (Some(RatioFlag::Value(r)), _) => RatioChoice::Fixed(r),
+            (Some(RatioFlag::Auto), _) | (None, None) => RatioChoice::Auto,
+            (None, Some(seconds)) => RatioChoice::TargetExposure {
+                seconds,
                 iso: self.target_iso,
             },
         };
