@@ -39,6 +39,7 @@ struct Line {
     ssim: f64,
     cast: f64,
     gain: String,
+    black: f64,
     raw: String,
 }
 
@@ -46,11 +47,11 @@ fn lines(csv: &str) -> Vec<Line> {
     let mut it = csv.lines();
     assert_eq!(
         it.next().unwrap(),
-        "protocol,id,reference,iso,ratio,seed,method,psnr,ssim,cast_dab,cast_da,cast_db,cast_blocks,gain"
+        "protocol,id,reference,iso,ratio,seed,method,psnr,ssim,cast_dab,cast_da,cast_db,cast_blocks,gain,black_lift"
     );
     it.map(|l| {
         let f: Vec<&str> = l.split(',').collect();
-        assert_eq!(f.len(), 14, "{l}");
+        assert_eq!(f.len(), 15, "{l}");
         assert_eq!(f[0], "synthetic");
         assert!(f[12].parse::<usize>().unwrap() > 10, "cast blocks: {l}");
         Line {
@@ -63,6 +64,7 @@ fn lines(csv: &str) -> Vec<Line> {
             ssim: f[8].parse().unwrap(),
             cast: f[9].parse().unwrap(),
             gain: f[13].into(),
+            black: f[14].parse().unwrap(),
             raw: l.to_string(),
         }
     })
@@ -512,5 +514,47 @@ fn a_noise_aware_model_is_told_each_captures_noise() {
     assert!(
         measured.iter().all(|l| l.psnr.is_finite() && l.psnr > 10.0),
         "{measured:?}"
+    );
+}
+
+/// `--uncalibrated` hands the methods each capture with its dark-level
+/// offset: the noisy input's black-level figure (mean error where the
+/// chart is below 1 % of white) rises by the A7S2's black-level error at
+/// ISO 1600 x100 (+2.43 DN x 100 / 15,871 DN = +0.0153 of white) times the
+/// slope of the clamp at black (about one half for noise centred there):
+/// between 0.004 and 0.016 above the calibrated input's. The header says
+/// which input the methods got.
+#[test]
+fn uncalibrated_captures_keep_their_black_level_error() {
+    let (d, clean) = setup("uncalibrated");
+    let mut black = Vec::new();
+    for extra in [&[][..], &["--uncalibrated"][..]] {
+        let csv = d.join(format!("b{}.csv", extra.len()));
+        let mut args = vec!["--iso", "1600", "--ratio", "100", "--csv", s(&csv)];
+        args.extend_from_slice(extra);
+        let out = succeed(&eval(&[&clean], &args));
+        let want = if extra.is_empty() {
+            "minus its dark-level offset"
+        } else {
+            "its dark-level offset (the profile's black-level error at the ISO) kept, uncalibrated"
+        };
+        assert!(out.contains(want), "{out}");
+        let l = lines(&std::fs::read_to_string(&csv).unwrap());
+        assert_eq!(l.len(), 1);
+        black.push(l[0].black);
+    }
+    let rise = black[1] - black[0];
+    assert!((0.004..0.016).contains(&rise), "{black:?}");
+    let e = one_line_error(&pgrf(&[
+        "eval",
+        "--protocol",
+        "eld",
+        "--root",
+        s(&d),
+        "--uncalibrated",
+    ]));
+    assert!(
+        e.contains("--uncalibrated goes with --protocol synthetic only"),
+        "{e}"
     );
 }

@@ -9,7 +9,7 @@
 use super::table::Row;
 use super::{centre_crop, load_pair, DatasetError, LoadedPair, Result, Sample};
 use crate::method::{CaseInfo, MethodUnderTest};
-use crate::metrics::{colour_cast, evaluate, CameraColour, MetricError, Protocol};
+use crate::metrics::{black_lift, colour_cast, evaluate, CameraColour, MetricError, Protocol};
 use ndarray::{Array3, ArrayView3};
 use pgrf_core::Progress;
 use pgrf_raw::{LevelOverrides, RawFrame};
@@ -172,6 +172,7 @@ pub fn run(
                 iso: None,
                 seed: None,
                 cast: None,
+                black: None,
             },
             source: smp.noisy.display().to_string(),
             title: smp.id.clone(),
@@ -238,6 +239,10 @@ pub(crate) fn run_cases(
                 Some(c) => colour_cast(out.view(), reference, c).map_err(at)?,
                 None => None,
             };
+            let black = colour
+                .is_some()
+                .then(|| black_lift(out.view(), reference).map(|b| b.0))
+                .flatten();
             if k == rank {
                 first = Some(sc.psnr);
             }
@@ -251,6 +256,7 @@ pub(crate) fn run_cases(
                 ssim: sc.ssim,
                 gain: sc.gain,
                 cast,
+                black,
                 ..case.row.clone()
             });
         }

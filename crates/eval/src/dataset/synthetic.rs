@@ -491,6 +491,7 @@ pub fn run(
                 iso: Some(c.iso),
                 seed: Some(seed),
                 cast: None,
+                black: None,
             },
             source: format!("{} ({})", img.path.display(), c.label()),
             title: format!("{} {}", img.id, c.label()),

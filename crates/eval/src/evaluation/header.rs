@@ -60,7 +60,9 @@ pub(super) fn header(cfg: &EvalConfig, what: &str) -> String {
         Some(w) => format!("white {w}"),
         None => "white from each file".into(),
     };
-    let input = if synthetic {
+    let input = if synthetic && cfg.synthetic.uncalibrated {
+        "capture = reference / ratio through the noise model, x ratio, its dark-level offset (the profile's black-level error at the ISO) kept, uncalibrated, clamped [0,1]"
+    } else if synthetic {
         "capture = reference / ratio through the noise model, x ratio, minus its dark-level offset (the profile's black-level error at the ISO, calibrated), clamped [0,1]"
     } else {
         "input x ratio clamped [0,1]"

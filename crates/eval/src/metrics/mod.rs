@@ -6,6 +6,8 @@
 //!   with its defaults (7x7 uniform window, sample covariance, channel mean).
 //! - [`cast`]: the colour-cast figure, a mean CIELAB chroma shift over
 //!   low-texture blocks (not part of ELD's protocol; pgrf's synthetic one).
+//! - `black`: the black-level figure, the mean restoration error where the
+//!   reference is black (pgrf's synthetic protocol; issue 36).
 //! - [`correct`]: ELD's single least-squares brightness gain over unsaturated pixels.
 //! - [`protocol`]: the evaluation protocol that strings them together (clamp,
 //!   optional correction, x255 as floats) and says in one line what it measured.
@@ -13,6 +15,7 @@
 //! All accumulation is f64 and every parallel reduction adds its partial sums
 //! in a fixed order, so a result does not depend on the number of threads.
 
+mod black;
 pub mod cast;
 mod correct;
 mod error;
@@ -22,6 +25,7 @@ mod psnr;
 mod ssim;
 mod sum;
 
+pub use black::{black_lift, BLACK_BELOW};
 pub use cast::{colour_cast, CameraColour, Cast};
 pub use correct::{illuminance_correct, illuminance_gain, IlluminanceGain};
 pub use error::MetricError;

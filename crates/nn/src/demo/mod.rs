@@ -174,6 +174,7 @@ impl Demo {
                     iso: None,
                     seed: None,
                     cast: None,
+                    black: None,
                 });
             }
         }
