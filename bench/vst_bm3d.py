@@ -86,11 +86,22 @@ def main():
     ap.add_argument("dump", help="folder written by pgrf eval --dump")
     ap.add_argument("out", help="folder for KEY.output.npy (created)")
     ap.add_argument("--jobs", type=int, default=1, help="cases at once")
+    ap.add_argument(
+        "--resume",
+        action="store_true",
+        help="skip cases whose KEY.output.npy exists (outputs are written atomically, so one "
+        "that exists is whole): continue a run that was stopped",
+    )
     a = ap.parse_args()
     os.makedirs(a.out, exist_ok=True)
     keys = sorted(f[: -len(".json")] for f in os.listdir(a.dump) if f.endswith(".json"))
     if not keys:
         sys.exit(f"{a.dump}: no KEY.json files (run pgrf eval --dump first)")
+    if a.resume:
+        done = [k for k in keys if os.path.exists(os.path.join(a.out, k + ".output.npy"))]
+        if done:
+            print(f"{len(done)} cases already restored in {a.out}, skipped", flush=True)
+        keys = [k for k in keys if k not in set(done)]
     t0 = time.time()
     with ProcessPoolExecutor(max_workers=max(1, a.jobs)) as pool:
         for key, secs in pool.map(one, [(a.dump, a.out, k) for k in keys]):

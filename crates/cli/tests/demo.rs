@@ -300,3 +300,23 @@ fn bad_demo_arguments_are_one_line_errors() {
         );
     }
 }
+
+/// A noise-aware SPC runs in the demo: it is told each capture's noise by
+/// the lookup `pgrf enhance` uses (before, the demo had no noise to give
+/// and such a model was refused); a residual model trained two steps stays
+/// within 1 dB of the noisy input it starts from.
+#[test]
+fn a_noise_aware_model_runs_in_the_demo() {
+    let dir = scratch("demo", "noise-aware");
+    let m = dir.join("aware.safetensors");
+    common::noise_aware_model(&m);
+    let out = dir.join("out");
+    let v = run_scene(
+        &out,
+        &["--scene", "procedural", "--size", "128x128", "--spc", s(&m)],
+    );
+    for ratio in ["x100", "x200"] {
+        let (spc, noisy) = (psnr(&v, ratio, "spc"), psnr(&v, ratio, "noisy"));
+        assert!((spc - noisy).abs() < 1.0, "{ratio}: {spc} vs {noisy}");
+    }
+}

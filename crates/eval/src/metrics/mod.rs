@@ -25,7 +25,7 @@ mod psnr;
 mod ssim;
 mod sum;
 
-pub use black::{black_lift, BLACK_BELOW};
+pub use black::black_lift;
 pub use cast::{colour_cast, CameraColour, Cast};
 pub use correct::{illuminance_correct, illuminance_gain, IlluminanceGain};
 pub use error::MetricError;

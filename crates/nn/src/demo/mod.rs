@@ -13,6 +13,7 @@
 mod picture;
 mod scene;
 
+use crate::condition::NoiseLevel;
 use crate::infer::enhance::describe_method;
 pub use crate::infer::enhance::BoxError;
 use crate::infer::prepare::network_input;
@@ -23,6 +24,7 @@ use pgrf_core::{NoProgress, Progress};
 use pgrf_eval::dataset::table::Row;
 use pgrf_eval::{evaluate, MetricError, Protocol, Scores};
 use pgrf_noise::capture::DarkCapture;
+use pgrf_noise::lookup::{find_noise, range_of, KnownNoise};
 use pgrf_noise::{CameraProfile, ModelKind, NoiseError};
 use pgrf_raw::{pack_normalized, unpack_normalized, write_dng, DngOptions, RawError, RawFrame};
 pub use scene::{Clean, PhotoSource, Scene};
@@ -230,12 +232,28 @@ impl Bench<'_> {
         progress.advance(1);
         let run = |r: &dyn Restore, name: &str| -> Result<(Scores, RawFrame), DemoError> {
             progress.message(&format!("x{ratio}: {name}"));
+            // A noise-aware model is told the capture's noise by the lookup
+            // `pgrf enhance` uses (for the simulated A7S2: its built-in
+            // profile at the capture's ISO).
+            let level = match r.meta().arch.conditioning().needs_level() {
+                true => {
+                    let n = find_noise(&dark, &KnownNoise::default())?;
+                    Some(NoiseLevel::from_dn(
+                        n.k,
+                        n.read,
+                        n.row,
+                        range_of(&dark),
+                        ratio as f64,
+                    ))
+                }
+                false => None,
+            };
             let out = restore_frame(
                 r,
                 &dark,
                 ratio as f32,
                 Some(&dark_dn),
-                None,
+                level,
                 &self.tiling,
                 &NoProgress,
             )?;

@@ -167,7 +167,7 @@ pub fn auto_ratio(frame: &RawFrame, dark_dn: Option<&Array3<f32>>) -> Result<Aut
     let sum: f64 = low.iter().map(|&v| v as f64).sum::<f64>() + sample[keep - 1] as f64;
     let level = sum / kept as f64;
     // Below a millionth of white the mean is the noise's, not a scene's.
-    if !(level > 1e-6) {
+    if level.is_nan() || level <= 1e-6 {
         return Err(NnError::BadSetting {
             flag: "--ratio",
             message: format!(

@@ -1,0 +1,45 @@
+#!/usr/bin/env bash
+# Issue 36's measure (MODELS.md, "Noise-aware models", "The measure"): the three real mosaics
+# of ../shared/data/raw plus two photos the training held out, made dark with the Sony A7S2's
+# noise at ISO 400/1600/6400/12800 and the Canon EOS 5D Mark IV's (never trained) at ISO
+# 200/800/3200, ratios 20/100/200, uncalibrated (each capture keeps its dark-level offset),
+# centre 256 x 256 packed crops; every capture also restored by VST + BM3D given the true
+# parameters (bench/vst_bm3d.py, PyPI bm3d 4.0.3) and scored for the noisy input.
+#
+# Usage: bench/noise_aware_measure.sh OUT MODEL...   (MODEL: builtin:spc, a weight file, ...)
+#   PHOTOS (default ~/.cache/pgrf/photos, tools/fetch_photos.sh's folder) must hold the
+#   held-out photos plasma-workspace-wallpapers__Kite.jpg and __Path.jpg.
+# Writes OUT/{a7s2,5d4}.csv and .md; the captures (OUT/dump-*) and BM3D's outputs (OUT/bm3d-*)
+# are kept and reused, so a stopped run continues and new models cost only their own time.
+# JOBS=N runs N BM3D cases at once.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+out="$1"; shift
+photos="${PHOTOS:-$HOME/.cache/pgrf/photos}"
+data=../shared/data/raw
+cargo build --release --locked -p pgrf-cli >/dev/null
+pgrf=target/release/pgrf
+python3 -c "import bm3d" 2>/dev/null || python3 -m pip install --quiet bm3d==4.0.3 numpy
+mkdir -p "$out/realset"
+cp -n "$data/canon550d_colorchart.dng" "$data/kodak_dc50.kdc" "$out/realset/"
+[ -e "$out/realset/dslr_crop.dng" ] || "$pgrf" convert "$data/dslr_crop_768x512_rggb14.raw" \
+    --width 768 --height 512 --bits 14 --cfa RGGB --black 600 --white 15520 \
+    -o "$out/realset/dslr_crop.dng" >/dev/null
+cp -n "$photos/plasma-workspace-wallpapers__Kite.jpg" "$photos/plasma-workspace-wallpapers__Path.jpg" "$out/realset/"
+models=()
+for m in "$@"; do models+=(--model "$m"); done
+run() { # NAME PROFILE ISOS
+    local name=$1 profile=$2 isos=$3
+    local common=(eval --protocol synthetic --root "$out/realset" --profile "$profile" --iso "$isos"
+        --ratio 20,100,200 --uncalibrated --crop 256 --quiet)
+    if [ ! -d "$out/dump-$name" ]; then
+        mkdir -p "$out/dump-$name.part"
+        "$pgrf" "${common[@]}" --dump "$out/dump-$name.part" >/dev/null
+        mv "$out/dump-$name.part" "$out/dump-$name"
+    fi
+    python3 bench/vst_bm3d.py "$out/dump-$name" "$out/bm3d-$name" --resume --jobs "${JOBS:-1}"
+    "$pgrf" "${common[@]}" "${models[@]}" --outputs "vst-bm3d=$out/bm3d-$name" \
+        --csv "$out/$name.csv" --markdown "$out/$name.md"
+}
+run a7s2 sony-a7s2 400,1600,6400,12800
+run 5d4 canon-eos5d4 200,800,3200
