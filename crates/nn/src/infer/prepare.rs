@@ -24,6 +24,15 @@ pub fn network_input(
             message: format!("the exposure ratio must be a positive number, got {ratio}"),
         });
     }
+    let mut x = normalised_minus_dark(frame, dark_dn)?;
+    x.par_mapv_inplace(|v| (v * ratio).clamp(0.0, 1.0));
+    Ok(x)
+}
+
+/// `frame` packed, each plane normalised by its black and white levels,
+/// minus `dark_dn` (DN above black, packed like the frame) on the same
+/// scale; not amplified, not clamped.
+fn normalised_minus_dark(frame: &RawFrame, dark_dn: Option<&Array3<f32>>) -> Result<Array3<f32>> {
     let mut x = pack_normalized(frame, false)?;
     if let Some(dark) = dark_dn {
         if dark.shape() != x.shape() {
@@ -44,7 +53,6 @@ pub fn network_input(
                 .par_for_each(|v, &d| *v -= d * scale);
         }
     }
-    x.par_mapv_inplace(|v| (v * ratio).clamp(0.0, 1.0));
     Ok(x)
 }
 
@@ -128,24 +136,7 @@ impl AutoRatio {
 /// within [1, [`AUTO_MAX_RATIO`]]. Refuses a frame with no signal above
 /// black (a lens-cap frame): no ratio makes it a photograph.
 pub fn auto_ratio(frame: &RawFrame, dark_dn: Option<&Array3<f32>>) -> Result<AutoRatio> {
-    let mut x = pack_normalized(frame, false)?;
-    if let Some(dark) = dark_dn {
-        if dark.shape() != x.shape() {
-            return Err(NnError::SizeMismatch(format!(
-                "dark shading packs to {:?}, the frame to {:?}",
-                dark.shape(),
-                x.shape()
-            )));
-        }
-        for (plane, (mut xp, dp)) in x
-            .axis_iter_mut(Axis(0))
-            .zip(dark.axis_iter(Axis(0)))
-            .enumerate()
-        {
-            let scale = 1.0 / (frame.white as f32 - frame.black[plane]);
-            xp.zip_mut_with(&dp, |v, &d| *v -= d * scale);
-        }
-    }
+    let x = normalised_minus_dark(frame, dark_dn)?;
     // Every 7th value (7 is prime to the plane and row sizes that matter:
     // the subsample takes every plane and column phase).
     let step = if x.len() > 1 << 20 { 7 } else { 1 };
