@@ -67,24 +67,22 @@ pub(crate) fn load_init<B: Backend>(
     arch: &crate::arch::Architecture,
     device: &B::Device,
 ) -> Result<(Net<B>, WeightMeta, bool)> {
-    let bytes = weights::read_bytes(path)?;
-    let (meta, mut tensors) = weights::from_bytes(&bytes, path)?;
+    let (meta, mut tensors) = weights::read(path)?;
     weights::check_arch(path, &meta, arch)?;
-    if !arch.widen_unconditioned(&meta.arch, &mut tensors) {
-        let (net, meta) = load_bytes::<B>(path, &bytes, device)?;
-        return Ok((net, meta, false));
-    }
+    // `arch` is the run's own (already checked against memory), so the
+    // file's tensors are assigned to it whether or not they were widened.
+    let widened = arch.widen_unconditioned(&meta.arch, &mut tensors);
     let net = arch
         .init::<B>(device)?
         .assign(&tensors, device)
         .map_err(|e| {
             NnError::SizeMismatch(format!(
-                "{}: widened weights do not fit {}: {e}",
+                "{}: weights do not fit {}: {e}",
                 path.display(),
                 arch.describe()
             ))
         })?;
-    Ok((net, meta, true))
+    Ok((net, meta, widened))
 }
 
 /// Load a file that must hold the SPC denoiser.
