@@ -26,8 +26,8 @@ use pgrf_core::seed::mix64;
 use pgrf_core::stats::median;
 use pgrf_nn::backend::DeviceKind;
 use pgrf_nn::flow::SamplerKind;
-use pgrf_nn::infer::image::plan_for;
-use pgrf_nn::infer::memory::{attention_tokens, auto_tile, fixed_bytes, tile_bytes};
+use pgrf_nn::infer::image::frame_plan;
+use pgrf_nn::infer::memory::{attention_tokens, auto_tile, fixed_bytes, windowed_tile_bytes};
 use pgrf_nn::infer::restorer::UNSEARCHED_T2;
 use pgrf_nn::infer::DEFAULT_OVERLAP;
 use pgrf_nn::infer::{restore_image, ImageOptions, Restore, Restorer, SamplerChoice};
@@ -290,7 +290,7 @@ pub fn run(a: &EnhanceArgs) -> Result<()> {
         seed: 0,
         noise: None,
     };
-    let plan = plan_for(ph, pw, &opts, r.side_multiple())?;
+    let plan = frame_plan(r, ph, pw, &opts)?;
     let tiles = plan.count();
     let (th, tw) = (plan.rows.len, plan.cols.len);
     let sampler = match r.sampler() {
@@ -300,8 +300,9 @@ pub fn run(a: &EnhanceArgs) -> Result<()> {
     let nfe = r.nfe();
     let mib = |b: f64| b / (1 << 20) as f64;
     let attention_tokens = attention_tokens(&r.meta().arch, th, tw);
-    let estimated_peak_mib =
-        mib(tile_bytes(&r.meta().arch, th, tw) + fixed_bytes(r, ph, pw) as f64);
+    let estimated_peak_mib = mib(
+        windowed_tile_bytes(&r.meta().arch, th, tw, r.window()) + fixed_bytes(r, ph, pw) as f64
+    );
     let attention_scores_mib = mib(4.0 * (attention_tokens as f64).powi(2));
     if a.dry_run {
         let plan = serde_json::json!({

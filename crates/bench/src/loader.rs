@@ -9,7 +9,7 @@ use clap::Args;
 use pgrf_nn::data::build::sources;
 use pgrf_nn::data::loader_rate;
 use pgrf_nn::TrainConfig;
-use pgrf_noise::pair::{PairSpec, RatioSpec};
+use pgrf_noise::pair::PairSpec;
 use pgrf_noise::CameraProfile;
 use std::sync::Arc;
 use std::time::Instant;
@@ -55,10 +55,7 @@ pub fn run(a: &LoaderArgs) -> Result<()> {
     let built = sources(&config)?;
     let open_s = t.elapsed().as_secs_f64();
     let mut spec = PairSpec::new(CameraProfile::load(&config.profile)?, config.noise);
-    spec.ratio = RatioSpec::Uniform {
-        lo: config.ratio_min,
-        hi: config.ratio_max,
-    };
+    spec.ratio = config.ratio_draw.spec(config.ratio_min, config.ratio_max);
     let what = built.train.describe();
     let rate = loader_rate(
         Arc::new(built.train),

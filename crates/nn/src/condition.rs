@@ -13,6 +13,14 @@
 //! - **sigma map** (FFDNet; Ansel's sigma-map U-Net): four more input
 //!   planes holding sqrt(gain * x + floor), the standard deviation the level
 //!   predicts at each packed pixel (from the clamped input itself);
+//! - **log-sigma map**: the same four planes as (ln sigma - [`LOG_SIGMA_CENTRE`])
+//!   / [`LOG_SIGMA_SPREAD`]. The deviations of interest span two decades
+//!   (0.003 at a camera's own low-ISO noise to 0.3 at ISO 12800 x200); as
+//!   raw values they reach the first layer 10-100x weaker than the image
+//!   planes, and a network started from blind weights (zero plane weights)
+//!   learnt little use of them in 7,000 steps (MODELS.md). In the log they
+//!   span about -1.2..1.2, the image planes' scale, and equal steps in noise
+//!   ratio are equal steps in the input;
 //! - **k-sigma** (Wang et al., "Practical Deep Raw Image Denoising on Mobile
 //!   Devices", ECCV 2020): the input mapped by x' = x g/gain + g floor/gain^2
 //!   (g = [`KSIGMA_REF_GAIN`]), in which the noise is Poisson-like with the
@@ -35,6 +43,18 @@ pub const KSIGMA_REF_GAIN: f32 = 0.01;
 /// The smallest gain a level may have: below it the k-sigma domain's scale
 /// (`KSIGMA_REF_GAIN / gain`) exceeds 10^6 and f32 loses the image.
 const MIN_GAIN: f32 = 1e-8;
+
+/// The log-sigma planes are (ln sigma - centre) / spread: sigma 0.03 (ln
+/// -3.5, mid-range training noise) maps to 0.
+pub const LOG_SIGMA_CENTRE: f32 = -3.5;
+
+/// See [`LOG_SIGMA_CENTRE`]: sigma 0.003 maps to -1.15, sigma 0.3 to +1.15.
+pub const LOG_SIGMA_SPREAD: f32 = 2.0;
+
+/// The smallest deviation the log-sigma planes hold (a noiseless black
+/// pixel would be ln 0): 1e-4 of white, a tenth of a 14-bit camera's read
+/// noise at its lowest ISO.
+const MIN_LOG_SIGMA: f32 = 1e-4;
 
 /// The noise of an amplified, normalised network input: Var(x) = gain *
 /// E\[x\] + floor, in the input's units.
@@ -95,6 +115,9 @@ pub enum Conditioning {
     SigmaMap,
     /// The input in the k-sigma domain, the output mapped back.
     KSigma,
+    /// Four more input planes: the log of the noise standard deviation at
+    /// each packed pixel, centred and scaled to the image planes' range.
+    LogSigmaMap,
 }
 
 impl Conditioning {
@@ -102,7 +125,7 @@ impl Conditioning {
     /// planes come first).
     pub fn extra_channels(self) -> usize {
         match self {
-            Conditioning::SigmaMap => 4,
+            Conditioning::SigmaMap | Conditioning::LogSigmaMap => 4,
             Conditioning::None | Conditioning::KSigma => 0,
         }
     }
@@ -118,6 +141,7 @@ impl Conditioning {
             Conditioning::None => "none",
             Conditioning::SigmaMap => "sigma-map",
             Conditioning::KSigma => "k-sigma",
+            Conditioning::LogSigmaMap => "log-sigma-map",
         }
     }
 
@@ -134,7 +158,7 @@ impl Conditioning {
     fn affine(self, level: &NoiseLevel) -> (f32, f32) {
         match self {
             Conditioning::KSigma => level.ksigma(),
-            Conditioning::None | Conditioning::SigmaMap => (1.0, 0.0),
+            Conditioning::None | Conditioning::SigmaMap | Conditioning::LogSigmaMap => (1.0, 0.0),
         }
     }
 }
@@ -174,11 +198,17 @@ impl<B: Backend> Conditioned<B> {
         let scale = column(&|l| kind.affine(l).0);
         let offset = column(&|l| kind.affine(l).1);
         let mut input = noisy.clone() * scale.clone() + offset.clone();
-        if kind == Conditioning::SigmaMap {
+        if kind.extra_channels() > 0 {
             let gain = column(&|l| l.gain);
             let floor = column(&|l| l.floor);
             let sigma = (noisy.clamp_min(0.0) * gain + floor).sqrt();
-            input = Tensor::cat(vec![input, sigma], 1);
+            let planes = match kind {
+                Conditioning::LogSigmaMap => {
+                    (sigma.clamp_min(MIN_LOG_SIGMA).log() - LOG_SIGMA_CENTRE) / LOG_SIGMA_SPREAD
+                }
+                _ => sigma,
+            };
+            input = Tensor::cat(vec![input, planes], 1);
         }
         Conditioned {
             input,
@@ -300,6 +330,42 @@ mod tests {
         // The identity domain: outputs pass through untouched.
         let y = c.input_units_of(x.clone());
         assert_eq!(y.into_data(), x.into_data());
+    }
+
+    /// The log-sigma planes are the log of the sigma planes, centred and
+    /// scaled; a noiseless black pixel is held at the smallest deviation.
+    #[test]
+    fn the_log_sigma_map_is_the_scaled_log_of_the_deviation() {
+        let x = batch();
+        let ls = levels();
+        let plain = Conditioned::new(Conditioning::SigmaMap, x.clone(), &ls);
+        let logged = Conditioned::new(Conditioning::LogSigmaMap, x.clone(), &ls);
+        assert_eq!(logged.input.dims(), [2, 8, 3, 3]);
+        let a = plain.input.into_data().to_vec::<f32>().unwrap();
+        let b = logged.input.into_data().to_vec::<f32>().unwrap();
+        for item in 0..2 {
+            for k in 0..36 {
+                let (i, j) = (item * 72 + k, item * 72 + 36 + k);
+                assert_eq!(a[i], b[i], "the four planes come first, unchanged");
+                let want = (a[j].max(1e-4).ln() + 3.5) / 2.0;
+                assert!((b[j] - want).abs() < 1e-5, "{} vs {want}", b[j]);
+            }
+        }
+        // sigma 0.003 and 0.3, the ends of the training range, land at
+        // -1.15 and +1.15.
+        for (sigma, want) in [(0.003f32, -1.1546), (0.3, 1.1480)] {
+            let got = (sigma.ln() - LOG_SIGMA_CENTRE) / LOG_SIGMA_SPREAD;
+            assert!((got - want).abs() < 1e-3, "{sigma}: {got}");
+        }
+        let silent = NoiseLevel {
+            gain: 1e-6,
+            floor: 0.0,
+        };
+        let black = Tensor::<B, 4>::zeros([1, 4, 1, 1], &Default::default());
+        let c = Conditioned::new(Conditioning::LogSigmaMap, black, &[silent]);
+        let v = c.input.into_data().to_vec::<f32>().unwrap();
+        let floor = (1e-4f32.ln() + 3.5) / 2.0;
+        assert!(v[4..].iter().all(|p| (p - floor).abs() < 1e-5), "{v:?}");
     }
 
     #[test]

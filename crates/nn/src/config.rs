@@ -106,6 +106,10 @@ pub struct TrainConfig {
     /// Largest exposure ratio [default: 300].
     #[cfg_attr(feature = "clap", arg(long, default_value_t = d().ratio_max, hide_default_value = true))]
     pub ratio_max: f32,
+    /// How ratios are drawn between --ratio-min and --ratio-max: uniform, or log (every factor of the range equally often: as many crops below x20 as above it for 1..300) [default: uniform].
+    #[cfg_attr(feature = "clap", arg(long, value_enum, default_value_t = d().ratio_draw, hide_default_value = true))]
+    #[serde(skip_serializing_if = "is_uniform")]
+    pub ratio_draw: RatioDraw,
     /// Side of the packed training crops [default: 512].
     #[cfg_attr(feature = "clap", arg(long, default_value_t = d().patch, hide_default_value = true))]
     pub patch: usize,
@@ -145,7 +149,7 @@ pub struct TrainConfig {
     /// Learn a correction: the SID U-Net adds its input to its output; the flow model adds T - Xt to its velocity (its first stage starts as the noisy input). Not the papers' design; converges far faster for small CPU-trained models.
     #[cfg_attr(feature = "clap", arg(long, action = clap::ArgAction::Set, num_args = 0..=1, default_missing_value = "true", default_value_t = false, hide_default_value = true))]
     pub residual: bool,
-    /// Tell the network how noisy its input is (MODELS.md, "Noise-aware models"): none (it guesses from the pixels), sigma-map (four more input planes, the noise standard deviation at each pixel) or k-sigma (the input mapped so that its noise is the same at every gain, the output mapped back) [default: none].
+    /// Tell the network how noisy its input is (MODELS.md, "Noise-aware models"): none (it guesses from the pixels), sigma-map (four more input planes, the noise standard deviation at each pixel), k-sigma (the input mapped so that its noise is the same at every gain, the output mapped back) or log-sigma-map (the sigma planes as their centred log: the scale of the image planes) [default: none].
     #[cfg_attr(feature = "clap", arg(long, value_enum, default_value_t = d().conditioning, hide_default_value = true))]
     #[serde(skip_serializing_if = "is_unconditioned")]
     pub conditioning: Conditioning,
@@ -209,6 +213,34 @@ pub struct TrainConfig {
     pub device: crate::backend::DeviceKind,
 }
 
+/// How `pgrf train` draws each crop's exposure ratio in its range.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
+pub enum RatioDraw {
+    /// Uniform in the range (every run before issue 36's second stage).
+    #[default]
+    Uniform,
+    /// ln ratio uniform: low ratios (low noise) as often as high ones.
+    Log,
+}
+
+impl RatioDraw {
+    /// The pair synthesis' spec for the range `lo..hi`.
+    pub fn spec(self, lo: f32, hi: f32) -> pgrf_noise::pair::RatioSpec {
+        use pgrf_noise::pair::RatioSpec;
+        match self {
+            RatioDraw::Uniform => RatioSpec::Uniform { lo, hi },
+            RatioDraw::Log => RatioSpec::LogUniform { lo, hi },
+        }
+    }
+}
+
+/// Records of runs with uniform ratios stay as they were (no `ratio_draw`).
+fn is_uniform(r: &RatioDraw) -> bool {
+    *r == RatioDraw::Uniform
+}
+
 /// Records of unconditioned runs stay as they were before conditioning
 /// existed (no `conditioning` key).
 fn is_unconditioned(c: &Conditioning) -> bool {
@@ -241,6 +273,7 @@ impl Default for TrainConfig {
             photo_wb_spread: crate::data::photos::WB_SPREAD,
             ratio_min: 1.0,
             ratio_max: 300.0,
+            ratio_draw: RatioDraw::Uniform,
             patch: 512,
             batch: 1,
             workers: 2,

@@ -52,6 +52,53 @@ pub(crate) fn folded<B: Backend>(
     (rows * scale + shift).reshape([n, c, h, w])
 }
 
+/// Padding (rows, columns) that brings an `h` x `w` input to whole windows
+/// of side `side`: none when the input fits in one window (it is then its
+/// own window, as a training crop is), else up to the next multiple on each
+/// axis. The one rule both the frame ([`crate::infer`]) and the network
+/// ([`crate::arch::sr3`]) pad by, so that a padded frame's tiles need no
+/// more padding inside the network.
+pub fn window_padding(h: usize, w: usize, side: usize) -> (usize, usize) {
+    if side == 0 || (h <= side && w <= side) {
+        return (0, 0);
+    }
+    ((side - h % side) % side, (side - w % side) % side)
+}
+
+/// `f` applied to each `side` x `side` window of `x` `(n, c, h, w)` as if
+/// it were a batch item of its own, the windows put back in place: the
+/// statistics of a GroupNorm, or an attention's tokens, stay inside the
+/// window. The windows sit on a grid from the input's origin; an input
+/// that is one window or less, or not a whole number of windows (`side` 0:
+/// none), is passed to `f` whole.
+///
+/// Why: a flow network's GroupNorm and attention otherwise see the whole
+/// tile it is run on, so its output depends on how a frame is tiled (by
+/// ~30 dB PSNR between tilings). With windows of the training crop's side
+/// on the frame's grid, and tiles placed on that grid, every window's
+/// statistics are those of the same pixels whatever the tiling, and the
+/// same statistics the network learnt on its crops.
+pub fn windowed<B: Backend>(
+    x: Tensor<B, 4>,
+    side: usize,
+    f: impl FnOnce(Tensor<B, 4>) -> Tensor<B, 4>,
+) -> Tensor<B, 4> {
+    let [n, c, h, w] = x.dims();
+    if side == 0 || (h <= side && w <= side) || h % side != 0 || w % side != 0 {
+        return f(x);
+    }
+    let (gy, gx) = (h / side, w / side);
+    let windows = x
+        .reshape([n, c, gy, side, gx, side])
+        .permute([0, 2, 4, 1, 3, 5])
+        .reshape([n * gy * gx, c, side, side]);
+    let y = f(windows);
+    let co = y.dims()[1];
+    y.reshape([n, gy, gx, co, side, side])
+        .permute([0, 3, 1, 4, 2, 5])
+        .reshape([n, co, h, w])
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -77,5 +124,38 @@ mod tests {
             .max()
             .into_scalar();
         assert!(d < 1e-5, "{d}");
+    }
+
+    /// Each window is normalised as a batch item of its own: equal to
+    /// cutting the windows out by hand; the identity comes back in place;
+    /// inputs of one window or an odd size pass whole.
+    #[test]
+    fn windows_are_normalised_on_their_own() {
+        let device = Default::default();
+        let gn = GroupNormConfig::new(2, 4).init::<Cpu>(&device);
+        let x = Tensor::<Cpu, 4>::random([2, 4, 8, 12], Distribution::Normal(0.3, 1.5), &device);
+        let same = windowed(x.clone(), 4, |t| t);
+        assert_eq!(same.into_data(), x.clone().into_data());
+        let got = windowed(x.clone(), 4, |t| group_norm(&gn, t));
+        for (wy, wx) in [(0, 0), (1, 2), (0, 1)] {
+            let (y0, x0) = (4 * wy, 4 * wx);
+            let part = x.clone().slice([0..2, 0..4, y0..y0 + 4, x0..x0 + 4]);
+            let want = group_norm(&gn, part);
+            let have = got.clone().slice([0..2, 0..4, y0..y0 + 4, x0..x0 + 4]);
+            let d: f32 = (want - have).abs().max().into_scalar();
+            assert!(d < 1e-5, "window ({wy}, {wx}): {d}");
+        }
+        let whole = group_norm(&gn, x.clone());
+        for side in [0, 12, 5] {
+            let d: f32 = (windowed(x.clone(), side, |t| group_norm(&gn, t)) - whole.clone())
+                .abs()
+                .max()
+                .into_scalar();
+            assert!(d < 1e-6, "side {side}: {d}");
+        }
+        assert_eq!(window_padding(100, 60, 128), (0, 0));
+        assert_eq!(window_padding(130, 60, 128), (126, 68));
+        assert_eq!(window_padding(256, 384, 128), (0, 0));
+        assert_eq!(window_padding(256, 384, 0), (0, 0));
     }
 }

@@ -27,7 +27,6 @@ use burn::tensor::{ElementConversion, Tensor, TensorData};
 use pgrf_calib::mix::{MixError, MixSpec};
 use pgrf_core::Progress;
 use pgrf_noise::mix::PairMix;
-use pgrf_noise::pair::RatioSpec;
 use std::io::Write;
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -111,7 +110,7 @@ pub fn run(
         model: c.noise,
         iso: c.iso,
         iso_range,
-        ratio: RatioSpec::Uniform { lo, hi },
+        ratio: c.ratio_draw.spec(lo, hi),
         calibrated_dark_level: c.calibrated_dark_level,
         calibration: c.calib.as_deref(),
     })

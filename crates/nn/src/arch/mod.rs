@@ -282,6 +282,24 @@ impl<B: Backend> Net<B> {
         matches!(self, Net::Pgrf(_))
     }
 
+    /// The flow network with its statistics taken over windows of `side`
+    /// ([`Sr3Unet::with_window`]; 0: whole inputs); the denoiser, which has
+    /// no statistics, unchanged.
+    pub(crate) fn with_window(self, side: usize) -> std::result::Result<Net<B>, String> {
+        Ok(match self {
+            Net::Pgrf(n) => Net::Pgrf(n.with_window(side)?),
+            spc => spc,
+        })
+    }
+
+    /// The window side of [`Net::with_window`] (0: none).
+    pub(crate) fn window(&self) -> usize {
+        match self {
+            Net::Pgrf(n) => n.window(),
+            Net::Spc(_) => 0,
+        }
+    }
+
     /// The SPC denoiser, if this is one.
     pub fn into_denoiser(self) -> Option<SidUnet<B>> {
         match self {
@@ -424,7 +442,8 @@ mod tests {
         ]
     }
 
-    /// A blind network's weights start a sigma-map one that computes exactly
+    /// A blind network's weights start a sigma-map (or log-sigma-map) one
+    /// that computes exactly
     /// what the blind one did (the noise planes' input weights are zero),
     /// for both networks; other networks, and the k-sigma transform (no
     /// planes to add), are refused.
@@ -441,11 +460,12 @@ mod tests {
             residual: false,
             ..config(kind)
         };
-        for method in [Method::Spc, Method::Pgrf] {
+        let cases = [Method::Spc, Method::Pgrf]
+            .into_iter()
+            .flat_map(|m| [Conditioning::SigmaMap, Conditioning::LogSigmaMap].map(|k| (m, k)));
+        for (method, kind) in cases {
             let blind = blind_cfg(Conditioning::None).architecture(method).unwrap();
-            let aware = blind_cfg(Conditioning::SigmaMap)
-                .architecture(method)
-                .unwrap();
+            let aware = blind_cfg(kind).architecture(method).unwrap();
             assert!(aware.can_start_from(&blind) && aware.can_start_from(&aware));
             assert!(!blind.can_start_from(&aware), "{method:?}");
             let ksigma = blind_cfg(Conditioning::KSigma)
@@ -477,7 +497,7 @@ mod tests {
             assert!(scale > 1e-3, "{method:?}: output {scale}");
             assert!(
                 d <= 1e-5 * scale.max(1.0),
-                "{method:?}: widened net differs by {d}"
+                "{method:?} {kind:?}: widened net differs by {d}"
             );
         }
     }
@@ -496,6 +516,7 @@ mod tests {
             Conditioning::None,
             Conditioning::SigmaMap,
             Conditioning::KSigma,
+            Conditioning::LogSigmaMap,
         ] {
             for method in [Method::Spc, Method::Pgrf] {
                 let arch = config(kind).architecture(method).unwrap();
@@ -547,6 +568,7 @@ mod tests {
             Conditioning::None,
             Conditioning::SigmaMap,
             Conditioning::KSigma,
+            Conditioning::LogSigmaMap,
         ] {
             let net = config(kind)
                 .architecture(Method::Spc)

@@ -16,6 +16,7 @@ use crate::data::Extras;
 use crate::error::{NnError, Result as NnResult};
 use crate::layers::Layer;
 use crate::named::NamedTensor;
+use crate::norm::{window_padding, windowed};
 use crate::ops::{self, group_norm, silu, PgrfOps};
 use burn::config::Config;
 use burn::module::Module;
@@ -228,6 +229,7 @@ impl Sr3Config {
             levels,
             res_blocks: self.res_blocks,
             conditioning: self.conditioning,
+            window: 0,
         })
     }
 }
@@ -342,16 +344,26 @@ impl NetworkConfig for Sr3Config {
         Sr3Config::side_multiple(self)
     }
 
-    /// Self-attention relates every position of a tile to every other, and
-    /// its memory grows with the square of the tokens, so flow models are
-    /// held to twice the training patch, but never below 512 (512 when the
-    /// file does not record it). The floor is measured: the shipped flow
-    /// model, trained on 64-pixel crops, scores 29.45 dB on the demo's x100
-    /// capture in tiles of 128 (overlap 32), 29.92 in tiles of 256 and 30.03
-    /// as one 768 x 512 tile: small tiles cost more at their borders than a
-    /// softmax over more tokens than in training does.
+    /// A flow model whose file records a training crop that is a multiple
+    /// of its side multiple restores within windows of that crop
+    /// ([`crate::Restore::window`]): its attention memory grows with the
+    /// pixels, not their square, and larger tiles only save border work, so
+    /// its cap is the denoiser's 8192. Without windows, self-attention
+    /// relates every position of a tile to every other and its memory grows
+    /// with the square of the tokens, so such flow models are held to twice
+    /// the training patch, but never below 512 (512 when the file does not
+    /// record it). The floor is measured: the shipped flow model, trained
+    /// on 64-pixel crops, scored 29.45 dB on the demo's x100 capture in
+    /// tiles of 128 (overlap 32), 29.92 in tiles of 256 and 30.03 as one
+    /// 768 x 512 tile: small tiles cost more at their borders than a softmax
+    /// over more tokens than in training does.
     fn tile_cap(&self, trained_patch: Option<usize>) -> usize {
-        trained_patch.map_or(512, |p| (2 * p).clamp(512, 2048))
+        let m = Sr3Config::side_multiple(self);
+        match trained_patch {
+            Some(p) if p >= m && p % m == 0 => 8192,
+            Some(p) => (2 * p).clamp(512, 2048),
+            None => 512,
+        }
     }
 
     fn sampled(&self) -> bool {
@@ -420,7 +432,13 @@ pub fn attention_core<B: Backend>(qkv: Tensor<B, 3>, c: usize) -> Tensor<B, 3> {
 }
 
 impl<B: PgrfOps> SelfAttention<B> {
-    fn forward(&self, x: Tensor<B, 4>) -> Tensor<B, 4> {
+    /// The block on each `window` x `window` window of `x` on its own
+    /// (0: the whole input; [`windowed`]).
+    fn forward(&self, x: Tensor<B, 4>, window: usize) -> Tensor<B, 4> {
+        windowed(x, window, |x| self.forward_whole(x))
+    }
+
+    fn forward_whole(&self, x: Tensor<B, 4>) -> Tensor<B, 4> {
         let [n, c, h, w] = x.dims();
         let qkv =
             ops::conv2d(&self.qkv, group_norm(&self.norm, x.clone())).reshape([n, 3 * c, h * w]);
@@ -482,14 +500,17 @@ impl<B: Backend> ResBlock<B> {
 }
 
 impl<B: PgrfOps> ResBlock<B> {
-    fn forward(&self, x: Tensor<B, 4>, emb: &Tensor<B, 2>) -> Tensor<B, 4> {
+    /// The block on `x`, its GroupNorms' statistics (and its attention)
+    /// taken over `window` x `window` windows (0: the whole input).
+    fn forward(&self, x: Tensor<B, 4>, emb: &Tensor<B, 2>, window: usize) -> Tensor<B, 4> {
         let [n, _, _, _] = x.dims();
-        let h = ops::conv2d(&self.conv1, silu(group_norm(&self.norm1, x.clone())));
+        let norm = |g: &GroupNorm<B>, x: Tensor<B, 4>| windowed(x, window, |x| group_norm(g, x));
+        let h = ops::conv2d(&self.conv1, silu(norm(&self.norm1, x.clone())));
         let c = h.dims()[1];
         let h = h + self.emb.forward(emb.clone()).reshape([n, c, 1, 1]);
         let h = ops::conv2d(
             &self.conv2,
-            self.dropout.forward(silu(group_norm(&self.norm2, h))),
+            self.dropout.forward(silu(norm(&self.norm2, h))),
         );
         let res = match &self.skip {
             Some(s) => ops::conv2d(s, x),
@@ -497,7 +518,7 @@ impl<B: PgrfOps> ResBlock<B> {
         };
         let out = h + res;
         match &self.attn {
-            Some(a) => a.forward(out),
+            Some(a) => a.forward(out, window),
             None => out,
         }
     }
@@ -550,6 +571,11 @@ pub struct Sr3Unet<B: Backend> {
     res_blocks: usize,
     #[module(skip)]
     conditioning: Conditioning,
+    /// Side of the windows (level 0, packed pixels) over which GroupNorm
+    /// and attention take their statistics; 0: the whole input, as in
+    /// training ([`Sr3Unet::with_window`]).
+    #[module(skip)]
+    window: usize,
 }
 
 /// Sinusoidal embedding of t (one value per batch item) into `dim` features:
@@ -580,7 +606,9 @@ impl<B: PgrfOps> Sr3Unet<B> {
             (planes - xt.clone(), scale.reshape([n, 1, 1, 1]))
         });
         let m = 1 << (self.levels - 1);
-        let (ph, pw) = ((m - h % m) % m, (m - w % m) % m);
+        // Whole windows first (none without windows), then the levels' multiple.
+        let (wh, ww) = window_padding(h, w, self.window);
+        let (ph, pw) = (wh + (m - (h + wh) % m) % m, ww + (m - (w + ww) % m) % m);
         let x = Tensor::cat(vec![cond, xt], 1);
         let mode = if ph < h && pw < w {
             PadMode::Reflect
@@ -599,9 +627,13 @@ impl<B: PgrfOps> Sr3Unet<B> {
         let mut x = ops::conv2d(&self.first, x);
         let mut feats = vec![x.clone()];
         let mut res = self.downs.iter();
+        let window = |level: usize| self.window >> level;
         for level in 0..self.levels {
             for _ in 0..self.res_blocks {
-                x = res.next().expect("res block").forward(x, &emb);
+                x = res
+                    .next()
+                    .expect("res block")
+                    .forward(x, &emb, window(level));
                 feats.push(x.clone());
             }
             if level + 1 < self.levels {
@@ -610,17 +642,18 @@ impl<B: PgrfOps> Sr3Unet<B> {
             }
         }
         for block in &self.mid {
-            x = block.forward(x, &emb);
+            x = block.forward(x, &emb, window(self.levels - 1));
         }
         let mut ups = self.ups.iter();
         let mut upsamples = self.upsamples.iter();
         for level in (0..self.levels).rev() {
             for _ in 0..=self.res_blocks {
                 let skip = feats.pop().expect("skip");
-                x = ups
-                    .next()
-                    .expect("up block")
-                    .forward(Tensor::cat(vec![x, skip], 1), &emb);
+                x = ups.next().expect("up block").forward(
+                    Tensor::cat(vec![x, skip], 1),
+                    &emb,
+                    window(level),
+                );
             }
             if level > 0 {
                 let [_, _, hh, ww] = x.dims();
@@ -632,7 +665,8 @@ impl<B: PgrfOps> Sr3Unet<B> {
                 x = ops::conv2d(upsamples.next().expect("upsample"), x);
             }
         }
-        let out = ops::conv2d(&self.final_conv, silu(group_norm(&self.final_norm, x)));
+        let x = windowed(x, self.window, |x| group_norm(&self.final_norm, x));
+        let out = ops::conv2d(&self.final_conv, silu(x));
         let c = out.dims()[1];
         let out = out.slice([0..n, 0..c, 0..h, 0..w]);
         match skip {
@@ -646,6 +680,31 @@ impl<B: Backend> Sr3Unet<B> {
     /// How the network is told its input's noise level.
     pub fn conditioning(&self) -> Conditioning {
         self.conditioning
+    }
+
+    /// The network with its GroupNorm and attention statistics taken over
+    /// `side` x `side` windows on the input's grid (level l: side / 2^l),
+    /// the input padded to whole windows when it is larger than one
+    /// ([`crate::norm::window_padding`]); 0 restores whole inputs. `side`
+    /// must be a multiple of 2^(levels-1) (else refused, naming the
+    /// multiple). Inference sets it to the training crop's side, so that a
+    /// frame's result does not depend on its tiling and every window sees
+    /// what a training crop did; training leaves it 0 (a crop is one
+    /// window).
+    pub fn with_window(mut self, side: usize) -> Result<Self, String> {
+        let m = 1 << (self.levels - 1);
+        if !side.is_multiple_of(m) {
+            return Err(format!(
+                "window {side} is not a multiple of the network's {m}"
+            ));
+        }
+        self.window = side;
+        Ok(self)
+    }
+
+    /// The window side of [`Sr3Unet::with_window`] (0: none).
+    pub fn window(&self) -> usize {
+        self.window
     }
 
     /// The layers [`Sr3Unet::forward`] runs on `(batch, 4, h, w)` inputs, in

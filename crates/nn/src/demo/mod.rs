@@ -318,8 +318,8 @@ pub fn run<P: Progress>(
         models: &models,
         profile,
         seed: cfg.seed,
-        // Tiles as `pgrf enhance` chooses them (memory, and the flow
-        // model's cap at twice its training crop).
+        // Tiles as `pgrf enhance` chooses them (memory, and the file's
+        // cap).
         tiling: Tiling {
             tile: cfg.tile,
             overlap: None,

@@ -4,7 +4,7 @@
 //! mosaic and levels.
 
 use super::image::{
-    check_tiling_args, overlap_for, plan_for, restore_image, round_tile, ImageOptions,
+    check_tiling_args, frame_plan, overlap_for, restore_image, round_tile, ImageOptions,
 };
 use super::memory::auto_tile;
 use super::prepare::network_input;
@@ -83,12 +83,16 @@ pub fn restore_packed(
         noise,
         ..tiling.options(r, ph, pw)
     };
-    let plan = plan_for(ph, pw, &opts, r.side_multiple())?;
+    let plan = frame_plan(r, ph, pw, &opts)?;
     if tiling.tile.is_some() && tiling.device == DeviceKind::Cpu {
         // A tile the user chose is checked against the memory there is
         // (the automatic one is sized from it).
-        let need = super::memory::tile_bytes(&r.meta().arch, plan.rows.len, plan.cols.len)
-            + super::memory::fixed_bytes(r, ph, pw) as f64;
+        let need = super::memory::windowed_tile_bytes(
+            &r.meta().arch,
+            plan.rows.len,
+            plan.cols.len,
+            r.window(),
+        ) + super::memory::fixed_bytes(r, ph, pw) as f64;
         pgrf_core::mem::check_fits(&format!("--tile {}", opts.tile), need).map_err(|e| {
             NnError::TooLarge(format!(
                 "{e}; leave --tile out (pgrf would use {}) or give a smaller one",

@@ -6,7 +6,8 @@ use super::start::start_noise;
 use super::tiles::{run_tiled, AxisPlan, TilePlan};
 use crate::condition::NoiseLevel;
 use crate::error::{NnError, Result};
-use ndarray::{Array3, ArrayView3};
+use crate::norm::window_padding;
+use ndarray::{s, Array3, ArrayView3};
 use pgrf_core::Progress;
 
 /// How a frame is cut into tiles and which start noise the flow draws.
@@ -32,9 +33,11 @@ pub const DEFAULT_OVERLAP: usize = 64;
 /// SID U-Net and overlap 64 (README, "Tiling"): tiles of 128 differ from one
 /// whole-frame pass by 49.5 dB PSNR, of 144 by 51.4, of 192 by 53.9; the
 /// convolutional network's tiles converge as they grow, so 144 is where
-/// the result stops depending on the tiling (> 50 dB). The flow network's
-/// tiles never converge (GroupNorm and attention see the whole tile), and
-/// below 144 its border losses grow too, so the bound holds for both.
+/// the result stops depending on the tiling (> 50 dB). A flow network
+/// restores within windows of its training crop, and its tiles are whole
+/// windows, at least two when the frame does not fit in one
+/// ([`frame_plan`]); below 144 its border losses grow too, so the bound
+/// holds for both.
 pub const MIN_TILE: usize = 144;
 
 /// The smallest overlap a user may ask for when a frame is tiled: with less
@@ -94,22 +97,88 @@ pub fn restore_image(
     if let Some(pos) = input.iter().position(|v| !v.is_finite()) {
         return Err(NnError::NonFiniteInput { index: pos });
     }
-    let plan = plan_for(h, w, opts, r.side_multiple())?;
+    // A windowed flow network's frame is padded to whole windows, so that
+    // its tiles (multiples of the window, overlapping by multiples of it,
+    // the last flush with the padded end) all sit on the frame's window grid.
+    let (ph, pw) = window_padding(h, w, r.window());
+    let plan = frame_plan(r, h, w, opts)?;
+    let padded = (ph + pw > 0).then(|| reflect_pad(input, ph, pw));
     let x0s: Vec<Array3<f32>> = (0..r.samples() as u64)
-        .map(|k| start_noise(opts.seed, k, c, h, w))
+        .map(|k| {
+            let x0 = start_noise(opts.seed, k, c, h, w);
+            if ph + pw > 0 {
+                reflect_pad(x0.view(), ph, pw)
+            } else {
+                x0
+            }
+        })
         .collect();
-    let mut inputs = vec![input];
+    let mut inputs = vec![padded.as_ref().map_or(input, |a| a.view())];
     inputs.extend(x0s.iter().map(|a| a.view()));
-    let mut out = run_tiled(&inputs, c, &plan, |_, views| {
+    let out = run_tiled(&inputs, c, &plan, |_, views| {
         let y = r.restore(views[0], &views[1..], opts.noise)?;
         progress.advance(1);
         Ok(y)
     })?;
+    let mut out = if ph + pw > 0 {
+        out.slice(s![.., ..h, ..w]).to_owned()
+    } else {
+        out
+    };
     if let Some(pos) = out.iter().position(|v| v.is_nan()) {
         return Err(NnError::NanOutput { index: pos });
     }
     out.mapv_inplace(|v| v.clamp(0.0, 1.0));
     Ok(out)
+}
+
+/// The tiles `r` runs on an `h` x `w` packed frame: [`plan_for`], on the
+/// frame padded to whole windows and with the overlap rounded up to whole
+/// windows where `r` has them ([`Restore::window`]).
+pub fn frame_plan(r: &dyn Restore, h: usize, w: usize, opts: &ImageOptions) -> Result<TilePlan> {
+    let window = r.window();
+    let (ph, pw) = window_padding(h, w, window);
+    // With windows the overlap is whole windows too (one at least), so that
+    // every tile of the padded frame (multiples of the window, the last
+    // flush with its end) starts on the window grid.
+    // A tile that holds the whole frame holds it padded too.
+    let padded = (h + ph).max(w + pw);
+    let opts = ImageOptions {
+        tile: if opts.tile >= h.max(w) {
+            opts.tile.max(padded)
+        } else {
+            opts.tile
+        },
+        overlap: match window {
+            0 => opts.overlap,
+            s => opts.overlap.div_ceil(s).max(1) * s,
+        },
+        ..*opts
+    };
+    plan_for(h + ph, w + pw, &opts, r.side_multiple())
+}
+
+/// `a` `(c, h, w)` extended by `ph` rows below and `pw` columns to the
+/// right, mirrored about its last row and column (the edge not repeated, as
+/// the network's own reflection padding does), the mirror folding back for
+/// pads longer than the image.
+pub(crate) fn reflect_pad(a: ArrayView3<f32>, ph: usize, pw: usize) -> Array3<f32> {
+    let (c, h, w) = a.dim();
+    let fold = |i: usize, n: usize| -> usize {
+        if n == 1 {
+            return 0;
+        }
+        let p = 2 * (n - 1);
+        let k = i % p;
+        if k < n {
+            k
+        } else {
+            p - k
+        }
+    };
+    Array3::from_shape_fn((c, h + ph, w + pw), |(k, i, j)| {
+        a[[k, fold(i, h), fold(j, w)]]
+    })
 }
 
 /// The tile side actually run for a requested `tile` on a frame whose

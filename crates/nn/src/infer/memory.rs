@@ -20,8 +20,20 @@ pub fn attention_tokens(arch: &Architecture, h: usize, w: usize) -> usize {
 /// plus the attention scores and their softmax (tokens^2 floats each),
 /// which grow with the square of the pixel count.
 pub fn tile_bytes(arch: &Architecture, h: usize, w: usize) -> f64 {
-    let tokens = attention_tokens(arch, h, w) as f64;
-    arch.bytes_per_pixel() * (h * w) as f64 + 2.0 * 4.0 * tokens * tokens
+    windowed_tile_bytes(arch, h, w, 0)
+}
+
+/// [`tile_bytes`] for a network that attends within `window` x `window`
+/// windows ([`crate::Restore::window`]; 0: the whole tile): the scores are
+/// then those of one window times the windows, linear in the pixels.
+pub fn windowed_tile_bytes(arch: &Architecture, h: usize, w: usize, window: usize) -> f64 {
+    let scores = if window == 0 || (h <= window && w <= window) {
+        (attention_tokens(arch, h, w) as f64).powi(2)
+    } else {
+        let per = attention_tokens(arch, window, window) as f64;
+        (h.div_ceil(window) * w.div_ceil(window)) as f64 * per * per
+    };
+    arch.bytes_per_pixel() * (h * w) as f64 + 2.0 * 4.0 * scores
 }
 
 /// The largest square tile, a multiple of `multiple` between
@@ -29,6 +41,7 @@ pub fn tile_bytes(arch: &Architecture, h: usize, w: usize) -> f64 {
 pub(crate) fn tile_for_budget(
     arch: &Architecture,
     multiple: usize,
+    window: usize,
     budget: u64,
     cap: usize,
 ) -> usize {
@@ -36,7 +49,7 @@ pub(crate) fn tile_for_budget(
     let lo = (8 * m).max(super::image::MIN_TILE).div_ceil(m) * m;
     let by_pixels = (budget as f64 / arch.bytes_per_pixel()).sqrt() as usize;
     let mut side = (by_pixels.min(cap).max(lo) / m) * m;
-    while side > lo && tile_bytes(arch, side, side) > budget as f64 {
+    while side > lo && windowed_tile_bytes(arch, side, side, window) > budget as f64 {
         side -= m;
     }
     side.max(lo)
@@ -68,8 +81,9 @@ pub fn fixed_bytes(r: &dyn crate::infer::Restore, ph: usize, pw: usize) -> u64 {
 /// whose estimated peak fits in half the available memory once the frame's
 /// buffers and the weights are set aside (the whole frame when it fits), on
 /// CUDA (where burn does not report free memory) 1024, both within the
-/// file's cap: twice the training patch clamped to 512..2048 for flow models
-/// (512 when unrecorded), 8192 for the denoiser. `ph` x `pw` is the packed
+/// file's cap: 8192 for the denoiser and for flow models that restore within
+/// windows of their training crop, else twice the crop clamped to
+/// 512..2048 (512 when unrecorded). `ph` x `pw` is the packed
 /// frame's size; returns a tile side in packed pixels.
 pub fn auto_tile(
     device: crate::backend::DeviceKind,
@@ -85,10 +99,10 @@ pub fn auto_tile(
             let budget = (pgrf_core::mem::available_memory().unwrap_or(2 << 30) / 2)
                 .saturating_sub(fixed_bytes(r, ph, pw));
             let arch = &r.meta().arch;
-            if side <= cap && tile_bytes(arch, ph, pw) <= budget as f64 {
+            if side <= cap && windowed_tile_bytes(arch, ph, pw, r.window()) <= budget as f64 {
                 side
             } else {
-                tile_for_budget(arch, r.side_multiple(), budget, cap)
+                tile_for_budget(arch, r.side_multiple(), r.window(), budget, cap)
             }
         }
     }
@@ -102,16 +116,18 @@ mod tests {
     #[test]
     fn tiles_grow_with_memory_and_stay_aligned() {
         let a = Architecture::SidUnet(SidUnetConfig::new());
-        let small = tile_for_budget(&a, 16, 256 << 20, 2048);
-        let big = tile_for_budget(&a, 16, 8 << 30, 2048);
+        let small = tile_for_budget(&a, 16, 0, 256 << 20, 2048);
+        let big = tile_for_budget(&a, 16, 0, 8 << 30, 2048);
         assert!(small < big, "{small} {big}");
         assert_eq!(small % 16, 0);
         assert_eq!(big % 16, 0);
         assert!(big <= 2048);
-        assert_eq!(tile_for_budget(&a, 16, 1, 2048), 144);
-        assert_eq!(tile_for_budget(&a, 16, 8 << 30, 512), 512);
+        assert_eq!(tile_for_budget(&a, 16, 0, 1, 2048), 144);
+        assert_eq!(tile_for_budget(&a, 16, 0, 8 << 30, 512), 512);
         let f = Architecture::Sr3(Sr3Config::new());
-        assert!(tile_for_budget(&f, 16, 1 << 30, 2048) < tile_for_budget(&a, 16, 1 << 30, 2048));
+        assert!(
+            tile_for_budget(&f, 16, 0, 1 << 30, 2048) < tile_for_budget(&a, 16, 0, 1 << 30, 2048)
+        );
         assert!(pgrf_core::mem::available_memory().unwrap_or(1) > 0);
     }
 
@@ -129,5 +145,17 @@ mod tests {
         assert!(tile_bytes(&f, 1024, 1024) > scores);
         let a = Architecture::SidUnet(SidUnetConfig::new());
         assert_eq!(attention_tokens(&a, 1024, 1024), 0);
+        // Within windows of 128 the scores are 64 windows of 16^2 tokens
+        // each at a 1024 tile: 64 x 256^2 floats, not 16384^2.
+        let per_pixel = f.bytes_per_pixel() * 1024.0 * 1024.0;
+        let windowed = windowed_tile_bytes(&f, 1024, 1024, 128) - per_pixel;
+        assert!(
+            (windowed - 2.0 * 4.0 * 64.0 * 65536.0).abs() < 1.0,
+            "{windowed}"
+        );
+        assert_eq!(
+            windowed_tile_bytes(&f, 100, 60, 128),
+            tile_bytes(&f, 100, 60)
+        );
     }
 }

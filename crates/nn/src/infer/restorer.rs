@@ -51,6 +51,12 @@ pub trait Restore {
     fn samples(&self) -> usize;
     /// Sides of tiles should be multiples of this (no internal padding).
     fn side_multiple(&self) -> usize;
+    /// Side of the windows a flow network takes its statistics over (0:
+    /// each tile whole): frames are padded to whole windows and tiled on
+    /// their grid ([`crate::infer::image::restore_image`]).
+    fn window(&self) -> usize {
+        0
+    }
     /// The restored tile, `(4, h, w)` like `input` and not clamped, from
     /// `input` (T, packed, amplified, in [0, 1]) and one X0 per sample
     /// (none for the denoiser), each of `input`'s shape; the flow model's
@@ -146,6 +152,8 @@ impl<B: PgrfOps> Restorer<B> {
             SamplerKind::OneStep => Sampler::OneStep,
             SamplerKind::Euler(steps) => Sampler::Euler { steps },
         };
+        let window = trained_window(&net, &meta);
+        let net = net.with_window(window).map_err(NnError::Invalid)?;
         Ok(Restorer {
             net,
             meta,
@@ -153,6 +161,21 @@ impl<B: PgrfOps> Restorer<B> {
             samples: choice.samples,
             device,
         })
+    }
+
+    /// The restorer with the flow network's statistics taken over windows
+    /// of `side` (0: each tile whole, as before windows existed) instead of
+    /// the training crop's; for comparisons. Refuses a side that is not a
+    /// multiple of the network's.
+    pub fn with_window(mut self, side: usize) -> Result<Self> {
+        self.net = self
+            .net
+            .with_window(side)
+            .map_err(|e| NnError::BadSetting {
+                flag: "--window",
+                message: e,
+            })?;
+        Ok(self)
     }
 
     fn tensor(&self, a: ArrayView3<f32>) -> Tensor<B, 4> {
@@ -185,7 +208,14 @@ impl<B: PgrfOps> Restore for Restorer<B> {
     }
 
     fn side_multiple(&self) -> usize {
-        self.meta.arch.side_multiple()
+        match self.net.window() {
+            0 => self.meta.arch.side_multiple(),
+            w => w,
+        }
+    }
+
+    fn window(&self) -> usize {
+        self.net.window()
     }
 
     fn restore(
@@ -245,6 +275,19 @@ impl<B: PgrfOps> Restore for Restorer<B> {
             .map_err(|e| NnError::Invalid(format!("reading the network output: {e:?}")))?;
         Array3::from_shape_vec((c, h, w), v)
             .map_err(|e| NnError::SizeMismatch(format!("network output shape: {e}")))
+    }
+}
+
+/// The window a flow network restores with: the side of the crops its file
+/// says it was trained on (each crop was one window, so every window of a
+/// frame sees what a crop did), when that is a multiple of the network's
+/// side multiple; else 0 (whole tiles), as for a file without a training
+/// record. The denoiser has none.
+fn trained_window<B: Backend>(net: &Net<B>, meta: &WeightMeta) -> usize {
+    let m = meta.arch.side_multiple().max(1);
+    match (net.sampled(), meta.training.as_ref()) {
+        (true, Some(t)) if t.patch >= m && t.patch % m == 0 => t.patch,
+        _ => 0,
     }
 }
 

@@ -96,6 +96,7 @@ impl Searched {
             match self.ratio {
                 RatioSpec::Fixed(r) => format!("{r}"),
                 RatioSpec::Uniform { lo, hi } => format!("U({lo}, {hi})"),
+                RatioSpec::LogUniform { lo, hi } => format!("logU({lo}, {hi})"),
             },
             req.options.seed,
             p = req.patch
