@@ -841,3 +841,77 @@ fn a_noise_aware_run_starts_from_blind_weights_and_its_average_resumes() {
     let err = one_line_error(&run(bad));
     assert!(err.contains("--ema") && err.contains("(0, 1)"), "{err}");
 }
+
+/// `--window` (issue 36, item 6): a flow model trained within windows of
+/// its crops records the window, and restores with it; one trained without
+/// restores within windows of its crop; windows that do not divide the
+/// crops, and windows for the SPC, are one-line errors before any work.
+#[test]
+fn a_flow_model_trained_within_windows_restores_with_them() {
+    let d = scratch("window");
+    let train = |out: &Path, extra: &[&str]| {
+        let mut args = vec![
+            "train",
+            "flow",
+            "--steps",
+            "2",
+            "--patch",
+            "32",
+            "--inner-channels",
+            "8",
+            "--channel-mults",
+            "1,2",
+            "--attn-levels",
+            "1",
+            "--val-pairs",
+            "1",
+            "-o",
+            s(out),
+        ];
+        args.extend_from_slice(extra);
+        pgrf(&args)
+    };
+    let windowed = d.join("w.safetensors");
+    let r = train(&windowed, &["--window", "16"]);
+    let err = String::from_utf8_lossy(&r.stderr);
+    assert!(r.status.success(), "{err}");
+    assert!(
+        err.contains("(32x32 crops within windows of 16, batch 1)"),
+        "{err}"
+    );
+    let meta = pgrf_nn::weights::read_meta(&windowed).unwrap();
+    assert_eq!(meta.training.unwrap().config.unwrap().window, Some(16));
+    let load = |p: &Path| {
+        pgrf_nn::infer::load(
+            p,
+            pgrf_nn::SamplerChoice::default(),
+            pgrf_nn::DeviceKind::Cpu,
+        )
+        .unwrap()
+    };
+    assert_eq!(load(&windowed).window(), 16);
+    let whole = d.join("c.safetensors");
+    let r = train(&whole, &[]);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    assert_eq!(load(&whole).window(), 32, "the crop side");
+    for (method, extra, says) in [
+        ("flow", vec!["--window", "12"], "must divide --patch 32"),
+        (
+            "flow",
+            vec!["--window", "16", "--val-patch", "40"],
+            "must divide --val-patch 40",
+        ),
+        (
+            "spc",
+            vec!["--window", "16"],
+            "the SPC denoiser takes no statistics",
+        ),
+    ] {
+        let bad = d.join("bad.safetensors");
+        let mut args = vec!["train", method, "--patch", "32", "-o", s(&bad)];
+        args.extend_from_slice(&extra);
+        let e = one_line_error(&pgrf(&args));
+        assert!(e.contains(says), "{e}");
+        assert!(!bad.exists());
+    }
+}

@@ -168,6 +168,10 @@ pub struct TrainConfig {
     /// SR3 levels with self-attention (0 = full resolution), comma-separated [default: 3].
     #[cfg_attr(feature = "clap", arg(long, value_delimiter = ','))]
     pub attn_levels: Option<Vec<usize>>,
+    /// Flow model: take GroupNorm and attention statistics over windows of this side (packed pixels) of each crop, as a frame is restored (MODELS.md, "PGRF independent of the tiling"); crops of 2 x 2 windows teach the network the window borders it meets in a frame. Recorded; inference uses it. [default: none: each crop whole, its side the window at inference].
+    #[cfg_attr(feature = "clap", arg(long))]
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub window: Option<usize>,
     /// SR3 GroupNorm groups [default: 32, or fewer to divide the channels].
     #[cfg_attr(feature = "clap", arg(long))]
     pub norm_groups: Option<usize>,
@@ -293,6 +297,7 @@ impl Default for TrainConfig {
             channel_mults: None,
             res_blocks: None,
             attn_levels: None,
+            window: None,
             norm_groups: None,
             dropout: None,
             val_every: 1000,
@@ -369,6 +374,30 @@ impl TrainConfig {
                     "--time-max is the flow model's training time range; the SPC denoiser has none"
                         .into(),
             });
+        }
+        if let Some(w) = self.window {
+            if method == Method::Spc {
+                return Err(bad(
+                    "--window",
+                    "--window is the flow model's statistics windows; the SPC denoiser takes no statistics",
+                ));
+            }
+            if w == 0 || !self.patch.is_multiple_of(w) {
+                return Err(bad(
+                    "--window",
+                    format!(
+                        "--window {w} must divide --patch {} (crops of whole windows)",
+                        self.patch
+                    ),
+                ));
+            }
+            let val = self.val_patch.unwrap_or(self.patch);
+            if !val.is_multiple_of(w) {
+                return Err(bad(
+                    "--window",
+                    format!("--window {w} must divide --val-patch {val} (validation crops of whole windows)"),
+                ));
+            }
         }
         Ok(())
     }

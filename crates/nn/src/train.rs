@@ -201,11 +201,12 @@ fn header(
     noise: &NoiseSource,
 ) -> String {
     format!(
-        "training {} on {} ({}x{} crops, batch {}), noise {} from {}{}{}, {} steps, lr {:e} ({:?}){}, {} on {}",
+        "training {} on {} ({}x{} crops{}, batch {}), noise {} from {}{}{}, {} steps, lr {:e} ({:?}){}, {} on {}",
         arch.describe(),
         train.describe(),
         c.patch,
         c.patch,
+        c.window.map(|w| format!(" within windows of {w}")).unwrap_or_default(),
         c.batch,
         noise.model,
         mix.describe(),
@@ -470,6 +471,14 @@ fn train<B: PgrfAutodiff>(
             j.outputs.checkpoint.display()
         ));
     }
+    // Statistics windows as the frames will be restored with (none: each
+    // crop whole); not part of the weights, so set after any loading.
+    net = net
+        .with_window(s.window.unwrap_or(0))
+        .map_err(|e| NnError::BadSetting {
+            flag: "--window",
+            message: format!("--window: {e}"),
+        })?;
     let mut ema = match (s.ema, saved_ema) {
         (None, _) => None,
         (Some(d), Some(bytes)) => Some(Ema::from_bytes(d, &bytes, &j.outputs.checkpoint)?),
@@ -537,7 +546,10 @@ fn train<B: PgrfAutodiff>(
             Ok(match ema {
                 None => (raw, None),
                 Some(e) => {
-                    let avg = e.network::<B::InnerBackend>(&j.arch, device)?;
+                    let avg = e
+                        .network::<B::InnerBackend>(&j.arch, device)?
+                        .with_window(s.window.unwrap_or(0))
+                        .map_err(NnError::Invalid)?;
                     (validate(&avg, v, s.val_t2, device), Some(raw))
                 }
             })

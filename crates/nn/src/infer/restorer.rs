@@ -278,16 +278,22 @@ impl<B: PgrfOps> Restore for Restorer<B> {
     }
 }
 
-/// The window a flow network restores with: the side of the crops its file
-/// says it was trained on (each crop was one window, so every window of a
-/// frame sees what a crop did), when that is a multiple of the network's
-/// side multiple; else 0 (whole tiles), as for a file without a training
-/// record. The denoiser has none.
+/// The window a flow network restores with: the window it was trained
+/// with (`pgrf train --window`), else the side of the crops its file says
+/// it was trained on (each crop was one window, so every window of a frame
+/// sees what a crop did), when that is a multiple of the network's side
+/// multiple; else 0 (whole tiles), as for a file without a training record.
+/// The denoiser has none.
 fn trained_window<B: Backend>(net: &Net<B>, meta: &WeightMeta) -> usize {
     let m = meta.arch.side_multiple().max(1);
-    match (net.sampled(), meta.training.as_ref()) {
-        (true, Some(t)) if t.patch >= m && t.patch % m == 0 => t.patch,
-        _ => 0,
+    let Some(t) = meta.training.as_ref().filter(|_| net.sampled()) else {
+        return 0;
+    };
+    let side = t.config.as_ref().and_then(|c| c.window).unwrap_or(t.patch);
+    if side >= m && side.is_multiple_of(m) {
+        side
+    } else {
+        0
     }
 }
 
