@@ -163,19 +163,21 @@ fn sid_unet_tiles_blend_without_seams() {
     check(&r, "SID U-Net");
 }
 
+/// A small SR3 (three levels, attention at the last) for the flow tests.
+fn small_sr3() -> Architecture {
+    Architecture::Sr3(
+        Sr3Config::new()
+            .with_inner_channels(8)
+            .with_channel_mults(vec![1, 2, 2])
+            .with_res_blocks(1)
+            .with_attn_levels(vec![2])
+            .with_norm_groups(4),
+    )
+}
+
 #[test]
 fn flow_model_tiles_blend_without_seams() {
-    let r = restorer(
-        Architecture::Sr3(
-            Sr3Config::new()
-                .with_inner_channels(8)
-                .with_channel_mults(vec![1, 2, 2])
-                .with_res_blocks(1)
-                .with_attn_levels(vec![2])
-                .with_norm_groups(4),
-        ),
-        1.0,
-    );
+    let r = restorer(small_sr3(), 1.0);
     check(&r, "SR3 two-stage");
 }
 
@@ -200,14 +202,7 @@ fn psnr(a: &Array3<f32>, b: &Array3<f32>) -> f64 {
 /// the grid is exercised too.
 #[test]
 fn a_windowed_flow_model_does_not_depend_on_the_tiling() {
-    let arch = Architecture::Sr3(
-        Sr3Config::new()
-            .with_inner_channels(8)
-            .with_channel_mults(vec![1, 2, 2])
-            .with_res_blocks(1)
-            .with_attn_levels(vec![2])
-            .with_norm_groups(4),
-    );
+    let arch = small_sr3();
     let (h, w) = (230, 300);
     let x = scene(h, w);
     let run = |r: &dyn Restore, tile: usize| {
