@@ -183,13 +183,7 @@ fn flow_model_tiles_blend_without_seams() {
 
 /// PSNR (dB, peak 1) of `a` against `b`.
 fn psnr(a: &Array3<f32>, b: &Array3<f32>) -> f64 {
-    let mse = a
-        .iter()
-        .zip(b)
-        .map(|(x, y)| ((x - y) as f64).powi(2))
-        .sum::<f64>()
-        / a.len() as f64;
-    10.0 * (1.0 / mse.max(1e-20)).log10()
+    pgrf_eval::psnr(a.view(), b.view(), 1.0).unwrap()
 }
 
 /// Issue 36, item 6: a flow network whose GroupNorm and attention take

@@ -16,6 +16,7 @@ mod network;
 pub mod sid_unet;
 pub mod sr3;
 
+pub(crate) use network::MEMORY_TILE_CAP;
 pub use sid_unet::{SidUnet, SidUnetConfig};
 pub use sr3::{Sr3Config, Sr3Unet};
 

@@ -9,6 +9,10 @@ use crate::config::Method;
 use crate::data::Extras;
 use crate::error::Result;
 
+/// The tile cap of a network limited by memory alone: the convolutional
+/// denoiser, and a flow model whose attention and statistics stay within
+/// windows (its memory grows with the pixels, not their square).
+pub(crate) const MEMORY_TILE_CAP: usize = 8192;
 /// A network's configuration as the rest of the crate sees it: the method it
 /// implements, its description, the checks before building it from a record,
 /// its size and memory estimates, and what its training batches carry.
@@ -38,8 +42,10 @@ pub(crate) trait NetworkConfig {
     /// Sides of tiles should be multiples of this (no internal padding).
     fn side_multiple(&self) -> usize;
 
-    /// Largest tile the network should see, given the training patch its
-    /// file records (if any).
+    /// Largest tile the network should see when it runs on whole tiles,
+    /// given the training patch its file records (if any). A flow model
+    /// that restores within windows is limited by memory alone
+    /// ([`MEMORY_TILE_CAP`]; `infer::memory::tile_cap`).
     fn tile_cap(&self, trained_patch: Option<usize>) -> usize;
 
     /// Whether the network is sampled from start noise X0 (a flow model)

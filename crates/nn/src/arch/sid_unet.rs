@@ -317,7 +317,7 @@ impl NetworkConfig for SidUnetConfig {
 
     /// The convolutional denoiser is limited by memory alone.
     fn tile_cap(&self, _trained_patch: Option<usize>) -> usize {
-        8192
+        super::network::MEMORY_TILE_CAP
     }
 
     fn sampled(&self) -> bool {

@@ -344,26 +344,18 @@ impl NetworkConfig for Sr3Config {
         Sr3Config::side_multiple(self)
     }
 
-    /// A flow model whose file records a training crop that is a multiple
-    /// of its side multiple restores within windows of that crop
-    /// ([`crate::Restore::window`]): its attention memory grows with the
-    /// pixels, not their square, and larger tiles only save border work, so
-    /// its cap is the denoiser's 8192. Without windows, self-attention
-    /// relates every position of a tile to every other and its memory grows
-    /// with the square of the tokens, so such flow models are held to twice
-    /// the training patch, but never below 512 (512 when the file does not
-    /// record it). The floor is measured: the shipped flow model, trained
-    /// on 64-pixel crops, scored 29.45 dB on the demo's x100 capture in
-    /// tiles of 128 (overlap 32), 29.92 in tiles of 256 and 30.03 as one
-    /// 768 x 512 tile: small tiles cost more at their borders than a softmax
-    /// over more tokens than in training does.
+    /// On whole tiles self-attention relates every position of a tile to
+    /// every other and its memory grows with the square of the tokens, so
+    /// flow models are held to twice the training patch, but never below
+    /// 512 (512 when the file does not record it). The floor is measured:
+    /// the shipped flow model, trained on 64-pixel crops, scored 29.45 dB
+    /// on the demo's x100 capture in tiles of 128 (overlap 32), 29.92 in
+    /// tiles of 256 and 30.03 as one 768 x 512 tile: small tiles cost more
+    /// at their borders than a softmax over more tokens than in training
+    /// does. (A flow model restoring within windows is capped by memory
+    /// alone: `infer::memory::tile_cap`.)
     fn tile_cap(&self, trained_patch: Option<usize>) -> usize {
-        let m = Sr3Config::side_multiple(self);
-        match trained_patch {
-            Some(p) if p >= m && p % m == 0 => 8192,
-            Some(p) => (2 * p).clamp(512, 2048),
-            None => 512,
-        }
+        trained_patch.map_or(512, |p| (2 * p).clamp(512, 2048))
     }
 
     fn sampled(&self) -> bool {

@@ -138,17 +138,17 @@ pub fn restore_image(
 pub fn frame_plan(r: &dyn Restore, h: usize, w: usize, opts: &ImageOptions) -> Result<TilePlan> {
     let window = r.window();
     let (ph, pw) = window_padding(h, w, window);
-    // With windows the overlap is whole windows too (one at least), so that
-    // every tile of the padded frame (multiples of the window, the last
-    // flush with its end) starts on the window grid.
-    // A tile that holds the whole frame holds it padded too.
     let padded = (h + ph).max(w + pw);
     let opts = ImageOptions {
+        // A tile that holds the whole frame holds it padded too.
         tile: if opts.tile >= h.max(w) {
             opts.tile.max(padded)
         } else {
             opts.tile
         },
+        // With windows the overlap is whole windows too (one at least), so
+        // that every tile of the padded frame (multiples of the window, the
+        // last flush with its end) starts on the window grid.
         overlap: match window {
             0 => opts.overlap,
             s => opts.overlap.div_ceil(s).max(1) * s,

@@ -55,10 +55,16 @@ pub(crate) fn tile_for_budget(
     side.max(lo)
 }
 
-/// Largest tile a file's network should see: the network's own cap
-/// ([`Architecture::tile_cap`]), from the training patch the file records
-/// (flow models: twice the patch, clamped to 512..2048, 512 unrecorded).
-pub(crate) fn tile_cap(meta: &crate::weights::WeightMeta) -> usize {
+/// Largest tile `r` should see: memory alone bounds a network restoring
+/// within windows ([`crate::Restore::window`]); otherwise the network's own
+/// cap ([`Architecture::tile_cap`]), from the training patch its file
+/// records (flow models: twice the patch, clamped to 512..2048, 512
+/// unrecorded).
+pub(crate) fn tile_cap(r: &dyn crate::infer::Restore) -> usize {
+    if r.window() > 0 {
+        return crate::arch::MEMORY_TILE_CAP;
+    }
+    let meta = r.meta();
     meta.arch.tile_cap(meta.training.as_ref().map(|t| t.patch))
 }
 
@@ -91,7 +97,7 @@ pub fn auto_tile(
     ph: usize,
     pw: usize,
 ) -> usize {
-    let cap = tile_cap(r.meta());
+    let cap = tile_cap(r);
     let side = ph.max(pw);
     match device {
         crate::backend::DeviceKind::Cuda => 1024.min(cap),

@@ -152,8 +152,9 @@ impl<B: PgrfOps> Restorer<B> {
             SamplerKind::OneStep => Sampler::OneStep,
             SamplerKind::Euler(steps) => Sampler::Euler { steps },
         };
-        let window = trained_window(&net, &meta);
-        let net = net.with_window(window).map_err(NnError::Invalid)?;
+        let net = net
+            .with_window(trained_window(&meta))
+            .map_err(NnError::Invalid)?;
         Ok(Restorer {
             net,
             meta,
@@ -284,9 +285,9 @@ impl<B: PgrfOps> Restore for Restorer<B> {
 /// sees what a crop did), when that is a multiple of the network's side
 /// multiple; else 0 (whole tiles), as for a file without a training record.
 /// The denoiser has none.
-fn trained_window<B: Backend>(net: &Net<B>, meta: &WeightMeta) -> usize {
+fn trained_window(meta: &WeightMeta) -> usize {
     let m = meta.arch.side_multiple().max(1);
-    let Some(t) = meta.training.as_ref().filter(|_| net.sampled()) else {
+    let Some(t) = meta.training.as_ref().filter(|_| meta.arch.sampled()) else {
         return 0;
     };
     let side = t.config.as_ref().and_then(|c| c.window).unwrap_or(t.patch);
