@@ -28,6 +28,8 @@ pub struct MixSpec<'a> {
     pub ratio: RatioSpec,
     /// Captures without the camera's dark-level offset.
     pub calibrated_dark_level: bool,
+    /// Otherwise the share of captures drawn as calibrated (0..1).
+    pub calibrated_share: f64,
     /// A per-pixel calibration file for the (single) sensor.
     pub calibration: Option<&'a Path>,
 }
@@ -98,6 +100,7 @@ pub fn build(spec: &MixSpec) -> Result<CalibratedMix, MixError> {
     )
     .map_err(MixError::Profile)?;
     mix.set_calibrated_dark_level(spec.calibrated_dark_level);
+    mix.set_calibrated_share(spec.calibrated_share);
     let mut calibration = None;
     if let Some(path) = spec.calibration {
         let described = mix.describe();

@@ -277,6 +277,8 @@ fn a_profile_mix_trains_is_recorded_and_searches() {
         "--calibrated-dark-level",
         "--time-max",
         "0.5",
+        "--ratio-draw",
+        "log",
         "-o",
         s(&out),
     ]);
@@ -314,6 +316,8 @@ fn a_profile_mix_trains_is_recorded_and_searches() {
         text.contains("noise: sony-a7s2 (75%) + nikon-d850 (25%) pgrf, ISO 800..3200"),
         "{text}"
     );
+    // The pairs' ratios are drawn as the training drew them.
+    assert!(text.contains(", ratio logU(1, 300), seed "), "{text}");
     // Photos validate too, unprocessed as the record's configuration says;
     // the broken one is a note, not a failure.
     let photos = photo_folder(&d);
@@ -872,15 +876,22 @@ fn a_flow_model_trained_within_windows_restores_with_them() {
         pgrf(&args)
     };
     let windowed = d.join("w.safetensors");
-    let r = train(&windowed, &["--window", "16"]);
+    let r = train(&windowed, &["--window", "16", "--calibrated-share", "0.25"]);
     let err = String::from_utf8_lossy(&r.stderr);
     assert!(r.status.success(), "{err}");
     assert!(
         err.contains("(32x32 crops within windows of 16, batch 1)"),
         "{err}"
     );
+    assert!(
+        err.contains("(25% drawn with the dark level calibrated)"),
+        "{err}"
+    );
     let meta = pgrf_nn::weights::read_meta(&windowed).unwrap();
-    assert_eq!(meta.training.unwrap().config.unwrap().window, Some(16));
+    assert!(!meta.noise.calibrated_dark_level, "a share is not all");
+    let config = meta.training.unwrap().config.unwrap();
+    assert_eq!(config.window, Some(16));
+    assert_eq!(config.calibrated_share, 0.25);
     let load = |p: &Path| {
         pgrf_nn::infer::load(
             p,
@@ -905,6 +916,16 @@ fn a_flow_model_trained_within_windows_restores_with_them() {
             "spc",
             vec!["--window", "16"],
             "the SPC denoiser takes no statistics",
+        ),
+        (
+            "spc",
+            vec!["--calibrated-share", "1.5"],
+            "in [0, 1], got 1.5",
+        ),
+        (
+            "spc",
+            vec!["--calibrated-share", "0.5", "--calibrated-dark-level"],
+            "goes without --calibrated-dark-level",
         ),
     ] {
         let bad = d.join("bad.safetensors");

@@ -143,6 +143,13 @@ pub struct TrainConfig {
     /// Train on captures without the camera's dark-level offset (black-level error, colour bias): for input calibrated by `pgrf enhance --calib` (or the synthetic protocol); recorded in the weight file. Without it the network learns to guess an offset it cannot see, and subtracts the average guess from calibrated inputs too (a tint in dark areas).
     #[cfg_attr(feature = "clap", arg(long, action = clap::ArgAction::Set, num_args = 0..=1, default_missing_value = "true", default_value_t = false, hide_default_value = true))]
     pub calibrated_dark_level: bool,
+    /// Without --calibrated-dark-level: the share of captures drawn without the offset all the same (0..1), so that one network serves uncalibrated and calibrated input [default: 0].
+    #[cfg_attr(
+        feature = "clap",
+        arg(long, default_value_t = 0.0, hide_default_value = true)
+    )]
+    #[serde(skip_serializing_if = "is_zero")]
+    pub calibrated_share: f64,
     /// Width of the first level: SID U-Net channels [default: 32]; for the flow model the SR3 inner channels unless --inner-channels is given.
     #[cfg_attr(feature = "clap", arg(long))]
     pub width: Option<usize>,
@@ -245,6 +252,11 @@ fn is_uniform(r: &RatioDraw) -> bool {
     *r == RatioDraw::Uniform
 }
 
+/// Records of runs without a calibrated share stay as they were.
+fn is_zero(v: &f64) -> bool {
+    *v == 0.0
+}
+
 /// Records of unconditioned runs stay as they were before conditioning
 /// existed (no `conditioning` key).
 fn is_unconditioned(c: &Conditioning) -> bool {
@@ -289,6 +301,7 @@ impl Default for TrainConfig {
             seed: 0,
             no_augment: false,
             calibrated_dark_level: false,
+            calibrated_share: 0.0,
             width: None,
             residual: false,
             conditioning: Conditioning::None,
@@ -526,6 +539,19 @@ impl TrainConfig {
             return Err(bad("--time-max", format!(
                 "--time-max must be in (0, 1] (the flow's training times are drawn from U(0, time-max)), got {t}"
             )));
+        }
+        let share = self.calibrated_share;
+        if !(0.0..=1.0).contains(&share) {
+            return Err(bad(
+                "--calibrated-share",
+                format!("--calibrated-share is a share of the captures, in [0, 1], got {share}"),
+            ));
+        }
+        if share > 0.0 && self.calibrated_dark_level {
+            return Err(bad(
+                "--calibrated-share",
+                "--calibrated-share goes without --calibrated-dark-level (which draws every capture calibrated)",
+            ));
         }
         self.iso_range()?;
         Ok(())

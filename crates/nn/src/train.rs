@@ -112,6 +112,7 @@ pub fn run(
         iso_range,
         ratio: c.ratio_draw.spec(lo, hi),
         calibrated_dark_level: c.calibrated_dark_level,
+        calibrated_share: c.calibrated_share,
         calibration: c.calib.as_deref(),
     })
     .map_err(|e| match e {
@@ -211,7 +212,13 @@ fn header(
         noise.model,
         mix.describe(),
         noise.calibration.as_ref().map(|c| format!(" + calibration {c}")).unwrap_or_default(),
-        if noise.calibrated_dark_level { " (dark level calibrated)" } else { "" },
+        if noise.calibrated_dark_level {
+            " (dark level calibrated)".to_string()
+        } else if c.calibrated_share > 0.0 {
+            format!(" ({:.0}% drawn with the dark level calibrated)", 100.0 * c.calibrated_share)
+        } else {
+            String::new()
+        },
         c.steps,
         c.lr,
         c.schedule,

@@ -168,6 +168,14 @@ impl PairMix {
         }
     }
 
+    /// Every camera's share of captures drawn as calibrated
+    /// ([`PairSpec::calibrated_share`]).
+    pub fn set_calibrated_share(&mut self, share: f64) {
+        for s in &mut self.specs {
+            s.calibrated_share = share;
+        }
+    }
+
     /// "sony-a7s2" or "sony-a7s2 (75%) + nikon-d850 (25%)", for headers.
     pub fn describe(&self) -> String {
         if self.specs.len() == 1 {

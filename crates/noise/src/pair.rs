@@ -113,6 +113,11 @@ pub struct PairSpec {
     /// --calib` (or in the synthetic protocol). Per-pixel calibration maps
     /// keep their own fixed pattern.
     pub calibrated_dark_level: bool,
+    /// Without [`PairSpec::calibrated_dark_level`]: the share (0..1) of
+    /// captures drawn as calibrated all the same, so that one network learns
+    /// both the raw camera's offset and its absence (issue 36: a model of
+    /// uncalibrated captures alone darkens calibrated ones).
+    pub calibrated_share: f64,
 }
 
 /// Global results of a calibration that accompany its per-pixel maps.
@@ -163,7 +168,15 @@ impl PairSpec {
             ratio: RatioSpec::default(),
             exposure: ExposureSpec::default(),
             calibrated_dark_level: false,
+            calibrated_share: 0.0,
         }
+    }
+
+    /// Whether capture `seed` falls in [`PairSpec::calibrated_share`] (its own
+    /// stream, so the other draws are those of a run without the share).
+    fn drawn_calibrated(&self, seed: u64) -> bool {
+        self.calibrated_share > 0.0
+            && open01(&mut stream(seed, Domain::Params, 3, 0)) < self.calibrated_share
     }
 
     /// Resolve the model for one capture.
@@ -176,7 +189,7 @@ impl PairSpec {
                 self.profile.sample_params(seed, Some(range))
             }
         };
-        if self.calibrated_dark_level {
+        if self.calibrated_dark_level || self.drawn_calibrated(seed) {
             params.bias = [0.0; 4];
         }
         let mut profile = std::borrow::Cow::Borrowed(&self.profile);
@@ -418,6 +431,41 @@ mod tests {
             biased >= 2,
             "only {biased} of 6 draws had an offset over 1 DN"
         );
+    }
+
+    #[test]
+    fn a_share_of_captures_is_drawn_calibrated() {
+        // Share 0.3 over 1,000 seeded captures: among those whose draw has a
+        // colour bias, the calibrated fraction is 0.3 within 4 binomial
+        // standard errors (~0.06); every other parameter is the draw of the
+        // spec without the share.
+        let mut spec = PairSpec::new(
+            CameraProfile::built_in("sony-a7s2").unwrap(),
+            ModelKind::Pgrf,
+        );
+        let mut shared = spec.clone();
+        shared.calibrated_share = 0.3;
+        let (mut biased, mut zeroed) = (0usize, 0usize);
+        for seed in 0..1000 {
+            let (_, raw) = spec.model(seed).unwrap();
+            let (_, drawn) = shared.model(seed).unwrap();
+            assert_eq!(drawn.k, raw.k);
+            assert_eq!(drawn.sigma_row, raw.sigma_row);
+            if raw.bias != [0.0; 4] {
+                biased += 1;
+                if drawn.bias == [0.0; 4] {
+                    zeroed += 1;
+                } else {
+                    assert_eq!(drawn.bias, raw.bias);
+                }
+            }
+        }
+        assert!(biased > 500, "{biased}");
+        let f = zeroed as f64 / biased as f64;
+        let se = (0.3 * 0.7 / biased as f64).sqrt();
+        assert!((f - 0.3).abs() < 4.0 * se, "{f} of {biased}");
+        spec.calibrated_share = 1.0;
+        assert_eq!(spec.model(7).unwrap().1.bias, [0.0; 4]);
     }
 
     #[test]

@@ -243,6 +243,9 @@ pub fn run(req: &SearchRequest, progress: &dyn Progress, warn: &dyn Fn(&str)) ->
         .check_available()
         .map_err(NnError::Device)?;
     let noise = &meta.noise;
+    // The pairs are drawn as the file's training drew them (ratio draw and
+    // calibrated share from its recorded configuration, when it has one).
+    let trained = meta.training.as_ref().and_then(|t| t.config.as_ref());
     let ratio = match req.ratio {
         Some(r) if r.is_finite() && r > 0.0 => RatioSpec::Fixed(r),
         Some(r) => {
@@ -251,10 +254,9 @@ pub fn run(req: &SearchRequest, progress: &dyn Progress, warn: &dyn Fn(&str)) ->
                 message: format!("--ratio must be a positive number, got {r}"),
             })
         }
-        None => RatioSpec::Uniform {
-            lo: noise.ratio[0],
-            hi: noise.ratio[1],
-        },
+        None => trained
+            .map_or(crate::config::RatioDraw::Uniform, |c| c.ratio_draw)
+            .spec(noise.ratio[0], noise.ratio[1]),
     };
     let (iso, iso_range) = match req.iso {
         Some(v) => (Some(v), None),
@@ -268,6 +270,7 @@ pub fn run(req: &SearchRequest, progress: &dyn Progress, warn: &dyn Fn(&str)) ->
         iso_range,
         ratio,
         calibrated_dark_level: noise.calibrated_dark_level,
+        calibrated_share: trained.map_or(0.0, |c| c.calibrated_share),
         calibration: req.calib.as_deref(),
     })
     .map_err(|e| match e {
