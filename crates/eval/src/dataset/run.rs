@@ -9,7 +9,7 @@
 use super::table::Row;
 use super::{centre_crop, load_pair, DatasetError, LoadedPair, Result, Sample};
 use crate::method::{CaseInfo, MethodUnderTest};
-use crate::metrics::{black_lift, colour_cast, evaluate, CameraColour, MetricError, Protocol};
+use crate::metrics::{black_level, colour_cast, evaluate, CameraColour, MetricError, Protocol};
 use ndarray::{Array3, ArrayView3};
 use pgrf_core::Progress;
 use pgrf_raw::{LevelOverrides, RawFrame};
@@ -241,7 +241,7 @@ pub(crate) fn run_cases(
             };
             let black = colour
                 .is_some()
-                .then(|| black_lift(out.view(), reference).map(|b| b.0))
+                .then(|| black_level(out.view(), reference))
                 .flatten();
             if k == rank {
                 first = Some(sc.psnr);

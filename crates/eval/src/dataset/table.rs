@@ -40,10 +40,10 @@ pub struct Row {
     pub seed: Option<u64>,
     /// The colour-cast figure, when the run measures it and a block qualified.
     pub cast: Option<Cast>,
-    /// The black-level figure (mean output minus reference where the
-    /// reference is below 1 % of white, fraction of white), measured with
-    /// the cast, when such pixels exist.
-    pub black: Option<f64>,
+    /// The black-level figures (mean and median output minus reference where
+    /// the reference is below 1 % of white, fractions of white), measured
+    /// with the cast, when such pixels exist.
+    pub black: Option<crate::metrics::BlackLevel>,
 }
 
 /// Means of one method in one table row.
@@ -271,7 +271,7 @@ fn opt<T: ToString>(v: Option<T>) -> String {
 /// Per-image CSV: protocol, id, ratio group, ratio, files, method, scores.
 /// Rows of the synthetic protocol (rows with an ISO) have their own
 /// columns: protocol, id, reference, iso, ratio, seed, method, psnr, ssim,
-/// cast_dab, cast_da, cast_db, cast_blocks, gain, black_lift.
+/// cast_dab, cast_da, cast_db, cast_blocks, gain, black_lift, black_median.
 pub fn csv(rows: &[Row]) -> String {
     if rows.iter().any(|r| r.iso.is_some()) {
         return synthetic_csv(rows);
@@ -299,13 +299,13 @@ pub fn csv(rows: &[Row]) -> String {
 
 fn synthetic_csv(rows: &[Row]) -> String {
     let mut s = String::from(
-        "protocol,id,reference,iso,ratio,seed,method,psnr,ssim,cast_dab,cast_da,cast_db,cast_blocks,gain,black_lift\n",
+        "protocol,id,reference,iso,ratio,seed,method,psnr,ssim,cast_dab,cast_da,cast_db,cast_blocks,gain,black_lift,black_median\n",
     );
     for r in rows {
         let c = r.cast.as_ref();
         let _ = writeln!(
             s,
-            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
             csv_field(&r.protocol),
             csv_field(&r.id),
             csv_field(&r.reference),
@@ -320,7 +320,8 @@ fn synthetic_csv(rows: &[Row]) -> String {
             opt(c.map(|c| c.db)),
             opt(c.map(|c| c.blocks)),
             opt(r.gain),
-            opt(r.black)
+            opt(r.black.map(|b| b.mean)),
+            opt(r.black.map(|b| b.median))
         );
     }
     s
@@ -424,13 +425,13 @@ mod tests {
         let lines: Vec<&str> = c.lines().collect();
         assert_eq!(
             lines[0],
-            "protocol,id,reference,iso,ratio,seed,method,psnr,ssim,cast_dab,cast_da,cast_db,cast_blocks,gain,black_lift"
+            "protocol,id,reference,iso,ratio,seed,method,psnr,ssim,cast_dab,cast_da,cast_db,cast_blocks,gain,black_lift,black_median"
         );
         assert_eq!(lines.len(), 7);
         assert_eq!(
             lines[1],
-            "synthetic,chart.dng,\"ref, 1.ARW\",3200,100,42,noisy input,20,0.2,3,-3,0.5,10,,"
+            "synthetic,chart.dng,\"ref, 1.ARW\",3200,100,42,noisy input,20,0.2,3,-3,0.5,10,,,"
         );
-        assert!(lines[6].ends_with(",m,30,0.3,,,,,,"), "{c}");
+        assert!(lines[6].ends_with(",m,30,0.3,,,,,,,"), "{c}");
     }
 }

@@ -6,8 +6,8 @@
 //!   with its defaults (7x7 uniform window, sample covariance, channel mean).
 //! - [`cast`]: the colour-cast figure, a mean CIELAB chroma shift over
 //!   low-texture blocks (not part of ELD's protocol; pgrf's synthetic one).
-//! - `black`: the black-level figure, the mean restoration error where the
-//!   reference is black (pgrf's synthetic protocol; issue 36).
+//! - `black`: the black-level figures, the mean and median restoration error
+//!   where the reference is black (pgrf's synthetic protocol; issue 36).
 //! - [`correct`]: ELD's single least-squares brightness gain over unsaturated pixels.
 //! - [`protocol`]: the evaluation protocol that strings them together (clamp,
 //!   optional correction, x255 as floats) and says in one line what it measured.
@@ -25,7 +25,7 @@ mod psnr;
 mod ssim;
 mod sum;
 
-pub use black::black_lift;
+pub use black::{black_level, BlackLevel};
 pub use cast::{colour_cast, CameraColour, Cast};
 pub use correct::{illuminance_correct, illuminance_gain, IlluminanceGain};
 pub use error::MetricError;
