@@ -41,6 +41,9 @@ struct Line {
     gain: String,
     black: f64,
     black_median: f64,
+    /// K and read noise a noise-aware method was told, and the truth.
+    told: [f64; 2],
+    truth: [f64; 2],
     raw: String,
 }
 
@@ -48,11 +51,11 @@ fn lines(csv: &str) -> Vec<Line> {
     let mut it = csv.lines();
     assert_eq!(
         it.next().unwrap(),
-        "protocol,id,reference,iso,ratio,seed,method,psnr,ssim,cast_dab,cast_da,cast_db,cast_blocks,gain,black_lift,black_median"
+        "protocol,id,reference,iso,ratio,seed,method,psnr,ssim,cast_dab,cast_da,cast_db,cast_blocks,gain,black_lift,black_median,told_k,told_read,true_k,true_read"
     );
     it.map(|l| {
         let f: Vec<&str> = l.split(',').collect();
-        assert_eq!(f.len(), 16, "{l}");
+        assert_eq!(f.len(), 20, "{l}");
         assert_eq!(f[0], "synthetic");
         assert!(f[12].parse::<usize>().unwrap() > 10, "cast blocks: {l}");
         Line {
@@ -67,6 +70,8 @@ fn lines(csv: &str) -> Vec<Line> {
             gain: f[13].into(),
             black: f[14].parse().unwrap(),
             black_median: f[15].parse().unwrap(),
+            told: [f[16].parse().unwrap(), f[17].parse().unwrap()],
+            truth: [f[18].parse().unwrap(), f[19].parse().unwrap()],
             raw: l.to_string(),
         }
     })
@@ -561,6 +566,67 @@ fn uncalibrated_captures_keep_their_black_level_error() {
     ]));
     assert!(
         e.contains("--uncalibrated goes with --protocol synthetic only"),
+        "{e}"
+    );
+}
+
+/// `--blind-noise`: a noise-aware model is told what the blind estimator
+/// finds in each capture, and the CSV has it beside the truth (without the
+/// flag the two are equal). The A7S2 at ISO 1600: K = 9.563e-4 x 1600 =
+/// 1.530 DN/e-, read 6.30 DN; on the 512 x 384 chart (flat patches) the
+/// estimate was 1.528 / 6.47 (seed 0; 0.36-6.1 within 10 % at ISO
+/// 400-6400 x20-x100): within 10 % and 25 % required.
+#[test]
+fn blind_noise_tells_the_estimate_and_records_the_truth() {
+    let (d, clean) = setup("blind");
+    let model = d.join("aware.safetensors");
+    common::noise_aware_model(&model);
+    let mut told = Vec::new();
+    for extra in [&[][..], &["--blind-noise"][..]] {
+        let csv = d.join(format!("n{}.csv", extra.len()));
+        let mut args = vec![
+            "--iso",
+            "1600",
+            "--ratio",
+            "100",
+            "--model",
+            s(&model),
+            "--csv",
+            s(&csv),
+        ];
+        args.extend_from_slice(extra);
+        let out = succeed(&eval(&[&clean], &args));
+        assert_eq!(
+            out.contains("told the blind estimate of each capture's noise"),
+            !extra.is_empty(),
+            "{out}"
+        );
+        let l = lines(&std::fs::read_to_string(&csv).unwrap());
+        assert_eq!(l.len(), 2);
+        assert!((l[0].truth[0] - 1.530).abs() < 0.001, "{:?}", l[0]);
+        assert_eq!(l[0].told, l[1].told, "every row of a capture");
+        told.push((l[0].told, l[0].truth));
+    }
+    let ((exact, truth), (blind, _)) = (told[0], told[1]);
+    assert_eq!(exact, truth);
+    assert!(
+        (blind[0] / truth[0] - 1.0).abs() < 0.10,
+        "{blind:?} vs {truth:?}"
+    );
+    assert!(
+        (blind[1] / truth[1] - 1.0).abs() < 0.25,
+        "{blind:?} vs {truth:?}"
+    );
+    let e = one_line_error(&pgrf(&[
+        "eval",
+        "--protocol",
+        "eld",
+        "--root",
+        s(&d),
+        "--blind-noise",
+    ]));
+    assert!(
+        e.contains("--blind-noise goes with --protocol synthetic only"),
         "{e}"
     );
 }

@@ -135,6 +135,9 @@ pub struct EvalFlags {
     /// Synthetic: hand the methods each capture as an uncalibrated camera writes it, its dark-level offset (the profile's black-level error) kept, instead of subtracted as a calibration would.
     #[arg(long)]
     pub uncalibrated: bool,
+    /// Synthetic: tell noise-aware models the blind estimate of each capture's noise (`pgrf_noise::estimate`, what `pgrf enhance` falls back to for a camera it knows nothing of) instead of its true parameters; the CSV has both.
+    #[arg(long)]
+    pub blind_noise: bool,
     /// No per-image progress lines on stderr.
     #[arg(long, short)]
     pub quiet: bool,
@@ -213,6 +216,7 @@ impl EvalFlags {
                 ("--profile", self.profile.is_some()),
                 ("--noise", self.noise.is_some()),
                 ("--uncalibrated", self.uncalibrated),
+                ("--blind-noise", self.blind_noise),
             ] {
                 if given {
                     return Err(bad(
@@ -236,6 +240,7 @@ impl EvalFlags {
             noise: self.noise.unwrap_or_default(),
             seed: self.seed,
             uncalibrated: self.uncalibrated,
+            blind_noise: self.blind_noise,
         })
     }
 

@@ -173,6 +173,7 @@ pub fn run(
                 seed: None,
                 cast: None,
                 black: None,
+                noise: None,
             },
             source: smp.noisy.display().to_string(),
             title: smp.id.clone(),

@@ -36,7 +36,7 @@
 //! refused.
 
 use super::run::{case_key, run_cases, Case, Outcome, RunOptions, Synthesis};
-use super::table::Row;
+use super::table::{NoiseRecord, Row};
 use super::{err, DatasetError, DatasetKind, LoadedPair, Result};
 use crate::method::CaseNoise;
 use crate::method::MethodUnderTest;
@@ -236,6 +236,9 @@ pub struct Synthetic {
     /// Hand the methods the capture with its dark-level offset kept, as an
     /// uncalibrated camera does ([`Synthetic::input`]).
     pub uncalibrated: bool,
+    /// Tell noise-aware methods the blind estimate of each capture's noise
+    /// instead of its true parameters ([`Synthetic::case_noise`]).
+    pub blind_noise: bool,
 }
 
 impl Synthetic {
@@ -272,6 +275,7 @@ impl Synthetic {
             kind,
             specs,
             uncalibrated: false,
+            blind_noise: false,
         })
     }
 
@@ -327,26 +331,66 @@ impl Synthetic {
         params.bias.map(|b| b * scale)
     }
 
-    /// What a noise-aware method is told of a capture drawn with `params`:
-    /// its true parameters, which a calibrated camera measures and which
-    /// `find_noise` reads, uncalibrated, from the camera's profile at its
-    /// ISO (the profile the capture was drawn from).
-    fn case_noise(&self, params: &pgrf_noise::CaptureParams) -> CaseNoise {
+    /// What a noise-aware method is told of `pair`: its true parameters,
+    /// which a calibrated camera measures and which `find_noise` reads,
+    /// uncalibrated, from the camera's profile at its ISO (the profile the
+    /// capture was drawn from); with `blind_noise`, what
+    /// [`pgrf_noise::estimate::fit`] finds in the capture the method gets
+    /// (before amplification and clamping), as `pgrf enhance` does for a
+    /// camera it has no profile of. Also the truth, for the record.
+    pub fn case_noise(&self, pair: &pgrf_noise::pair::Pair) -> Result<(CaseNoise, NoiseRecord)> {
+        let params = &pair.params;
         let read = match self.kind {
             ModelKind::Eld => params.sigma_tukey,
             _ => params.sigma_gauss,
         };
-        CaseNoise {
-            k: params.k,
-            read,
-            row: params.sigma_row,
-            range: self.specs[0].dn_range(),
-            source: if self.uncalibrated {
-                "the simulated camera's profile at its ISO".into()
-            } else {
-                "the simulated camera's calibration".into()
-            },
+        let range = self.specs[0].dn_range();
+        let record = |told: &CaseNoise| NoiseRecord {
+            told_k: told.k,
+            told_read: told.read,
+            true_k: params.k,
+            true_read: read,
+        };
+        if !self.blind_noise {
+            let told = CaseNoise {
+                k: params.k,
+                read,
+                row: params.sigma_row,
+                range,
+                source: if self.uncalibrated {
+                    "the simulated camera's profile at its ISO".into()
+                } else {
+                    "the simulated camera's calibration".into()
+                },
+            };
+            let r = record(&told);
+            return Ok((told, r));
         }
+        let offsets = if self.uncalibrated {
+            [0.0; 4]
+        } else {
+            self.offsets(params, pair.ratio)
+        };
+        let mut capture = pair.noisy.clone();
+        for (mut plane, off) in capture.outer_iter_mut().zip(offsets) {
+            let off = off as f32;
+            plane.mapv_inplace(|v| (v - off) / pair.ratio);
+        }
+        let fit = pgrf_noise::estimate::fit(capture.view())
+            .map_err(|e| DatasetError(format!("blind noise estimate: {e}")))?;
+        let (k, read_est) = fit.in_dn(range);
+        let told = CaseNoise {
+            k,
+            read: read_est,
+            row: 0.0,
+            range,
+            source: format!(
+                "blind estimate of the capture ({} blocks; true K {:.4}, read {:.2})",
+                fit.blocks, params.k, read
+            ),
+        };
+        let r = record(&told);
+        Ok((told, r))
     }
 
     /// The whole synthesised pair behind [`Synthetic::capture`], and its seed.
@@ -413,7 +457,11 @@ impl Synthetic {
                 "calibrated (dark-level offset subtracted)"
             },
             self.seed
-        )
+        ) + if self.blind_noise {
+            "; noise-aware methods are told the blind estimate of each capture's noise"
+        } else {
+            ""
+        }
     }
 }
 
@@ -464,7 +512,7 @@ pub fn run(
         let plane_rows = frame.cfa.offsets().map(|(r, _)| r);
         let (pair, seed) = synth.synthesize(clean.view(), plane_rows, &img.id, ci)?;
         let input = synth.input(&pair);
-        let noise = synth.case_noise(&pair.params);
+        let (noise, record) = synth.case_noise(&pair)?;
         let synthesis = opts.dump.is_some().then(|| Synthesis {
             noise: synth.noise_record(&pair.params, c.ratio),
             capture: pair.noisy,
@@ -492,6 +540,7 @@ pub fn run(
                 seed: Some(seed),
                 cast: None,
                 black: None,
+                noise: Some(record),
             },
             source: format!("{} ({})", img.path.display(), c.label()),
             title: format!("{} {}", img.id, c.label()),

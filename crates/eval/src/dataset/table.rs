@@ -44,6 +44,23 @@ pub struct Row {
     /// the reference is below 1 % of white, fractions of white), measured
     /// with the cast, when such pixels exist.
     pub black: Option<crate::metrics::BlackLevel>,
+    /// Synthetic: the noise a noise-aware method was told, and the truth.
+    pub noise: Option<NoiseRecord>,
+}
+
+/// The noise parameters a noise-aware method was told of a synthetic
+/// capture (`--blind-noise`: the blind estimate), beside the true ones; K in
+/// DN per electron, read noise in DN, on the profile's scale.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct NoiseRecord {
+    /// K told.
+    pub told_k: f64,
+    /// Read noise told.
+    pub told_read: f64,
+    /// K of the capture.
+    pub true_k: f64,
+    /// Read noise of the capture.
+    pub true_read: f64,
 }
 
 /// Means of one method in one table row.
@@ -271,7 +288,8 @@ fn opt<T: ToString>(v: Option<T>) -> String {
 /// Per-image CSV: protocol, id, ratio group, ratio, files, method, scores.
 /// Rows of the synthetic protocol (rows with an ISO) have their own
 /// columns: protocol, id, reference, iso, ratio, seed, method, psnr, ssim,
-/// cast_dab, cast_da, cast_db, cast_blocks, gain, black_lift, black_median.
+/// cast_dab, cast_da, cast_db, cast_blocks, gain, black_lift, black_median, told_k, told_read, true_k,
+/// true_read.
 pub fn csv(rows: &[Row]) -> String {
     if rows.iter().any(|r| r.iso.is_some()) {
         return synthetic_csv(rows);
@@ -299,13 +317,13 @@ pub fn csv(rows: &[Row]) -> String {
 
 fn synthetic_csv(rows: &[Row]) -> String {
     let mut s = String::from(
-        "protocol,id,reference,iso,ratio,seed,method,psnr,ssim,cast_dab,cast_da,cast_db,cast_blocks,gain,black_lift,black_median\n",
+        "protocol,id,reference,iso,ratio,seed,method,psnr,ssim,cast_dab,cast_da,cast_db,cast_blocks,gain,black_lift,black_median,told_k,told_read,true_k,true_read\n",
     );
     for r in rows {
         let c = r.cast.as_ref();
         let _ = writeln!(
             s,
-            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
             csv_field(&r.protocol),
             csv_field(&r.id),
             csv_field(&r.reference),
@@ -321,7 +339,11 @@ fn synthetic_csv(rows: &[Row]) -> String {
             opt(c.map(|c| c.blocks)),
             opt(r.gain),
             opt(r.black.map(|b| b.mean)),
-            opt(r.black.map(|b| b.median))
+            opt(r.black.map(|b| b.median)),
+            opt(r.noise.map(|n| n.told_k)),
+            opt(r.noise.map(|n| n.told_read)),
+            opt(r.noise.map(|n| n.true_k)),
+            opt(r.noise.map(|n| n.true_read))
         );
     }
     s
@@ -347,6 +369,7 @@ mod tests {
             seed: None,
             cast: None,
             black: None,
+            noise: None,
         }
     }
 
@@ -425,13 +448,13 @@ mod tests {
         let lines: Vec<&str> = c.lines().collect();
         assert_eq!(
             lines[0],
-            "protocol,id,reference,iso,ratio,seed,method,psnr,ssim,cast_dab,cast_da,cast_db,cast_blocks,gain,black_lift,black_median"
+            "protocol,id,reference,iso,ratio,seed,method,psnr,ssim,cast_dab,cast_da,cast_db,cast_blocks,gain,black_lift,black_median,told_k,told_read,true_k,true_read"
         );
         assert_eq!(lines.len(), 7);
         assert_eq!(
             lines[1],
-            "synthetic,chart.dng,\"ref, 1.ARW\",3200,100,42,noisy input,20,0.2,3,-3,0.5,10,,,"
+            "synthetic,chart.dng,\"ref, 1.ARW\",3200,100,42,noisy input,20,0.2,3,-3,0.5,10,,,,,,,"
         );
-        assert!(lines[6].ends_with(",m,30,0.3,,,,,,,"), "{c}");
+        assert!(lines[6].ends_with(",m,30,0.3,,,,,,,,,,,"), "{c}");
     }
 }

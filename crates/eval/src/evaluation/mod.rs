@@ -82,6 +82,8 @@ pub struct SyntheticSpec {
     pub seed: u64,
     /// Keep each capture's dark-level offset (an uncalibrated camera).
     pub uncalibrated: bool,
+    /// Tell noise-aware methods the blind estimate, not the truth.
+    pub blind_noise: bool,
 }
 
 impl Default for SyntheticSpec {
@@ -93,6 +95,7 @@ impl Default for SyntheticSpec {
             noise: ModelKind::default(),
             seed: 0,
             uncalibrated: false,
+            blind_noise: false,
         }
     }
 }
@@ -182,6 +185,7 @@ fn find_cases(cfg: &EvalConfig) -> Result<Cases, DatasetError> {
             s.seed,
         )?;
         recipe.uncalibrated = s.uncalibrated;
+        recipe.blind_noise = s.blind_noise;
         return Ok(Cases::Synthetic(synthetic::walk(&cfg.roots)?, recipe));
     }
     let root = one_root(cfg)?;

@@ -177,6 +177,7 @@ impl Demo {
                     seed: None,
                     cast: None,
                     black: None,
+                    noise: None,
                 });
             }
         }
