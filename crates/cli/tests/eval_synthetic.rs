@@ -68,8 +68,9 @@ fn lines(csv: &str) -> Vec<Line> {
             ssim: f[8].parse().unwrap(),
             cast: f[9].parse().unwrap(),
             gain: f[13].into(),
-            black: f[14].parse().unwrap(),
-            black_median: f[15].parse().unwrap(),
+            // Empty where the reference has no black region.
+            black: f[14].parse().unwrap_or(f64::NAN),
+            black_median: f[15].parse().unwrap_or(f64::NAN),
             told: [f[16].parse().unwrap(), f[17].parse().unwrap()],
             truth: [f[18].parse().unwrap(), f[19].parse().unwrap()],
             raw: l.to_string(),
