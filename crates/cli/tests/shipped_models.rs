@@ -1,11 +1,18 @@
 //! The built-in models and the training configuration type share one
 //! description: `models/NAME.toml` is the `pgrf train --config` file each
 //! shipped weight file was trained with, and it must describe exactly the
-//! network, noise and run the file's own record says.
+//! network, noise and run the file's own record says; the stages before it
+//! are `models/*.toml` too, with their logs in `models/logs`.
 
 use pgrf_nn::weights::{read_meta, WeightMeta};
 use pgrf_nn::{Method, TrainConfig};
+use serde_json::Value;
 use std::path::PathBuf;
+
+/// Seconds of training behind each shipped file's last stage, as its
+/// record carries them (the stages' logs sum to the same within a second).
+const SPC_SECONDS: f64 = 21_038.6;
+const PGRF_SECONDS: f64 = 23_294.8;
 
 fn models() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../models")
@@ -15,6 +22,30 @@ fn models() -> PathBuf {
 fn config(name: &str) -> TrainConfig {
     let text = std::fs::read_to_string(models().join(format!("{name}.toml"))).unwrap();
     TrainConfig::from_toml(&text).unwrap()
+}
+
+/// The steps stage `name` ran: the last step of `models/logs/NAME.log.csv`
+/// (a stage stopped early ran fewer than its configuration asks).
+fn steps_run(name: &str) -> u64 {
+    let log = std::fs::read_to_string(models().join(format!("logs/{name}.log.csv"))).unwrap();
+    let last = log.lines().last().unwrap();
+    last.split(',').next().unwrap().parse().unwrap()
+}
+
+/// The network's description without its input planes: a noise-aware stage
+/// widens the first layer of the blind network it starts from (`--init`),
+/// and nothing else.
+fn body(arch: &impl serde::Serialize) -> Value {
+    fn strip(v: &mut Value) {
+        if let Value::Object(m) = v {
+            m.remove("in_channels");
+            m.remove("conditioning");
+            m.values_mut().for_each(strip);
+        }
+    }
+    let mut v = serde_json::to_value(arch).unwrap();
+    strip(&mut v);
+    v
 }
 
 /// Checks `models/NAME.toml` against `models/NAME.safetensors` and returns
@@ -41,18 +72,27 @@ fn check(name: &str, method: Method) -> WeightMeta {
         .as_ref()
         .expect("shipped files record their training");
     assert_eq!(
-        (t.steps, t.batch, t.patch, t.seed, t.data.as_str()),
-        (cfg.steps, cfg.batch, cfg.patch, cfg.seed, cfg.data.as_str()),
+        (t.batch, t.patch, t.seed, t.data.as_str()),
+        (cfg.batch, cfg.patch, cfg.seed, cfg.data.as_str()),
         "{name}: run"
+    );
+    assert_eq!(t.steps, steps_run(name), "{name}: steps of its log");
+    assert!(t.steps <= cfg.steps);
+    // The record keeps the whole configuration, which is this file's.
+    assert_eq!(
+        t.config.as_ref(),
+        Some(&cfg),
+        "{name}: recorded configuration"
     );
     meta
 }
 
 /// A fine-tuned file's earlier stages, `earlier` (config names, oldest
-/// first): each builds the shipped network, the last one's output is the
-/// file the record says the run started from (also the `init` the shipped
-/// config names), and their steps sum to the steps the record carries.
-/// Returns the seconds behind the starting point.
+/// first): each builds the shipped network (less its input planes), the
+/// last one's output is the file the record says the run started from (also
+/// the `init` the shipped config names), and the steps their logs end at sum
+/// to the steps the record carries. Returns the seconds behind the starting
+/// point.
 fn check_stages(name: &str, meta: &WeightMeta, earlier: &[&str], method: Method) -> f64 {
     let from = meta
         .training
@@ -63,11 +103,13 @@ fn check_stages(name: &str, meta: &WeightMeta, earlier: &[&str], method: Method)
     for stage in earlier {
         let cfg = config(stage);
         assert_eq!(
-            serde_json::to_value(cfg.architecture(method).unwrap()).unwrap(),
-            serde_json::to_value(&meta.arch).unwrap(),
+            body(&cfg.architecture(method).unwrap()),
+            body(&meta.arch),
             "{stage}: architecture"
         );
-        steps += cfg.steps;
+        let ran = steps_run(stage);
+        assert!(ran <= cfg.steps, "{stage}: {ran} steps of {}", cfg.steps);
+        steps += ran;
     }
     let init = config(name)
         .init
@@ -83,25 +125,38 @@ fn check_stages(name: &str, meta: &WeightMeta, earlier: &[&str], method: Method)
 #[test]
 fn spc_config_describes_the_shipped_denoiser() {
     let meta = check("spc", Method::Spc);
-    // Its third stage started from the second stage's output, which started
-    // from the first's: 20,000 + 9,000 steps, 6,942 + 5,242 s.
-    let seconds = check_stages("spc", &meta, &["spc_base", "spc_stage2"], Method::Spc);
-    assert!((seconds - 12_184.0).abs() < 1.0, "{seconds}");
-    assert!(meta.noise.calibrated_dark_level);
+    // The third noise-aware stage started from the second, which started
+    // from the blind built-in SPC (three stages): 20,000 + 9,000 + 6,000 +
+    // 5,000 steps, 6,942 + 5,242 + 3,453 + 5,401 s.
+    let stages = ["spc_base", "spc_stage2", "spc_blind", "spc_noise2"];
+    let seconds = check_stages("spc", &meta, &stages, Method::Spc);
+    assert!((seconds - SPC_SECONDS).abs() < 1.0, "{seconds}");
+    assert!(meta.arch.conditioning().needs_level());
+    assert!(!meta.noise.calibrated_dark_level);
+    let t = meta.training.as_ref().unwrap();
+    assert_eq!(t.config.as_ref().unwrap().calibrated_share, 0.3);
 }
 
 #[test]
 fn pgrf_config_describes_the_shipped_flow_model() {
     let meta = check("pgrf", Method::Pgrf);
-    // Its fourth stage started from the third stage's output, each stage
-    // from the one before: 20,000 + 12,000 + 3,000 steps, 5,664 + 3,610 +
-    // 3,622 s; it drew its training times from U(0, 0.5).
-    let stages = ["pgrf_base", "pgrf_stage2", "pgrf_stage3"];
+    // Four blind stages (20,000 + 12,000 + 3,000 + 2,000 steps), then the
+    // noise-aware ones: 1,725 (stopped) + 2,000 + 477 (stopped) steps.
+    let stages = [
+        "pgrf_base",
+        "pgrf_stage2",
+        "pgrf_stage3",
+        "pgrf_blind",
+        "pgrf_noise2",
+        "pgrf_noise3",
+        "pgrf_noise4",
+    ];
     let seconds = check_stages("pgrf", &meta, &stages, Method::Pgrf);
-    assert!((seconds - 12_896.0).abs() < 1.0, "{seconds}");
+    assert!((seconds - PGRF_SECONDS).abs() < 1.0, "{seconds}");
     let t = meta.training.as_ref().unwrap();
-    assert_eq!(t.config.as_ref().unwrap().time_max, 0.5);
-    assert!(meta.noise.calibrated_dark_level);
+    let cfg = t.config.as_ref().unwrap();
+    assert_eq!((cfg.time_max, cfg.window), (0.5, Some(128)));
+    assert!(meta.arch.conditioning().needs_level());
     assert!(meta.t2.is_some(), "searched");
 }
 
@@ -115,4 +170,6 @@ fn a_different_config_is_caught() {
         serde_json::to_value(cfg.architecture(Method::Spc).unwrap()).unwrap(),
         serde_json::to_value(&meta.arch).unwrap()
     );
+    // Nor is a stage list that leaves one out.
+    assert_ne!(steps_run("spc_noise2"), 0);
 }

@@ -151,16 +151,18 @@ fn bad_checkpoints_are_refused_with_the_reason() {
     }
 }
 
-/// pgrf's shipped SPC (residual, width 16) exported as `.pth`: PyTorch
+/// The blind SPC built in until 2026-11-27 (residual, width 16;
+/// `tests/data/sid_unet/blind_spc.safetensors`, the `models/spc.safetensors`
+/// of commit 0c462fb, kept as this fixture's weights) exported as `.pth`: PyTorch
 /// loads it strictly into UNetSeeInDark and, adding the input as the
 /// residual network does, computes `spc_torch_output.f32` on the reference
 /// input (`sid_unet_torch.py check spc.pth input.f32 --residual --save`);
 /// pgrf's own forward must agree to 1e-5. Re-importing the export gives
 /// the same tensors, and exporting those again the same bytes. When
-/// models/spc.safetensors is retrained, regenerate the fixture that way.
+/// weights change, regenerate the fixture that way.
 #[test]
-fn the_shipped_spc_exports_to_what_pytorch_computes() {
-    let model = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../models/spc.safetensors");
+fn a_trained_spc_exports_to_what_pytorch_computes() {
+    let model = data("blind_spc.safetensors");
     let (meta, tensors) = weights::read(&model).unwrap();
     let device = Default::default();
     let (net, _) = model::load::<Cpu>(&model, &device).unwrap();
@@ -178,9 +180,9 @@ fn the_shipped_spc_exports_to_what_pytorch_computes() {
         .fold(0.0f32, f32::max);
     assert!(
         d < 1e-5,
-        "max |pgrf - PyTorch| = {d} (models/spc.safetensors retrained? regenerate spc_torch_output.f32)"
+        "max |pgrf - PyTorch| = {d} (blind_spc.safetensors changed? regenerate spc_torch_output.f32)"
     );
-    eprintln!("shipped SPC: max |pgrf - PyTorch| = {d:.2e}");
+    eprintln!("blind SPC: max |pgrf - PyTorch| = {d:.2e}");
 
     let pth = interop::export(&meta, &tensors, true).unwrap();
     let dir = std::env::temp_dir().join(format!("pgrf-export-{}", std::process::id()));

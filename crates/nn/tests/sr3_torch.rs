@@ -1,5 +1,8 @@
-//! The shipped PGRF velocity field (`models/pgrf.safetensors`) against
-//! PyTorch: `bench/sr3_reference.py` (PyTorch 2.9.1) loaded the model's
+//! A trained PGRF velocity field against PyTorch: the blind PGRF built in
+//! until 2026-11-27 (`tests/data/sr3/blind_pgrf.safetensors`, the
+//! `models/pgrf.safetensors` of commit 0c462fb, kept as this fixture's
+//! weights; the noise-aware built-in adds four input planes to the same
+//! network). `bench/sr3_reference.py` (PyTorch 2.9.1) loaded the model's
 //! `pgrf export-weights` `.pth` into its `Sr3Unet` with
 //! `load_state_dict(strict=True)` and ran it on fixed seeded inputs; its
 //! outputs are in `tests/data/sr3/` (`io.json` lists the cases: shapes, t,
@@ -39,12 +42,8 @@ fn tolerance(t: f32) -> f32 {
 }
 
 const REGENERATE: &str = "cargo build -p pgrf-cli\n  \
-     target/debug/pgrf export-weights models/pgrf.safetensors -o /tmp/pgrf.pth\n  \
-     /tmp/tv/bin/python bench/sr3_reference.py fixtures /tmp/pgrf.pth --config models/pgrf.safetensors";
-
-fn root() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
-}
+     target/debug/pgrf export-weights crates/nn/tests/data/sr3/blind_pgrf.safetensors -o /tmp/pgrf.pth\n  \
+     /tmp/tv/bin/python bench/sr3_reference.py fixtures /tmp/pgrf.pth --config crates/nn/tests/data/sr3/blind_pgrf.safetensors";
 
 fn data(name: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -72,8 +71,8 @@ fn usizes(v: &serde_json::Value) -> Vec<usize> {
 /// fixtures' inputs matches PyTorch's reference module, per batch item, to
 /// [`tolerance`] (1e-5 on the main case).
 #[test]
-fn shipped_pgrf_matches_pytorch_reference() {
-    let model = root().join("models/pgrf.safetensors");
+fn a_trained_pgrf_matches_pytorch_reference() {
+    let model = data("blind_pgrf.safetensors");
     let io: serde_json::Value =
         serde_json::from_slice(&std::fs::read(data("io.json")).unwrap()).unwrap();
     let sha: String = Sha256::digest(std::fs::read(&model).unwrap())
@@ -85,13 +84,13 @@ fn shipped_pgrf_matches_pytorch_reference() {
         "the weights are the ones the fixtures were computed from: pgrf's forward or the reference changed".to_string()
     } else {
         format!(
-            "models/pgrf.safetensors changed (sha256 {sha}; the fixtures were computed from {fixture_sha}): regenerate them"
+            "blind_pgrf.safetensors changed (sha256 {sha}; the fixtures were computed from {fixture_sha}): regenerate them"
         )
     };
     let device = Default::default();
     let (net, _) = model::load::<Cpu>(&model, &device).unwrap();
     let Net::Pgrf(net) = net else {
-        panic!("models/pgrf.safetensors is not a PGRF (SR3) model")
+        panic!("blind_pgrf.safetensors is not a PGRF (SR3) model")
     };
     let mut report = Vec::new();
     let mut failed = false;

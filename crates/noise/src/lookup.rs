@@ -276,7 +276,14 @@ pub fn find_noise(frame: &RawFrame, known: &KnownNoise) -> Result<FrameNoise> {
     }
     let packed =
         pgrf_raw::pack_normalized(frame, false).map_err(|e| NoiseError::Estimate(e.to_string()))?;
-    let fit = crate::estimate::fit(packed.view())?;
+    // Nothing else knows this camera: say how to tell pgrf when the frame
+    // cannot tell it either.
+    let fit = crate::estimate::fit(packed.view()).map_err(|e| match e {
+        NoiseError::Estimate(m) => NoiseError::Estimate(format!(
+            "{m}; no calibration, --noise, NoiseProfile or profile of this camera either: give --noise K=..,read=.. (or --calib)"
+        )),
+        e => e,
+    })?;
     let (k, read) = fit.in_dn(range);
     Ok(FrameNoise {
         k,

@@ -181,6 +181,11 @@ pub fn built_in_names() -> Vec<&'static str> {
 }
 
 impl CameraProfile {
+    /// The scale its DN values are stated on: white - black.
+    pub fn dn_range(&self) -> f64 {
+        self.dn_range
+    }
+
     /// A built-in profile by name ("sony-a7s2", "nikon-d850", "canon-eos70d",
     /// "canon-eos700d", "canon-eos5d4"), or None.
     pub fn built_in(name: &str) -> Option<CameraProfile> {

@@ -24,7 +24,6 @@ use pgrf_core::{NoProgress, Progress};
 use pgrf_eval::dataset::table::Row;
 use pgrf_eval::{evaluate, MetricError, Protocol, Scores};
 use pgrf_noise::capture::DarkCapture;
-use pgrf_noise::lookup::{find_noise, range_of, KnownNoise};
 use pgrf_noise::{CameraProfile, ModelKind, NoiseError};
 use pgrf_raw::{pack_normalized, unpack_normalized, write_dng, DngOptions, RawError, RawFrame};
 pub use scene::{Clean, PhotoSource, Scene};
@@ -233,17 +232,20 @@ impl Bench<'_> {
         progress.advance(1);
         let run = |r: &dyn Restore, name: &str| -> Result<(Scores, RawFrame), DemoError> {
             progress.message(&format!("x{ratio}: {name}"));
-            // A noise-aware model is told the capture's noise by the lookup
-            // `pgrf enhance` uses (for the simulated A7S2: its built-in
-            // profile at the capture's ISO).
+            // A noise-aware model is told the capture's noise as a
+            // calibration of the simulated camera states it (the profile's
+            // parameters at the ISO, on its DN range), as `enhance --calib`
+            // tells it a real calibration's: the demo's camera counts as
+            // calibrated, and a small window has too few flat blocks for
+            // the blind estimate a RAW of an unknown camera would get.
             let level = match r.meta().arch.conditioning().needs_level() {
                 true => {
-                    let n = find_noise(&dark, &KnownNoise::default())?;
+                    let p = self.profile.params_at_iso(ISO)?;
                     Some(NoiseLevel::from_dn(
-                        n.k,
-                        n.read,
-                        n.row,
-                        range_of(&dark),
+                        p.k,
+                        p.sigma_gauss,
+                        p.sigma_row,
+                        self.profile.dn_range(),
                         ratio as f64,
                     ))
                 }
