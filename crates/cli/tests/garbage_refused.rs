@@ -147,11 +147,12 @@ fn a_fits_saturate_below_its_samples_is_refused_unless_white_is_given() {
     let max = *samples.iter().max().unwrap();
     let above = samples.iter().filter(|&&x| x > 1000).count();
     assert!(max > 1000 && above > 0, "{max} {above}");
-    // SATURATE = 1000 where END was, END after it (the header block has room).
-    assert!(80 * (header_end + 2) <= data_at);
-    let at = 80 * header_end;
-    b[at..at + 80].copy_from_slice(&card("SATURATE=                 1000 / saturation level"));
-    b[at + 80..at + 160].copy_from_slice(&card("END"));
+    // pgrf wrote SATURATE = 16383 (the chart's white); it becomes 1000.
+    let sat = (0..header_end)
+        .find(|&i| b[80 * i..80 * i + 9] == *b"SATURATE=")
+        .expect("a SATURATE card");
+    b[80 * sat..80 * sat + 80]
+        .copy_from_slice(&card("SATURATE=                 1000 / saturation level"));
     let bad = d.join("sat.fits");
     std::fs::write(&bad, &b).unwrap();
     refused_by_all(
@@ -162,12 +163,17 @@ fn a_fits_saturate_below_its_samples_is_refused_unless_white_is_given() {
             256 * 192
         ),
     );
-    // --white settles it: every command runs.
-    for cmd in ["info", "convert"] {
-        let out = d.join(format!("ok_{cmd}.dng"));
+    // --white settles it: every command runs (enhance writes samples up to
+    // the raised white: 16 bits, not the file's 14).
+    for cmd in ["info", "convert", "preview", "enhance"] {
+        let ext = if cmd == "preview" { "png" } else { "dng" };
+        let out = d.join(format!("ok_{cmd}.{ext}"));
         let mut args = vec![cmd, s(&bad), "--white", "65535"];
-        if cmd == "convert" {
+        if cmd != "info" {
             args.extend_from_slice(&["-o", s(&out)]);
+        }
+        if cmd == "enhance" {
+            args.extend_from_slice(&["--model", "builtin:spc", "--ratio", "20"]);
         }
         let r = pgrf(&args);
         assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));

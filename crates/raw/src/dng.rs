@@ -225,7 +225,13 @@ fn put_ljpeg<W: Write + Seek>(
 ) -> std::result::Result<(), String> {
     use rayon::prelude::*;
     let (tw, th) = (tile_width(frame.width), DNG_TILE);
-    let bps = frame.bits.clamp(1, 16) as u8;
+    // The frame's bits, or more when a sample needs them (LJPEG-92 refuses
+    // a sample above its precision).
+    let top = frame.mosaic.iter().copied().max().unwrap_or(0);
+    let bps = frame
+        .bits
+        .max(crate::frame::bits_for(top as u32))
+        .clamp(1, 16) as u8;
     let components = if frame.mono { 1 } else { 2 };
     let tiler = ImageTiler::new(&frame.mosaic, frame.width, frame.height, 1, tw, th);
     let tiles = (0..tiler.tile_count())
@@ -400,6 +406,24 @@ mod tests {
         assert_eq!(back(&f), Some(-10.25));
         f.temperature_c = Some(23.0);
         assert_eq!(back(&f), Some(23.0));
+    }
+
+    /// A sample above the frame's bits (a result restored up to a white
+    /// raised by --white) widens BitsPerSample instead of failing the LJPEG
+    /// encoder ("Sample overflow"), and reads back exactly.
+    #[test]
+    fn samples_above_the_frames_bits_are_written_whole() {
+        let mut mosaic = vec![600u16; 64 * 32];
+        mosaic[77] = 40000;
+        let mut f =
+            RawFrame::from_mosaic(64, 32, mosaic.clone(), crate::Cfa::Rggb, [512.0; 4], 65535)
+                .unwrap();
+        f.bits = 14;
+        let bytes = encode_dng(&f, &DngOptions::default()).unwrap();
+        let back = crate::decode_bytes(std::path::Path::new("t.dng"), &bytes, &Default::default())
+            .unwrap();
+        assert!(back.mosaic == mosaic);
+        assert_eq!(back.bits, 16);
     }
 
     #[test]
