@@ -26,6 +26,33 @@ line starting with `pgrf: error: `. Anything else is a failure: an abort
 a signal, a time-out (120 s), or a message that is not one line. The peak
 resident memory of any run is reported (RUSAGE_CHILDREN's ru_maxrss).
 
+Issue 37's classes (`--classes`, comma-separated; default all), each
+made by the campaign itself and each case a refusal or a success that is
+known to be right; an exit 0 where the input contradicts itself counts as
+a failure ("accepted": garbage or an unloadable file written):
+
+    dngfield   targeted contradictions in a chart DNG's tiles (TileByteCounts
+               cut to 0, 1, 100 or a random share, TileWidth and TileLength
+               set to 0, 16, 65535 or a random value) and in the 550D's
+               uncompressed strip (BitsPerSample 8..16 but 14), through
+               info / preview / convert / enhance: each must be refused
+    saturate   FITS files (a converted chart) with SATURATE or DATAMAX below
+               the largest sample (refused unless --white; with --white:
+               ok) and at or above it (ok)
+    counts     absurd values of the flags issue 37 bounded: --sampler
+               euler:-N, --ratio / --target-exposure outside 1..10000
+               (enhance, synth, eval), make-dataset --scenes 1e9, train
+               --steps 0, enhance -o X.safetensors; and seeds up to 2^64 - 1
+               (must be accepted)
+    resume     train a tiny denoiser, then resume it after it finished
+               (must say "already finished" and leave the file byte for
+               byte), lose its weight file and resume (rewritten from the
+               checkpoint), resume with a smaller --steps (refused); every
+               weight file left must load in enhance; export-weights of a
+               record its tensors do not fit (refused)
+
+The mutation classes above are `mutate`; `--classes mutate` runs them alone.
+
 Ends with a table per command and class and exits 1 if anything failed.
 Needs Python 3 only; pgrf must be built (release).
 """
@@ -148,6 +175,245 @@ def verdict(code, err):
     return f"exit {code}, {len(lines)} lines"
 
 
+# ----------------------------------------------------------- issue 37's classes
+
+
+def ifd0_entries(b):
+    """(entry offset, tag, type, count) of IFD0 of a little-endian TIFF."""
+    off = struct.unpack("<I", b[4:8])[0]
+    n = struct.unpack("<H", b[off : off + 2])[0]
+    return [(off + 2 + 12 * i,) + struct.unpack("<HHI", b[off + 2 + 12 * i : off + 10 + 12 * i])
+            for i in range(n)]
+
+
+def set_value(b, tag, value):
+    """`b` with the one inline value of `tag` in IFD0 set, keeping its type."""
+    b = bytearray(b)
+    for at, t, typ, count in ifd0_entries(b):
+        if t == tag:
+            assert count == 1, (tag, count)
+            if typ == 3:
+                b[at + 8 : at + 10] = struct.pack("<H", value)
+            else:
+                b[at + 8 : at + 12] = struct.pack("<I", value)
+            return bytes(b)
+    raise KeyError(tag)
+
+
+def value_of(b, tag):
+    for at, t, typ, _count in ifd0_entries(b):
+        if t == tag:
+            return struct.unpack("<H" if typ == 3 else "<I", b[at + 8 : at + (10 if typ == 3 else 12)])[0]
+    raise KeyError(tag)
+
+
+def through_readers(pgrf, f, out, extra=()):
+    """The commands of the mutation classes on file `f`, outputs in `out`."""
+    cmds = {
+        "info": [pgrf, "info", str(f), *extra],
+        "preview": [pgrf, "preview", str(f), "--half", "-o", str(out / "p.png"), *extra],
+        "convert": [pgrf, "convert", str(f), "-o", str(out / "c.dng"), *extra],
+        "enhance": [pgrf, "enhance", str(f), "--model", "builtin:spc", "--ratio", "20",
+                    "--tile", "256", "-o", str(out / "e.dng"), *extra],
+    }
+    return cmds
+
+
+def dngfield_cases(work, pgrf, shared, rng, n):
+    """(name, file, expect) of the targeted DNG contradictions."""
+    chart = (work / "chart.dng").read_bytes()
+    count = value_of(chart, 325)
+    cases = []
+    for v in [0, 1, 100, rng.randrange(2, count)] + [rng.randrange(2, count) for _ in range(n)]:
+        cases.append((f"tilebytes_{v}", set_value(chart, 325, v)))
+    for tag, name in [(322, "tilewidth"), (323, "tilelength")]:
+        for v in [0, 16, 65535, rng.choice([32, 48, 128, 240, 272, 4096])]:
+            cases.append((f"{name}_{v}", set_value(chart, tag, v)))
+    src = shared / "canon550d_colorchart.dng"
+    if not src.exists():
+        src = Path(__file__).resolve().parent.parent / "crates/cli/assets/canon550d_colorchart.dng"
+    b550 = src.read_bytes()
+    for bits in [8, 10, 12, 13, 15, 16]:
+        cases.append((f"550d_bits{bits}", set_value(b550, 258, bits)))
+    return [(name, data, "refused") for name, data in cases]
+
+
+def fits_with(fits, cards, drop=()):
+    """A FITS file's bytes with the header cards `cards` ("KEY= value")
+    replacing any of the same keys, and the keys `drop` left out."""
+    end = next(i for i in range(len(fits) // 80) if fits[80 * i : 80 * i + 8] == b"END     ")
+    data_at = -(-80 * (end + 1) // 2880) * 2880
+    keys = {c.split("=")[0].strip() for c in cards} | set(drop)
+    kept = [fits[80 * i : 80 * i + 80] for i in range(end)
+            if fits[80 * i : 80 * i + 8].decode().strip() not in keys]
+    head = b"".join(kept + [c.ljust(80).encode() for c in cards] + [b"END".ljust(80)])
+    assert len(head) <= data_at, "no room in the header block"
+    return head.ljust(data_at, b" ") + fits[data_at:], data_at
+
+
+def saturate_cases(work, pgrf, rng):
+    fits = work / "chart.fits"
+    subprocess.run([pgrf, "convert", str(work / "chart.dng"), "-o", str(fits)], check=True,
+                   stderr=subprocess.DEVNULL)
+    raw = fits.read_bytes()
+    _, data_at = fits_with(raw, [])
+    n = 256 * 192
+    vals = [struct.unpack(">h", raw[data_at + 2 * i : data_at + 2 * i + 2])[0] + 32768 for i in range(n)]
+    top = max(vals)
+    cases = []
+    for key in ["SATURATE", "DATAMAX"]:
+        for level in [1, top // 2, top - 1, rng.randrange(1, top)]:
+            b, _ = fits_with(raw, [f"{key:<8}= {level:>20}"], drop=["SATURATE"])
+            cases.append((f"{key.lower()}_{level}", b, "refused", ()))
+            cases.append((f"{key.lower()}_{level}_white", b, "ok", ("--white", "65535")))
+        for level in [top, top + 1, 65534]:
+            b, _ = fits_with(raw, [f"{key:<8}= {level:>20}"], drop=["SATURATE"])
+            cases.append((f"{key.lower()}_{level}", b, "ok", ()))
+    return cases
+
+
+def counts_cases(work, pgrf):
+    """(name, argv, expect): flags issue 37 bounded."""
+    c, out = str(work / "chart.dng"), work / "out"
+    cases = []
+    for sampler in ["euler:-5", "euler--5", "euler:0", "euler:-1", "euler:10001"]:
+        cases.append((f"sampler_{sampler}", [pgrf, "enhance", c, "--model", "builtin:pgrf", "--sampler",
+                                             sampler, "--ratio", "20", "-o", str(out / "e.dng")], "refused"))
+    for r in ["1e30", "1e-30", "0", "-1", "0.5", "10001", "nan", "inf"]:
+        cases.append((f"enhance_ratio_{r}", [pgrf, "enhance", c, "--model", "builtin:spc", "--ratio", r,
+                                             "-o", str(out / "e.dng")], "refused"))
+        cases.append((f"synth_ratio_{r}", [pgrf, "synth", c, "--profile", "sony-a7s2", "--ratio", r,
+                                           "-o", str(out / "s.dng")], "refused"))
+        cases.append((f"eval_ratio_{r}", [pgrf, "eval", "--protocol", "synthetic", "--root", c, "--model",
+                                          "builtin:spc", "--iso", "1600", "--ratio", r], "refused"))
+    for t in ["1e30", "1e-12"]:
+        cases.append((f"target_exposure_{t}", [pgrf, "enhance", c, "--model", "builtin:spc",
+                                               "--target-exposure", t, "-o", str(out / "e.dng")], "refused"))
+    for scenes in ["1000000000", "4294967295"]:
+        cases.append((f"scenes_{scenes}", [pgrf, "make-dataset", "--layout", "eld", "-o", str(out / "ds"),
+                                           "--scenes", scenes], "refused"))
+    for o in ["model.safetensors", "x.png", "x.toml"]:
+        cases.append((f"enhance_o_{o}", [pgrf, "enhance", c, "--model", "builtin:spc", "--ratio", "20",
+                                         "-o", str(out / o)], "refused"))
+    tiny = ["train", "denoiser", "--width", "4", "--patch", "32", "--val-pairs", "1", "--data",
+            "procedural", "--iso", "1600", "--quiet"]
+    cases.append(("steps_0", [pgrf, *tiny, "--steps", "0", "-o", str(out / "z.safetensors")], "refused"))
+    for seed in [str(2**63), str(2**64 - 1)]:
+        cases.append((f"seed_{seed}", [pgrf, *tiny, "--steps", "1", "--seed", seed, "-o",
+                                       str(out / "s.safetensors")], "ok"))
+    cases.append(("seed_2^64", [pgrf, *tiny, "--steps", "1", "--seed", str(2**64), "-o",
+                                str(out / "s.safetensors")], "refused"))
+    return cases
+
+
+def loads(pgrf, model, work):
+    code, err, _, _ = run([pgrf, "enhance", str(work / "chart.dng"), "--model", str(model), "--ratio", "20",
+                           "-o", str(work / "out" / "load.dng")])
+    return code == 0, err
+
+
+def resume_class(work, pgrf, trials, record):
+    """Resume-after-finish trials; `record(case, verdict, detail)`."""
+    out = work / "out"
+    base = ["train", "denoiser", "--width", "4", "--patch", "32", "--val-pairs", "1", "--data",
+            "procedural", "--iso", "1600", "--quiet"]
+    for k in range(trials):
+        m = out / f"r{k}.safetensors"
+        args = [pgrf, *base, "--seed", str(k), "-o", str(m)]
+        code, err, _, _ = run(args + ["--steps", "2"])
+        if code != 0:
+            record("first run", f"exit {code}", err)
+            continue
+        first = m.read_bytes()
+        code, err, _, _ = run(args + ["--steps", "2", "--resume"])
+        ok = code == 0 and m.read_bytes() == first
+        record("resume finished", "ok" if ok else "accepted", err if not ok else "")
+        good, err = loads(pgrf, m, work)
+        record("finished file loads", "ok" if good else "unloadable", err)
+        m.unlink()
+        code, err, _, _ = run(args + ["--steps", "2", "--resume"])
+        good, err2 = loads(pgrf, m, work) if code == 0 else (False, err)
+        record("lost file rewritten", "ok" if good else "unloadable", err2)
+        code, err, _, _ = run(args + ["--steps", "1", "--resume"])
+        record("resume past --steps", verdict(code, err), err)
+    # A record its tensors do not fit.
+    m = out / "r0.safetensors"
+    if m.exists():
+        b = m.read_bytes()
+        n = struct.unpack("<Q", b[:8])[0]
+        import json
+        head = json.loads(b[8 : 8 + n])
+        rec = json.loads(head["__metadata__"]["pgrf"])
+        for width in [100000000, 8]:
+            rec["config"]["width"] = width
+            head["__metadata__"]["pgrf"] = json.dumps(rec)
+            hb = json.dumps(head).encode()
+            hb += b" " * (-len(hb) % 8)
+            bad = out / f"w{width}.safetensors"
+            bad.write_bytes(struct.pack("<Q", len(hb)) + hb + b[8 + n :])
+            code, err, _, _ = run([pgrf, "export-weights", str(bad), "-o", str(out / "x.pth")])
+            v = verdict(code, err)
+            record(f"export width {width}", "accepted" if v == "ok" else v, err)
+
+
+def run_37_classes(a, pgrf, work, shared, rng, table, failures, peak_box):
+    """Issue 37's classes: every case's verdict against what it must be."""
+    out = work / "out"
+
+    def fresh():
+        if out.exists():
+            shutil.rmtree(out)
+        out.mkdir()
+
+    def record(cls, cmd, case, v, expect, err):
+        got = v if v in ("ok", "refused") else v
+        bad = got != expect
+        table[f"{cls}/{cmd}"]["ok" if got == "ok" else ("refused" if got == "refused" else "other")] += 1
+        if bad:
+            label = "accepted" if got == "ok" else got
+            failures.append((f"{cls}/{cmd}", case, f"{label} (expected {expect})", err.strip()[:300]))
+
+    def go(args):
+        code, err, rss, _ = run(args)
+        peak_box[0] = max(peak_box[0], rss)
+        return verdict(code, err), err
+
+    if "dngfield" in a.classes:
+        for name, data, expect in dngfield_cases(work, pgrf, shared, rng, a.per_class):
+            f = work / f"f_{name}.dng"
+            f.write_bytes(data)
+            for cmd, args in through_readers(pgrf, f, out).items():
+                fresh()
+                v, err = go(args)
+                record("dngfield", cmd, name, v, expect, err)
+            f.unlink()
+    if "saturate" in a.classes:
+        for name, data, expect, extra in saturate_cases(work, pgrf, rng):
+            f = work / f"s_{name}.fits"
+            f.write_bytes(data)
+            for cmd, args in through_readers(pgrf, f, out, extra).items():
+                fresh()
+                v, err = go(args)
+                record("saturate", cmd, name, v, expect, err)
+            f.unlink()
+    if "counts" in a.classes:
+        for name, args, expect in counts_cases(work, pgrf):
+            fresh()
+            v, err = go(args)
+            # clap's own refusals (exit 2) are refusals too.
+            if v.startswith("exit 2,"):
+                v = "refused"
+            record("counts", args[1], name, v, expect, err)
+    if "resume" in a.classes:
+        fresh()
+
+        def rec(case, v, err):
+            record("resume", case.split()[0], case, v,
+                   "refused" if case == "resume past --steps" or case.startswith("export") else "ok", err)
+
+        resume_class(work, pgrf, max(1, a.per_class // 4), rec)
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     root = Path(__file__).resolve().parent.parent
@@ -157,7 +423,10 @@ def main():
     ap.add_argument("--seed", type=int, default=17)
     ap.add_argument("--work", default=None)
     ap.add_argument("--keep-failures", default=None)
+    ap.add_argument("--classes", default="mutate,dngfield,saturate,counts,resume",
+                    help="comma-separated: mutate (issue 17's five), dngfield, saturate, counts, resume")
     a = ap.parse_args()
+    a.classes = set(a.classes.split(","))
     pgrf = a.pgrf
     work = Path(a.work or tempfile.mkdtemp(prefix="pgrf-campaign-"))
     work.mkdir(parents=True, exist_ok=True)
@@ -182,7 +451,7 @@ def main():
     print(f"campaign: {len(inputs)} inputs, {a.per_class} files per class and input, seed {a.seed}")
 
     rng = random.Random(a.seed)
-    classes = ["truncate", "flip", "zero", "field", "append"]
+    classes = ["truncate", "flip", "zero", "field", "append"] if "mutate" in a.classes else []
     table = defaultdict(lambda: defaultdict(int))
     failures = []
     peak = 0.0
@@ -221,6 +490,9 @@ def main():
                             shutil.copy(f, Path(a.keep_failures) / f.name)
                 if not a.keep_failures or f.name not in {x[1] for x in failures}:
                     f.unlink()
+    peak_box = [peak]
+    run_37_classes(a, pgrf, work, shared, rng, table, failures, peak_box)
+    peak = peak_box[0]
     print(f"{n_files} mutated files, {time.time() - start:.0f} s, peak RSS of any run {peak:.0f} MiB")
     print(f"{'command/class':<20} " + " ".join(f"{k:>9}" for k in ["ok", "refused", "other"]))
     for key in sorted(table):

@@ -62,12 +62,13 @@ pub enum MixError {
     #[error(transparent)]
     Load(Box<CalibError>),
     /// The calibration is of another camera, ISO or CFA layout than the frame.
-    #[error("{}: {source}", path.display())]
+    #[error("{}: {cause}", path.display())]
     Mismatch {
         /// The calibration file.
         path: PathBuf,
-        /// What differs.
-        source: Box<CalibError>,
+        /// What differs (in the message, not a `source()`: one-line
+        /// reports print the chain, which would say it twice).
+        cause: Box<CalibError>,
     },
     /// The calibration's size is not the frame's.
     #[error("{}: calibration is {}x{}, the clean frame {}x{}", path.display(), calibration.0, calibration.1, frame.0, frame.1)]
@@ -80,12 +81,12 @@ pub enum MixError {
         frame: (usize, usize),
     },
     /// The calibration's maps could not be applied to the noise model.
-    #[error("--calib {}: {source}", path.display())]
+    #[error("--calib {}: {cause}", path.display())]
     Apply {
         /// The calibration file.
         path: PathBuf,
-        /// Why not.
-        source: Box<CalibError>,
+        /// Why not (in the message only, like [`MixError::Mismatch`]'s).
+        cause: Box<CalibError>,
     },
 }
 
@@ -138,7 +139,7 @@ pub fn calibrate(
     if let Some(FrameCheck { frame, force }) = check {
         let mismatch = |source| MixError::Mismatch {
             path: path.to_path_buf(),
-            source: Box::new(source),
+            cause: Box::new(source),
         };
         cal.check_matches(&frame.make, &frame.model, spec.iso, force)
             .and_then(|()| cal.check_layout(frame))
@@ -154,7 +155,54 @@ pub fn calibrate(
     }
     cal.apply_to(spec).map_err(|source| MixError::Apply {
         path: path.to_path_buf(),
-        source: Box::new(source),
+        cause: Box::new(source),
     })?;
     Ok(cal)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The line a one-line report prints: the error, then each source.
+    fn chain(e: &dyn std::error::Error) -> String {
+        let mut s = e.to_string();
+        let mut next = e.source();
+        while let Some(c) = next {
+            s.push_str(": ");
+            s.push_str(&c.to_string());
+            next = c.source();
+        }
+        s
+    }
+
+    /// What a calibration mismatch says appears once in the printed chain
+    /// (issue 37: `--calib` errors were printed twice in one line).
+    #[test]
+    fn a_mismatch_is_said_once() {
+        let cause = || {
+            Box::new(CalibError::BadOption {
+                flag: "--calib",
+                message: "calibrated at ISO 800, the frame is ISO 1600".into(),
+            })
+        };
+        let path = PathBuf::from("c.safetensors");
+        for e in [
+            MixError::Mismatch {
+                path: path.clone(),
+                cause: cause(),
+            },
+            MixError::Apply {
+                path: path.clone(),
+                cause: cause(),
+            },
+        ] {
+            let line = chain(&e);
+            assert_eq!(line.matches("ISO 800").count(), 1, "{line}");
+            assert!(
+                line.contains("c.safetensors: calibrated at ISO 800"),
+                "{line}"
+            );
+        }
+    }
 }

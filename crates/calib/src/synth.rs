@@ -94,12 +94,13 @@ pub enum SynthError {
     #[error(transparent)]
     Calibration(#[from] MixError),
     /// Synthesis itself failed on the frame `path`.
-    #[error("{}: {source}", path.display())]
+    #[error("{}: {cause}", path.display())]
     Synthesis {
         /// The clean frame's file.
         path: PathBuf,
-        /// Why.
-        source: NoiseError,
+        /// Why (in the message only: one-line reports print the chain of
+        /// sources, which would say it twice).
+        cause: NoiseError,
     },
 }
 
@@ -107,10 +108,10 @@ fn bad(flag: &'static str, message: String) -> SynthError {
     SynthError::BadSetting { flag, message }
 }
 
-/// The profile of `c` with its dark current replaced when `c` says,
-/// after checking the numeric settings.
-fn profile(c: &SynthConfig) -> Result<CameraProfile, SynthError> {
-    let mut profile = CameraProfile::load(&c.profile)?;
+/// Refuse numeric settings no frame can make right (a negative dark rate,
+/// a ratio outside [`pgrf_noise::pair::RATIO_RANGE`], a negative exposure):
+/// before any work, the frame not yet read.
+pub fn check(c: &SynthConfig) -> Result<(), SynthError> {
     if let Some(rate) = c.dark_rate {
         if !(rate.is_finite() && rate >= 0.0) {
             return Err(bad(
@@ -118,18 +119,9 @@ fn profile(c: &SynthConfig) -> Result<CameraProfile, SynthError> {
                 format!("--dark-rate must be >= 0 electrons, got {rate}"),
             ));
         }
-        profile.dark_current = Some(DarkCurrent {
-            law: c.dark_law,
-            rate,
-        });
     }
     if let Some(r) = c.ratio {
-        if !(r.is_finite() && r > 0.0) {
-            return Err(bad(
-                "--ratio",
-                format!("--ratio must be a positive number, got {r}"),
-            ));
-        }
+        pgrf_noise::pair::check_ratio("--ratio", r).map_err(|m| bad("--ratio", m))?;
     }
     if let Some(t) = c.exposure_time {
         if !(t.is_finite() && t >= 0.0) {
@@ -138,6 +130,20 @@ fn profile(c: &SynthConfig) -> Result<CameraProfile, SynthError> {
                 format!("--exposure-time must be >= 0 seconds, got {t}"),
             ));
         }
+    }
+    Ok(())
+}
+
+/// The profile of `c` with its dark current replaced when `c` says,
+/// after checking the numeric settings ([`check`]).
+fn profile(c: &SynthConfig) -> Result<CameraProfile, SynthError> {
+    check(c)?;
+    let mut profile = CameraProfile::load(&c.profile)?;
+    if let Some(rate) = c.dark_rate {
+        profile.dark_current = Some(DarkCurrent {
+            law: c.dark_law,
+            rate,
+        });
     }
     Ok(profile)
 }
@@ -181,9 +187,9 @@ pub fn synthesize(
     let plane_rows = frame.cfa.offsets().map(|(r, _)| r);
     let pair = spec
         .synthesize(clean.view(), plane_rows, c.seed)
-        .map_err(|source| SynthError::Synthesis {
+        .map_err(|cause| SynthError::Synthesis {
             path: path.to_path_buf(),
-            source,
+            cause,
         })?;
 
     let noisy = if c.brightened {

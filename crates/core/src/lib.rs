@@ -9,6 +9,7 @@
 #![warn(missing_docs)]
 
 mod atomic;
+pub mod disk;
 pub mod exit;
 pub mod mem;
 pub mod number;

@@ -47,12 +47,13 @@ pub enum PathError {
         path: PathBuf,
     },
     /// [`PathError::NoFolder`] of the output the option `flag` gave.
-    #[error("{flag} {source}")]
+    #[error("{flag} {cause}")]
     Flag {
         /// The option.
         flag: String,
-        /// What was wrong with its path.
-        source: Box<PathError>,
+        /// What was wrong with its path (in the message only: one-line
+        /// reports print the chain of sources, which would say it twice).
+        cause: Box<PathError>,
     },
 }
 
@@ -98,7 +99,7 @@ pub fn check_outputs(outputs: &[(&str, &Path)], inputs: &[&Path]) -> Result<(), 
     for (k, (flag, out)) in outputs.iter().enumerate() {
         require_parent_dir(out).map_err(|e| PathError::Flag {
             flag: flag.to_string(),
-            source: Box::new(e),
+            cause: Box::new(e),
         })?;
         if out.is_dir() {
             return Err(PathError::IsFolder {

@@ -136,6 +136,7 @@ pub struct TrainConfig {
     pub clip_grad: Option<f32>,
     /// Seed of initialisation, crops, noise, X0 and t [default: 0].
     #[cfg_attr(feature = "clap", arg(long, default_value_t = d().seed, hide_default_value = true))]
+    #[serde(with = "crate::seeded::wide_seed")]
     pub seed: u64,
     /// Turn off flips and transposes.
     #[cfg_attr(feature = "clap", arg(long, action = clap::ArgAction::Set, num_args = 0..=1, default_missing_value = "true", default_value_t = false, hide_default_value = true))]

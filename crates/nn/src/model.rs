@@ -5,8 +5,10 @@
 
 use crate::arch::{Net, Sr3Unet};
 use crate::error::{NnError, Result};
+use crate::named::NamedTensor;
 use crate::weights::{self, WeightMeta};
 use burn::tensor::backend::Backend;
+use std::collections::BTreeMap;
 use std::path::Path;
 
 impl<B: Backend> Net<B> {
@@ -32,6 +34,20 @@ pub(crate) fn load_bytes<B: Backend>(
     device: &B::Device,
 ) -> Result<(Net<B>, WeightMeta)> {
     let (meta, tensors) = weights::from_bytes(bytes, path)?;
+    let net = fit::<B>(path, &meta, &tensors, device)?;
+    Ok((net, meta))
+}
+
+/// The network `meta` records, holding `tensors` (read from `path`): every
+/// tensor must fit it by name and shape. A record claiming more parameters
+/// than the file holds values is refused before the network is built, so
+/// what is allocated is bounded by the file itself.
+fn fit<B: Backend>(
+    path: &Path,
+    meta: &WeightMeta,
+    tensors: &BTreeMap<String, NamedTensor>,
+    device: &B::Device,
+) -> Result<Net<B>> {
     let held: u64 = tensors.values().map(|t| t.values.len() as u64).sum();
     let needed = meta.arch.min_params();
     if needed > held as f64 {
@@ -48,13 +64,23 @@ pub(crate) fn load_bytes<B: Backend>(
             meta.arch.describe()
         ))
     };
-    let net = meta
-        .arch
+    meta.arch
         .init::<B>(device)
         .map_err(|e| NnError::Config(format!("{}: {e}", path.display())))?
-        .assign(&tensors, device)
-        .map_err(fit)?;
-    Ok((net, meta))
+        .assign(tensors, device)
+        .map_err(fit)
+}
+
+/// Check that a weight file's tensors are the network its record describes
+/// (names, shapes, nothing left over), as [`load`] would, without keeping
+/// the network: what commands that pass the tensors on (`export-weights`)
+/// check first.
+pub(crate) fn check_fit(
+    path: &Path,
+    meta: &WeightMeta,
+    tensors: &BTreeMap<String, NamedTensor>,
+) -> Result<()> {
+    fit::<crate::backend::Cpu>(path, meta, tensors, &Default::default()).map(|_| ())
 }
 
 /// The weights of `path` as a network of `arch`, to start a run from

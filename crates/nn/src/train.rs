@@ -55,6 +55,9 @@ pub struct Outcome {
     pub images_per_s: f64,
     /// Stopped by the `stop` flag before `steps`.
     pub interrupted: bool,
+    /// A resumed run whose checkpoint had already reached `steps`, with the
+    /// weight file it wrote then: nothing was trained or written.
+    pub already_finished: bool,
 }
 
 /// A finished (or stopped) run: how it ended and what it wrote.
@@ -88,6 +91,16 @@ pub fn run(
 ) -> Result<Trained> {
     let c = config;
     let outputs = c.outputs()?;
+    if c.steps == 0 && c.init.is_none() {
+        // Random weights recorded as a trained model: never what is wanted.
+        // With --init a run of no step copies that file's weights and adds
+        // up its history (its loss is NaN, null in the record, which reads
+        // back as NaN).
+        return Err(NnError::BadSetting {
+            flag: "--steps",
+            message: "--steps 0 trains nothing: give --steps 1 or more (or --init FILE, whose weights --steps 0 copies)".into(),
+        });
+    }
     if resume && !outputs.checkpoint.exists() {
         return Err(NnError::BadSetting {
             flag: "--resume",
@@ -97,8 +110,19 @@ pub fn run(
             ),
         });
     }
-    c.device.check_available().map_err(NnError::Device)?;
     let arch = c.architecture(method)?;
+    if resume {
+        let state = checkpoint::load(&outputs.checkpoint)?.state;
+        check_resumable(&state, &arch, c, &outputs.checkpoint)?;
+        if let Some(outcome) = finished(&state, c, &outputs) {
+            return Ok(Trained {
+                outcome,
+                method,
+                outputs,
+            });
+        }
+    }
+    c.device.check_available().map_err(NnError::Device)?;
     if let Some(init) = &c.init {
         crate::weights::require_arch(init, &arch)?;
     }
@@ -173,6 +197,82 @@ pub fn run(
         outcome,
         method,
         outputs,
+    })
+}
+
+/// Refuse to resume from a checkpoint of another network or other settings,
+/// or one past the run's `--steps` (its weights would be recorded as a run
+/// of more steps than asked for).
+fn check_resumable(
+    st: &CheckpointState,
+    arch: &Architecture,
+    s: &TrainConfig,
+    path: &std::path::Path,
+) -> Result<()> {
+    let arch_json = serde_json::to_value(arch).map_err(|e| NnError::Invalid(e.to_string()))?;
+    if st.task != arch.method() || st.arch != arch_json {
+        return Err(NnError::WrongArchitecture {
+            path: path.to_path_buf(),
+            message: format!(
+                "{}: checkpoint is of another network ({} {}), not this configuration",
+                path.display(),
+                st.task,
+                st.arch
+            ),
+        });
+    }
+    if (st.seed, st.batch, st.patch) != (s.seed, s.batch, s.patch) {
+        return Err(NnError::BadSetting {
+            flag: "--resume",
+            message: format!(
+                "{}: checkpoint was made with seed {}, batch {}, patch {}; resume with the same",
+                path.display(),
+                st.seed,
+                st.batch,
+                st.patch
+            ),
+        });
+    }
+    if st.step > s.steps {
+        return Err(NnError::BadSetting {
+            flag: "--steps",
+            message: format!(
+                "--resume: {} is at step {}, past --steps {}; give --steps {} or more to train on",
+                path.display(),
+                st.step,
+                s.steps,
+                st.step
+            ),
+        });
+    }
+    Ok(())
+}
+
+/// The outcome of resuming a run that had already finished: its checkpoint
+/// is at `steps` and the weight file it wrote then reads back as that run's
+/// (same steps). Nothing is redone or rewritten. `None` when there is work
+/// left, or when the weight file is missing or not that run's (a run killed
+/// between its last checkpoint and its weight file): the file is then
+/// written again from the checkpoint.
+fn finished(st: &CheckpointState, s: &TrainConfig, outputs: &TrainOutputs) -> Option<Outcome> {
+    if st.step < s.steps {
+        return None;
+    }
+    let meta = crate::weights::read_meta(&outputs.weights).ok()?;
+    let t = meta.training.as_ref()?;
+    (t.steps == st.step && (t.seed, t.batch, t.patch) == (s.seed, s.batch, s.patch)).then(|| {
+        Outcome {
+            start_step: st.step,
+            end_step: st.step,
+            losses: Vec::new(),
+            final_loss: t.final_loss,
+            val_psnr: t.val_psnr,
+            val_input_psnr: None,
+            seconds: 0.0,
+            images_per_s: 0.0,
+            interrupted: false,
+            already_finished: true,
+        }
     })
 }
 
@@ -436,33 +536,15 @@ fn train<B: PgrfAutodiff>(
     let recorder = Rec::default();
 
     let (mut start, mut elapsed0, mut last_val) = (0u64, 0.0f64, None);
+    // The loss of the checkpoint's last step: a resumed run that runs no
+    // step (its weight file lost) records it.
+    let mut resumed_loss = None;
     let mut saved_ema = None;
     if j.resume {
         let ck = checkpoint::load(&j.outputs.checkpoint)?;
         let st = &ck.state;
-        if st.task != j.arch.method() || st.arch != arch_json {
-            return Err(NnError::WrongArchitecture {
-                path: j.outputs.checkpoint.clone(),
-                message: format!(
-                    "{}: checkpoint is of another network ({} {}), not this configuration",
-                    j.outputs.checkpoint.display(),
-                    st.task,
-                    st.arch
-                ),
-            });
-        }
-        if (st.seed, st.batch, st.patch) != (s.seed, s.batch, s.patch) {
-            return Err(NnError::BadSetting {
-                flag: "--resume",
-                message: format!(
-                    "{}: checkpoint was made with seed {}, batch {}, patch {}; resume with the same",
-                    j.outputs.checkpoint.display(),
-                    st.seed,
-                    st.batch,
-                    st.patch
-                ),
-            });
-        }
+        check_resumable(st, &j.arch, s, &j.outputs.checkpoint)?;
+        resumed_loss = st.last_loss;
         let bad = |e: burn::record::RecorderError| NnError::BadFile {
             path: j.outputs.checkpoint.clone(),
             reason: e.to_string(),
@@ -652,14 +734,17 @@ fn train<B: PgrfAutodiff>(
         let lr = s.schedule.lr(s.lr, step.saturating_sub(1), s.steps);
         log.row(step, mean, lr, images_per_s, final_val, elapsed0 + seconds);
     }
-    let final_loss = losses.last().copied().unwrap_or(f32::NAN);
+    let last_loss = losses.last().copied().or(resumed_loss);
+    // NaN (null in the record, read back as NaN) only for a run stopped
+    // before its first step.
+    let final_loss = last_loss.unwrap_or(f32::NAN);
     save_checkpoint(
         &net,
         &optim,
         ema.as_ref(),
         step,
         elapsed0 + seconds,
-        losses.last().copied(),
+        last_loss,
         val_psnr,
     )?;
     let mut meta = WeightMeta::new(j.arch.clone(), j.noise.clone());
@@ -695,5 +780,6 @@ fn train<B: PgrfAutodiff>(
         seconds,
         images_per_s,
         interrupted,
+        already_finished: false,
     })
 }

@@ -57,7 +57,11 @@ pub struct TrainingSummary {
     pub seed: u64,
     /// Where the clean training images came from, in words.
     pub data: String,
-    /// Loss of the last step (L1, on [0, 1] data).
+    /// Loss of the last step (L1, on [0, 1] data); NaN (null in the
+    /// record) for a run stopped before its first step. Files in which an
+    /// older pgrf wrote null (a resumed run that had already finished) read
+    /// as NaN too, so that they load.
+    #[serde(deserialize_with = "nan_if_null")]
     pub final_loss: f32,
     /// PSNR (dB) on the held-out validation pairs at the end of training
     /// (of the moving average when the run kept one: the weights stored).
@@ -80,6 +84,11 @@ pub struct TrainingSummary {
     /// fine-tuning run: `steps` and `seconds` above count this run alone.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub started_from: Option<StartedFrom>,
+}
+
+/// A number that JSON may hold as null (serde_json writes NaN so): NaN.
+fn nan_if_null<'de, D: serde::Deserializer<'de>>(d: D) -> std::result::Result<f32, D::Error> {
+    Ok(Option::<f32>::deserialize(d)?.unwrap_or(f32::NAN))
 }
 
 /// The weights a fine-tuning run started from, and what training they had

@@ -15,6 +15,39 @@ use crate::profile::CameraProfile;
 use ndarray::{Array3, ArrayView3};
 use pgrf_core::seed::{open01, stream, Domain};
 
+/// The exposure ratios a user may give (`--ratio` of `enhance`, `synth`
+/// and `eval`): from 1 (a capture as bright as its reference) to 10000, a
+/// capture 13.3 stops darker. SID and ELD use 100 to 300; a ratio of 1e30
+/// (which made `synth` write an exposure of 1.7e28 s) or 1e-30 means
+/// nothing a camera records.
+pub const RATIO_RANGE: std::ops::RangeInclusive<f32> = 1.0..=10_000.0;
+
+/// `ratio`, given with `flag`, when it lies in [`RATIO_RANGE`]; else the
+/// one-line reason, naming the flag and the value.
+pub fn check_ratio(flag: &str, ratio: f32) -> std::result::Result<f32, String> {
+    if ratio.is_finite() && RATIO_RANGE.contains(&ratio) {
+        return Ok(ratio);
+    }
+    Err(format!(
+        "{flag} {}: the exposure ratio must be from {} to {} (a capture at most {} times darker than its reference; SID and ELD use 100 to 300)",
+        shown(ratio),
+        RATIO_RANGE.start(),
+        RATIO_RANGE.end(),
+        RATIO_RANGE.end()
+    ))
+}
+
+/// `v` as typed: its shortest f32 form, in scientific notation beyond
+/// ordinary magnitudes (`1e30`, not the f64 widening's 1.0000000150474662e30).
+fn shown(v: f32) -> String {
+    let a = v.abs();
+    if v.is_finite() && a != 0.0 && !(1e-4..1e9).contains(&a) {
+        format!("{v:e}")
+    } else {
+        format!("{v}")
+    }
+}
+
 /// How each pair's exposure ratio (clean light / noisy light, > 0) is chosen;
 /// the default is ELD/SID's U(100, 300).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -303,6 +336,42 @@ impl PairSpec {
             exposure_s,
             params,
         })
+    }
+}
+
+#[cfg(test)]
+mod ratio_tests {
+    use super::check_ratio;
+
+    #[test]
+    fn ratios_outside_one_to_ten_thousand_are_refused_with_the_flag() {
+        assert_eq!(check_ratio("--ratio", 1.0), Ok(1.0));
+        assert_eq!(check_ratio("--ratio", 10_000.0), Ok(10_000.0));
+        for bad in [
+            1e30,
+            1e-30,
+            0.999,
+            10_000.5,
+            0.0,
+            -3.0,
+            f32::NAN,
+            f32::INFINITY,
+        ] {
+            let e = check_ratio("--ratio", bad).unwrap_err();
+            assert!(
+                e.starts_with("--ratio ") && e.contains("from 1 to 10000"),
+                "{e}"
+            );
+        }
+        assert!(check_ratio("--ratio", 1e30)
+            .unwrap_err()
+            .starts_with("--ratio 1e30:"));
+        assert!(check_ratio("--ratio", 1e-30)
+            .unwrap_err()
+            .starts_with("--ratio 1e-30:"));
+        assert!(check_ratio("--ratio", 0.5)
+            .unwrap_err()
+            .starts_with("--ratio 0.5:"));
     }
 }
 

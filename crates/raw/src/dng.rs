@@ -1,4 +1,5 @@
-//! Writing a `RawFrame` as a DNG with rawler's writer.
+//! Writing a `RawFrame` as a DNG: rawler's TIFF writer, pgrf's own raw-image
+//! tags and pixel layout ([`tile_width`]: one LibRaw reads exactly).
 //!
 //! The DNG is what pgrf hands back to the photographer's raw converter, so it
 //! must be a faithful container: same mosaic size and CFA phase, same per-plane
@@ -10,15 +11,16 @@ use crate::frame::{ColorMatrix, RawFrame};
 use crate::panic_guard::quietly;
 use pgrf_core::write_atomic;
 use rawler::cfa::{PlaneColor, CFA};
-use rawler::decoders::{Camera, RawMetadata};
+use rawler::decoders::RawMetadata;
 use rawler::dng::writer::DngWriter;
-use rawler::dng::{CropMode, DngCompression, DngPhotometricConversion, DNG_VERSION_V1_4};
-use rawler::formats::tiff::{Rational, SRational};
+use rawler::dng::DNG_VERSION_V1_4;
+use rawler::formats::tiff::writer::DirectoryWriter;
+use rawler::formats::tiff::{CompressionMethod, PhotometricInterpretation, Rational, SRational};
 use rawler::imgop::xyz::Illuminant;
-use rawler::pixarray::PixU16;
-use rawler::rawimage::{BlackLevel, CFAConfig, RawImage, RawPhotometricInterpretation, WhiteLevel};
+use rawler::ljpeg92::LjpegCompressor;
 use rawler::tags::{DngTag, ExifTag, TiffCommonTag};
-use std::io::Cursor;
+use rawler::tiles::ImageTiler;
+use std::io::{Cursor, Seek, Write};
 use std::path::Path;
 
 /// Pixel compression inside the DNG.
@@ -50,6 +52,42 @@ impl Default for DngOptions {
     }
 }
 
+/// Side of pgrf's LJPEG-92 tiles (TileLength always, TileWidth for frames
+/// of 256 pixels or wider except 512: [`tile_width`]).
+pub const DNG_TILE: usize = 256;
+
+/// The TileWidth of a lossless DNG of a frame `width` pixels wide: one rule
+/// that makes LibRaw (0.22, `lossless_dng_load_raw`) read every tile the
+/// way it was written, found by `tests/reference/dng_width_sweep.py`:
+///
+/// - never wider than the frame. LibRaw ends a tile's row at the tile width
+///   *or at the image width*, so a tile wider than the frame (256 for a frame
+///   of 200) had the padding of each row read as the start of the next: 61 of
+///   238 sizes came back wrong before, every one narrower than 256 or 512
+///   wide. Frames under 16 pixels keep one 16-pixel tile (TIFF wants tile
+///   widths in multiples of 16; LibRaw opens no frame under 22 pixels anyway).
+/// - never exactly half the frame. For LJPEG of two or more components LibRaw
+///   reads `clrs` JPEG rows' worth of pixels per row when `clrs * jwide ==
+///   raw_width` (a layout of some cameras' DNGs); pgrf's tiles are
+///   two-component JPEG rows of the tile width, so a frame of exactly two
+///   tiles (512) was read with every row wrong. Such a frame gets one tile
+///   column as wide as the frame.
+///
+/// Otherwise 256, what pgrf always wrote: the files of every other size are
+/// unchanged, byte for byte.
+pub fn tile_width(width: usize) -> usize {
+    let tw = if width >= DNG_TILE {
+        DNG_TILE
+    } else {
+        (width / 16 * 16).max(16)
+    };
+    if 2 * tw == width {
+        width
+    } else {
+        tw
+    }
+}
+
 /// Encode `frame` as DNG bytes.
 pub fn encode_dng(frame: &RawFrame, opts: &DngOptions) -> Result<Vec<u8>> {
     frame.check_levels()?;
@@ -62,31 +100,30 @@ pub fn encode_dng(frame: &RawFrame, opts: &DngOptions) -> Result<Vec<u8>> {
             height: frame.height,
         });
     }
-    let image = rawler_image(frame);
     let exif = exif_for(frame);
     quietly(|| -> std::result::Result<Vec<u8>, String> {
         let mut buf = Cursor::new(Vec::with_capacity(frame.mosaic.len() * 2 + 65536));
         let mut dng = DngWriter::new(&mut buf, DNG_VERSION_V1_4).map_err(|e| e.to_string())?;
-        let mut raw = dng.subframe_on_root(0);
-        let compression = match opts.compression {
-            Compression::Lossless => DngCompression::Lossless,
-            Compression::Uncompressed => DngCompression::Uncompressed,
-        };
-        raw.raw_image(
-            &image,
-            CropMode::None,
-            compression,
-            DngPhotometricConversion::Original,
-            1,
-        )
-        .map_err(|e| e.to_string())?;
+        // The raw image in IFD0, its tags and pixels written by pgrf (the
+        // tile layout is LibRaw's business: [`tile_width`]); the pixels go
+        // before the metadata's blobs, as rawler's writer placed them.
+        dng.root_ifd_mut()
+            .add_tag(TiffCommonTag::NewSubFileType, 0_u32);
+        raw_tags(dng.root_ifd_mut(), frame);
+        match opts.compression {
+            Compression::Lossless => put_ljpeg(&mut dng, frame)?,
+            Compression::Uncompressed => put_uncompressed(&mut dng, frame)?,
+        }
         if let Some(np) = &frame.noise_profile {
             let flat: Vec<f64> = np.iter().flatten().copied().collect();
-            raw.ifd_mut()
+            dng.root_ifd_mut()
                 .add_tag(rawler::tags::DngTag::NoiseProfile, flat.as_slice());
         }
-        raw.finalize().map_err(|e| e.to_string())?;
-        dng.load_base_tags(&image).map_err(|e| e.to_string())?;
+        let root = dng.root_ifd_mut();
+        root.add_tag(TiffCommonTag::Make, frame.make.as_str());
+        root.add_tag(TiffCommonTag::Model, frame.model.as_str());
+        let unique = format!("{} {}", frame.make, frame.model);
+        root.add_tag(DngTag::UniqueCameraModel, unique.as_str());
         dng.load_metadata(&exif).map_err(|e| e.to_string())?;
         write_color_tags(&mut dng, frame);
         if let Some(t) = frame.temperature_c.filter(|t| t.is_finite()) {
@@ -115,51 +152,142 @@ pub fn write_dng(frame: &RawFrame, path: &Path, opts: &DngOptions) -> Result<()>
     Ok(write_atomic(path, &bytes)?)
 }
 
-fn rawler_image(frame: &RawFrame) -> RawImage {
-    let mut cam = Camera::new();
-    cam.make = frame.make.clone();
-    cam.model = frame.model.clone();
-    cam.clean_make = frame.make.clone();
-    cam.clean_model = frame.model.clone();
-    cam.cfa = CFA::new(frame.cfa.name());
-    cam.plane_color = PlaneColor::new("RGB");
-    cam.real_bps = frame.bits.clamp(1, 16) as usize;
+/// The raw image's description (size, levels, CFA, photometric
+/// interpretation), with the types rawler's writer gave each tag.
+fn raw_tags(ifd: &mut DirectoryWriter, frame: &RawFrame) {
+    let (w, h) = (frame.width, frame.height);
+    ifd.add_tag(TiffCommonTag::ImageWidth, w as u32);
+    ifd.add_tag(TiffCommonTag::ImageLength, h as u32);
+    ifd.add_tag(DngTag::ActiveArea, [0_u16, 0, h as u16, w as u16]);
+    ifd.add_tag(ExifTag::PlanarConfiguration, 1_u16);
+    ifd.add_tag(
+        DngTag::DefaultScale,
+        [Rational::new(1, 1), Rational::new(1, 1)],
+    );
+    ifd.add_tag(DngTag::BestQualityScale, Rational::new(1, 1));
+    if frame.white <= u16::MAX as u32 {
+        ifd.add_tag(DngTag::WhiteLevel, &vec![frame.white as u16]);
+    } else {
+        ifd.add_tag(DngTag::WhiteLevel, &vec![frame.white]);
+    }
     // Black level as a 2x2 repeat pattern anchored at pixel (0, 0).
-    let pattern: Vec<Rational> = (0..2)
+    let black: Vec<Rational> = (0..2)
         .flat_map(|r| (0..2).map(move |c| (r, c)))
         .map(|(r, c)| rational_level(frame.black[frame.cfa.plane_at(r, c)]))
         .collect();
-    let black = BlackLevel {
-        levels: pattern,
-        cpp: 1,
-        width: 2,
-        height: 2,
-    };
-    let white = WhiteLevel::new(vec![frame.white]);
+    ifd.add_tag(DngTag::BlackLevelRepeatDim, [2_u16, 2]);
+    if black.iter().all(|x| x.d == 1) {
+        let whole: Vec<u32> = black.iter().map(|x| x.n).collect();
+        if whole.iter().all(|x| *x <= u16::MAX as u32) {
+            ifd.add_tag(
+                DngTag::BlackLevel,
+                &whole.iter().map(|x| *x as u16).collect::<Vec<u16>>(),
+            );
+        } else {
+            ifd.add_tag(DngTag::BlackLevel, &whole);
+        }
+    } else {
+        ifd.add_tag(DngTag::BlackLevel, black.as_slice());
+    }
+    ifd.add_tag(TiffCommonTag::SamplesPerPixel, 1_u16);
     // A monochrome frame is a one-sample LinearRaw image: how the DNG
     // specification and Leica's Monochrom DNGs store a sensor without a
     // colour filter. Its black pattern still repeats 2x2.
-    let photometric = if frame.mono {
-        RawPhotometricInterpretation::LinearRaw
+    if frame.mono {
+        ifd.add_tag(
+            TiffCommonTag::PhotometricInt,
+            PhotometricInterpretation::LinearRaw,
+        );
     } else {
-        RawPhotometricInterpretation::Cfa(CFAConfig::new(&cam.cfa, &cam.plane_color))
+        let cfa = CFA::new(frame.cfa.name());
+        ifd.add_tag(
+            TiffCommonTag::CFARepeatPatternDim,
+            [cfa.width as u16, cfa.height as u16],
+        );
+        ifd.add_tag(TiffCommonTag::CFAPattern, &cfa.flat_pattern()[..]);
+        ifd.add_tag(
+            TiffCommonTag::PhotometricInt,
+            PhotometricInterpretation::CFA,
+        );
+        ifd.add_tag(DngTag::CFAPlaneColor, &PlaneColor::new("RGB"));
+        ifd.add_tag(DngTag::CFALayout, 1_u16); // square
+    }
+}
+
+/// The pixels as LJPEG-92 tiles of [`tile_width`] x [`DNG_TILE`] (the last
+/// column and row padded by repeating the edge), predictor 1; a CFA frame's
+/// rows as two-component JPEG rows (the two colours of a row alternate), a
+/// monochrome frame's as one component. The tiles are compressed in
+/// parallel.
+fn put_ljpeg<W: Write + Seek>(
+    dng: &mut DngWriter<W>,
+    frame: &RawFrame,
+) -> std::result::Result<(), String> {
+    use rayon::prelude::*;
+    let (tw, th) = (tile_width(frame.width), DNG_TILE);
+    // The frame's bits, or more when a sample needs them (LJPEG-92 refuses
+    // a sample above its precision).
+    let top = frame.mosaic.iter().copied().max().unwrap_or(0);
+    let bps = frame
+        .bits
+        .max(crate::frame::bits_for(top as u32))
+        .clamp(1, 16) as u8;
+    let components = if frame.mono { 1 } else { 2 };
+    let tiler = ImageTiler::new(&frame.mosaic, frame.width, frame.height, 1, tw, th);
+    let tiles = (0..tiler.tile_count())
+        .into_par_iter()
+        .map(|i| {
+            let tile = tiler.build_tile(i);
+            LjpegCompressor::new(&tile, tw / components, th, components, bps, 1, 0, 0)
+                .and_then(|c| c.encode())
+                .map_err(|e| format!("LJPEG encoding failed: {e}"))
+        })
+        .collect::<std::result::Result<Vec<Vec<u8>>, String>>()?;
+    let (mut offsets, mut sizes) = (Vec::new(), Vec::new());
+    for t in &tiles {
+        offsets.push(dng.dng.write_data(t).map_err(|e| e.to_string())?);
+        sizes.push(t.len() as u32);
+    }
+    let ifd = dng.root_ifd_mut();
+    ifd.add_tag(TiffCommonTag::Compression, CompressionMethod::ModernJPEG);
+    ifd.add_tag(TiffCommonTag::BitsPerSample, &vec![bps as u16]);
+    ifd.add_tag(TiffCommonTag::SampleFormat, &vec![1_u16]);
+    ifd.add_tag(TiffCommonTag::TileOffsets, &offsets);
+    ifd.add_tag(TiffCommonTag::TileByteCounts, &sizes);
+    ifd.add_tag(TiffCommonTag::TileWidth, tw as u16);
+    ifd.add_tag(TiffCommonTag::TileLength, th as u16);
+    Ok(())
+}
+
+/// The pixels as 16-bit little-endian strips: one strip up to 100 rows,
+/// strips of 256 rows above.
+fn put_uncompressed<W: Write + Seek>(
+    dng: &mut DngWriter<W>,
+    frame: &RawFrame,
+) -> std::result::Result<(), String> {
+    let rows = if frame.height > 100 {
+        256
+    } else {
+        frame.height.max(1)
     };
-    // The writer derives AsShotNeutral from these; it is rewritten exactly below.
-    let wb = frame
-        .wb
-        .map(|w| [w[0], w[1], w[2], f32::NAN])
-        .unwrap_or([1.0, 1.0, 1.0, f32::NAN]);
-    let pixels = PixU16::new_with(frame.mosaic.clone(), frame.width, frame.height);
-    RawImage::new(
-        cam,
-        pixels,
-        1,
-        wb,
-        photometric,
-        Some(black),
-        Some(white),
-        false,
-    )
+    let (mut offsets, mut sizes, mut counts) = (Vec::new(), Vec::new(), Vec::new());
+    for strip in frame.mosaic.chunks(rows * frame.width.max(1)) {
+        offsets.push(
+            dng.dng
+                .write_data_u16_le(strip)
+                .map_err(|e| e.to_string())?,
+        );
+        sizes.push(std::mem::size_of_val(strip) as u32);
+        counts.push((strip.len() / frame.width.max(1)) as u32);
+    }
+    let ifd = dng.root_ifd_mut();
+    ifd.add_tag(TiffCommonTag::Compression, CompressionMethod::None);
+    ifd.add_tag(TiffCommonTag::SampleFormat, &vec![1_u16]);
+    ifd.add_tag(TiffCommonTag::BitsPerSample, &vec![16_u16]);
+    ifd.add_tag(TiffCommonTag::StripOffsets, &offsets);
+    ifd.add_tag(TiffCommonTag::StripByteCounts, &sizes);
+    ifd.add_tag(TiffCommonTag::RowsPerStrip, &counts);
+    Ok(())
 }
 
 /// Integer levels stay integers (most readers expect SHORT/LONG); fractional
@@ -278,6 +406,24 @@ mod tests {
         assert_eq!(back(&f), Some(-10.25));
         f.temperature_c = Some(23.0);
         assert_eq!(back(&f), Some(23.0));
+    }
+
+    /// A sample above the frame's bits (a result restored up to a white
+    /// raised by --white) widens BitsPerSample instead of failing the LJPEG
+    /// encoder ("Sample overflow"), and reads back exactly.
+    #[test]
+    fn samples_above_the_frames_bits_are_written_whole() {
+        let mut mosaic = vec![600u16; 64 * 32];
+        mosaic[77] = 40000;
+        let mut f =
+            RawFrame::from_mosaic(64, 32, mosaic.clone(), crate::Cfa::Rggb, [512.0; 4], 65535)
+                .unwrap();
+        f.bits = 14;
+        let bytes = encode_dng(&f, &DngOptions::default()).unwrap();
+        let back = crate::decode_bytes(std::path::Path::new("t.dng"), &bytes, &Default::default())
+            .unwrap();
+        assert!(back.mosaic == mosaic);
+        assert_eq!(back.bits, 16);
     }
 
     #[test]

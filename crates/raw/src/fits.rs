@@ -96,6 +96,12 @@ pub struct FitsImage {
     /// otherwise, or SATURATE (else DATAMAX) when the header gives a smaller
     /// integer one that no sample exceeds.
     pub white: u32,
+    /// When the header's SATURATE (else DATAMAX) is a smaller integer than
+    /// full scale but samples exceed it, what is wrong, for one line: a
+    /// frame read for use is refused unless a white level is given
+    /// (`--white`), since neither the header's level nor full scale is known
+    /// to be where the camera clips. `white` is then full scale.
+    pub white_conflict: Option<String>,
     /// Exposure in seconds: EXPTIME, else EXPOSURE.
     pub exposure_s: Option<f64>,
     /// EGAIN: the system gain in electrons per ADU, when the capture program
@@ -404,15 +410,22 @@ fn read_primary(name: &Path, bytes: &[u8]) -> Result<FitsImage> {
     } else {
         65535
     };
+    let mut white_conflict = None;
     if !normalised {
         for key in ["SATURATE", "DATAMAX"] {
             if let Some(v) = number(header, key).map_err(decode)? {
-                if v.fract() == 0.0
-                    && v >= 1.0
-                    && v < f64::from(white)
-                    && v >= f64::from(max_sample)
-                {
-                    white = v as u32;
+                if v.fract() == 0.0 && v >= 1.0 && v < f64::from(white) {
+                    if v < f64::from(max_sample) {
+                        // A saturation level samples exceed is not where
+                        // this frame clips: white stays full scale, and the
+                        // frame is refused unless --white settles it.
+                        let above = data.iter().filter(|&&x| f64::from(x) > v).count();
+                        white_conflict = Some(format!(
+                            "{key} = {v} lies below {above} of the {n} samples (the largest is {max_sample}): the header's saturation level contradicts the data; --white sets the level to use ({v} clips the samples above it, {white} is full scale)"
+                        ));
+                    } else {
+                        white = v as u32;
+                    }
                     break;
                 }
             }
@@ -434,6 +447,7 @@ fn read_primary(name: &Path, bytes: &[u8]) -> Result<FitsImage> {
         instrument,
         date_obs,
         conversion,
+        white_conflict,
     })
 }
 

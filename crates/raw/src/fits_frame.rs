@@ -24,6 +24,9 @@ pub(crate) fn frame_from_fits(
     overrides: &LevelOverrides,
 ) -> Result<RawFrame> {
     let img = read_fits(path, bytes)?;
+    if let (Some(why), None) = (&img.white_conflict, overrides.white) {
+        return Err(RawError::decode(path, why));
+    }
     let mut frame = match img.bayer {
         Some(cfa) => {
             RawFrame::from_mosaic(img.width, img.height, img.data, cfa, [0.0; 4], img.white)

@@ -197,6 +197,9 @@ impl RawFrame {
         }
         if let Some(w) = o.white {
             self.white = w;
+            // Samples up to a raised white need its bits (a FITS of 14
+            // significant bits read with --white 65535).
+            self.bits = self.bits.max(bits_for(w));
         }
         self.check_levels()
     }

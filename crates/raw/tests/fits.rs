@@ -473,10 +473,63 @@ fn saturate_and_datamax_lower_the_white_level() {
         ]),
         4095
     );
-    // Not a full scale: a sample above it, a fraction, or not smaller.
-    assert_eq!(read(&[card("DATAMAX", FitsValue::Int(1000))]), 65535);
+    // Not a full scale: a fraction, or not smaller.
     assert_eq!(read(&[card("SATURATE", FitsValue::Float(4095.5))]), 65535);
     assert_eq!(read(&[card("SATURATE", FitsValue::Int(70000))]), 65535);
+}
+
+/// A saturation level two of the four samples exceed contradicts the data:
+/// the image reads with full scale and says why, and a frame decoded for use
+/// is refused in one line unless --white gives the level (issue 37).
+#[test]
+fn a_saturation_level_below_the_samples_is_refused_unless_white_is_given() {
+    use pgrf_raw::{decode_bytes, LevelOverrides};
+    for key in ["SATURATE", "DATAMAX"] {
+        let bytes = encode_fits_u16(
+            2,
+            2,
+            &[0, 100, 4000, 4095],
+            &[card(key, FitsValue::Int(1000))],
+        )
+        .unwrap();
+        let img = read_fits(&name(), &bytes).unwrap();
+        assert_eq!(img.white, 65535);
+        let why = img.white_conflict.expect("a conflict");
+        assert!(
+            why.contains(&format!(
+                "{key} = 1000 lies below 2 of the 4 samples (the largest is 4095)"
+            )),
+            "{why}"
+        );
+        let e = decode_bytes(&name(), &bytes, &LevelOverrides::default())
+            .unwrap_err()
+            .to_string();
+        assert!(
+            !e.contains('\n') && e.contains("contradicts the data"),
+            "{e}"
+        );
+        for white in [1000, 65535] {
+            let f = decode_bytes(
+                &name(),
+                &bytes,
+                &LevelOverrides {
+                    white: Some(white),
+                    ..Default::default()
+                },
+            )
+            .unwrap();
+            assert_eq!(f.white, white);
+        }
+    }
+    // At or above the largest sample it is the white level, no conflict.
+    let bytes = encode_fits_u16(
+        2,
+        2,
+        &[0, 100, 4000, 4095],
+        &[card("SATURATE", FitsValue::Int(4095))],
+    )
+    .unwrap();
+    assert_eq!(read_fits(&name(), &bytes).unwrap().white_conflict, None);
 }
 
 // --------------------------------------------------------- hostile headers

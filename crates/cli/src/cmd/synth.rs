@@ -22,7 +22,7 @@ pub struct SynthArgs {
     /// canon-eos700d, canon-eos5d4), darktable:"MAKER MODEL", dng:FILE.dng or a JSON file.
     #[arg(long)]
     pub profile: String,
-    /// Exposure ratio (the capture is this many times darker). Default: drawn from U(100, 300) by the seed.
+    /// Exposure ratio, 1 to 10000 (the capture is this many times darker). Default: drawn from U(100, 300) by the seed.
     #[arg(long)]
     pub ratio: Option<f32>,
     /// ISO of the simulated capture. Default: the file's ISO; if it has none,
@@ -96,6 +96,7 @@ pub fn run(a: &SynthArgs) -> Result<()> {
             bail!("--png-gain must be a positive number, got {g}");
         }
     }
+    pgrf_calib::synth::check(&config(a))?;
     let frame = a.input.open(&a.clean)?;
     let made = synthesize(&frame, &a.clean, &config(a))?;
     write_dng(&made.frame, &a.output, &DngOptions::default())?;

@@ -132,6 +132,15 @@ fn stop_on_ctrl_c(started: Arc<AtomicBool>) -> Arc<AtomicBool> {
 
 fn report(a: &TrainArgs, t: &Trained) {
     let o = &t.outcome;
+    if o.already_finished && !a.quiet {
+        eprintln!(
+            "already finished: {} is at step {} of --steps {}; {} left as it was (a larger --steps trains on)",
+            t.outputs.checkpoint.display(),
+            o.end_step,
+            o.end_step,
+            t.outputs.weights.display()
+        );
+    }
     let val = o
         .val_psnr
         .map(|p| format!(", validation PSNR {p:.2} dB"))
@@ -140,7 +149,7 @@ fn report(a: &TrainArgs, t: &Trained) {
         .val_input_psnr
         .map(|p| format!(" (noisy input {p:.2} dB)"))
         .unwrap_or_default();
-    if !a.quiet {
+    if !a.quiet && !o.already_finished {
         eprintln!(
             "steps {}..{}: final loss {:.5}{val}{input}, {:.2} images/s, {:.1} s; wrote {}",
             o.start_step,
@@ -164,6 +173,7 @@ fn report(a: &TrainArgs, t: &Trained) {
                 "images_per_s": o.images_per_s,
                 "seconds": o.seconds,
                 "interrupted": o.interrupted,
+                "already_finished": o.already_finished,
                 "output": t.outputs.weights,
                 "checkpoint": t.outputs.checkpoint,
             })

@@ -96,8 +96,7 @@ pub fn run_export(a: &ExportArgs) -> Result<()> {
         ),
     };
     pgrf_core::paths::check_outputs(&[("-o", &a.output)], &[&a.model])?;
-    let (meta, tensors) = pgrf_nn::weights::read(&a.model)?;
-    let out = interop::export(&meta, &tensors, pth)?;
+    let (meta, tensors, out) = interop::export_file(&a.model, pth)?;
     pgrf_core::write_atomic(&a.output, &out.bytes)
         .with_context(|| format!("-o {}", a.output.display()))?;
     eprintln!(
@@ -105,7 +104,7 @@ pub fn run_export(a: &ExportArgs) -> Result<()> {
         a.output.display(),
         meta.arch.describe(),
         out.naming,
-        tensors.len()
+        tensors
     );
     if out.residual {
         eprintln!(

@@ -107,6 +107,38 @@ fn create_dir(dir: &Path) -> Result<()> {
     std::fs::create_dir_all(dir).map_err(|e| err(format!("{}: {e}", dir.display())))
 }
 
+/// Bytes per mosaic pixel of the DNGs written, rounded up from a measurement
+/// (512 x 512 frames: ELD 1.14, SID 0.91 bytes per pixel, LJPEG-92 of
+/// noisy 14-bit data), and bytes of metadata per file.
+const BYTES_PER_PIXEL: f64 = 1.2;
+const BYTES_PER_FILE: f64 = 4096.0;
+
+/// Refuse a benchmark the disk under `root` cannot hold (files and bytes),
+/// before any work: `--scenes 1000000000` would otherwise run until the
+/// disk is full. Each scene is written and dropped before the next, so
+/// memory holds one scene whatever the count.
+fn check_room(root: &Path, m: &Miniature) -> Result<()> {
+    let per_scene: u64 = match m.layout {
+        Layout::Eld => 16,
+        Layout::Sid => 4,
+    };
+    let frames = u64::from(m.scenes) * per_scene;
+    let bytes =
+        frames as f64 * (m.width as f64 * m.height as f64 * BYTES_PER_PIXEL + BYTES_PER_FILE);
+    // Scene folders (ELD) count as files too.
+    let files = frames + u64::from(m.scenes);
+    pgrf_core::disk::check_room(
+        &format!(
+            "--scenes {} of {}x{} frames ({} per scene)",
+            m.scenes, m.width, m.height, per_scene
+        ),
+        bytes,
+        files,
+        root,
+    )
+    .map_err(|e| err(format!("{e}; give fewer --scenes or a smaller --size")))
+}
+
 /// Write the miniature benchmark under `root` (which must be empty or new).
 pub fn write(root: &Path, m: &Miniature) -> Result<Written> {
     if m.scenes == 0 {
@@ -122,6 +154,7 @@ pub fn write(root: &Path, m: &Miniature) -> Result<Written> {
             root.display()
         )));
     }
+    check_room(root, m)?;
     create_dir(root)?;
     let (w, h) = (m.width, m.height);
     let mut files = 0usize;

@@ -104,10 +104,10 @@ pub fn parse_ratios(text: &str) -> Result<Vec<f32>> {
     let mut out: Vec<f32> = Vec::new();
     for item in split(text, "--ratio")? {
         let v = match item.parse::<f32>() {
-            Ok(v) if v.is_finite() && v >= 1.0 => v,
-            _ => {
+            Ok(v) => pgrf_noise::pair::check_ratio("--ratio", v).or_else(err)?,
+            Err(_) => {
                 return err(format!(
-                    "--ratio {item:?}: not a finite number >= 1 (the exposure ratio)"
+                    "--ratio {item:?}: not a number (the exposure ratio, from 1 to 10000)"
                 ))
             }
         };
@@ -257,9 +257,7 @@ impl Synthetic {
         let camera = CameraProfile::load(profile).map_err(|e| DatasetError(e.to_string()))?;
         let mut specs = Vec::new();
         for c in &conditions {
-            if !(c.ratio.is_finite() && c.ratio >= 1.0) {
-                return err(format!("ratio {} is not a finite number >= 1", c.ratio));
-            }
+            pgrf_noise::pair::check_ratio("ratio", c.ratio).map_err(DatasetError)?;
             camera
                 .params_at_iso(c.iso)
                 .map_err(|e| DatasetError(format!("--iso {}: {e}", c.iso)))?;
@@ -598,7 +596,18 @@ mod tests {
         for bad in ["", "800,", "0", "-800", "16o0", "800,800", "1.5"] {
             assert!(parse_isos(bad).is_err(), "{bad}");
         }
-        for bad in ["", "0.5", "-100", "inf", "NaN", "100,100", "100,100.2", "x"] {
+        for bad in [
+            "",
+            "0.5",
+            "-100",
+            "inf",
+            "NaN",
+            "100,100",
+            "100,100.2",
+            "x",
+            "1e30",
+            "10001",
+        ] {
             assert!(parse_ratios(bad).is_err(), "{bad}");
         }
         let e = parse_ratios("100,100.2").unwrap_err().to_string();

@@ -210,9 +210,10 @@ impl std::str::FromStr for SamplerKind {
             "one-step" | "onestep" | "1" => return Ok(Self::OneStep),
             _ => {}
         }
+        // One separator at most: `euler:-5` is a negative count, not 5.
         let n = lower
             .strip_prefix("euler")
-            .map(|r| r.trim_start_matches([':', '-']))
+            .map(|r| r.strip_prefix([':', '-']).unwrap_or(r))
             .ok_or_else(|| {
                 format!("unknown sampler '{s}' (expected two-stage, one-step or euler:N)")
             })?;
@@ -240,6 +241,12 @@ mod tests {
         assert_eq!("euler:50".parse(), Ok(SamplerKind::Euler(50)));
         assert_eq!("Euler-8".parse(), Ok(SamplerKind::Euler(8)));
         assert!("euler:0".parse::<SamplerKind>().is_err());
+        // A sign is not a separator (issue 37: euler:-5 ran as euler:5).
+        for bad in ["euler:-5", "euler--5", "euler::5", "euler:", "euler:10001"] {
+            let e = bad.parse::<SamplerKind>().unwrap_err();
+            assert!(e.contains("from 1 to 10000"), "{bad}: {e}");
+        }
+        assert_eq!("euler5".parse(), Ok(SamplerKind::Euler(5)));
         assert!("heun".parse::<SamplerKind>().is_err());
         assert_eq!(Sampler::Euler { steps: 50 }.nfe(), 50);
         assert_eq!(Sampler::TwoStage { t2: 0.3 }.nfe(), 2);

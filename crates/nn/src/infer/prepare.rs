@@ -91,7 +91,23 @@ pub fn ratio_from_exposure(
             ),
         });
     }
-    Ok((target_exposure_s / t * gain) as f32)
+    let ratio = target_exposure_s / t * gain;
+    let range = pgrf_noise::pair::RATIO_RANGE;
+    if !(ratio.is_finite() && range.contains(&(ratio as f32))) {
+        let shown = pgrf_core::number::shown;
+        return Err(NnError::BadSetting {
+            flag: "--target-exposure",
+            message: format!(
+                "--target-exposure {} s over the file's exposure of {} s is a ratio of {}; the exposure ratio must be from {} to {}",
+                shown(target_exposure_s),
+                shown(t),
+                shown(ratio),
+                range.start(),
+                range.end()
+            ),
+        });
+    }
+    Ok(ratio as f32)
 }
 
 /// Where `--ratio auto` brings a frame: its mean level (black-subtracted,
@@ -214,6 +230,14 @@ mod tests {
         let mut g = f.clone();
         g.exposure_s = None;
         assert!(ratio_from_exposure(&g, 1.0, None).is_err());
+        // 1e30 s over 0.01 s, or 1e-9 s: ratios no camera records.
+        for t in [1e30, 1e-9] {
+            let e = ratio_from_exposure(&f, t, None).unwrap_err().to_string();
+            assert!(
+                e.contains("from 1 to 10000") && e.contains("exposure of 0.01 s"),
+                "{e}"
+            );
+        }
     }
 }
 

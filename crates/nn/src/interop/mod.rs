@@ -267,6 +267,18 @@ pub struct Exported {
     pub residual: bool,
 }
 
+/// [`export`] of the weight file `model`, its tensors first checked to be
+/// the network its record describes, by name and shape ([`crate::model`]'s
+/// check, the one `enhance` makes): a file whose record and tensors
+/// disagree is refused, never exported. Returns the record, the number of
+/// tensors and the export.
+pub fn export_file(model: &Path, pth: bool) -> Result<(WeightMeta, usize, Exported)> {
+    let (meta, tensors) = crate::weights::read(model)?;
+    crate::model::check_fit(model, &meta, &tensors)?;
+    let out = export(&meta, &tensors, pth)?;
+    Ok((meta, tensors.len(), out))
+}
+
 /// A pgrf weight file's network for PyTorch: `.pth` (torch.save's zip
 /// format) when `pth`, else safetensors. The SID U-Net in UNetSeeInDark's
 /// names, the SR3 network in pgrf's own.

@@ -16,8 +16,15 @@
 //! - every image's claimed width x height is at most [`MAX_PIXELS`], so a
 //!   decode can never ask for more than a few GB;
 //! - strip and tile extents lie inside the file and past the 8-byte header;
-//! - in a DNG, an uncompressed image's strips hold the bits per sample it
-//!   claims (BitsPerSample 8 over 14-bit data would decode to black);
+//! - in a DNG, an uncompressed image's strips (or each tile) hold the bits
+//!   per sample it claims, to within a few bytes of padding (BitsPerSample 8
+//!   over 14-bit data would decode to black, 12 over 14 to noise);
+//! - in a DNG, each lossless-JPEG strip or tile is a whole stream (markers
+//!   up to its scan, coded data ending in a marker inside its byte count:
+//!   rawler decodes a cut one as constant planes), and a tile's frame is
+//!   TileWidth x TileLength samples (rawler decodes another as zeros);
+//!   tiles are at least one pixel and their padded area within the pixel
+//!   bound;
 //! - every entry's values lie inside the file, whatever their type: rawler
 //!   allocates an entry's values (up to 4 GB for a count of 2^32 - 1) before
 //!   reading them, and reads a type it does not know as bytes;

@@ -99,6 +99,8 @@ struct Image {
     strips: Vec<u64>,
     strip_counts: Vec<u64>,
     tiled: bool,
+    tile_width: Option<u64>,
+    tile_length: Option<u64>,
     tiles: Vec<u64>,
     tile_counts: Vec<u64>,
 }
@@ -185,7 +187,7 @@ pub(super) fn walk_ifds<'a>(
         walk.ifd(first, true)?;
     }
     for img in &walk.images {
-        check_image(img, bytes.len() as u64, walk.dng)?;
+        check_image(img, bytes, walk.dng)?;
     }
     Ok(walk)
 }
@@ -357,7 +359,14 @@ impl<'a> Walk<'a> {
                 TAG_COMPRESSION => img.compression = one(),
                 TAG_STRIP_OFFSETS => img.strips = e.values(bytes, order),
                 TAG_STRIP_COUNTS => img.strip_counts = e.values(bytes, order),
-                TAG_TILE_WIDTH | TAG_TILE_LENGTH => img.tiled = true,
+                TAG_TILE_WIDTH => {
+                    img.tiled = true;
+                    img.tile_width = one();
+                }
+                TAG_TILE_LENGTH => {
+                    img.tiled = true;
+                    img.tile_length = one();
+                }
                 TAG_TILE_OFFSETS => img.tiles = e.values(bytes, order),
                 TAG_TILE_COUNTS => img.tile_counts = e.values(bytes, order),
                 _ => {}
@@ -400,7 +409,8 @@ impl<'a> Walk<'a> {
     }
 }
 
-fn check_image(img: &Image, len: u64, dng: bool) -> Result<(), String> {
+fn check_image(img: &Image, bytes: &[u8], dng: bool) -> Result<(), String> {
+    let len = bytes.len() as u64;
     let (Some(w), Some(h)) = (img.width, img.length) else {
         return Ok(());
     };
@@ -424,24 +434,165 @@ fn check_image(img: &Image, len: u64, dng: bool) -> Result<(), String> {
             }
         }
     }
-    // A DNG's uncompressed strips must hold the samples it claims.
-    if dng && img.compression == Some(1) && !img.tiled && !img.strip_counts.is_empty() {
-        let bits = img.bits.unwrap_or(1);
-        let spp = img.samples.unwrap_or(1);
-        let row = (w.saturating_mul(spp).saturating_mul(bits)).div_ceil(8);
-        let need = row.saturating_mul(h);
-        let have: u64 = img
-            .strip_counts
-            .iter()
-            .fold(0u64, |a, &c| a.saturating_add(c));
-        if have < need || have > need.saturating_add(need / 4).saturating_add(64) {
-            let held = have as f64 * 8.0 / (w as f64 * h as f64 * spp as f64).max(1.0);
+    if !dng {
+        return Ok(());
+    }
+    let spp = img.samples.unwrap_or(1);
+    let bits = img.bits.unwrap_or(1);
+    if img.tiled {
+        let (tw, th) = (img.tile_width.unwrap_or(0), img.tile_length.unwrap_or(0));
+        if tw == 0 || th == 0 {
             return Err(format!(
-                "inconsistent DNG: BitsPerSample says {bits} for a {w} x {h} image, but its uncompressed strips hold {held:.1} bits per sample"
+                "inconsistent DNG: a tiled {w} x {h} image with TileWidth {tw} and TileLength {th}"
+            ));
+        }
+        // rawler decodes whole tiles: the padded area is what it allocates.
+        let padded = (
+            w.div_ceil(tw).saturating_mul(tw),
+            h.div_ceil(th).saturating_mul(th),
+        );
+        if let Some(what) = too_many_pixels(padded.0, padded.1) {
+            return Err(format!(
+                "inconsistent DNG: tiles of {tw} x {th} make a {w} x {h} image {what}"
             ));
         }
     }
+    let (what, offsets, counts) = if img.tiled {
+        ("tile", &img.tiles, &img.tile_counts)
+    } else {
+        ("strip", &img.strips, &img.strip_counts)
+    };
+    match img.compression {
+        // Uncompressed: the strips (or each tile) must hold the samples
+        // BitsPerSample claims, to within a few bytes of padding: 12 bits
+        // claimed over 14-bit data (1/6 more bytes) would decode to noise.
+        Some(1) => {
+            let slack = |need: u64| need / 64 + 16;
+            let row = |width: u64| width.saturating_mul(spp).saturating_mul(bits).div_ceil(8);
+            let held =
+                |have: u64, pixels: u64| have as f64 * 8.0 / (pixels as f64 * spp as f64).max(1.0);
+            if img.tiled {
+                let (tw, th) = (img.tile_width.unwrap_or(0), img.tile_length.unwrap_or(0));
+                let need = row(tw).saturating_mul(th);
+                if let Some((i, &have)) = counts
+                    .iter()
+                    .enumerate()
+                    .find(|(_, &c)| c < need || c > need.saturating_add(slack(need)))
+                {
+                    return Err(format!(
+                        "inconsistent DNG: BitsPerSample says {bits} for tiles of {tw} x {th}, but tile {i} holds {:.1} bits per sample",
+                        held(have, tw * th)
+                    ));
+                }
+            } else if !counts.is_empty() {
+                let need = row(w).saturating_mul(h);
+                let have: u64 = counts.iter().fold(0u64, |a, &c| a.saturating_add(c));
+                if have < need || have > need.saturating_add(slack(need)) {
+                    return Err(format!(
+                        "inconsistent DNG: BitsPerSample says {bits} for a {w} x {h} image, but its uncompressed strips hold {:.1} bits per sample",
+                        held(have, w * h)
+                    ));
+                }
+            }
+        }
+        // Lossless JPEG: each strip or tile must be a whole stream (rawler
+        // decodes a cut one as zeros) and a tile's frame must be the tile.
+        Some(7) => {
+            for (i, (&o, &c)) in offsets.iter().zip(counts.iter()).enumerate() {
+                let data = &bytes[o as usize..(o + c) as usize];
+                let frame = lossless_jpeg(data).map_err(|why| {
+                    format!("damaged DNG: {what} {i}'s LJPEG data ({c} bytes at byte {o}) {why}")
+                })?;
+                if let (Some((wide, high, clrs)), true) = (frame, img.tiled) {
+                    let (tw, th) = (img.tile_width.unwrap_or(0), img.tile_length.unwrap_or(0));
+                    if wide.saturating_mul(clrs).saturating_mul(high)
+                        != tw.saturating_mul(th).saturating_mul(spp)
+                    {
+                        return Err(format!(
+                            "inconsistent DNG: tile {i}'s LJPEG frame is {} x {high} samples, TileWidth x TileLength say {tw} x {th}",
+                            wide * clrs
+                        ));
+                    }
+                }
+            }
+        }
+        _ => {}
+    }
     Ok(())
+}
+
+/// The frame of an LJPEG-92 stream (a DNG's strip or tile): (samples per
+/// line, lines, components) of its SOF3, checked to be whole: markers in
+/// order up to the scan, then coded data that ends in a marker (EOI) inside
+/// `data`. `Ok(None)` for a JPEG of another kind (a baseline preview: not
+/// checked here); `Err` says what is wrong, for one line.
+fn lossless_jpeg(data: &[u8]) -> Result<Option<(u64, u64, u64)>, String> {
+    if data.get(..2) != Some(&[0xff, 0xd8][..]) {
+        return Err("does not start with a JPEG start-of-image marker".into());
+    }
+    let cut = || "ends inside its JPEG header".to_string();
+    let mut at = 2usize;
+    let mut frame = None;
+    loop {
+        let (&b, &m) = (
+            data.get(at).ok_or_else(cut)?,
+            data.get(at + 1).ok_or_else(cut)?,
+        );
+        if b != 0xff {
+            return Err(format!("has no JPEG marker at byte {at} of its header"));
+        }
+        if m == 0xff {
+            at += 1; // fill byte
+            continue;
+        }
+        at += 2;
+        if (0xd0..=0xd7).contains(&m) || m == 0x01 {
+            continue;
+        }
+        if m == 0xd9 {
+            return Err("ends (EOI) before its scan".into());
+        }
+        let len = data
+            .get(at..at + 2)
+            .map(|l| u16::from_be_bytes([l[0], l[1]]) as usize)
+            .ok_or_else(cut)?;
+        let seg = data.get(at + 2..at + len.max(2)).ok_or_else(cut)?;
+        match m {
+            0xc3 => {
+                let [_, hh, hl, wh, wl, n, ..] = *seg else {
+                    return Err("has a short frame header".into());
+                };
+                let (high, wide) = (u16::from_be_bytes([hh, hl]), u16::from_be_bytes([wh, wl]));
+                frame = Some((wide as u64, high as u64, n as u64));
+            }
+            0xc0..=0xcf if !matches!(m, 0xc4 | 0xc8 | 0xcc) => return Ok(None),
+            0xda => {
+                at += len.max(2);
+                break;
+            }
+            _ => {}
+        }
+        at += len.max(2);
+    }
+    let Some(frame) = frame else {
+        return Err("has a scan but no lossless frame header (SOF3)".into());
+    };
+    // The coded data ends at the first marker: 0xFF followed by neither a
+    // stuffed zero, a restart marker nor a fill byte.
+    let mut i = at;
+    while let Some(p) = data
+        .get(i..)
+        .and_then(|d| d.iter().position(|&b| b == 0xff))
+    {
+        let k = i + p;
+        match data.get(k + 1) {
+            None => break,
+            Some(0x00) | Some(0xd0..=0xd7) => i = k + 2,
+            Some(0xff) => i = k + 1,
+            Some(_) => return Ok(Some(frame)),
+        }
+    }
+    Err("is cut short: its coded data runs to the end of the bytes the file gives it, with no end-of-image marker".into())
 }
 
 #[cfg(test)]
@@ -514,6 +665,11 @@ mod tests {
         let at = 8 + 2 + 12 * 6 + 8;
         short[at..at + 4].copy_from_slice(&8u32.to_le_bytes());
         assert!(check(&short).unwrap_err().contains("BitsPerSample says 16"));
+        // 14 over 16-bit data: 1/7 more bytes than the bits claimed, beyond
+        // the few bytes of padding allowed (before issue 37: a quarter).
+        let e = check(&image(14, 4096, true)).unwrap_err();
+        assert!(e.contains("BitsPerSample says 14"), "{e}");
+        assert_eq!(check(&image(16, 4096 + 16, true)), Ok(()));
         // Outside a DNG the bits are not checked (unpacked 12-bit NEFs).
         assert_eq!(check(&image(12, 4096, false)), Ok(()));
         // A strip at offset 0 reads the header as pixels; one past the end.
@@ -524,6 +680,40 @@ mod tests {
         let mut past = image(16, 4096, false);
         past.truncate(past.len() - 4);
         assert!(check(&past).unwrap_err().contains("truncated"));
+    }
+
+    /// SOI, SOF3 (14 bits, 4 lines of 2 samples, 2 components), SOS, coded
+    /// data with a stuffed 0xFF and a restart marker, EOI.
+    fn ljpeg() -> Vec<u8> {
+        let mut s = vec![0xff, 0xd8];
+        s.extend([0xff, 0xc3, 0, 14, 14, 0, 4, 0, 2, 2, 0, 0x11, 0, 1, 0x11, 0]);
+        s.extend([0xff, 0xda, 0, 10, 2, 0, 0, 1, 0, 1, 0, 0]);
+        s.extend([0x12, 0xff, 0x00, 0x34, 0xff, 0xd0, 0x56, 0xff, 0xd9]);
+        s
+    }
+
+    #[test]
+    fn lossless_jpeg_streams_must_be_whole() {
+        use super::lossless_jpeg;
+        let s = ljpeg();
+        assert_eq!(lossless_jpeg(&s), Ok(Some((2, 4, 2))));
+        // Cut anywhere: in the header, in the coded data, inside the EOI.
+        for cut in [1, 3, 10, 20, 30, s.len() - 3, s.len() - 1] {
+            assert!(lossless_jpeg(&s[..cut]).is_err(), "cut at {cut}");
+        }
+        let e = lossless_jpeg(&s[..s.len() - 2]).unwrap_err();
+        assert!(e.contains("cut short"), "{e}");
+        // Fill bytes before the EOI, bytes after it: whole.
+        let mut filled = s[..s.len() - 2].to_vec();
+        filled.extend([0xff, 0xff, 0xd9, 7, 7]);
+        assert_eq!(lossless_jpeg(&filled), Ok(Some((2, 4, 2))));
+        // Not JPEG; a baseline JPEG (a preview) is not checked here.
+        assert!(lossless_jpeg(b"\x00\x01\x02")
+            .unwrap_err()
+            .contains("start-of-image"));
+        assert_eq!(lossless_jpeg(&[0xff, 0xd8, 0xff, 0xc0, 0, 2]), Ok(None));
+        let e = lossless_jpeg(&[0xff, 0xd8, 0xff, 0xd9]).unwrap_err();
+        assert!(e.contains("before its scan"), "{e}");
     }
 
     #[test]

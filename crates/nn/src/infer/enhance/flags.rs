@@ -22,7 +22,7 @@ pub struct EnhanceFlags {
     /// Weight file from `pgrf train` (SPC denoiser or PGRF flow model).
     #[arg(long, short = 'm')]
     pub model: PathBuf,
-    /// Exposure ratio: the input is multiplied by it before denoising; `auto` (the default without --target-exposure) meters each frame, bringing its mean level (brightest 1 % left out) to 1/8 of white, ratio 1..300, and prints what it chose.
+    /// Exposure ratio, 1 to 10000: the input is multiplied by it before denoising; `auto` (the default without --target-exposure) meters each frame, bringing its mean level (brightest 1 % left out) to 1/8 of white, ratio 1..300, and prints what it chose.
     #[arg(
         long,
         conflicts_with = "target_exposure",
@@ -116,12 +116,7 @@ impl EnhanceFlags {
     /// expand folders and plan every output ([`plan_jobs`]).
     pub fn jobs(&self) -> Result<Vec<Job>, NnError> {
         if let Some(RatioFlag::Value(r)) = self.ratio {
-            if !(r.is_finite() && r > 0.0) {
-                return Err(refused(
-                    "--ratio",
-                    format!("--ratio must be a positive number or auto, got {r}"),
-                ));
-            }
+            pgrf_noise::pair::check_ratio("--ratio", r).map_err(|m| refused("--ratio", m))?;
         }
         if let Some(t) = self.t2 {
             if !(0.0..=1.0).contains(&t) {

@@ -49,11 +49,9 @@ pub fn plan_jobs(
     output: &Path,
     previews: Previews,
 ) -> Result<Vec<Job>, NnError> {
+    let is_dng = check_output_name(output)?;
     let (mut inputs, had_dir) = expand_inputs(paths)?;
     let single = inputs.len() == 1 && !had_dir;
-    let is_dng = output
-        .extension()
-        .is_some_and(|e| e.eq_ignore_ascii_case("dng"));
     if let Previews::At(p) = previews {
         if !p.extension().is_some_and(|e| e.eq_ignore_ascii_case("png")) {
             return Err(refused("--png", format!(
@@ -102,6 +100,39 @@ pub fn plan_jobs(
         ));
     }
     folder_jobs(inputs, output, previews != Previews::None)
+}
+
+/// Whether `-o` names a DNG file (else a folder): a `.dng` name, an
+/// existing folder, or a new folder's name without an extension. Another
+/// existing file or another extension (`-o model.safetensors`) is refused
+/// in one line saying what enhance writes, rather than taken for a folder
+/// to create ("File exists").
+fn check_output_name(output: &Path) -> Result<bool, NnError> {
+    if output.is_dir() {
+        return Ok(false);
+    }
+    let ext = output.extension().map(|e| e.to_string_lossy().into_owned());
+    if ext
+        .as_deref()
+        .is_some_and(|e| e.eq_ignore_ascii_case("dng"))
+    {
+        return Ok(true);
+    }
+    let what = if output.exists() {
+        "is an existing file, not a folder".to_string()
+    } else {
+        match ext {
+            Some(e) => format!("has the extension .{e}"),
+            None => return Ok(false),
+        }
+    };
+    Err(refused(
+        "-o",
+        format!(
+            "-o {} {what}: enhance writes DNG files: name one .dng (one input) or a folder (an existing one, or a new name without an extension)",
+            output.display()
+        ),
+    ))
 }
 
 /// One job per input into the output folder (created if missing), keeping
