@@ -224,7 +224,9 @@ fn enhance_output_names_a_dng_or_a_folder() {
     }
     assert!(!d.join("new.safetensors").exists());
     assert_eq!(std::fs::read(&model).unwrap(), b"not a folder");
-    // A new folder without an extension is made, as before.
+    // A new folder without an extension is made, as before (the
+    // noise-aware SPC told the noise: the small chart has too few flat
+    // blocks for a blind estimate).
     let r = pgrf(&[
         "enhance",
         s(&c),
@@ -232,6 +234,8 @@ fn enhance_output_names_a_dng_or_a_folder() {
         "builtin:spc",
         "--ratio",
         "20",
+        "--noise",
+        "K=1,read=4",
         "-o",
         s(&d.join("outdir")),
     ]);

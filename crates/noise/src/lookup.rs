@@ -285,6 +285,13 @@ pub fn find_noise(frame: &RawFrame, known: &KnownNoise) -> Result<FrameNoise> {
         e => e,
     })?;
     let (k, read) = fit.in_dn(range);
+    if !(k.is_finite() && k > 0.0 && read.is_finite()) {
+        return Err(NoiseError::Estimate(format!(
+            "the frame shows no signal-dependent noise (K estimated as {k:.3e} DN/e- from {} blocks); \
+no calibration, --noise, NoiseProfile or profile of this camera either: give --noise K=..,read=.. (or --calib)",
+            fit.blocks
+        )));
+    }
     Ok(FrameNoise {
         k,
         read,
