@@ -153,6 +153,32 @@ fn exposure_ratios_outside_one_to_ten_thousand_are_refused() {
             ratio,
         ]));
         assert!(e.contains("from 1 to 10000"), "eval {ratio}: {e}");
+        // The sampling search's pairs and a training run's range too.
+        let flow = d.join("flow.safetensors");
+        let shipped = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../models/pgrf.safetensors");
+        std::fs::copy(&shipped, &flow).unwrap();
+        let e = one_line_error(&pgrf(&[
+            "search",
+            "--model",
+            s(&flow),
+            "--procedural",
+            "2",
+            "--ratio",
+            ratio,
+        ]));
+        assert!(
+            e.contains("--ratio") && e.contains("from 1 to 10000"),
+            "search {ratio}: {e}"
+        );
+        let model = d.join("m.safetensors");
+        for flag in ["--ratio-min", "--ratio-max"] {
+            let e = one_line_error(&pgrf(&["train", "spc", flag, ratio, "-o", s(&model)]));
+            assert!(
+                e.contains(flag) && e.contains("from 1 to 10000"),
+                "train {flag} {ratio}: {e}"
+            );
+        }
+        std::fs::remove_file(&flow).unwrap();
     }
     // A target exposure that makes such a ratio (the chart records 1/60 s).
     let e = one_line_error(&pgrf(&[

@@ -498,10 +498,13 @@ impl TrainConfig {
             ));
         }
         let (lo, hi) = (self.ratio_min, self.ratio_max);
-        if !(lo > 0.0 && hi >= lo && hi.is_finite()) {
+        for (flag, r) in [("--ratio-min", lo), ("--ratio-max", hi)] {
+            pgrf_noise::pair::check_ratio(flag, r).map_err(|m| bad(flag, m))?;
+        }
+        if hi < lo {
             return Err(bad(
                 "--ratio-min",
-                format!("ratio range {lo}..{hi} must be positive and ordered"),
+                format!("ratio range {lo}..{hi} must be ordered"),
             ));
         }
         if let Some(c) = self.clip_grad {

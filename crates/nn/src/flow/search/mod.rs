@@ -247,13 +247,12 @@ pub fn run(req: &SearchRequest, progress: &dyn Progress, warn: &dyn Fn(&str)) ->
     // calibrated share from its recorded configuration, when it has one).
     let trained = meta.training.as_ref().and_then(|t| t.config.as_ref());
     let ratio = match req.ratio {
-        Some(r) if r.is_finite() && r > 0.0 => RatioSpec::Fixed(r),
-        Some(r) => {
-            return Err(NnError::BadSetting {
+        Some(r) => RatioSpec::Fixed(pgrf_noise::pair::check_ratio("--ratio", r).map_err(
+            |message| NnError::BadSetting {
                 flag: "--ratio",
-                message: format!("--ratio must be a positive number, got {r}"),
-            })
-        }
+                message,
+            },
+        )?),
         None => trained
             .map_or(crate::config::RatioDraw::Uniform, |c| c.ratio_draw)
             .spec(noise.ratio[0], noise.ratio[1]),
