@@ -79,6 +79,22 @@ fn lines(csv: &str) -> Vec<Line> {
     .collect()
 }
 
+/// `flag` with another protocol than the synthetic one: one line saying so.
+fn refused_off_synthetic(root: &Path, flag: &str) {
+    let e = one_line_error(&pgrf(&[
+        "eval",
+        "--protocol",
+        "eld",
+        "--root",
+        s(root),
+        flag,
+    ]));
+    assert!(
+        e.contains(&format!("{flag} goes with --protocol synthetic only")),
+        "{e}"
+    );
+}
+
 /// `pgrf eval --protocol synthetic --root ROOT... EXTRA...`'s arguments.
 fn eval<'a>(root: &[&'a Path], extra: &[&'a str]) -> Vec<&'a str> {
     let mut args = vec!["eval", "--protocol", "synthetic", "--root"];
@@ -557,18 +573,7 @@ fn uncalibrated_captures_keep_their_black_level_error() {
     // (0.0153; measured 0.0152), within 10 % (row noise, quantisation).
     let rise = black[1].1 - black[0].1;
     assert!((rise - 0.0153).abs() < 0.0015, "{black:?}");
-    let e = one_line_error(&pgrf(&[
-        "eval",
-        "--protocol",
-        "eld",
-        "--root",
-        s(&d),
-        "--uncalibrated",
-    ]));
-    assert!(
-        e.contains("--uncalibrated goes with --protocol synthetic only"),
-        "{e}"
-    );
+    refused_off_synthetic(&d, "--uncalibrated");
 }
 
 /// `--blind-noise`: a noise-aware model is told what the blind estimator
@@ -618,16 +623,5 @@ fn blind_noise_tells_the_estimate_and_records_the_truth() {
         (blind[1] / truth[1] - 1.0).abs() < 0.25,
         "{blind:?} vs {truth:?}"
     );
-    let e = one_line_error(&pgrf(&[
-        "eval",
-        "--protocol",
-        "eld",
-        "--root",
-        s(&d),
-        "--blind-noise",
-    ]));
-    assert!(
-        e.contains("--blind-noise goes with --protocol synthetic only"),
-        "{e}"
-    );
+    refused_off_synthetic(&d, "--blind-noise");
 }

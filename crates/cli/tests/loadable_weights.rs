@@ -22,10 +22,10 @@ fn summary(out: &Output) -> Value {
     serde_json::from_str(text.lines().last().expect("a JSON line")).expect("JSON summary")
 }
 
-/// A two-step denoiser run of width 4 writing `out` (and its checkpoint),
-/// with `extra` flags.
-fn train(out: &Path, steps: &str, extra: &[&str]) -> Output {
-    let mut args = vec![
+/// The arguments of a denoiser run of width 4 for `steps` steps writing
+/// `out` (and its checkpoint).
+fn train_args<'a>(out: &'a Path, steps: &'a str) -> Vec<&'a str> {
+    vec![
         "train",
         "denoiser",
         "--steps",
@@ -44,11 +44,15 @@ fn train(out: &Path, steps: &str, extra: &[&str]) -> Output {
         "1600",
         "--data",
         "procedural",
-        "--quiet",
-        "--json",
         "-o",
         s(out),
-    ];
+    ]
+}
+
+/// That run, quiet with its JSON summary, with `extra` flags.
+fn train(out: &Path, steps: &str, extra: &[&str]) -> Output {
+    let mut args = train_args(out, steps);
+    args.extend_from_slice(&["--quiet", "--json"]);
     args.extend_from_slice(extra);
     pgrf(&args)
 }
@@ -126,28 +130,8 @@ fn resuming_a_finished_run_leaves_its_file_and_every_file_written_loads() {
     let r = enhances(&d, &out);
     assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
     // Without --json the line says so.
-    let mut args = vec![
-        "train",
-        "denoiser",
-        "--steps",
-        "2",
-        "--width",
-        "4",
-        "--patch",
-        "32",
-        "--batch",
-        "2",
-        "--seed",
-        "3",
-        "--val-pairs",
-        "2",
-        "--iso",
-        "1600",
-        "--data",
-        "procedural",
-        "-o",
-    ];
-    args.extend_from_slice(&[s(&out), "--resume"]);
+    let mut args = train_args(&out, "2");
+    args.push("--resume");
     let r = pgrf(&args);
     let err = String::from_utf8_lossy(&r.stderr);
     assert!(

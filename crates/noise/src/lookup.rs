@@ -232,6 +232,10 @@ fn from_built_in(frame: &RawFrame, iso: u32, range: f64) -> Option<FrameNoise> {
         })
 }
 
+/// What an estimate that fails adds: nothing else knew the camera either,
+/// and how to tell pgrf.
+const NO_SOURCE: &str = "no calibration, --noise, NoiseProfile or profile of this camera either: give --noise K=..,read=.. (or --calib)";
+
 /// The frame's noise from the first source that has it (module
 /// documentation).
 pub fn find_noise(frame: &RawFrame, known: &KnownNoise) -> Result<FrameNoise> {
@@ -279,16 +283,13 @@ pub fn find_noise(frame: &RawFrame, known: &KnownNoise) -> Result<FrameNoise> {
     // Nothing else knows this camera: say how to tell pgrf when the frame
     // cannot tell it either.
     let fit = crate::estimate::fit(packed.view()).map_err(|e| match e {
-        NoiseError::Estimate(m) => NoiseError::Estimate(format!(
-            "{m}; no calibration, --noise, NoiseProfile or profile of this camera either: give --noise K=..,read=.. (or --calib)"
-        )),
+        NoiseError::Estimate(m) => NoiseError::Estimate(format!("{m}; {NO_SOURCE}")),
         e => e,
     })?;
     let (k, read) = fit.in_dn(range);
     if !(k.is_finite() && k > 0.0 && read.is_finite()) {
         return Err(NoiseError::Estimate(format!(
-            "the frame shows no signal-dependent noise (K estimated as {k:.3e} DN/e- from {} blocks); \
-no calibration, --noise, NoiseProfile or profile of this camera either: give --noise K=..,read=.. (or --calib)",
+            "the frame shows no signal-dependent noise (K estimated as {k:.3e} DN/e- from {} blocks); {NO_SOURCE}",
             fit.blocks
         )));
     }

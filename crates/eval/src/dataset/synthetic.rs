@@ -313,13 +313,29 @@ impl Synthetic {
     /// error, which at x100-x200 shifts dark areas by several percent of
     /// full scale and tints them.
     pub fn calibrated_input(&self, pair: &pgrf_noise::pair::Pair) -> Array3<f32> {
-        let mut input = pair.noisy.clone();
+        self.minus_offsets(pair, |v| v.clamp(0.0, 1.0))
+    }
+
+    /// Each plane of the amplified capture minus its dark-level offset
+    /// ([`Synthetic::offsets`]), then `f`.
+    fn minus_offsets(&self, pair: &pgrf_noise::pair::Pair, f: impl Fn(f32) -> f32) -> Array3<f32> {
+        let mut out = pair.noisy.clone();
         let offsets = self.offsets(&pair.params, pair.ratio);
-        for (mut plane, off) in input.outer_iter_mut().zip(offsets) {
+        for (mut plane, off) in out.outer_iter_mut().zip(offsets) {
             let off = off as f32;
-            plane.mapv_inplace(|v| (v - off).clamp(0.0, 1.0));
+            plane.mapv_inplace(|v| f(v - off));
         }
-        input
+        out
+    }
+
+    /// The read noise (DN) of a capture drawn with `params`: Gaussian in the
+    /// pgrf and P-G models, Tukey-lambda in ELD's (its scale stands for the
+    /// spread).
+    fn read_sigma(&self, params: &pgrf_noise::CaptureParams) -> f64 {
+        match self.kind {
+            ModelKind::Eld => params.sigma_tukey,
+            _ => params.sigma_gauss,
+        }
     }
 
     /// The dark-level offset of an amplified, normalised capture drawn with
@@ -338,10 +354,7 @@ impl Synthetic {
     /// camera it has no profile of. Also the truth, for the record.
     pub fn case_noise(&self, pair: &pgrf_noise::pair::Pair) -> Result<(CaseNoise, NoiseRecord)> {
         let params = &pair.params;
-        let read = match self.kind {
-            ModelKind::Eld => params.sigma_tukey,
-            _ => params.sigma_gauss,
-        };
+        let read = self.read_sigma(params);
         let range = self.specs[0].dn_range();
         let record = |told: &CaseNoise| NoiseRecord {
             told_k: told.k,
@@ -364,16 +377,13 @@ impl Synthetic {
             let r = record(&told);
             return Ok((told, r));
         }
-        let offsets = if self.uncalibrated {
-            [0.0; 4]
+        // The capture as the method gets it, before amplification and
+        // clamping.
+        let capture = if self.uncalibrated {
+            pair.noisy.mapv(|v| v / pair.ratio)
         } else {
-            self.offsets(params, pair.ratio)
+            self.minus_offsets(pair, |v| v / pair.ratio)
         };
-        let mut capture = pair.noisy.clone();
-        for (mut plane, off) in capture.outer_iter_mut().zip(offsets) {
-            let off = off as f32;
-            plane.mapv_inplace(|v| (v - off) / pair.ratio);
-        }
         let fit = pgrf_noise::estimate::fit(capture.view())
             .map_err(|e| DatasetError(format!("blind noise estimate: {e}")))?;
         let (k, read_est) = fit.in_dn(range);
@@ -415,12 +425,8 @@ impl Synthetic {
     fn noise_record(&self, params: &pgrf_noise::CaptureParams, ratio: f32) -> serde_json::Value {
         let dn = self.specs[0].dn_range();
         let r = ratio as f64;
-        // Read (Gaussian in the pgrf model, Tukey-lambda in ELD's: its
-        // scale stands for the spread), row noise and 1-DN quantisation.
-        let read = match self.kind {
-            ModelKind::Eld => params.sigma_tukey,
-            _ => params.sigma_gauss,
-        };
+        // Read, row noise and 1-DN quantisation.
+        let read = self.read_sigma(params);
         let var_dn = read * read + params.sigma_row * params.sigma_row + 1.0 / 12.0;
         serde_json::json!({
             "profile": self.profile,
