@@ -1,9 +1,61 @@
 //! How pgrf's programs end: whatever happened, the user reads one line on
-//! stderr (`PROGRAM: error: ...`), and scripts get exit code 1 for an error.
+//! stderr (`PROGRAM: error: ...`), and scripts read the outcome from the exit
+//! code: 0 done, 1 the command failed, 2 a usage error (clap's), 3 a batch
+//! finished but some of its items failed ([`PartialFailure`]), so a job
+//! scheduler can tell "retry the whole thing" from "look at these files".
 //! Shared by the `pgrf` and `pgrf-bench` binaries.
 
+use std::error::Error;
 use std::fmt::Display;
 use std::process::ExitCode;
+
+/// The exit code of a command that failed as a whole.
+pub const EXIT_FAILURE: u8 = 1;
+/// The exit code of a batch that processed every item it could but some
+/// failed ([`PartialFailure`]).
+pub const EXIT_PARTIAL: u8 = 3;
+
+/// A batch ran to its end and some of its items failed (each already
+/// reported on its own): [`finish`] prints this one line and exits with
+/// [`EXIT_PARTIAL`] instead of 1, wherever it sits in the error's chain.
+#[derive(Debug)]
+pub struct PartialFailure {
+    /// How many items the batch had.
+    pub total: usize,
+    /// The items that failed, as the user named them.
+    pub failed: Vec<String>,
+}
+
+/// How many failed items [`PartialFailure`]'s line names; the rest are
+/// counted (each was reported on its own line, and in a manifest).
+const NAMED: usize = 10;
+
+impl Display for PartialFailure {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let n = self.failed.len();
+        write!(f, "{n} of {} files failed: ", self.total)?;
+        write!(f, "{}", self.failed[..n.min(NAMED)].join(", "))?;
+        if n > NAMED {
+            write!(f, " and {} more", n - NAMED)?;
+        }
+        Ok(())
+    }
+}
+
+impl Error for PartialFailure {}
+
+/// The exit code for error `e`: [`EXIT_PARTIAL`] when a [`PartialFailure`]
+/// is in its chain of causes, else [`EXIT_FAILURE`].
+pub fn exit_code_of(e: &(dyn Error + 'static)) -> u8 {
+    let mut next: Option<&(dyn Error + 'static)> = Some(e);
+    while let Some(err) = next {
+        if err.is::<PartialFailure>() {
+            return EXIT_PARTIAL;
+        }
+        next = err.source();
+    }
+    EXIT_FAILURE
+}
 
 /// Make a panic print one line, `PROGRAM: internal error (please report):
 /// MESSAGE at FILE:LINE`, instead of Rust's multi-line report. A panic about
@@ -28,14 +80,19 @@ pub fn one_line_panics(program: &'static str) {
     }));
 }
 
-/// The exit code of a command's result; an error is printed as one line
-/// `PROGRAM: error: ...` (with its causes, `{:#}`, newlines folded).
-pub fn finish<E: Display>(program: &str, result: Result<(), E>) -> ExitCode {
+/// The exit code of a command's result ([`exit_code_of`]); an error is
+/// printed as one line `PROGRAM: error: ...` (with its causes, `{:#}`,
+/// newlines folded).
+pub fn finish<E>(program: &str, result: Result<(), E>) -> ExitCode
+where
+    E: Display + AsRef<dyn Error + Send + Sync + 'static>,
+{
     match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("{}", error_line(program, &e));
-            ExitCode::FAILURE
+            let err: &(dyn Error + Send + Sync + 'static) = e.as_ref();
+            ExitCode::from(exit_code_of(err))
         }
     }
 }
@@ -52,5 +109,26 @@ mod tests {
     fn errors_are_one_line_with_the_program_name() {
         let e = std::io::Error::other("first\nsecond");
         assert_eq!(super::error_line("pgrf", &e), "pgrf: error: first second");
+    }
+
+    /// A partial failure gives code 3 wherever it sits in the chain (under
+    /// a context, say); any other error 1.
+    #[test]
+    fn a_partial_failure_anywhere_in_the_chain_exits_3() {
+        #[derive(Debug, thiserror::Error)]
+        #[error("while enhancing")]
+        struct Context(#[source] super::PartialFailure);
+        let partial = super::PartialFailure {
+            total: 7,
+            failed: vec!["a.dng".into(), "b.dng".into()],
+        };
+        assert_eq!(partial.to_string(), "2 of 7 files failed: a.dng, b.dng");
+        let many = super::PartialFailure {
+            total: 30,
+            failed: (0..12).map(|i| format!("{i}.dng")).collect(),
+        };
+        assert!(many.to_string().ends_with(", 9.dng and 2 more"), "{many}");
+        assert_eq!(super::exit_code_of(&Context(partial)), 3);
+        assert_eq!(super::exit_code_of(&std::io::Error::other("x")), 1);
     }
 }

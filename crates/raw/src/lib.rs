@@ -43,4 +43,4 @@ pub use frame::{bits_for, ColorMatrix, LevelOverrides, RawFrame};
 pub use frame_file::{write_frame, FrameFormat};
 pub use headerless::{read_headerless, HeaderlessSpec};
 pub use pack::{pack_normalized, pack_u16, unpack_normalized, unpack_u16};
-pub use preview::{render_preview, Preview, PreviewOptions};
+pub use preview::{png_size, render_preview, Preview, PreviewOptions};

@@ -230,6 +230,26 @@ impl Preview {
     }
 }
 
+/// The size (width, height) of the PNG at `path`, every pixel decoded: an
+/// error when it is not a whole PNG (cut short by a killed copy, damaged),
+/// so that `pgrf enhance --skip-existing` keeps a preview only when it
+/// reads back whole.
+pub fn png_size(path: &Path) -> Result<(usize, usize)> {
+    // The closing IEND chunk (empty, fixed CRC): decoders stop after the
+    // pixels and would not notice a file cut short within it.
+    const IEND: [u8; 12] = [0, 0, 0, 0, b'I', b'E', b'N', b'D', 0xAE, 0x42, 0x60, 0x82];
+    let bytes = std::fs::read(path).map_err(|e| RawError::io(path, e))?;
+    if !bytes.ends_with(&IEND) {
+        return Err(RawError::decode(
+            path,
+            "not a whole PNG (no IEND chunk at its end)",
+        ));
+    }
+    let image = image::load_from_memory_with_format(&bytes, image::ImageFormat::Png)
+        .map_err(|e| RawError::decode(path, e.to_string()))?;
+    Ok((image.width() as usize, image.height() as usize))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -354,5 +374,24 @@ mod tests {
             );
         }
         assert!(p.encode_png(12).is_err());
+    }
+
+    /// A whole PNG gives its size; one cut short anywhere, or not a PNG,
+    /// is an error naming the file.
+    #[test]
+    fn png_size_reads_only_whole_pngs() {
+        let d = std::env::temp_dir().join(format!("pgrf-png-size-{}", std::process::id()));
+        std::fs::create_dir_all(&d).unwrap();
+        let path = d.join("p.png");
+        let p = render_preview(&grey_frame(Cfa::Rggb, 0.18), &PreviewOptions::default()).unwrap();
+        let bytes = p.encode_png(8).unwrap();
+        std::fs::write(&path, &bytes).unwrap();
+        assert_eq!(png_size(&path).unwrap(), (16, 12));
+        for keep in [0, 8, bytes.len() / 2, bytes.len() - 1] {
+            std::fs::write(&path, &bytes[..keep]).unwrap();
+            let e = png_size(&path).unwrap_err().to_string();
+            assert!(e.contains("p.png"), "{keep}: {e}");
+        }
+        std::fs::remove_dir_all(&d).unwrap();
     }
 }
