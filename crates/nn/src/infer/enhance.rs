@@ -2,7 +2,8 @@
 //! Bayer mosaic, find the exposure ratio, apply a calibration (dark
 //! shading, defect correction; pgrf-calib's [`Calibration::prepare_light`]),
 //! restore it tile by tile, write the linear DNG and the sRGB preview, and
-//! report what was done. Which files go where: [`jobs::plan_jobs`]; the
+//! report what was done. Which files go where: [`jobs::plan_jobs`]; many
+//! files, shards, skipping and the manifest: [`batch::run_batch`]; the
 //! flags: [`flags::EnhanceFlags`] (the `clap` feature).
 
 use super::prepare::{auto_ratio, ratio_from_exposure};
@@ -19,6 +20,7 @@ use serde::Serialize;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
+pub mod batch;
 #[cfg(feature = "clap")]
 pub mod flags;
 pub mod jobs;

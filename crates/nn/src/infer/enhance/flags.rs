@@ -2,8 +2,9 @@
 //! configuration and jobs they make, and the notes printed before the first
 //! file: kept beside the recipe, so a new option is added in one crate.
 
-use super::jobs::{plan_jobs, Previews};
-use super::{CalibrationFile, EnhanceConfig, EnhanceError, Job, RatioChoice};
+use super::batch::{check_manifest, Batch, Shard};
+use super::jobs::{plan_jobs, read_list, Previews};
+use super::{CalibrationFile, EnhanceConfig, EnhanceError, RatioChoice};
 use crate::backend::DeviceKind;
 use crate::error::NnError;
 use crate::flow::sample::SamplerKind;
@@ -16,9 +17,21 @@ use std::path::PathBuf;
 /// `pgrf enhance`'s flags (the input-opening options are the caller's).
 #[derive(clap::Args, Debug)]
 pub struct EnhanceFlags {
-    /// Noisy RAW files, or folders of them.
-    #[arg(required = true)]
+    /// Noisy RAW files, or folders of them (optional with --from-list).
+    #[arg(required_unless_present = "from_list")]
     pub inputs: Vec<PathBuf>,
+    /// Also enhance the files (or folders) listed in FILE, one path a line; blank lines and lines starting with # are skipped; relative paths are relative to the current folder (as `find . -name '*.CR2' > FILE` writes them).
+    #[arg(long, value_name = "FILE")]
+    pub from_list: Option<PathBuf>,
+    /// Do only shard I of N (counted from 0): the files at positions I, I+N, I+2N, ... of the whole input list sorted by path, so N runs with the same arguments split the work without overlap.
+    #[arg(long, value_name = "I/N", allow_hyphen_values = true)]
+    pub shard: Option<String>,
+    /// Leave a file whose DNG (and preview, with --png) already exists and reads back whole; a file cut short is redone.
+    #[arg(long)]
+    pub skip_existing: bool,
+    /// Append one JSON line per file to FILE (input, output, png, status done|skipped|failed, seconds, noise, error, shard).
+    #[arg(long, value_name = "FILE")]
+    pub manifest: Option<PathBuf>,
     /// Weight file from `pgrf train` (SPC denoiser or PGRF flow model).
     #[arg(long, short = 'm')]
     pub model: PathBuf,
@@ -113,8 +126,10 @@ fn refused(flag: &'static str, message: String) -> NnError {
 
 impl EnhanceFlags {
     /// Refuse flag values no file can make right, before any work; then
-    /// expand folders and plan every output ([`plan_jobs`]).
-    pub fn jobs(&self) -> Result<Vec<Job>, NnError> {
+    /// read the list, expand folders and plan every output ([`plan_jobs`],
+    /// on the whole list: every shard agrees on it), and check the
+    /// manifest's path.
+    pub fn batch(&self) -> Result<Batch, NnError> {
         if let Some(RatioFlag::Value(r)) = self.ratio {
             pgrf_noise::pair::check_ratio("--ratio", r).map_err(|m| refused("--ratio", m))?;
         }
@@ -124,12 +139,34 @@ impl EnhanceFlags {
             }
         }
         check_tiling_args(self.tile, self.overlap)?;
+        let shard = (self.shard.as_deref())
+            .map(|s| s.parse::<Shard>().map_err(|m| refused("--shard", m)))
+            .transpose()?;
+        let mut given = self.inputs.clone();
+        if let Some(list) = &self.from_list {
+            given.extend(read_list(list)?);
+        }
+        if given.is_empty() {
+            return Err(refused(
+                "--from-list",
+                "no inputs: the list names no files and none are given on the command line".into(),
+            ));
+        }
         let previews = match &self.png {
             None => Previews::None,
             Some(None) => Previews::BesideEach,
             Some(Some(p)) => Previews::At(p),
         };
-        plan_jobs(&self.inputs, &self.output, previews)
+        let jobs = plan_jobs(&given, &self.output, previews)?;
+        if let Some(m) = &self.manifest {
+            check_manifest(m, &given, &jobs)?;
+        }
+        Ok(Batch {
+            jobs,
+            shard,
+            skip_existing: self.skip_existing,
+            manifest: self.manifest.clone(),
+        })
     }
 
     /// How every file is enhanced (the calibration loaded).

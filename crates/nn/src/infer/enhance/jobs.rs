@@ -23,8 +23,11 @@ fn refused(flag: &'static str, message: String) -> NnError {
     NnError::BadSetting { flag, message }
 }
 
-/// The inputs: files as given, folders expanded; and whether a folder was
-/// among them.
+/// The inputs: files as given, folders expanded, sorted by path with
+/// repeats left out (a file named twice, in the list and on the command
+/// line, or as `./a.dng` and `a.dng`, is one input); and whether a folder
+/// was among them. The order is what `--shard` counts in, so every shard
+/// of one command line sees the same list.
 fn expand_inputs(paths: &[PathBuf]) -> Result<(Vec<PathBuf>, bool), NnError> {
     let mut inputs = Vec::new();
     let mut had_dir = false;
@@ -38,7 +41,39 @@ fn expand_inputs(paths: &[PathBuf]) -> Result<(Vec<PathBuf>, bool), NnError> {
             return Err(NnError::NoSuchInput(p.clone()));
         }
     }
+    inputs.sort();
+    let mut seen = HashSet::new();
+    inputs.retain(|p| seen.insert(p.canonicalize().unwrap_or_else(|_| p.clone())));
     Ok((inputs, had_dir))
+}
+
+/// The paths `--from-list` names: one a line, blank lines and lines
+/// starting with `#` left out, spaces around a path dropped. A relative
+/// path is taken relative to the current folder, not the list's, which is
+/// how `find . -name '*.CR2' > night.txt` writes them. Every listed path
+/// must exist (a file or a folder): the first that does not is refused
+/// naming the list and the line, before any work.
+pub fn read_list(list: &Path) -> Result<Vec<PathBuf>, NnError> {
+    let refuse = |message: String| refused("--from-list", message);
+    let text = std::fs::read_to_string(list)
+        .map_err(|e| refuse(format!("--from-list {}: cannot read: {e}", list.display())))?;
+    let mut paths = Vec::new();
+    for (i, line) in text.lines().enumerate() {
+        let line = line.trim();
+        if line.is_empty() || line.starts_with('#') {
+            continue;
+        }
+        let path = PathBuf::from(line);
+        if !path.exists() {
+            return Err(refuse(format!(
+                "--from-list {} line {}: {line}: no such file or folder",
+                list.display(),
+                i + 1
+            )));
+        }
+        paths.push(path);
+    }
+    Ok(paths)
 }
 
 /// Expand folders, decide every output path (`output` is a .dng for one
@@ -140,10 +175,17 @@ fn check_output_name(output: &Path) -> Result<bool, NnError> {
 fn folder_jobs(inputs: Vec<PathBuf>, folder: &Path, png: bool) -> Result<Vec<Job>, NnError> {
     if !folder.is_dir() {
         require_parent_dir(folder)?;
-        std::fs::create_dir(folder).map_err(|e| NnError::Output {
-            path: folder.to_path_buf(),
-            reason: format!("cannot create the output folder: {e}"),
-        })?;
+        // Shards started together race to create it: one that lost the
+        // race finds the folder there, which is all it wanted.
+        match std::fs::create_dir(folder) {
+            Err(e) if !(e.kind() == std::io::ErrorKind::AlreadyExists && folder.is_dir()) => {
+                return Err(NnError::Output {
+                    path: folder.to_path_buf(),
+                    reason: format!("cannot create the output folder: {e}"),
+                })
+            }
+            _ => {}
+        }
     }
     let mut seen = HashSet::new();
     inputs
