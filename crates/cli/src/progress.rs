@@ -1,7 +1,7 @@
 //! The CLI's one progress display: an indicatif bar (rate, ETA) behind the
 //! libraries' `pgrf_core::Progress` trait, with one style for every command.
 
-use indicatif::{ProgressBar, ProgressStyle};
+use indicatif::{MultiProgress, ProgressBar, ProgressStyle};
 use pgrf_core::Progress;
 
 /// A progress bar on stderr, hidden with `--quiet` (and by indicatif itself
@@ -9,6 +9,8 @@ use pgrf_core::Progress;
 pub struct Bar {
     bar: ProgressBar,
     quiet: bool,
+    /// The display it is one of ([`Bar::within`]), left when it is dropped.
+    multi: Option<MultiProgress>,
 }
 
 /// The one bar style: what runs, how far, how fast, how long to go.
@@ -30,7 +32,29 @@ impl Bar {
         };
         bar.set_style(style(units));
         bar.set_prefix(prefix.into());
-        Bar { bar, quiet }
+        Bar {
+            bar,
+            quiet,
+            multi: None,
+        }
+    }
+
+    /// [`Bar::new`] drawn as one of `multi`'s bars (a batch's bar over
+    /// files above each file's bar over tiles), and taken off it when
+    /// dropped, so a batch of any length holds one file's bar at a time.
+    pub fn within(
+        multi: &MultiProgress,
+        prefix: impl Into<String>,
+        len: u64,
+        units: &str,
+        quiet: bool,
+    ) -> Bar {
+        let mut b = Bar::new(prefix, len, units, quiet);
+        if !quiet {
+            b.bar = multi.add(b.bar.clone());
+            b.multi = Some(multi.clone());
+        }
+        b
     }
 
     /// The underlying bar, for messages and ticking.
@@ -48,6 +72,14 @@ impl Bar {
             eprintln!("{line}");
         } else {
             self.bar.println(line);
+        }
+    }
+}
+
+impl Drop for Bar {
+    fn drop(&mut self) {
+        if let Some(m) = &self.multi {
+            m.remove(&self.bar);
         }
     }
 }

@@ -1,14 +1,19 @@
 //! `pgrf enhance`: dark noisy RAW photos in, clean linear DNGs (and sRGB
-//! previews) out, with either network, at full resolution in bounded memory.
+//! previews) out, with either network, at full resolution in bounded memory;
+//! many files as one batch, or as one shard of a cluster's batch
+//! (`pgrf_nn::infer::enhance::batch`).
 
 use crate::input::InputArgs;
 use crate::progress::Bar;
-use anyhow::{bail, Context, Result};
+use anyhow::{Context, Result};
 use clap::Args;
+use indicatif::MultiProgress;
+use pgrf_nn::infer::enhance::batch::{run_batch, BatchEvents, BatchFailure, Record, Status};
 use pgrf_nn::infer::enhance::flags::EnhanceFlags;
-use pgrf_nn::infer::enhance::{enhance_file, BoxError, EnhanceConfig, FileReport, Job};
+use pgrf_nn::infer::enhance::{BoxError, FileReport, Job};
 use pgrf_nn::infer::Restore;
-use std::path::PathBuf;
+use std::cell::Cell;
+use std::path::Path;
 
 #[derive(Args, Debug)]
 pub struct EnhanceArgs {
@@ -20,80 +25,112 @@ pub struct EnhanceArgs {
 
 pub fn run(a: &EnhanceArgs) -> Result<()> {
     let e = &a.enhance;
-    let jobs = e.jobs()?;
+    let batch = e.batch()?;
     e.device.check_available().map_err(anyhow::Error::msg)?;
     let cfg = e.config()?;
     let restorer = crate::shipped::load_model(&e.model, e.sampler(), e.device)
         .with_context(|| format!("--model {}", e.model.display()))?;
-    let header = std::cell::Cell::new(e.quiet);
-    let print_header = || {
-        if !header.replace(true) {
-            for line in e.notes(restorer.as_ref()) {
-                eprintln!("{line}");
-            }
+    if let (Some(shard), 0) = (batch.shard, batch.selected_count()) {
+        if !e.quiet {
+            eprintln!(
+                "shard {shard}: nothing to do ({} inputs in all, none fall to this shard)",
+                batch.jobs.len()
+            );
         }
-    };
-    let mut failed: Vec<PathBuf> = Vec::new();
-    let n = jobs.len();
-    for (i, job) in jobs.iter().enumerate() {
-        match enhance_one(a, &cfg, job, restorer.as_ref(), (i, n), &print_header) {
-            Ok(report) => {
-                if e.json {
-                    println!("{}", serde_json::to_string(&report)?);
-                }
-            }
-            Err(err) => {
-                let msg = format!("{err:#}").replace('\n', " ");
-                if n == 1 {
-                    bail!(msg);
-                }
-                if !e.quiet {
-                    eprintln!("skipped {}: {msg}", job.input.display());
-                }
-                if e.json {
-                    println!(
-                        "{}",
-                        serde_json::json!({"input": job.input.display().to_string(), "error": msg})
-                    );
-                }
-                failed.push(job.input.clone());
-            }
-        }
+        return Ok(());
     }
-    if !failed.is_empty() {
-        let list: Vec<String> = failed.iter().map(|p| p.display().to_string()).collect();
-        bail!(
-            "{} of {n} files could not be enhanced: {}",
-            failed.len(),
-            list.join(", ")
-        );
+    let single = batch.jobs.len() == 1;
+    let view = View::new(e, restorer.as_ref(), batch.selected_count(), single);
+    let open = |p: &Path| a.input.open(p).map_err(BoxError::from);
+    let outcome = run_batch(&cfg, restorer.as_ref(), &batch, &open, &view)?;
+    match outcome.failure(batch.jobs.len()) {
+        None => Ok(()),
+        Some(BatchFailure::One(err)) => Err(err.into()),
+        Some(BatchFailure::Some(partial)) => Err(partial.into()),
     }
-    Ok(())
 }
 
-/// Enhance file number `index` of `count` and say what was written.
-fn enhance_one(
-    a: &EnhanceArgs,
-    cfg: &EnhanceConfig,
-    job: &Job,
-    restorer: &dyn Restore,
-    (index, count): (usize, usize),
-    print_header: &dyn Fn(),
-) -> Result<FileReport> {
-    let name = job
-        .input
-        .file_name()
-        .map(|s| s.to_string_lossy().into_owned())
-        .unwrap_or_default();
-    let quiet = a.enhance.quiet;
-    let open = |p: &std::path::Path| a.input.open(p).map_err(BoxError::from);
-    let start = || {
-        print_header();
-        Bar::new(format!("[{}/{count}] {name}", index + 1), 0, "tiles", quiet)
-    };
-    let r = enhance_file(cfg, restorer, job, open, start)?;
-    if !quiet {
-        eprintln!("{}", r.line());
+/// What the user sees of a batch: the model's notes before the first file
+/// is restored, a bar over the files above each file's bar over tiles, a
+/// line per file, and with `--json` one JSON line per file on stdout.
+struct View<'a> {
+    flags: &'a EnhanceFlags,
+    restorer: &'a dyn Restore,
+    multi: MultiProgress,
+    files: Bar,
+    noted: Cell<bool>,
+    /// One input in all: its failure is the command's one error line.
+    single: bool,
+}
+
+impl<'a> View<'a> {
+    fn new(
+        flags: &'a EnhanceFlags,
+        restorer: &'a dyn Restore,
+        count: usize,
+        single: bool,
+    ) -> View<'a> {
+        let multi = MultiProgress::new();
+        let files = Bar::within(&multi, "batch", count as u64, "files", flags.quiet);
+        View {
+            flags,
+            restorer,
+            multi,
+            files,
+            noted: Cell::new(flags.quiet),
+            single,
+        }
     }
-    Ok(r)
+}
+
+impl BatchEvents for View<'_> {
+    type Tiles = Bar;
+
+    fn files(&self) -> &dyn pgrf_core::Progress {
+        &self.files
+    }
+
+    fn tiles(&self, index: usize, count: usize, job: &Job) -> Bar {
+        if !self.noted.replace(true) {
+            for line in self.flags.notes(self.restorer) {
+                self.files.println(&line);
+            }
+        }
+        let name = (job.input.file_name())
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        let prefix = format!("[{}/{count}] {name}", index + 1);
+        Bar::within(&self.multi, prefix, 0, "tiles", self.flags.quiet)
+    }
+
+    fn finished(&self, record: &Record, report: Option<&FileReport>) {
+        if record.status == Status::Failed && self.single {
+            return;
+        }
+        let line = match (record.status, report) {
+            (Status::Done, Some(r)) => r.line(),
+            (Status::Skipped, _) => {
+                let png = (record.png.as_ref())
+                    .map(|p| format!(" and {p}"))
+                    .unwrap_or_default();
+                format!(
+                    "kept {}{png} (there already, reading back whole)",
+                    record.output
+                )
+            }
+            _ => format!(
+                "failed {}: {}",
+                record.input,
+                record.error.as_deref().unwrap_or_default()
+            ),
+        };
+        self.files.println(&line);
+        if self.flags.json {
+            let json = match report {
+                Some(r) => serde_json::to_string(r),
+                None => serde_json::to_string(record),
+            };
+            println!("{}", json.unwrap_or_default());
+        }
+    }
 }
