@@ -44,6 +44,14 @@ a failure ("accepted": garbage or an unloadable file written):
                (enhance, synth, eval), make-dataset --scenes 1e9, train
                --steps 0, enhance -o X.safetensors; and seeds up to 2^64 - 1
                (must be accepted)
+    collide    output/input collisions for every command and output flag:
+               an output that is an input (the RAW, the model, the config,
+               a profile, a calibration frame), one inside an input folder
+               (a stack, --root, --data, --val), an output folder holding
+               an input, two outputs on one path (also the default
+               NAME_worst.png beside --csv): each must be refused, and every
+               file of the case's folder left byte for byte ("overwritten"
+               or "wrote" otherwise)
     resume     train a tiny denoiser, then resume it after it finished
                (must say "already finished" and leave the file byte for
                byte), lose its weight file and resume (rewritten from the
@@ -358,6 +366,84 @@ def resume_class(work, pgrf, trials, record):
             record(f"export width {width}", "accepted" if v == "ok" else v, err)
 
 
+def collide_cases(work, pgrf):
+    """(name, argv) of output/input collisions, every command and output
+    flag: an output that is an input file, sits inside an input folder,
+    holds one (folders), or shares a path with another output. Every case
+    must be refused with every input left byte for byte."""
+    d = work / "collide"
+    if d.exists():
+        shutil.rmtree(d)
+    d.mkdir()
+    c = d / "c.dng"
+    shutil.copy(work / "chart.dng", c)
+    for stack in ["bias", "flat", "raws"]:
+        (d / stack).mkdir()
+        shutil.copy(work / "chart.dng", d / stack / "f1.dng")
+    w, t, pj = d / "w.safetensors", d / "t.toml", d / "p.json"
+    w.write_bytes(b"weights stand-in")
+    t.write_text("steps = 1\n")
+    pj.write_text("{}")
+    bias, flat, raws = d / "bias", d / "flat", d / "raws"
+    S = str
+    ev = [pgrf, "eval", "--protocol", "synthetic", "--root", S(c), "--model", "builtin:spc",
+          "--ratio", "100", "--iso", "1600"]
+    tr = [pgrf, "train", "spc", "--config", S(t)]
+    ca = [pgrf, "calibrate", "--bias", S(bias), "--flat", S(flat)]
+    en = [pgrf, "enhance", "--model", "builtin:spc", "--ratio", "20", "--noise", "K=1,read=4"]
+    sy = [pgrf, "synth", S(c), "--profile", "sony-a7s2"]
+    cases = [
+        ("preview_o_input", [pgrf, "preview", S(c), "-o", S(c)]),
+        ("convert_o_input", [pgrf, "convert", S(c), "-o", S(c)]),
+        ("synth_o_input", [*sy, "-o", S(c)]),
+        ("synth_png_input", [*sy, "-o", S(d / "s.dng"), "--png", S(c)]),
+        ("synth_o_png", [*sy, "-o", S(d / "s.dng"), "--png", S(d / "s.dng")]),
+        ("synth_o_profile", [pgrf, "synth", S(c), "--profile", S(pj), "-o", S(pj)]),
+        ("simulate_o_file", [pgrf, "simulate-sensor", "-o", S(c)]),
+        ("make_dataset_o_file", [pgrf, "make-dataset", "--layout", "eld", "-o", S(c)]),
+        ("calibrate_o_frame", [*ca, "-o", S(bias / "f1.dng")]),
+        ("calibrate_o_in_stack", [*ca, "-o", S(bias / "cal.safetensors")]),
+        ("calibrate_report_in_stack", [*ca, "-o", S(d / "cal.st"), "--report", S(flat / "r")]),
+        ("calibrate_masters_in_stack", [*ca, "-o", S(d / "cal.st"), "--masters", S(bias / "m")]),
+        ("calibrate_masters_is_stack", [*ca, "-o", S(d / "cal.st"), "--masters", S(bias)]),
+        ("calibrate_report_holds_stack", [*ca, "-o", S(d / "cal.st"), "--report", S(d)]),
+        ("calibrate_darktable_frame", [*ca, "-o", S(d / "cal.st"), "--darktable-into", S(flat / "f1.dng")]),
+        ("calibrate_o_darktable", [*ca, "-o", S(d / "cal.st"), "--darktable-into", S(d / "cal.st")]),
+        ("train_o_config", [*tr, "-o", S(t)]),
+        ("train_log_config", [*tr, "-o", S(d / "m.st"), "--log", S(t)]),
+        ("train_checkpoint_config", [*tr, "-o", S(d / "m.st"), "--checkpoint", S(t)]),
+        ("train_log_profile", [*tr, "-o", S(d / "m.st"), "--profile", S(pj), "--log", S(pj)]),
+        ("train_o_init", [*tr, "-o", S(w), "--init", S(w)]),
+        ("train_ckpt_in_data", [*tr, "-o", S(d / "m.st"), "--data", S(raws), "--checkpoint", S(raws / "m.ckpt")]),
+        ("train_o_log", [*tr, "-o", S(d / "m.st"), "--log", S(d / "m.st")]),
+        ("enhance_o_input", [*en, S(c), "-o", S(c)]),
+        ("enhance_o_in_folder", [*en, S(raws), "-o", S(raws / "clean")]),
+        ("enhance_o_holds_folder", [*en, S(raws), "-o", S(d)]),
+        ("enhance_png_input", [*en, S(c), "-o", S(d / "e.dng"), "--png", S(c)]),
+        ("enhance_png_o", [*en, S(c), "-o", S(d / "e.dng"), "--png", S(d / "e.dng")]),
+        ("search_plot_model", [pgrf, "search", "--model", S(w), "--procedural", "2", "--plot", S(w)]),
+        ("search_plot_in_val", [pgrf, "search", "--model", S(w), "--val", S(raws), "--plot", S(raws / "p.png")]),
+        ("eval_csv_root", [*ev, "--csv", S(c)]),
+        ("eval_markdown_root", [*ev, "--markdown", S(c)]),
+        ("eval_worst_root", [*ev, "--worst", S(c)]),
+        ("eval_csv_model", [*ev, "--model", S(w), "--csv", S(w)]),
+        ("eval_dump_root", [pgrf, "eval", "--protocol", "synthetic", "--root", S(raws), "--dump", S(raws)]),
+        ("eval_dump_holds_root", [pgrf, "eval", "--protocol", "synthetic", "--root", S(raws), "--dump", S(d)]),
+        ("eval_csv_markdown", [*ev, "--csv", S(d / "r.csv"), "--markdown", S(d / "r.csv")]),
+        ("eval_worst_default", [*ev, "--csv", S(d / "r.csv"), "--markdown", S(d / "r_worst.png")]),
+        ("import_o_input", [pgrf, "import-weights", S(w), "-o", S(w)]),
+        ("export_o_model", [pgrf, "export-weights", S(w), "-o", S(w)]),
+        ("demo_o_holds_photo", [pgrf, "demo", "--photo", S(c), "-o", S(d)]),
+        ("demo_o_is_spc", [pgrf, "demo", "--spc", S(w), "-o", S(w)]),
+    ]
+    return d, cases
+
+
+def tree(d):
+    """Every file under `d` with its bytes."""
+    return {str(p.relative_to(d)): p.read_bytes() for p in sorted(d.rglob("*")) if p.is_file()}
+
+
 def run_37_classes(a, pgrf, work, shared, rng, table, failures, peak_box):
     """Issue 37's classes: every case's verdict against what it must be."""
     out = work / "out"
@@ -406,6 +492,19 @@ def run_37_classes(a, pgrf, work, shared, rng, table, failures, peak_box):
             if v.startswith("exit 2,"):
                 v = "refused"
             record("counts", args[1], name, v, expect, err)
+    if "collide" in a.classes:
+        d, cases = collide_cases(work, pgrf)
+        before = tree(d)
+        for name, args in cases:
+            v, err = go(args)
+            if v.startswith("exit 2,"):
+                v = "refused"
+            after = tree(d)
+            if after != before:
+                v = "overwritten" if any(after.get(k) != b for k, b in before.items()) else "wrote"
+                for k in set(after) - set(before):
+                    (d / k).unlink()
+            record("collide", args[1], name, v, "refused", err)
     if "resume" in a.classes:
         fresh()
 
@@ -425,8 +524,8 @@ def main():
     ap.add_argument("--seed", type=int, default=17)
     ap.add_argument("--work", default=None)
     ap.add_argument("--keep-failures", default=None)
-    ap.add_argument("--classes", default="mutate,dngfield,saturate,counts,resume",
-                    help="comma-separated: mutate (issue 17's five), dngfield, saturate, counts, resume")
+    ap.add_argument("--classes", default="mutate,dngfield,saturate,counts,collide,resume",
+                    help="comma-separated: mutate (issue 17's five), dngfield, saturate, counts, collide, resume")
     a = ap.parse_args()
     a.classes = set(a.classes.split(","))
     pgrf = a.pgrf

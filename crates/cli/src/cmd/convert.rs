@@ -23,7 +23,6 @@ pub struct ConvertArgs {
 }
 
 pub fn run(a: &ConvertArgs) -> Result<()> {
-    pgrf_core::paths::check_outputs(&[("-o", &a.output)], &[&a.file])?;
     let frame = a.input.open(&a.file)?;
     let opts = DngOptions {
         compression: if a.uncompressed {

@@ -39,7 +39,6 @@ pub fn run(a: &PreviewArgs) -> Result<()> {
     if a.png_bits != 8 && a.png_bits != 16 {
         bail!("--png-bits must be 8 or 16, got {}", a.png_bits);
     }
-    pgrf_core::paths::check_outputs(&[("-o", &a.output)], &[&a.file])?;
     let frame = a.input.open(&a.file)?;
     let p = render_preview(
         &frame,
