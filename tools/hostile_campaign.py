@@ -42,8 +42,13 @@ a failure ("accepted": garbage or an unloadable file written):
     counts     absurd values of the flags issue 37 bounded: --sampler
                euler:-N, --ratio / --target-exposure outside 1..10000
                (enhance, synth, eval), make-dataset --scenes 1e9, train
-               --steps 0, enhance -o X.safetensors; and seeds up to 2^64 - 1
-               (must be accepted)
+               --steps 0, enhance -o X.safetensors; enhance --samples 1e5 and
+               1e9, train --val-pairs / --workers / --batch 1e9, --workers 0,
+               --steps 2^64 - 1; and seeds up to 2^64 - 1 (must be accepted)
+    fitssize   sparse FITS frames through info / preview / convert / enhance:
+               720 MP (header alone) and 650 MP refused; 500 MP of 8-bit
+               samples, 100 MP Bayer and mono decoded or refused for memory
+               with the figures, never an abort
     collide    output/input collisions for every command and output flag:
                an output that is an input (the RAW, the model, the config,
                a profile, a calibration frame), one inside an input folder
@@ -313,6 +318,57 @@ def counts_cases(work, pgrf):
                                        str(out / "s.safetensors")], "ok"))
     cases.append(("seed_2^64", [pgrf, *tiny, "--steps", "1", "--seed", str(2**64), "-o",
                                 str(out / "s.safetensors")], "refused"))
+    # Memory: counts whose buffers or threads no machine has.
+    for n in ["100000", "1000000000"]:
+        cases.append((f"samples_{n}", [pgrf, "enhance", c, "--model", "builtin:pgrf", "--ratio", "20",
+                                       "--noise", "K=1,read=4", "--samples", n, "-o", str(out / "e.dng")],
+                      "refused"))
+    for flag, n in [("--val-pairs", "1000000000"), ("--workers", "1000000000"), ("--workers", "0"),
+                    ("--batch", "1000000000"), ("--steps", str(2**64 - 1))]:
+        args = [a for a in tiny if a not in ("--val-pairs", "1")] if flag == "--val-pairs" else tiny
+        steps = [] if flag == "--steps" else ["--steps", "1"]
+        cases.append((f"train{flag}_{n}", [pgrf, *args, *steps, flag, n, "-o",
+                                            str(out / "v.safetensors")], "refused"))
+    return cases
+
+
+def sparse_fits(path, w, h, bitpix=8, bayer=False):
+    """A FITS file of w x h zero samples written sparse (no disk for data)."""
+    cards = ["SIMPLE  = %20s" % "T", "BITPIX  = %20d" % bitpix, "NAXIS   = %20d" % 2,
+             "NAXIS1  = %20d" % w, "NAXIS2  = %20d" % h]
+    if bayer:
+        cards.append("BAYERPAT= 'RGGB'")
+    cards.append("END")
+    head = "".join(c.ljust(80) for c in cards)
+    head = head.ljust(-(-len(head) // 2880) * 2880).encode()
+    total = -(-(len(head) + w * h * abs(bitpix) // 8) // 2880) * 2880
+    with open(path, "wb") as f:
+        f.write(head)
+        f.seek(total - 1)
+        f.write(b"\0")
+
+
+def fitssize_cases(work):
+    """(name, file, expect) of FITS frames at and past the sizes pgrf takes:
+    past 600 MP (refused from the header alone, data or not), 500 MP of
+    8-bit samples (decoded or refused for memory, never an abort), 100 MP
+    Bayer and mono. `None`: ok or refused, whichever the memory allows."""
+    d = work / "fitssize"
+    d.mkdir(exist_ok=True)
+    cases = []
+    for name, w, h, bits, bayer, expect in [
+        ("720mp_header_only", 30000, 24000, 8, False, "refused"),
+        ("650mp", 26000, 25000, 8, False, "refused"),
+        ("500mp_8bit", 25000, 20000, 8, False, None),
+        ("100mp_bayer16", 10000, 10000, 16, True, None),
+        ("100mp_mono8", 10000, 10000, 8, False, None),
+    ]:
+        f = d / f"{name}.fits"
+        sparse_fits(f, w, h, bits, bayer)
+        if name.endswith("header_only"):
+            with open(f, "r+b") as fh:
+                fh.truncate(2880)
+        cases.append((name, f, expect))
     return cases
 
 
@@ -492,6 +548,21 @@ def run_37_classes(a, pgrf, work, shared, rng, table, failures, peak_box):
             if v.startswith("exit 2,"):
                 v = "refused"
             record("counts", args[1], name, v, expect, err)
+    if "fitssize" in a.classes:
+        for name, f, expect in fitssize_cases(work):
+            for cmd, args in through_readers(pgrf, f, out).items():
+                if cmd == "enhance" and name == "100mp_bayer16":
+                    # A real job of minutes (100 MP through the network on
+                    # 2 cores), past the run time-out; its memory check is
+                    # the Rust test memory_bounds.rs's.
+                    continue
+                fresh()
+                v, err = go(args)
+                if expect is None and v in ("ok", "refused"):
+                    record("fitssize", cmd, name, v, v, err)
+                else:
+                    record("fitssize", cmd, name, v, expect or "ok or refused", err)
+            f.unlink()
     if "collide" in a.classes:
         d, cases = collide_cases(work, pgrf)
         before = tree(d)
@@ -524,8 +595,9 @@ def main():
     ap.add_argument("--seed", type=int, default=17)
     ap.add_argument("--work", default=None)
     ap.add_argument("--keep-failures", default=None)
-    ap.add_argument("--classes", default="mutate,dngfield,saturate,counts,collide,resume",
-                    help="comma-separated: mutate (issue 17's five), dngfield, saturate, counts, collide, resume")
+    ap.add_argument("--classes", default="mutate,dngfield,saturate,counts,fitssize,collide,resume",
+                    help="comma-separated: mutate (issue 17's five), dngfield, saturate, counts, fitssize, "
+                         "collide, resume")
     a = ap.parse_args()
     a.classes = set(a.classes.split(","))
     pgrf = a.pgrf

@@ -40,6 +40,12 @@ pub fn run(a: &PreviewArgs) -> Result<()> {
         bail!("--png-bits must be 8 or 16, got {}", a.png_bits);
     }
     let frame = a.input.open(&a.file)?;
+    let per_pixel = if a.half {
+        pgrf_raw::memory::PREVIEW_HALF
+    } else {
+        pgrf_raw::memory::PREVIEW_FULL
+    };
+    pgrf_raw::memory::check_frame(&a.file, "previewing", frame.width, frame.height, per_pixel)?;
     let p = render_preview(
         &frame,
         &PreviewOptions {
