@@ -46,7 +46,7 @@ fn sparse_fits(path: &Path, w: u64, h: u64, bitpix: i32, bayer: bool) {
     }
     cards.push("END".into());
     let mut header: String = cards.iter().map(|c| format!("{c:<80}")).collect();
-    while header.len() % 2880 != 0 {
+    while !header.len().is_multiple_of(2880) {
         header.push(' ');
     }
     let data = w * h * (bitpix.unsigned_abs() as u64 / 8);
