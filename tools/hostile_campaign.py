@@ -42,8 +42,21 @@ a failure ("accepted": garbage or an unloadable file written):
     counts     absurd values of the flags issue 37 bounded: --sampler
                euler:-N, --ratio / --target-exposure outside 1..10000
                (enhance, synth, eval), make-dataset --scenes 1e9, train
-               --steps 0, enhance -o X.safetensors; and seeds up to 2^64 - 1
-               (must be accepted)
+               --steps 0, enhance -o X.safetensors; enhance --samples 1e5 and
+               1e9, train --val-pairs / --workers / --batch 1e9, --workers 0,
+               --steps 2^64 - 1; and seeds up to 2^64 - 1 (must be accepted)
+    fitssize   sparse FITS frames through info / preview / convert / enhance:
+               720 MP (header alone) and 650 MP refused; 500 MP of 8-bit
+               samples, 100 MP Bayer and mono decoded or refused for memory
+               with the figures, never an abort
+    collide    output/input collisions for every command and output flag:
+               an output that is an input (the RAW, the model, the config,
+               a profile, a calibration frame), one inside an input folder
+               (a stack, --root, --data, --val), an output folder holding
+               an input, two outputs on one path (also the default
+               NAME_worst.png beside --csv): each must be refused, and every
+               file of the case's folder left byte for byte ("overwritten"
+               or "wrote" otherwise)
     resume     train a tiny denoiser, then resume it after it finished
                (must say "already finished" and leave the file byte for
                byte), lose its weight file and resume (rewritten from the
@@ -305,6 +318,57 @@ def counts_cases(work, pgrf):
                                        str(out / "s.safetensors")], "ok"))
     cases.append(("seed_2^64", [pgrf, *tiny, "--steps", "1", "--seed", str(2**64), "-o",
                                 str(out / "s.safetensors")], "refused"))
+    # Memory: counts whose buffers or threads no machine has.
+    for n in ["100000", "1000000000"]:
+        cases.append((f"samples_{n}", [pgrf, "enhance", c, "--model", "builtin:pgrf", "--ratio", "20",
+                                       "--noise", "K=1,read=4", "--samples", n, "-o", str(out / "e.dng")],
+                      "refused"))
+    for flag, n in [("--val-pairs", "1000000000"), ("--workers", "1000000000"), ("--workers", "0"),
+                    ("--batch", "1000000000"), ("--steps", str(2**64 - 1))]:
+        args = [a for a in tiny if a not in ("--val-pairs", "1")] if flag == "--val-pairs" else tiny
+        steps = [] if flag == "--steps" else ["--steps", "1"]
+        cases.append((f"train{flag}_{n}", [pgrf, *args, *steps, flag, n, "-o",
+                                            str(out / "v.safetensors")], "refused"))
+    return cases
+
+
+def sparse_fits(path, w, h, bitpix=8, bayer=False):
+    """A FITS file of w x h zero samples written sparse (no disk for data)."""
+    cards = ["SIMPLE  = %20s" % "T", "BITPIX  = %20d" % bitpix, "NAXIS   = %20d" % 2,
+             "NAXIS1  = %20d" % w, "NAXIS2  = %20d" % h]
+    if bayer:
+        cards.append("BAYERPAT= 'RGGB'")
+    cards.append("END")
+    head = "".join(c.ljust(80) for c in cards)
+    head = head.ljust(-(-len(head) // 2880) * 2880).encode()
+    total = -(-(len(head) + w * h * abs(bitpix) // 8) // 2880) * 2880
+    with open(path, "wb") as f:
+        f.write(head)
+        f.seek(total - 1)
+        f.write(b"\0")
+
+
+def fitssize_cases(work):
+    """(name, file, expect) of FITS frames at and past the sizes pgrf takes:
+    past 600 MP (refused from the header alone, data or not), 500 MP of
+    8-bit samples (decoded or refused for memory, never an abort), 100 MP
+    Bayer and mono. `None`: ok or refused, whichever the memory allows."""
+    d = work / "fitssize"
+    d.mkdir(exist_ok=True)
+    cases = []
+    for name, w, h, bits, bayer, expect in [
+        ("720mp_header_only", 30000, 24000, 8, False, "refused"),
+        ("650mp", 26000, 25000, 8, False, "refused"),
+        ("500mp_8bit", 25000, 20000, 8, False, None),
+        ("100mp_bayer16", 10000, 10000, 16, True, None),
+        ("100mp_mono8", 10000, 10000, 8, False, None),
+    ]:
+        f = d / f"{name}.fits"
+        sparse_fits(f, w, h, bits, bayer)
+        if name.endswith("header_only"):
+            with open(f, "r+b") as fh:
+                fh.truncate(2880)
+        cases.append((name, f, expect))
     return cases
 
 
@@ -358,6 +422,84 @@ def resume_class(work, pgrf, trials, record):
             record(f"export width {width}", "accepted" if v == "ok" else v, err)
 
 
+def collide_cases(work, pgrf):
+    """(name, argv) of output/input collisions, every command and output
+    flag: an output that is an input file, sits inside an input folder,
+    holds one (folders), or shares a path with another output. Every case
+    must be refused with every input left byte for byte."""
+    d = work / "collide"
+    if d.exists():
+        shutil.rmtree(d)
+    d.mkdir()
+    c = d / "c.dng"
+    shutil.copy(work / "chart.dng", c)
+    for stack in ["bias", "flat", "raws"]:
+        (d / stack).mkdir()
+        shutil.copy(work / "chart.dng", d / stack / "f1.dng")
+    w, t, pj = d / "w.safetensors", d / "t.toml", d / "p.json"
+    w.write_bytes(b"weights stand-in")
+    t.write_text("steps = 1\n")
+    pj.write_text("{}")
+    bias, flat, raws = d / "bias", d / "flat", d / "raws"
+    S = str
+    ev = [pgrf, "eval", "--protocol", "synthetic", "--root", S(c), "--model", "builtin:spc",
+          "--ratio", "100", "--iso", "1600"]
+    tr = [pgrf, "train", "spc", "--config", S(t)]
+    ca = [pgrf, "calibrate", "--bias", S(bias), "--flat", S(flat)]
+    en = [pgrf, "enhance", "--model", "builtin:spc", "--ratio", "20", "--noise", "K=1,read=4"]
+    sy = [pgrf, "synth", S(c), "--profile", "sony-a7s2"]
+    cases = [
+        ("preview_o_input", [pgrf, "preview", S(c), "-o", S(c)]),
+        ("convert_o_input", [pgrf, "convert", S(c), "-o", S(c)]),
+        ("synth_o_input", [*sy, "-o", S(c)]),
+        ("synth_png_input", [*sy, "-o", S(d / "s.dng"), "--png", S(c)]),
+        ("synth_o_png", [*sy, "-o", S(d / "s.dng"), "--png", S(d / "s.dng")]),
+        ("synth_o_profile", [pgrf, "synth", S(c), "--profile", S(pj), "-o", S(pj)]),
+        ("simulate_o_file", [pgrf, "simulate-sensor", "-o", S(c)]),
+        ("make_dataset_o_file", [pgrf, "make-dataset", "--layout", "eld", "-o", S(c)]),
+        ("calibrate_o_frame", [*ca, "-o", S(bias / "f1.dng")]),
+        ("calibrate_o_in_stack", [*ca, "-o", S(bias / "cal.safetensors")]),
+        ("calibrate_report_in_stack", [*ca, "-o", S(d / "cal.st"), "--report", S(flat / "r")]),
+        ("calibrate_masters_in_stack", [*ca, "-o", S(d / "cal.st"), "--masters", S(bias / "m")]),
+        ("calibrate_masters_is_stack", [*ca, "-o", S(d / "cal.st"), "--masters", S(bias)]),
+        ("calibrate_report_holds_stack", [*ca, "-o", S(d / "cal.st"), "--report", S(d)]),
+        ("calibrate_darktable_frame", [*ca, "-o", S(d / "cal.st"), "--darktable-into", S(flat / "f1.dng")]),
+        ("calibrate_o_darktable", [*ca, "-o", S(d / "cal.st"), "--darktable-into", S(d / "cal.st")]),
+        ("train_o_config", [*tr, "-o", S(t)]),
+        ("train_log_config", [*tr, "-o", S(d / "m.st"), "--log", S(t)]),
+        ("train_checkpoint_config", [*tr, "-o", S(d / "m.st"), "--checkpoint", S(t)]),
+        ("train_log_profile", [*tr, "-o", S(d / "m.st"), "--profile", S(pj), "--log", S(pj)]),
+        ("train_o_init", [*tr, "-o", S(w), "--init", S(w)]),
+        ("train_ckpt_in_data", [*tr, "-o", S(d / "m.st"), "--data", S(raws), "--checkpoint", S(raws / "m.ckpt")]),
+        ("train_o_log", [*tr, "-o", S(d / "m.st"), "--log", S(d / "m.st")]),
+        ("enhance_o_input", [*en, S(c), "-o", S(c)]),
+        ("enhance_o_in_folder", [*en, S(raws), "-o", S(raws / "clean")]),
+        ("enhance_o_holds_folder", [*en, S(raws), "-o", S(d)]),
+        ("enhance_png_input", [*en, S(c), "-o", S(d / "e.dng"), "--png", S(c)]),
+        ("enhance_png_o", [*en, S(c), "-o", S(d / "e.dng"), "--png", S(d / "e.dng")]),
+        ("search_plot_model", [pgrf, "search", "--model", S(w), "--procedural", "2", "--plot", S(w)]),
+        ("search_plot_in_val", [pgrf, "search", "--model", S(w), "--val", S(raws), "--plot", S(raws / "p.png")]),
+        ("eval_csv_root", [*ev, "--csv", S(c)]),
+        ("eval_markdown_root", [*ev, "--markdown", S(c)]),
+        ("eval_worst_root", [*ev, "--worst", S(c)]),
+        ("eval_csv_model", [*ev, "--model", S(w), "--csv", S(w)]),
+        ("eval_dump_root", [pgrf, "eval", "--protocol", "synthetic", "--root", S(raws), "--dump", S(raws)]),
+        ("eval_dump_holds_root", [pgrf, "eval", "--protocol", "synthetic", "--root", S(raws), "--dump", S(d)]),
+        ("eval_csv_markdown", [*ev, "--csv", S(d / "r.csv"), "--markdown", S(d / "r.csv")]),
+        ("eval_worst_default", [*ev, "--csv", S(d / "r.csv"), "--markdown", S(d / "r_worst.png")]),
+        ("import_o_input", [pgrf, "import-weights", S(w), "-o", S(w)]),
+        ("export_o_model", [pgrf, "export-weights", S(w), "-o", S(w)]),
+        ("demo_o_holds_photo", [pgrf, "demo", "--photo", S(c), "-o", S(d)]),
+        ("demo_o_is_spc", [pgrf, "demo", "--spc", S(w), "-o", S(w)]),
+    ]
+    return d, cases
+
+
+def tree(d):
+    """Every file under `d` with its bytes."""
+    return {str(p.relative_to(d)): p.read_bytes() for p in sorted(d.rglob("*")) if p.is_file()}
+
+
 def run_37_classes(a, pgrf, work, shared, rng, table, failures, peak_box):
     """Issue 37's classes: every case's verdict against what it must be."""
     out = work / "out"
@@ -406,6 +548,34 @@ def run_37_classes(a, pgrf, work, shared, rng, table, failures, peak_box):
             if v.startswith("exit 2,"):
                 v = "refused"
             record("counts", args[1], name, v, expect, err)
+    if "fitssize" in a.classes:
+        for name, f, expect in fitssize_cases(work):
+            for cmd, args in through_readers(pgrf, f, out).items():
+                if cmd == "enhance" and name == "100mp_bayer16":
+                    # A real job of minutes (100 MP through the network on
+                    # 2 cores), past the run time-out; its memory check is
+                    # the Rust test memory_bounds.rs's.
+                    continue
+                fresh()
+                v, err = go(args)
+                if expect is None and v in ("ok", "refused"):
+                    record("fitssize", cmd, name, v, v, err)
+                else:
+                    record("fitssize", cmd, name, v, expect or "ok or refused", err)
+            f.unlink()
+    if "collide" in a.classes:
+        d, cases = collide_cases(work, pgrf)
+        before = tree(d)
+        for name, args in cases:
+            v, err = go(args)
+            if v.startswith("exit 2,"):
+                v = "refused"
+            after = tree(d)
+            if after != before:
+                v = "overwritten" if any(after.get(k) != b for k, b in before.items()) else "wrote"
+                for k in set(after) - set(before):
+                    (d / k).unlink()
+            record("collide", args[1], name, v, "refused", err)
     if "resume" in a.classes:
         fresh()
 
@@ -425,8 +595,9 @@ def main():
     ap.add_argument("--seed", type=int, default=17)
     ap.add_argument("--work", default=None)
     ap.add_argument("--keep-failures", default=None)
-    ap.add_argument("--classes", default="mutate,dngfield,saturate,counts,resume",
-                    help="comma-separated: mutate (issue 17's five), dngfield, saturate, counts, resume")
+    ap.add_argument("--classes", default="mutate,dngfield,saturate,counts,fitssize,collide,resume",
+                    help="comma-separated: mutate (issue 17's five), dngfield, saturate, counts, fitssize, "
+                         "collide, resume")
     a = ap.parse_args()
     a.classes = set(a.classes.split(","))
     pgrf = a.pgrf

@@ -4,6 +4,7 @@
 
 mod cmd;
 mod input;
+mod io;
 mod progress;
 mod shipped;
 
@@ -70,6 +71,9 @@ fn main() -> ExitCode {
     pgrf_nn::ops::set_kernels(cli.kernels);
     pgrf_noise::darktable::set_profiles_path(cli.darktable_profiles.clone());
     pgrf_core::mem::keep_freed_buffers();
+    if let Err(e) = io::check(&cli.command, cli.darktable_profiles.as_deref()) {
+        return pgrf_core::exit::finish("pgrf", Err(e));
+    }
     let result = match &cli.command {
         Command::Demo(a) => cmd::demo::run(a),
         Command::Info(a) => cmd::info::run(a),

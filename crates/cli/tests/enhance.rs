@@ -325,7 +325,7 @@ fn bad_input_gives_one_line_and_writes_nothing() {
                 "-o",
                 s(&noisy),
             ],
-            &["is the input file"],
+            &["is the input"],
         ),
         (
             vec![

@@ -378,6 +378,11 @@ fn bad_settings_are_one_line_errors_and_write_nothing() {
     let none = d.join("none");
     let empty = d.join("empty");
     std::fs::create_dir_all(&empty).unwrap();
+    // A data folder holding a file that is no image (outputs may not go
+    // into it: pgrf_core::paths::Io).
+    let mixed = d.join("mixed");
+    std::fs::create_dir_all(&mixed).unwrap();
+    std::fs::write(mixed.join("bad.toml"), "stepz = 3\n").unwrap();
     let cases: Vec<(Vec<&str>, &str)> = vec![
         (
             vec!["train", "denoiser", "--config", s(&cfg), "-o", s(&out)],
@@ -392,8 +397,12 @@ fn bad_settings_are_one_line_errors_and_write_nothing() {
             "no files",
         ),
         (
-            vec!["train", "denoiser", "--data", s(&d), "-o", s(&out)],
+            vec!["train", "denoiser", "--data", s(&mixed), "-o", s(&out)],
             "bad.toml",
+        ),
+        (
+            vec!["train", "denoiser", "--data", s(&d), "-o", s(&out)],
+            "is inside the input folder",
         ),
         (
             vec!["train", "flow", "--attn-levels", "7", "-o", s(&out)],
@@ -535,12 +544,12 @@ fn bad_settings_are_one_line_errors_and_write_nothing() {
         ]));
         assert!(e.contains("without CUDA"), "{e}");
     }
-    // The config and the empty folder stay the only entries.
+    // The config and the two data folders stay the only entries.
     let names: Vec<_> = std::fs::read_dir(&d)
         .unwrap()
         .map(|e| e.unwrap().file_name())
         .collect();
-    assert_eq!(names.len(), 2, "{names:?}");
+    assert_eq!(names.len(), 3, "{names:?}");
 }
 
 #[test]

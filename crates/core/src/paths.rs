@@ -36,8 +36,41 @@ pub enum PathError {
         /// The input it would overwrite.
         input: PathBuf,
     },
-    /// Two outputs name one file.
-    #[error("{flag} and {other} both name {}; give two different files", path.display())]
+    /// A folder output names an existing file.
+    #[error("{flag} {} is a file; give a folder", path.display())]
+    IsFile {
+        /// The option that named it.
+        flag: String,
+        /// The output.
+        path: PathBuf,
+    },
+    /// The output lies inside an input folder, where it would join the
+    /// inputs (and the next run would read it as one).
+    #[error("{flag} {} is inside the input folder {}{}; write the result outside it", path.display(), input.display(), named_by(input_flag))]
+    InsideInput {
+        /// The option that named the output.
+        flag: String,
+        /// The output.
+        path: PathBuf,
+        /// The option that named the input folder.
+        input_flag: String,
+        /// The input folder.
+        input: PathBuf,
+    },
+    /// The output folder holds an input, which its files could replace.
+    #[error("{flag} {} holds the input {}{}; write the result into a folder without inputs", path.display(), input.display(), named_by(input_flag))]
+    HoldsInput {
+        /// The option that named the output folder.
+        flag: String,
+        /// The output folder.
+        path: PathBuf,
+        /// The option that named the input.
+        input_flag: String,
+        /// The input inside it.
+        input: PathBuf,
+    },
+    /// Two outputs name one path (or one output folder lies in another).
+    #[error("{flag} and {other} both name {}; give two different paths", path.display())]
     Twice {
         /// The later option.
         flag: String,
@@ -55,6 +88,16 @@ pub enum PathError {
         /// reports print the chain of sources, which would say it twice).
         cause: Box<PathError>,
     },
+}
+
+/// " (FLAG)" after an input the option `flag` named; nothing for a
+/// positional input (`flag` empty).
+fn named_by(flag: &str) -> String {
+    if flag.is_empty() {
+        String::new()
+    } else {
+        format!(" ({flag})")
+    }
 }
 
 /// `p`'s folder must exist.
@@ -79,53 +122,198 @@ pub fn same_file(a: &Path, b: &Path) -> bool {
     }
 }
 
-/// `p` made absolute with its folder resolved, for comparing outputs that
-/// do not exist yet.
+/// `p` made absolute with links and `..` resolved as far as it exists: the
+/// whole path when it exists, else its folder's resolution joined with its
+/// name (an output not written yet), else `p` joined to the current folder.
 fn resolved(p: &Path) -> PathBuf {
+    if let Ok(c) = p.canonicalize() {
+        return c;
+    }
     let dir = p
         .parent()
         .filter(|d| !d.as_os_str().is_empty())
         .unwrap_or(Path::new("."));
     match (dir.canonicalize(), p.file_name()) {
         (Ok(d), Some(name)) => d.join(name),
-        _ => p.to_path_buf(),
+        _ => std::env::current_dir()
+            .map(|c| c.join(p))
+            .unwrap_or_else(|_| p.to_path_buf()),
     }
 }
 
-/// Every check on a command's outputs, before any work: each output's
-/// folder exists, no output is an existing folder, names one of `inputs`,
-/// or is named twice. `outputs` pairs each path with the flag that gave it.
-pub fn check_outputs(outputs: &[(&str, &Path)], inputs: &[&Path]) -> Result<(), PathError> {
-    for (k, (flag, out)) in outputs.iter().enumerate() {
-        require_parent_dir(out).map_err(|e| PathError::Flag {
-            flag: flag.to_string(),
-            cause: Box::new(e),
-        })?;
-        if out.is_dir() {
-            return Err(PathError::IsFolder {
-                flag: flag.to_string(),
-                path: out.to_path_buf(),
-            });
-        }
-        if let Some(input) = inputs.iter().find(|i| same_file(out, i)) {
-            return Err(PathError::IsInput {
-                flag: flag.to_string(),
-                path: out.to_path_buf(),
-                input: input.to_path_buf(),
-            });
-        }
-        if let Some((other, _)) = outputs[..k]
-            .iter()
-            .find(|(_, o)| resolved(o) == resolved(out))
-        {
-            return Err(PathError::Twice {
-                flag: flag.to_string(),
-                other: other.to_string(),
-                path: out.to_path_buf(),
-            });
-        }
+/// What an output is: a file the command writes, or a folder it writes
+/// files into (created if missing).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Kind {
+    /// One file.
+    File,
+    /// A folder of files.
+    Folder,
+}
+
+/// A path and the option that named it.
+#[derive(Clone, Debug)]
+struct Named {
+    flag: String,
+    path: PathBuf,
+}
+
+/// Everything a command reads and writes, declared before any work so that
+/// one rule ([`Io::check`]) decides for every command whether its outputs
+/// are safe to write: no output may be an input, sit inside an input
+/// folder or, as a folder, hold an input; no two outputs may share a path.
+/// Inputs that do not exist (a built-in model's name, a profile name) are
+/// not files and are passed over; the command reports them itself.
+#[derive(Clone, Debug, Default)]
+pub struct Io {
+    inputs: Vec<Named>,
+    outputs: Vec<(Named, Kind)>,
+}
+
+impl Io {
+    /// Nothing read or written yet.
+    pub fn new() -> Self {
+        Self::default()
     }
-    Ok(())
+
+    /// `path` (a file or a folder) is read; `flag` names it in messages
+    /// (empty for positional arguments).
+    pub fn input(&mut self, flag: &str, path: impl AsRef<Path>) -> &mut Self {
+        self.inputs.push(Named {
+            flag: flag.to_string(),
+            path: path.as_ref().to_path_buf(),
+        });
+        self
+    }
+
+    /// Each of `paths` is read.
+    pub fn inputs<P: AsRef<Path>>(
+        &mut self,
+        flag: &str,
+        paths: impl IntoIterator<Item = P>,
+    ) -> &mut Self {
+        for p in paths {
+            self.input(flag, p);
+        }
+        self
+    }
+
+    /// The file `path` is written.
+    pub fn file(&mut self, flag: &str, path: impl AsRef<Path>) -> &mut Self {
+        self.output(flag, path, Kind::File)
+    }
+
+    /// Files are written into the folder `path`.
+    pub fn folder(&mut self, flag: &str, path: impl AsRef<Path>) -> &mut Self {
+        self.output(flag, path, Kind::Folder)
+    }
+
+    /// `path` is written, as a file or a folder of files.
+    pub fn output(&mut self, flag: &str, path: impl AsRef<Path>, kind: Kind) -> &mut Self {
+        let named = Named {
+            flag: flag.to_string(),
+            path: path.as_ref().to_path_buf(),
+        };
+        self.outputs.push((named, kind));
+        self
+    }
+
+    /// `path`, where given, is written.
+    pub fn output_opt(
+        &mut self,
+        flag: &str,
+        path: Option<impl AsRef<Path>>,
+        kind: Kind,
+    ) -> &mut Self {
+        if let Some(p) = path {
+            self.output(flag, p, kind);
+        }
+        self
+    }
+
+    /// The rule, checked on the paths alone (nothing is read or written):
+    /// every output's folder exists; a file output is not an existing
+    /// folder and a folder output not an existing file; no output is an
+    /// input, inside an input folder or (a folder) around an input; no two
+    /// outputs name one path, and no output folder lies in another.
+    pub fn check(&self) -> Result<(), PathError> {
+        let inputs: Vec<(&Named, PathBuf, bool)> = self
+            .inputs
+            .iter()
+            .filter(|i| i.path.exists())
+            .map(|i| (i, resolved(&i.path), i.path.is_dir()))
+            .collect();
+        let mut seen: Vec<(&Named, PathBuf, Kind)> = Vec::new();
+        for (out, kind) in &self.outputs {
+            let flag = out.flag.clone();
+            let path = out.path.clone();
+            require_parent_dir(&path).map_err(|e| PathError::Flag {
+                flag: flag.clone(),
+                cause: Box::new(e),
+            })?;
+            match kind {
+                Kind::File if path.is_dir() => return Err(PathError::IsFolder { flag, path }),
+                Kind::Folder if path.exists() && !path.is_dir() => {
+                    return Err(PathError::IsFile { flag, path })
+                }
+                _ => {}
+            }
+            let at = resolved(&path);
+            for (input, place, is_dir) in &inputs {
+                let input_flag = input.flag.clone();
+                let input_path = input.path.clone();
+                if at == *place || same_file(&path, &input.path) {
+                    return Err(PathError::IsInput {
+                        flag,
+                        path,
+                        input: input_path,
+                    });
+                }
+                if *is_dir && at.starts_with(place) {
+                    return Err(PathError::InsideInput {
+                        flag,
+                        path,
+                        input_flag,
+                        input: input_path,
+                    });
+                }
+                if *kind == Kind::Folder && place.starts_with(&at) {
+                    return Err(PathError::HoldsInput {
+                        flag,
+                        path,
+                        input_flag,
+                        input: input_path,
+                    });
+                }
+            }
+            for (other, place, other_kind) in &seen {
+                let nested = *kind == Kind::Folder
+                    && *other_kind == Kind::Folder
+                    && (at.starts_with(place) || place.starts_with(&at));
+                if at == *place || nested {
+                    return Err(PathError::Twice {
+                        flag,
+                        other: other.flag.clone(),
+                        path,
+                    });
+                }
+            }
+            seen.push((out, at, *kind));
+        }
+        Ok(())
+    }
+}
+
+/// Every check on a command's output files, before any work: [`Io::check`]
+/// with `outputs` (each paired with the flag that gave it) as files and
+/// `inputs` as read.
+pub fn check_outputs(outputs: &[(&str, &Path)], inputs: &[&Path]) -> Result<(), PathError> {
+    let mut io = Io::new();
+    io.inputs("", inputs);
+    for (flag, out) in outputs {
+        io.file(flag, out);
+    }
+    io.check()
 }
 
 #[cfg(test)]
@@ -157,6 +345,88 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.starts_with("-o ") && e.contains("does not exist"), "{e}");
+        std::fs::remove_dir_all(&d).unwrap();
+    }
+
+    #[test]
+    fn outputs_keep_out_of_input_folders_and_away_from_each_other() {
+        let d = std::env::temp_dir().join(format!("pgrf-io-test-{}", std::process::id()));
+        let stack = d.join("bias");
+        std::fs::create_dir_all(&stack).unwrap();
+        std::fs::write(stack.join("f1.dng"), b"raw").unwrap();
+        let model = d.join("m.safetensors");
+        std::fs::write(&model, b"w").unwrap();
+        let check = |outs: &[(&str, PathBuf, Kind)]| {
+            let mut io = Io::new();
+            io.input("--bias", &stack).input("--model", &model);
+            io.input("--profile", "builtin-name-not-a-file");
+            for (flag, p, kind) in outs {
+                io.output(flag, p, *kind);
+            }
+            io.check().map_err(|e| e.to_string())
+        };
+        // Beside the inputs, a file and a folder (new or existing) are fine,
+        // and so is a file in an output folder.
+        std::fs::create_dir_all(d.join("report")).unwrap();
+        let ok = check(&[
+            ("-o", d.join("c.safetensors"), Kind::File),
+            ("--report", d.join("report"), Kind::Folder),
+            ("--log", d.join("report").join("log.csv"), Kind::File),
+        ]);
+        assert_eq!(ok, Ok(()));
+        // The model through another spelling.
+        let e = check(&[("--csv", d.join("bias/../m.safetensors"), Kind::File)]).unwrap_err();
+        assert!(e.contains("is the input"), "{e}");
+        // A file or folder inside the stack, even one not made yet.
+        for (p, kind) in [
+            (stack.join("c.safetensors"), Kind::File),
+            (stack.join("masters"), Kind::Folder),
+            (stack.clone(), Kind::Folder),
+        ] {
+            let e = check(&[("--masters", p, kind)]).unwrap_err();
+            assert!(
+                e.contains("inside the input folder") && e.contains("(--bias)")
+                    || e.contains("is the input"),
+                "{e}"
+            );
+        }
+        // A folder around an input: the stack's parent holds it.
+        let e = check(&[("--dump", d.clone(), Kind::Folder)]).unwrap_err();
+        assert!(
+            e.contains("holds the input")
+                && e.ends_with("(--bias); write the result into a folder without inputs"),
+            "{e}"
+        );
+        // A folder output that is a file, two outputs on one path, one
+        // output folder in another.
+        let e = check(&[("--report", model.clone(), Kind::Folder)]).unwrap_err();
+        assert!(
+            e.contains("is a file; give a folder") || e.contains("is the input"),
+            "{e}"
+        );
+        let r = d.join("r.csv");
+        let e = check(&[
+            ("--csv", r.clone(), Kind::File),
+            ("--markdown", r, Kind::File),
+        ])
+        .unwrap_err();
+        assert_eq!(
+            e,
+            format!(
+                "--markdown and --csv both name {}; give two different paths",
+                d.join("r.csv").display()
+            )
+        );
+        std::fs::create_dir_all(d.join("out")).unwrap();
+        let e = check(&[
+            ("--report", d.join("out"), Kind::Folder),
+            ("--masters", d.join("out").join("m"), Kind::Folder),
+        ])
+        .unwrap_err();
+        assert!(e.contains("--masters and --report both name"), "{e}");
+        std::fs::write(d.join("plain"), b"x").unwrap();
+        let e = check(&[("--report", d.join("plain"), Kind::Folder)]).unwrap_err();
+        assert!(e.ends_with("is a file; give a folder"), "{e}");
         std::fs::remove_dir_all(&d).unwrap();
     }
 }

@@ -22,7 +22,7 @@ mod metrics;
 pub mod npy;
 
 pub use compare::{compare_files, CompareError, FileScores};
-pub use evaluation::{run_protocol, EvalConfig, EvalError, Evaluation, SyntheticSpec};
+pub use evaluation::{run_protocol, worst_path, EvalConfig, EvalError, Evaluation, SyntheticSpec};
 pub use method::{CaseInfo, CaseNoise, MethodUnderTest};
 
 pub use metrics::cast;

@@ -13,6 +13,15 @@ use pgrf_noise::ModelKind;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
+/// The most optimiser steps a run may ask for: the paper's runs take 10^5
+/// to 10^6, and the run keeps one loss per step.
+pub const MAX_STEPS: u64 = 1_000_000_000;
+
+/// The most data threads a run may ask for: beyond the cores a machine has
+/// they only queue batches (each holding memory), and a thread per request
+/// would run the process out of them.
+pub const MAX_WORKERS: usize = 64;
+
 /// What `pgrf train` trains: the paper's two methods.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
@@ -122,8 +131,8 @@ pub struct TrainConfig {
     /// Memory for decoded training RAWs, MiB [default: 4096].
     #[cfg_attr(feature = "clap", arg(long, default_value_t = d().cache_mib, hide_default_value = true))]
     pub cache_mib: usize,
-    /// Optimisation steps [default: 30000].
-    #[cfg_attr(feature = "clap", arg(long, default_value_t = d().steps, hide_default_value = true))]
+    /// Optimisation steps, at most 10^9 [default: 30000].
+    #[cfg_attr(feature = "clap", arg(long, default_value_t = d().steps, hide_default_value = true, value_parser = clap::value_parser!(u64).range(..=MAX_STEPS)))]
     pub steps: u64,
     /// Base learning rate [default: 1e-4].
     #[cfg_attr(feature = "clap", arg(long, default_value_t = d().lr, hide_default_value = true))]
@@ -516,6 +525,24 @@ impl TrainConfig {
                 ),
                 ));
             }
+        }
+        if self.steps > MAX_STEPS {
+            return Err(bad(
+                "--steps",
+                format!(
+                    "--steps must be at most {MAX_STEPS} (the log keeps a loss per step), got {}",
+                    self.steps
+                ),
+            ));
+        }
+        if !(1..=MAX_WORKERS).contains(&self.workers) {
+            return Err(bad(
+                "--workers",
+                format!(
+                    "--workers is a number of data threads, 1 to {MAX_WORKERS}, got {}",
+                    self.workers
+                ),
+            ));
         }
         if self.photo_downscale == 0 {
             return Err(bad(

@@ -279,15 +279,23 @@ fn finished(st: &CheckpointState, s: &TrainConfig, outputs: &TrainOutputs) -> Op
 /// Refuse a run whose step (or validation crop) would not fit in memory.
 fn check_memory(c: &TrainConfig, arch: &Architecture) -> Result<()> {
     use crate::infer::memory::{tile_bytes, training_bytes};
-    let (p, b, v) = (c.patch, c.batch, c.val_patch());
-    let need = training_bytes(arch, p, b).max(tile_bytes(arch, v, v));
+    let (p, b, v, n) = (c.patch, c.batch, c.val_patch(), c.val_pairs);
+    // The data workers each keep two batches of crops ready besides the
+    // step's own (pairs and the flow's start fields, four planes of f32).
+    let queued = (c.workers.max(1) * 2 * b) as f64 * 3.0 * 16.0 * (p * p) as f64;
+    let need = training_bytes(arch, p, b).max(tile_bytes(arch, v, v))
+        + crate::data::validation::ValSet::bytes(v, n)
+        + queued;
     pgrf_core::mem::check_fits(
-        &format!("training with --patch {p} --batch {b} (validation crops {v})"),
+        &format!(
+            "training with --patch {p} --batch {b} --workers {} and {n} validation pairs of {v}",
+            c.workers
+        ),
         need,
     )
     .map_err(|e| {
         NnError::TooLarge(format!(
-            "{e}; give a smaller --patch, --batch or --val-patch"
+            "{e}; give a smaller --patch, --batch, --val-patch or fewer --val-pairs"
         ))
     })
 }
@@ -592,7 +600,7 @@ fn train<B: PgrfAutodiff>(
         augment: !s.no_augment,
         extras: j.arch.extras(s.time_max),
     };
-    let mut loader = Loader::start(source, mix, sample, s.batch, start, s.workers, 2);
+    let mut loader = Loader::start(source, mix, sample, s.batch, start, s.workers, 2)?;
     let shape = [s.batch, 4, s.patch, s.patch];
     let clock = Instant::now();
     let mut losses = Vec::new();

@@ -61,19 +61,29 @@ fn decode_source(
         return crate::fits_frame::frame_from_fits(path, source.buf(), overrides);
     }
     crate::container::check(source.buf()).map_err(|reason| RawError::decode(path, reason))?;
-    let (image, exif) = quietly(|| -> std::result::Result<_, String> {
-        let decoder = rawler::get_decoder(&source).map_err(|e| e.to_string())?;
+    let (image, exif) = quietly(|| -> std::result::Result<_, Stop> {
+        let decoder = rawler::get_decoder(&source).map_err(|e| Stop::Decoder(e.to_string()))?;
         let params = RawDecodeParams::default();
+        // The frame's size without its pixels (rawler's `dummy` decode),
+        // checked against the memory there is before the real decode.
+        if let Ok(shape) = decoder.raw_image(&source, &params, true) {
+            let (w, h) = (shape.width * shape.cpp, shape.height);
+            crate::memory::check_frame(path, "decoding", w, h, crate::memory::DECODE)
+                .map_err(Stop::Memory)?;
+        }
         let image = decoder
             .raw_image(&source, &params, false)
-            .map_err(|e| e.to_string())?;
+            .map_err(|e| Stop::Decoder(e.to_string()))?;
         // EXIF is a convenience; a file whose pixels decode but whose
         // metadata does not is still usable.
         let exif = decoder.raw_metadata(&source, &params).ok();
         Ok((image, exif))
     })
-    .and_then(|r| r)
-    .map_err(|reason| RawError::decode(path, tidy_reason(&reason)))?;
+    .map_err(|reason| RawError::decode(path, tidy_reason(&reason)))?
+    .map_err(|stop| match stop {
+        Stop::Decoder(reason) => RawError::decode(path, tidy_reason(&reason)),
+        Stop::Memory(e) => e,
+    })?;
     let mut frame = frame_from_rawler(path, image, exif)?;
     frame.temperature_c = crate::container::exif_temperature(source.buf());
     // A damaged NoiseProfile does not make the photo unreadable: it is left
@@ -84,6 +94,13 @@ fn decode_source(
         .flatten();
     frame.apply_overrides(overrides)?;
     Ok(frame)
+}
+
+/// Why a decode stopped: rawler's complaint, or a frame the memory cannot
+/// hold.
+enum Stop {
+    Decoder(String),
+    Memory(RawError),
 }
 
 /// rawler's messages start with "Error: " or carry its issue-tracker hint;

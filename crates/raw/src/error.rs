@@ -37,6 +37,15 @@ pub enum RawError {
         /// What about it pgrf cannot handle, on one line.
         reason: String,
     },
+    /// A frame (or one stage's work on it) that the memory available cannot
+    /// hold, refused before the allocation that would abort the process.
+    #[error("{path}: {reason}")]
+    Memory {
+        /// The file.
+        path: PathBuf,
+        /// What needs how much, and how much there is, on one line.
+        reason: String,
+    },
     /// A frame with no pixels.
     #[error("invalid input: empty frame {width}x{height}")]
     EmptyFrame {

@@ -319,6 +319,9 @@ fn read_primary(name: &Path, bytes: &[u8]) -> Result<FitsImage> {
             )));
         }
     }
+    if let Some(why) = crate::container::limits::too_many_pixels(width, height) {
+        return Err(decode(why));
+    }
     let sample_bytes = u64::from(bitpix.unsigned_abs() / 8);
     let need = width * height * sample_bytes; // <= 65536^2 * 8: no overflow
     let have = (bytes.len() - data_start.min(bytes.len())) as u64;
@@ -329,6 +332,7 @@ fn read_primary(name: &Path, bytes: &[u8]) -> Result<FitsImage> {
     }
     let (width, height) = (width as usize, height as usize);
     let n = width * height;
+    crate::memory::check_frame(name, "decoding", width, height, crate::memory::DECODE)?;
 
     // Scaling keywords.
     let bzero = number(header, "BZERO").map_err(decode)?.unwrap_or(0.0);

@@ -559,13 +559,21 @@ fn huge_header_claim_errors_without_allocating() {
     LARGEST.with(|m| m.set(0));
     let e = error_line(&bytes);
     let largest = LARGEST.with(Cell::get);
+    // Past 600 MP: refused from the header alone (issue 37).
     assert!(
-        e.contains(
-            "truncated: the image needs 8589934592 bytes after the header, the file has 2880"
-        ),
+        e.contains("a 65536 x 65536 image (4295 megapixels), more than any camera makes"),
         "{e}"
     );
     assert!(largest < 1 << 20, "largest allocation {largest} bytes");
+    // Within 600 MP, a header whose data are missing is truncated.
+    let bytes = raw_fits(&image_cards(16, &[20000, 20000]), &[0u8; 100]);
+    let e = error_line(&bytes);
+    assert!(
+        e.contains(
+            "truncated: the image needs 800000000 bytes after the header, the file has 2880"
+        ),
+        "{e}"
+    );
 
     for (axes, key) in [([70000usize, 4], "NAXIS1 = 70000"), ([4, 1], "NAXIS2 = 1")] {
         let e = error_line(&raw_fits(&image_cards(16, &axes), &[0u8; 16]));

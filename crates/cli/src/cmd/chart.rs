@@ -40,7 +40,6 @@ pub fn run(a: &ChartArgs) -> Result<()> {
     if !(a.exposure > 0.0 && a.exposure <= 1.0) {
         bail!("--exposure must be in (0, 1], got {}", a.exposure);
     }
-    pgrf_core::paths::check_outputs(&[("-o", &a.output)], &[])?;
     let spec = ChartSpec {
         width: a.width,
         height: a.height,

@@ -23,8 +23,9 @@ pub struct ConvertArgs {
 }
 
 pub fn run(a: &ConvertArgs) -> Result<()> {
-    pgrf_core::paths::check_outputs(&[("-o", &a.output)], &[&a.file])?;
     let frame = a.input.open(&a.file)?;
+    let (w, h) = (frame.width, frame.height);
+    pgrf_raw::memory::check_frame(&a.file, "writing", w, h, pgrf_raw::memory::WRITE)?;
     let opts = DngOptions {
         compression: if a.uncompressed {
             Compression::Uncompressed

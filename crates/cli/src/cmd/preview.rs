@@ -39,8 +39,13 @@ pub fn run(a: &PreviewArgs) -> Result<()> {
     if a.png_bits != 8 && a.png_bits != 16 {
         bail!("--png-bits must be 8 or 16, got {}", a.png_bits);
     }
-    pgrf_core::paths::check_outputs(&[("-o", &a.output)], &[&a.file])?;
     let frame = a.input.open(&a.file)?;
+    let per_pixel = if a.half {
+        pgrf_raw::memory::PREVIEW_HALF
+    } else {
+        pgrf_raw::memory::PREVIEW_FULL
+    };
+    pgrf_raw::memory::check_frame(&a.file, "previewing", frame.width, frame.height, per_pixel)?;
     let p = render_preview(
         &frame,
         &PreviewOptions {

@@ -84,13 +84,6 @@ pub struct SynthArgs {
 }
 
 pub fn run(a: &SynthArgs) -> Result<()> {
-    let mut outputs = vec![("-o", a.output.as_path())];
-    if let Some(p) = &a.png {
-        outputs.push(("--png", p.as_path()));
-    }
-    let mut inputs = vec![a.clean.as_path(), std::path::Path::new(&a.profile)];
-    inputs.extend(a.calib.as_deref());
-    pgrf_core::paths::check_outputs(&outputs, &inputs)?;
     if let Some(g) = a.png_gain {
         if !(g.is_finite() && g > 0.0) {
             bail!("--png-gain must be a positive number, got {g}");

@@ -44,19 +44,6 @@ pub fn run(a: &TrainArgs) -> Result<()> {
         print!("{}", config.to_toml());
         return Ok(());
     }
-    // Every file the run writes, checked before any work: folders exist,
-    // none is a folder or one of the run's inputs, no two are the same.
-    let out = config.outputs()?;
-    let inputs = config.input_files();
-    let inputs: Vec<&std::path::Path> = inputs.iter().map(|p| p.as_path()).collect();
-    pgrf_core::paths::check_outputs(
-        &[
-            ("-o", &out.weights),
-            ("--checkpoint", &out.checkpoint),
-            ("--log", &out.log),
-        ],
-        &inputs,
-    )?;
     let started = Arc::new(AtomicBool::new(false));
     let stop = stop_on_ctrl_c(started.clone());
     let progress = Steps {

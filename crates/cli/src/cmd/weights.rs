@@ -31,7 +31,6 @@ pub fn run_import(a: &ImportArgs) -> Result<()> {
             a.arch
         );
     }
-    pgrf_core::paths::check_outputs(&[("-o", &a.output)], &[&a.file])?;
     let imported = interop::import_sid(&a.file, a.from, a.key.as_deref())?;
     let bytes = imported.encode()?;
     pgrf_core::write_atomic(&a.output, &bytes)
@@ -95,7 +94,6 @@ pub fn run_export(a: &ExportArgs) -> Result<()> {
             a.output.display()
         ),
     };
-    pgrf_core::paths::check_outputs(&[("-o", &a.output)], &[&a.model])?;
     let (meta, tensors, out) = interop::export_file(&a.model, pth)?;
     pgrf_core::write_atomic(&a.output, &out.bytes)
         .with_context(|| format!("-o {}", a.output.display()))?;

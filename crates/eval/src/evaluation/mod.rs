@@ -9,6 +9,7 @@
 
 mod header;
 mod write;
+pub use write::worst_path;
 
 use crate::dataset::run::{Outcome, RunOptions, Worst, NOISY};
 use crate::dataset::synthetic::{self, Synthetic, DEFAULT_ISOS, DEFAULT_RATIOS};

@@ -16,11 +16,11 @@ fn write_file(path: &Path, text: &str) -> Result<(), EvalError> {
     })
 }
 
-/// Where the worst-images picture goes: as given, else next to the CSV as
-/// NAME_worst.png, else nowhere.
-fn worst_path(cfg: &EvalConfig) -> Option<PathBuf> {
-    cfg.worst.clone().or_else(|| {
-        cfg.csv.as_ref().map(|c| {
+/// Where the worst-images picture goes: `worst` as given, else next to the
+/// CSV as NAME_worst.png, else nowhere.
+pub fn worst_path(worst: Option<&Path>, csv: Option<&Path>) -> Option<PathBuf> {
+    worst.map(Path::to_path_buf).or_else(|| {
+        csv.map(|c| {
             let stem = c.file_stem().unwrap_or_default().to_string_lossy();
             c.with_file_name(format!("{stem}_worst.png"))
         })
@@ -48,7 +48,7 @@ impl Evaluation {
             write_file(p, &text)?;
             wrote(&format!("wrote {}", p.display()));
         }
-        if let Some(p) = worst_path(cfg) {
+        if let Some(p) = worst_path(cfg.worst.as_deref(), cfg.csv.as_deref()) {
             if !self.worst.is_empty() {
                 let cols = &self.worst_columns;
                 write_worst(&self.worst, cols, &p)?;

@@ -54,13 +54,17 @@ pub fn parse_data(text: &str) -> Result<Vec<DataEntry>> {
 }
 
 impl TrainConfig {
-    /// The files a run reads: the `data` entries' files and folders (none
-    /// when `data` does not parse), the calibration, the camera for photos
-    /// and the starting weights; what no output may overwrite.
+    /// The files a run reads: the `data` and `val_data` entries' files and
+    /// folders (none when they do not parse), the calibration, the camera
+    /// for photos and the starting weights; what no output may overwrite.
     pub fn input_files(&self) -> Vec<PathBuf> {
-        let mut inputs: Vec<PathBuf> = parse_data(&self.data)
-            .map(|entries| entries.into_iter().filter_map(|e| e.path).collect())
-            .unwrap_or_default();
+        let entries = |text: &str| -> Vec<PathBuf> {
+            parse_data(text)
+                .map(|entries| entries.into_iter().filter_map(|e| e.path).collect())
+                .unwrap_or_default()
+        };
+        let mut inputs = entries(&self.data);
+        inputs.extend(self.val_data.as_deref().map(entries).unwrap_or_default());
         inputs.extend(self.calib.clone());
         inputs.extend(self.camera_like.clone());
         inputs.extend(self.init.clone());

@@ -209,7 +209,7 @@ impl Loader {
         start: u64,
         workers: usize,
         ahead: usize,
-    ) -> Loader {
+    ) -> Result<Loader> {
         let workers = workers.max(1);
         let mut receivers = Vec::new();
         let mut handles = Vec::new();
@@ -230,16 +230,21 @@ impl Loader {
                         b += workers as u64;
                     }
                 })
-                .expect("spawn data worker");
+                .map_err(|e| {
+                    NnError::TooLarge(format!(
+                        "starting data thread {} of {workers}: {e}; give fewer --workers",
+                        w + 1
+                    ))
+                })?;
             receivers.push(rx);
             handles.push(h);
         }
-        Loader {
+        Ok(Loader {
             receivers,
             next: start,
             start,
             handles,
-        }
+        })
     }
 
     /// The next batch in order.
@@ -270,7 +275,7 @@ pub fn loader_rate(
         augment: true,
         extras: Extras::None,
     };
-    let mut loader = Loader::start(source, mix, sample, batch, 0, workers, 2);
+    let mut loader = Loader::start(source, mix, sample, batch, 0, workers, 2)?;
     for _ in 0..workers.max(1) {
         loader.next_batch()?;
     }
@@ -316,9 +321,9 @@ mod tests {
         };
         let src = Arc::new(Source::Procedural);
         let sp = Arc::new(PairMix::from(spec()));
-        let mut one = Loader::start(src.clone(), sp.clone(), sample.clone(), 2, 0, 1, 1);
-        let mut three = Loader::start(src.clone(), sp.clone(), sample.clone(), 2, 0, 3, 2);
-        let mut late = Loader::start(src, sp, sample, 2, 2, 2, 1);
+        let mut one = Loader::start(src.clone(), sp.clone(), sample.clone(), 2, 0, 1, 1).unwrap();
+        let mut three = Loader::start(src.clone(), sp.clone(), sample.clone(), 2, 0, 3, 2).unwrap();
+        let mut late = Loader::start(src, sp, sample, 2, 2, 2, 1).unwrap();
         let a: Vec<Batch> = (0..4).map(|_| one.next_batch().unwrap()).collect();
         let b: Vec<Batch> = (0..4).map(|_| three.next_batch().unwrap()).collect();
         let c = late.next_batch().unwrap();
@@ -410,8 +415,8 @@ mod tests {
             extras: Extras::None,
         };
         let sp = Arc::new(PairMix::from(spec()));
-        let mut one = Loader::start(mix(open()), sp.clone(), sample.clone(), 4, 0, 1, 1);
-        let mut three = Loader::start(mix(open()), sp, sample, 4, 0, 3, 2);
+        let mut one = Loader::start(mix(open()), sp.clone(), sample.clone(), 4, 0, 1, 1).unwrap();
+        let mut three = Loader::start(mix(open()), sp, sample, 4, 0, 3, 2).unwrap();
         let mut photo_like = 0;
         for _ in 0..10 {
             let (a, b) = (one.next_batch().unwrap(), three.next_batch().unwrap());

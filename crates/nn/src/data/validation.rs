@@ -40,6 +40,13 @@ pub struct ValSet {
 }
 
 impl ValSet {
+    /// Bytes `count` pairs of `patch` x `patch` packed crops hold: the
+    /// noisy input, the clean target and the start field, four planes of
+    /// f32 each; checked against the memory there is before they are made.
+    pub fn bytes(patch: usize, count: usize) -> f64 {
+        count as f64 * 3.0 * 4.0 * (patch * patch) as f64 * 4.0
+    }
+
     /// `count` pairs of `patch` x `patch` crops from `source`, noise from
     /// `mix`, no augmentation: pair i is a function of (`seed`, i) only,
     /// drawn from streams apart from the training samples of the same seed.

@@ -252,6 +252,14 @@ pub fn enhance_file<P: Progress>(
             path: job.input.clone(),
             source,
         })?;
+    crate::infer::memory::check_frame(
+        restorer,
+        &job.input,
+        (frame.width, frame.height),
+        cfg.tiling.tile,
+        cfg.tiling.device,
+        job.png.is_some(),
+    )?;
     let (dark, defects_corrected) = calibrate(cfg, &mut frame)?;
     let (ratio, ratio_auto) = ratio_of(&frame, dark.as_ref(), cfg.ratio)?;
     let noise = match restorer.meta().arch.conditioning().needs_level() {

@@ -83,6 +83,54 @@ pub fn fixed_bytes(r: &dyn crate::infer::Restore, ph: usize, pw: usize) -> u64 {
     (4 * ph * pw * 4 * (3 + r.samples())) as u64 + r.weight_bytes()
 }
 
+/// Refuse to restore `file`'s `width` x `height` mosaic with `r` when the
+/// memory there is cannot hold its frame buffers (one start field per flow
+/// sample among them), the smallest tile the run would use, the restored
+/// frame's DNG and, with `preview`, its sRGB preview; checked once the
+/// frame is decoded, before any of these is allocated. `tile` is the
+/// user's tile, else the automatic one; on CUDA the tiles are on the card
+/// and only the host's buffers count.
+pub fn check_frame(
+    r: &dyn crate::infer::Restore,
+    file: &std::path::Path,
+    (width, height): (usize, usize),
+    tile: Option<usize>,
+    device: crate::backend::DeviceKind,
+    preview: bool,
+) -> Result<(), crate::NnError> {
+    let (ph, pw) = (height / 2, width / 2);
+    let pixels = (width * height) as f64;
+    let mut need = fixed_bytes(r, ph, pw) as f64 + pixels * pgrf_raw::memory::WRITE;
+    if preview {
+        need += pixels * pgrf_raw::memory::PREVIEW_FULL;
+    }
+    if device == crate::backend::DeviceKind::Cpu {
+        let t = tile
+            .unwrap_or_else(|| auto_tile(device, r, ph, pw))
+            .min(ph.max(pw));
+        need += windowed_tile_bytes(&r.meta().arch, t.min(ph), t.min(pw), r.window());
+    }
+    let samples = r.samples();
+    let what = format!(
+        "{}: restoring its {width} x {height} frame ({:.0} MP){}",
+        file.display(),
+        pixels / 1e6,
+        if samples > 1 {
+            format!(" with --samples {samples}")
+        } else {
+            String::new()
+        }
+    );
+    pgrf_core::mem::check_fits(&what, need).map_err(|e| {
+        let hint = if samples > 1 {
+            "; each sample holds a start field of the frame: give fewer --samples"
+        } else {
+            ""
+        };
+        crate::NnError::TooLarge(format!("{e}{hint}"))
+    })
+}
+
 /// The tile `pgrf enhance` uses unless told: on the CPU the largest tile
 /// whose estimated peak fits in half the available memory once the frame's
 /// buffers and the weights are set aside (the whole frame when it fits), on

@@ -13,6 +13,11 @@ use crate::weights::{self, WeightMeta};
 use burn::tensor::backend::Backend;
 use burn::tensor::{Tensor, TensorData};
 use ndarray::{Array3, ArrayView3};
+
+/// The most flow samples averaged (`--samples`, in enhance and in the
+/// search's averaging study); each holds a start field of the whole frame,
+/// and every sample costs a full two-stage pass.
+pub const MAX_SAMPLES: usize = 64;
 use std::path::Path;
 
 /// t2 used when a flow model's file has not been through `pgrf search`.
@@ -141,10 +146,13 @@ impl<B: PgrfOps> Restorer<B> {
                 message: format!("t2 must be in [0, 1], got {t2}"),
             });
         }
-        if choice.samples == 0 {
+        if !(1..=MAX_SAMPLES).contains(&choice.samples) {
             return Err(NnError::BadSetting {
                 flag: "--samples",
-                message: "--samples must be at least 1".into(),
+                message: format!(
+                    "--samples must be from 1 to {MAX_SAMPLES}, got {}",
+                    choice.samples
+                ),
             });
         }
         let sampler = match choice.kind {

@@ -17,7 +17,7 @@ pub const MAX_LISTED: u64 = 1 << 22;
 pub const MAX_BOXES: usize = 1 << 16;
 
 /// The megapixels of a `w` x `h` image, when more than [`MAX_PIXELS`].
-pub(super) fn too_many_pixels(w: u64, h: u64) -> Option<String> {
+pub(crate) fn too_many_pixels(w: u64, h: u64) -> Option<String> {
     let pixels = w.saturating_mul(h);
     (pixels > MAX_PIXELS).then(|| {
         format!(

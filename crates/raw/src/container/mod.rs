@@ -65,7 +65,7 @@
 
 mod bmff;
 mod lenient;
-mod limits;
+pub(crate) mod limits;
 mod makernote;
 mod mrw;
 mod order;

@@ -66,8 +66,7 @@ pub(crate) fn reported_counts(k_max: usize) -> Vec<usize> {
     v
 }
 
-/// The most samples the averaging study takes.
-pub(crate) const MAX_SAMPLES: usize = 64;
+use crate::infer::restorer::MAX_SAMPLES;
 
 /// How to search.
 #[derive(Clone, Debug)]
@@ -317,8 +316,7 @@ pub fn run(req: &SearchRequest, progress: &dyn Progress, warn: &dyn Fn(&str)) ->
         });
     }
     let p = req.patch;
-    let need =
-        crate::infer::memory::tile_bytes(&meta.arch, p, p) + (count * 3 * 4 * p * p * 4) as f64;
+    let need = crate::infer::memory::tile_bytes(&meta.arch, p, p) + ValSet::bytes(p, count);
     pgrf_core::mem::check_fits(&format!("--patch {p} with {count} pairs"), need)
         .map_err(|e| NnError::TooLarge(format!("{e}; give a smaller --patch or fewer pairs")))?;
     let val = ValSet::build(&source, &built.mix, p, count, req.options.seed)?;

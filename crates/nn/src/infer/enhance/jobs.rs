@@ -84,7 +84,7 @@ pub fn plan_jobs(
     output: &Path,
     previews: Previews,
 ) -> Result<Vec<Job>, NnError> {
-    let is_dng = check_output_name(output)?;
+    let is_dng = output_is_dng(output)?;
     let (mut inputs, had_dir) = expand_inputs(paths)?;
     let single = inputs.len() == 1 && !had_dir;
     if let Previews::At(p) = previews {
@@ -142,7 +142,7 @@ pub fn plan_jobs(
 /// existing file or another extension (`-o model.safetensors`) is refused
 /// in one line saying what enhance writes, rather than taken for a folder
 /// to create ("File exists").
-fn check_output_name(output: &Path) -> Result<bool, NnError> {
+pub fn output_is_dng(output: &Path) -> Result<bool, NnError> {
     if output.is_dir() {
         return Ok(false);
     }

@@ -1,0 +1,177 @@
+//! What every command reads and writes, declared in one place and checked
+//! by one rule ([`pgrf_core::paths::Io::check`]) before the command starts:
+//! no output may be an input, sit inside an input folder or, as a folder,
+//! hold an input, and no two outputs may share a path. A command that adds
+//! a path option declares it here.
+
+use crate::cmd;
+use crate::Command;
+use anyhow::Result;
+use pgrf_core::paths::{Io, Kind};
+use std::path::{Path, PathBuf};
+
+/// Check `command`'s paths (and the global `--darktable-profiles` file,
+/// which every command may read) before any work.
+pub fn check(command: &Command, darktable_profiles: Option<&Path>) -> Result<()> {
+    let mut io = Io::new();
+    if let Some(p) = darktable_profiles {
+        io.input("--darktable-profiles", p);
+    }
+    declare(command, &mut io)?;
+    io.check()?;
+    Ok(())
+}
+
+/// The files a camera-profile option names (`dng:FILE`, a JSON file, in a
+/// mix of several); built-in and darktable names are no files and are
+/// passed over by the check.
+fn profile_files(spec: &str) -> Vec<PathBuf> {
+    pgrf_noise::mix::parse_profiles(spec)
+        .map(|entries| {
+            entries
+                .into_iter()
+                .map(|e| PathBuf::from(e.name.strip_prefix("dng:").unwrap_or(&e.name)))
+                .collect()
+        })
+        .unwrap_or_default()
+}
+
+fn declare(command: &Command, io: &mut Io) -> Result<()> {
+    match command {
+        Command::Demo(a) => {
+            io.inputs("--photo", &a.photo)
+                .inputs("--spc", &a.spc)
+                .inputs("--pgrf", &a.pgrf)
+                .folder("-o", &a.output);
+        }
+        Command::Info(a) => {
+            io.input("", &a.file);
+        }
+        Command::Metrics(a) => {
+            io.input("", &a.output).input("", &a.reference);
+        }
+        Command::Profiles(_) => {}
+        Command::Preview(a) => {
+            io.input("", &a.file).file("-o", &a.output);
+        }
+        Command::Convert(a) => {
+            io.input("", &a.file).file("-o", &a.output);
+        }
+        Command::Chart(a) => {
+            io.file("-o", &a.output);
+        }
+        Command::Synth(a) => declare_synth(a, io),
+        Command::SimulateSensor(a) => {
+            io.folder("-o", &a.output);
+        }
+        Command::MakeDataset(a) => {
+            io.folder("-o", &a.output);
+        }
+        Command::Calibrate(a) => declare_calibrate(a, io)?,
+        Command::Train(a) => declare_train(a, io)?,
+        Command::Enhance(a) => declare_enhance(a, io)?,
+        Command::Search(a) => {
+            let r = a.request();
+            io.input("--model", &r.model)
+                .inputs("--val", &a.val)
+                .inputs("--calib", &a.calib)
+                .file("--plot", &r.plot);
+        }
+        Command::Eval(a) => declare_eval(a, io)?,
+        Command::ImportWeights(a) => {
+            io.input("", &a.file).file("-o", &a.output);
+        }
+        Command::ExportWeights(a) => {
+            io.input("", &a.model).file("-o", &a.output);
+        }
+    }
+    Ok(())
+}
+
+fn declare_synth(a: &cmd::synth::SynthArgs, io: &mut Io) {
+    io.input("", &a.clean)
+        .inputs("--calib", &a.calib)
+        .inputs("--profile", profile_files(&a.profile))
+        .file("-o", &a.output)
+        .output_opt("--png", a.png.as_ref(), Kind::File);
+}
+
+fn declare_calibrate(a: &cmd::calibrate::CalibrateArgs, io: &mut Io) -> Result<()> {
+    io.input("--bias", &a.bias)
+        .inputs("--dark", &a.dark)
+        .input("--flat", &a.flat)
+        .file("-o", &a.output)
+        .output_opt("--report", a.report.as_ref(), Kind::Folder)
+        .output_opt("--masters", a.masters.as_ref(), Kind::Folder);
+    let darktable = a
+        .darktable_into
+        .clone()
+        .unwrap_or_else(|| a.output.with_extension("noiseprofiles.json"));
+    let flag = if a.darktable_into.is_some() {
+        "--darktable-into"
+    } else {
+        "-o (its darktable entry)"
+    };
+    io.file(flag, darktable);
+    Ok(())
+}
+
+fn declare_train(a: &cmd::train::TrainArgs, io: &mut Io) -> Result<()> {
+    io.inputs("--config", &a.config);
+    let config = a.settings.merge(a.config.as_deref(), a.method)?;
+    io.inputs("--data", config.input_files())
+        .inputs("--profile", profile_files(&config.profile));
+    if a.print_config {
+        return Ok(());
+    }
+    let out = config.outputs()?;
+    io.file("-o", &out.weights)
+        .file("--checkpoint", &out.checkpoint)
+        .file("--log", &out.log);
+    Ok(())
+}
+
+fn declare_enhance(a: &cmd::enhance::EnhanceArgs, io: &mut Io) -> Result<()> {
+    let e = &a.enhance;
+    let is_dng = pgrf_nn::infer::enhance::jobs::output_is_dng(&e.output)?;
+    let kind = if is_dng { Kind::File } else { Kind::Folder };
+    io.inputs("", &e.inputs)
+        .inputs("--from-list", &e.from_list)
+        .input("--model", &e.model)
+        .inputs("--calib", &e.calib)
+        .output("-o", &e.output, kind)
+        .output_opt("--manifest", e.manifest.as_ref(), Kind::File);
+    if let Some(Some(png)) = &e.png {
+        io.file("--png", png);
+    }
+    Ok(())
+}
+
+fn declare_eval(a: &cmd::eval::EvalArgs, io: &mut Io) -> Result<()> {
+    let e = &a.eval;
+    io.inputs("--root", &e.root)
+        .inputs("--model", &a.model)
+        .inputs("--list", &e.list)
+        .inputs(
+            "--profile",
+            e.profile.as_deref().map(profile_files).unwrap_or_default(),
+        );
+    for item in &e.outputs {
+        if let Some((_, dir)) = item.split_once('=') {
+            io.input("--outputs", dir);
+        }
+    }
+    io.output_opt("--csv", e.csv.as_ref(), Kind::File)
+        .output_opt("--markdown", e.markdown.as_ref(), Kind::File)
+        .output_opt(
+            if e.worst.is_some() {
+                "--worst"
+            } else {
+                "--worst (beside --csv)"
+            },
+            pgrf_eval::worst_path(e.worst.as_deref(), e.csv.as_deref()).as_ref(),
+            Kind::File,
+        )
+        .output_opt("--dump", e.dump.as_ref(), Kind::Folder);
+    Ok(())
+}
