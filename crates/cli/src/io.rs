@@ -135,8 +135,14 @@ fn declare_enhance(a: &cmd::enhance::EnhanceArgs, io: &mut Io) -> Result<()> {
     let e = &a.enhance;
     let is_dng = pgrf_nn::infer::enhance::jobs::output_is_dng(&e.output)?;
     let kind = if is_dng { Kind::File } else { Kind::Folder };
+    // The files a list names are inputs too (a list that cannot be read
+    // is reported by the command itself).
+    let listed = (e.from_list.as_deref())
+        .and_then(|l| pgrf_nn::infer::enhance::jobs::read_list(l).ok())
+        .unwrap_or_default();
     io.inputs("", &e.inputs)
         .inputs("--from-list", &e.from_list)
+        .inputs("--from-list", listed)
         .input("--model", &e.model)
         .inputs("--calib", &e.calib)
         .output("-o", &e.output, kind)

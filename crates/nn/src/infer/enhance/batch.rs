@@ -368,44 +368,29 @@ pub fn run_batch<E: BatchEvents>(
     Ok(outcome)
 }
 
-/// `p` made absolute with its folder resolved (links, `..`), for comparing
-/// files that may not exist yet.
-fn resolved(p: &Path) -> PathBuf {
-    let dir = p.parent().filter(|d| !d.as_os_str().is_empty());
-    match (dir.unwrap_or(Path::new(".")).canonicalize(), p.file_name()) {
-        (Ok(d), Some(name)) => d.join(name),
-        _ => p.to_path_buf(),
-    }
-}
-
-/// `--manifest`'s checks, before any work: its folder exists, it is not a
-/// folder, an input, an output of the plan, or inside a folder given as
-/// input (the next run over that folder would take it for a photo).
-/// `given` are the inputs as named (files and folders), `jobs` the plan.
+/// `--manifest`'s checks, before any work, by the one rule on outputs
+/// ([`pgrf_core::paths::Io`]): its folder exists, and it is not a folder,
+/// an input, inside a folder given as input (the next run over that folder
+/// would take it for a photo) or an output of the plan. `given` are the
+/// inputs as named (files and folders), `jobs` the plan.
 pub fn check_manifest(manifest: &Path, given: &[PathBuf], jobs: &[Job]) -> Result<(), NnError> {
-    let inputs: Vec<&Path> = jobs.iter().map(|j| j.input.as_path()).collect();
-    pgrf_core::paths::check_outputs(&[("--manifest", manifest)], &inputs)?;
-    let at = resolved(manifest);
-    let refuse = |what: String| NnError::BadSetting {
-        flag: "--manifest",
-        message: format!("--manifest {} {what}", manifest.display()),
-    };
-    if let Some(dir) = (given.iter())
-        .filter(|g| g.is_dir())
-        .find(|g| g.canonicalize().is_ok_and(|d| at.starts_with(d)))
-    {
-        return Err(refuse(format!(
-            "is inside the input folder {}; write it elsewhere",
-            dir.display()
-        )));
+    let mut io = pgrf_core::paths::Io::new();
+    io.inputs("", given)
+        .inputs("", jobs.iter().map(|j| &j.input))
+        .file("--manifest", manifest);
+    // Only a plan output of the manifest's name can be it (thousands of
+    // outputs need not be compared with each other again).
+    let name = manifest.file_name();
+    for j in jobs {
+        for (flag, out) in
+            std::iter::once(("-o", &j.output)).chain(j.png.iter().map(|p| ("--png", p)))
+        {
+            if out.file_name() == name {
+                io.file(flag, out);
+            }
+        }
     }
-    let outputs = (jobs.iter()).flat_map(|j| std::iter::once(&j.output).chain(&j.png));
-    if let Some(out) = outputs.into_iter().find(|o| resolved(o) == at) {
-        return Err(refuse(format!(
-            "is also an output ({}); give the manifest its own name",
-            out.display()
-        )));
-    }
+    io.check()?;
     Ok(())
 }
 
@@ -561,9 +546,11 @@ mod tests {
         }];
         let given = [input.clone()];
         let says = |m: &Path| check_manifest(m, &given, &plan).unwrap_err().to_string();
-        assert!(says(&input.join("a.dng")).contains("is the input"));
+        // The input file lies in the input folder: either is named.
+        let e = says(&input.join("a.dng"));
+        assert!(e.contains("is the input") || e.contains("inside the input folder"), "{e}");
         assert!(says(&input.join("m.jsonl")).contains("inside the input folder"));
-        assert!(says(&d.join("a.png")).contains("is also an output"));
+        assert!(says(&d.join("a.png")).contains("--png and --manifest both name"));
         assert!(says(&d.join("nope/m.jsonl")).contains("does not exist"));
         check_manifest(&d.join("m.jsonl"), &given, &plan).unwrap();
         std::fs::remove_dir_all(&d).unwrap();
