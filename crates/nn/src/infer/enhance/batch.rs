@@ -548,7 +548,10 @@ mod tests {
         let says = |m: &Path| check_manifest(m, &given, &plan).unwrap_err().to_string();
         // The input file lies in the input folder: either is named.
         let e = says(&input.join("a.dng"));
-        assert!(e.contains("is the input") || e.contains("inside the input folder"), "{e}");
+        assert!(
+            e.contains("is the input") || e.contains("inside the input folder"),
+            "{e}"
+        );
         assert!(says(&input.join("m.jsonl")).contains("inside the input folder"));
         assert!(says(&d.join("a.png")).contains("--png and --manifest both name"));
         assert!(says(&d.join("nope/m.jsonl")).contains("does not exist"));
