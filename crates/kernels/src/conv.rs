@@ -90,35 +90,52 @@ pub fn im2col(x: &[f32], g: &ConvGeom, images: Range<usize>, col: &mut [f32]) {
     let len = images.len() * per;
     assert_eq!(x.len(), g.n * g.ci * plane, "input size");
     assert_eq!(col.len(), g.rows() * len, "im2col buffer size");
-    let ([sy, sx], [py, px]) = (g.stride, g.pad);
     col.par_chunks_mut(len.max(1))
         .enumerate()
         .for_each(|(r, row)| {
-            let (c, ky, kx) = (r / (g.kh * g.kw), (r / g.kw) % g.kh, r % g.kw);
-            let (lo, hi) = valid_columns(ow, g.w, kx, sx, px);
+            let c = r / (g.kh * g.kw);
             for (j, img) in images.clone().enumerate() {
                 let src = &x[(img * g.ci + c) * plane..][..plane];
-                for oy in 0..oh {
-                    let out = &mut row[j * per + oy * ow..][..ow];
-                    let iy = oy * sy + ky;
-                    if iy < py || iy - py >= g.h {
-                        out.fill(0.0);
-                        continue;
-                    }
-                    let line = &src[(iy - py) * g.w..][..g.w];
-                    out[..lo].fill(0.0);
-                    out[hi..].fill(0.0);
-                    if sx == 1 {
-                        let start = lo + kx - px;
-                        out[lo..hi].copy_from_slice(&line[start..start + hi - lo]);
-                    } else {
-                        for (ox, o) in out.iter_mut().enumerate().take(hi).skip(lo) {
-                            *o = line[ox * sx + kx - px];
-                        }
-                    }
-                }
+                fill_im2col_row(src, g, r, 0..oh, &mut row[j * per..][..per]);
             }
         });
+}
+
+/// Row `r` = `(c, ky, kx)` of the im2col layout for output rows `oys` of
+/// one image, from `src`, that image's plane `c` (`h * w`): `out[(oy -
+/// oys.start) * ow + ox] = src[oy * sy + ky - py, ox * sx + kx - px]`, zero
+/// outside the plane. Shared by [`im2col`] and the forward convolution's
+/// row tiles.
+pub(crate) fn fill_im2col_row(
+    src: &[f32],
+    g: &ConvGeom,
+    r: usize,
+    oys: Range<usize>,
+    out: &mut [f32],
+) {
+    let (_, ow) = g.out_hw().expect("a valid geometry");
+    let ([sy, sx], [py, px]) = (g.stride, g.pad);
+    let (ky, kx) = ((r / g.kw) % g.kh, r % g.kw);
+    let (lo, hi) = valid_columns(ow, g.w, kx, sx, px);
+    for (i, oy) in oys.enumerate() {
+        let out = &mut out[i * ow..][..ow];
+        let iy = oy * sy + ky;
+        if iy < py || iy - py >= g.h {
+            out.fill(0.0);
+            continue;
+        }
+        let line = &src[(iy - py) * g.w..][..g.w];
+        out[..lo].fill(0.0);
+        out[hi..].fill(0.0);
+        if sx == 1 {
+            let start = lo + kx - px;
+            out[lo..hi].copy_from_slice(&line[start..start + hi - lo]);
+        } else {
+            for (ox, o) in out.iter_mut().enumerate().take(hi).skip(lo) {
+                *o = line[ox * sx + kx - px];
+            }
+        }
+    }
 }
 
 /// The adjoint of [`im2col`]: `dx` (`(images, ci, h, w)`, the chunk's

@@ -7,14 +7,17 @@
 //! gradient as a forward convolution over strided `swap_dims` views, copies
 //! the whole output gradient for the bias gradient, scatters the input
 //! gradient serially (col2im), and decomposes activations and Adam into
-//! many full-size passes (BENCHMARKS.md, "Training step"). The matrix
-//! products stay in Flex's gemm; what is here is the data movement around
-//! them, done once, contiguously and in parallel.
+//! many full-size passes (BENCHMARKS.md, "Training step"). The backward's
+//! matrix products stay in Flex's gemm; what is here is the data movement
+//! around them, done once, contiguously and in parallel, and the forward
+//! convolution with its own calls to the same `gemm` crate.
 //!
 //! - [`conv`]: convolution geometry, im2col and its adjoint col2im, the
 //!   `[channels, n * pixels]` layouts the products run on, the
 //!   space-to-depth shuffles of a non-overlapping transposed convolution and
 //!   per-channel sums (bias gradients).
+//! - [`conv_forward`]: the forward convolution over cache-sized tiles of
+//!   output rows, one `gemm` product each, bias written first.
 //! - [`act`]: LeakyReLU and SiLU forward and backward, SiLU with a
 //!   branch-free exp the compiler vectorises.
 //! - [`norm`]: GroupNorm with its affine, forward and backward, per
@@ -24,6 +27,7 @@
 pub mod act;
 pub mod adam;
 pub mod conv;
+pub mod conv_forward;
 pub mod norm;
 
 /// Elements per rayon task in the element-wise kernels: large enough that

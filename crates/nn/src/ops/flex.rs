@@ -53,6 +53,49 @@ fn matmul(a: FlexTensor, b: FlexTensor) -> FlexTensor {
     <Flex as FloatTensorOps<Flex>>::float_matmul(a, b)
 }
 
+/// A convolution with one group and dilation 1 by pgrf's own kernel
+/// ([`pgrf_kernels::conv_forward::conv2d_forward`]: im2col over row tiles
+/// that stay in cache, one gemm product each, bias first); anything else
+/// goes to burn's operation.
+pub(super) fn conv2d(
+    x: FlexTensor,
+    weight: FlexTensor,
+    bias: Option<FlexTensor>,
+    options: ConvOptions<2>,
+) -> FlexTensor {
+    let (xd, wd) = (dims(&x), dims(&weight));
+    let geom = ConvGeom {
+        n: xd[0],
+        ci: xd[1],
+        h: xd[2],
+        w: xd[3],
+        kh: wd[2],
+        kw: wd[3],
+        stride: options.stride,
+        pad: options.padding,
+    };
+    let typed = is_f32(&[&x, &weight]) && bias.as_ref().is_none_or(|b| is_f32(&[b]));
+    let Some((oh, ow)) = geom
+        .out_hw()
+        .filter(|_| typed && options.dilation == [1, 1] && options.groups == 1 && wd[1] == geom.ci)
+    else {
+        return <Flex as ModuleOps<Flex>>::conv2d(x, weight, bias, options);
+    };
+    let co = wd[0];
+    let (x, weight) = (contiguous(x), contiguous(weight));
+    let bias = bias.map(contiguous);
+    let mut out = vec![0.0f32; geom.n * co * oh * ow];
+    pgrf_kernels::conv_forward::conv2d_forward(
+        values(&x),
+        &geom,
+        values(&weight),
+        co,
+        bias.as_ref().map(values),
+        &mut out,
+    );
+    new(out, &[geom.n, co, oh, ow])
+}
+
 /// Gradients of a convolution with one group and dilation 1: the bias's as
 /// per-channel sums of `dy`; per chunk of images, the weight's as `dY ·
 /// colᵀ` and the input's as col2im of `Wᵀ · dY`, with `dY` in the

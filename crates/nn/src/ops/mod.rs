@@ -412,6 +412,15 @@ impl PgrfOps for burn::backend::Flex {
         kernels() == Kernels::Pgrf
     }
 
+    fn pgrf_conv2d(
+        x: FloatTensor<Self>,
+        weight: FloatTensor<Self>,
+        bias: Option<FloatTensor<Self>>,
+        options: ConvOptions<2>,
+    ) -> FloatTensor<Self> {
+        flex::conv2d(x, weight, bias, options)
+    }
+
     fn pgrf_conv2d_backward(
         x: FloatTensor<Self>,
         weight: FloatTensor<Self>,

@@ -102,6 +102,8 @@ fn convolutions_match_burns() {
         (4, 6, 3, 2, PaddingConfig2d::Explicit(1, 1, 1, 1), 9, 8, 2),
         (5, 3, 1, 1, PaddingConfig2d::Valid, 5, 7, 2),
         (2, 3, 3, 1, PaddingConfig2d::Valid, 6, 1 + 4, 1),
+        // Wide enough that the forward splits each image into row tiles.
+        (32, 8, 3, 1, PaddingConfig2d::Same, 70, 66, 2),
     ];
     for (i, &(cin, cout, k, s, ref pad, h, w, n)) in cases.iter().enumerate() {
         let conv = seeded::<B, _>(&device, 10 + i as u64, || {

@@ -1,0 +1,262 @@
+//! The forward 2-D convolution, NCHW f32, as im2col over tiles of output
+//! rows and one matrix product per tile (the `gemm` crate's, which picks
+//! AVX-512, AVX2/FMA or baseline code at run time), the bias written first
+//! and the product added to it.
+//!
+//! Why tiles: an im2col of a whole image is `ci * kh * kw` times its size
+//! (19 MB per image at the U-Net's first level), and writing it then
+//! reading it back cost more than burn Flex's convolution saved
+//! (BENCHMARKS.md, issue 15: 330 ms against Flex's 252 ms for the U-Net's
+//! forward). A tile of output rows whose im2col block fits in a core's L2
+//! cache is built and consumed while it is still there; tiles are
+//! independent, so both cores work from the first layer to the last without
+//! the serial layout copies Flex makes around its products.
+
+// The products write each tile's rows straight into the NCHW output through
+// the `gemm` crate's pointer interface; every pointer and extent is checked
+// against the slices' lengths before the one unsafe block.
+#![allow(unsafe_code)]
+
+use crate::conv::{fill_im2col_row, ConvGeom};
+use rayon::prelude::*;
+
+/// Bytes of one tile's im2col block: about half a core's L2 cache on the
+/// machines pgrf runs on (512 KiB to 2 MiB per core), so the block and the
+/// weights' panel stay cached while the product reads them.
+const TILE_BYTES: usize = 256 << 10;
+
+/// Output pixels a tile has at least, whatever its im2col block's size: the
+/// product's columns, below which gemm's packing costs more than it saves.
+const MIN_TILE_PIXELS: usize = 256;
+
+/// Output rows per tile for `g` (at least one).
+fn rows_per_tile(g: &ConvGeom, ow: usize) -> usize {
+    let per_row = g.rows() * ow * std::mem::size_of::<f32>();
+    let by_cache = TILE_BYTES / per_row.max(1);
+    let by_width = MIN_TILE_PIXELS.div_ceil(ow.max(1));
+    by_cache.max(by_width).max(1)
+}
+
+/// A raw output pointer handed to the tasks, each of which writes only its
+/// own (image, rows) block.
+#[derive(Clone, Copy)]
+struct Out(*mut f32);
+// SAFETY: the tasks write disjoint elements (distinct images or distinct
+// output rows of one image), and the buffer outlives the parallel loop.
+unsafe impl Send for Out {}
+unsafe impl Sync for Out {}
+
+/// `out = conv(x, weight) + bias`: `x` is `(n, ci, h, w)`, `weight` is
+/// `(co, ci, kh, kw)` (so `[co, ci * kh * kw]` row-major), `bias` has `co`
+/// values, `out` is `(n, co, oh, ow)`; every element of `out` is written.
+/// Parallel over tiles of output rows (all images), each tile's product on
+/// one thread; with fewer tiles than threads (small late layers) the
+/// product itself runs on the pool.
+pub fn conv2d_forward(
+    x: &[f32],
+    g: &ConvGeom,
+    weight: &[f32],
+    co: usize,
+    bias: Option<&[f32]>,
+    out: &mut [f32],
+) {
+    let (oh, ow) = g.out_hw().expect("a valid geometry");
+    let (k, per) = (g.rows(), oh * ow);
+    assert_eq!(x.len(), g.n * g.ci * g.h * g.w, "input size");
+    assert_eq!(weight.len(), co * k, "weight size");
+    assert_eq!(out.len(), g.n * co * per, "output size");
+    if let Some(b) = bias {
+        assert_eq!(b.len(), co, "bias size");
+    }
+    if out.is_empty() {
+        return;
+    }
+    let rows = rows_per_tile(g, ow).min(oh);
+    let tiles_per_image = oh.div_ceil(rows);
+    let tasks = g.n * tiles_per_image;
+    let threads = rayon::current_num_threads();
+    let inner = if tasks >= threads {
+        gemm::Parallelism::None
+    } else {
+        gemm::Parallelism::Rayon(threads)
+    };
+    let dst = Out(out.as_mut_ptr());
+    (0..tasks)
+        .into_par_iter()
+        .for_each_init(Vec::new, |col, t| {
+            let (img, r0) = (t / tiles_per_image, (t % tiles_per_image) * rows);
+            let r1 = (r0 + rows).min(oh);
+            let len = (r1 - r0) * ow;
+            col.clear();
+            col.resize(k * len, 0.0);
+            let plane = g.h * g.w;
+            for (r, row) in col.chunks_mut(len).enumerate() {
+                let c = r / (g.kh * g.kw);
+                let src = &x[(img * g.ci + c) * plane..][..plane];
+                fill_im2col_row(src, g, r, r0..r1, row);
+            }
+            let base = img * co * per + r0 * ow;
+            // The tile's block of `out`: rows `r0..r1` of every output plane of
+            // image `img`, at `base + ch * per + i` for `i < len`; the last
+            // element lies below `out.len()` (checked by the asserts above:
+            // `base + (co - 1) * per + len <= (img + 1) * co * per`).
+            let dst = dst;
+            // SAFETY: the pointers cover `weight` (co x k), `col` (k x len) and
+            // the tile's block of `out` (co rows of len, stride per), all in
+            // bounds as computed above; no other task writes that block, and
+            // gemm reads its inputs only.
+            unsafe {
+                let d = dst.0.add(base);
+                if let Some(b) = bias {
+                    for (ch, &v) in b.iter().enumerate() {
+                        std::slice::from_raw_parts_mut(d.add(ch * per), len).fill(v);
+                    }
+                }
+                gemm::gemm(
+                    co,
+                    len,
+                    k,
+                    d,
+                    1,
+                    per as isize,
+                    bias.is_some(),
+                    weight.as_ptr(),
+                    1,
+                    k as isize,
+                    col.as_ptr(),
+                    1,
+                    len as isize,
+                    1.0,
+                    1.0,
+                    false,
+                    false,
+                    false,
+                    inner,
+                );
+            }
+        });
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The definition: a sum over channels and kernel taps, zero padding.
+    fn naive(x: &[f32], g: &ConvGeom, w: &[f32], co: usize, b: Option<&[f32]>) -> Vec<f32> {
+        let (oh, ow) = g.out_hw().unwrap();
+        let mut out = vec![0.0f32; g.n * co * oh * ow];
+        for n in 0..g.n {
+            for o in 0..co {
+                for oy in 0..oh {
+                    for ox in 0..ow {
+                        let mut s = b.map_or(0.0, |b| b[o] as f64);
+                        for c in 0..g.ci {
+                            for ky in 0..g.kh {
+                                for kx in 0..g.kw {
+                                    let iy = (oy * g.stride[0] + ky) as isize - g.pad[0] as isize;
+                                    let ix = (ox * g.stride[1] + kx) as isize - g.pad[1] as isize;
+                                    if iy < 0 || ix < 0 || iy >= g.h as isize || ix >= g.w as isize
+                                    {
+                                        continue;
+                                    }
+                                    let xv =
+                                        x[((n * g.ci + c) * g.h + iy as usize) * g.w + ix as usize];
+                                    let wv = w[((o * g.ci + c) * g.kh + ky) * g.kw + kx];
+                                    s += xv as f64 * wv as f64;
+                                }
+                            }
+                        }
+                        out[((n * co + o) * oh + oy) * ow + ox] = s as f32;
+                    }
+                }
+            }
+        }
+        out
+    }
+
+    fn values(len: usize, seed: u64) -> Vec<f32> {
+        // A seeded xorshift: uniform values in [-1, 1).
+        let mut s = seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1;
+        (0..len)
+            .map(|_| {
+                s ^= s << 13;
+                s ^= s >> 7;
+                s ^= s << 17;
+                (s >> 40) as f32 / (1u64 << 23) as f32 - 1.0
+            })
+            .collect()
+    }
+
+    #[test]
+    fn matches_the_definition_over_sizes_strides_and_paddings() {
+        // Odd and even sides, 1x1 / 2x2 / 3x3 kernels, strides 1 and 2,
+        // paddings 0 and 1, a batch, tall frames that split into several
+        // tiles and tiny ones that do not.
+        let cases = [
+            (1, 4, 7, 9, 3, 1, 1, 5),
+            (2, 3, 8, 8, 3, 1, 1, 16),
+            (3, 5, 11, 6, 3, 2, 1, 4),
+            (1, 2, 6, 10, 1, 1, 0, 3),
+            (2, 4, 9, 7, 2, 2, 0, 6),
+            (1, 32, 70, 66, 3, 1, 1, 8),
+            (1, 1, 2, 2, 3, 1, 1, 1),
+        ];
+        for (i, &(n, ci, h, w, k, s, p, co)) in cases.iter().enumerate() {
+            let g = ConvGeom {
+                n,
+                ci,
+                h,
+                w,
+                kh: k,
+                kw: k,
+                stride: [s, s],
+                pad: [p, p],
+            };
+            let (oh, ow) = g.out_hw().unwrap();
+            let x = values(n * ci * h * w, 2 * i as u64 + 1);
+            let wt = values(co * ci * k * k, 2 * i as u64 + 2);
+            let b = values(co, 99 + i as u64);
+            for bias in [Some(b.as_slice()), None] {
+                let mut out = vec![f32::NAN; n * co * oh * ow];
+                conv2d_forward(&x, &g, &wt, co, bias, &mut out);
+                let want = naive(&x, &g, &wt, co, bias);
+                let worst = out
+                    .iter()
+                    .zip(&want)
+                    .map(|(a, b)| (a - b).abs())
+                    .fold(0.0f32, f32::max);
+                // f32 sums of up to 288 products of values in [-1, 1]
+                // against f64 ones: within 1e-4 absolute.
+                assert!(worst < 1e-4, "case {i} {g:?}: worst {worst}");
+            }
+        }
+    }
+
+    #[test]
+    fn one_thread_and_the_pool_give_the_same_bits() {
+        let g = ConvGeom {
+            n: 2,
+            ci: 8,
+            h: 40,
+            w: 36,
+            kh: 3,
+            kw: 3,
+            stride: [1, 1],
+            pad: [1, 1],
+        };
+        let (oh, ow) = g.out_hw().unwrap();
+        let x = values(g.n * g.ci * g.h * g.w, 7);
+        let wt = values(16 * g.rows(), 8);
+        let b = values(16, 9);
+        let run = |threads: usize| {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
+            let mut out = vec![0.0f32; g.n * 16 * oh * ow];
+            pool.install(|| conv2d_forward(&x, &g, &wt, 16, Some(&b), &mut out));
+            out
+        };
+        assert_eq!(run(1), run(2));
+    }
+}
