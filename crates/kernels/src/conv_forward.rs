@@ -46,6 +46,18 @@ struct Out(*mut f32);
 unsafe impl Send for Out {}
 unsafe impl Sync for Out {}
 
+impl Out {
+    /// The element `offset` places in (a method, so that closures capture
+    /// the whole `Out`, which is `Sync`, not its raw pointer field).
+    ///
+    /// # Safety
+    /// `offset` must lie within the buffer.
+    unsafe fn at(self, offset: usize) -> *mut f32 {
+        // SAFETY: the caller keeps `offset` in bounds.
+        unsafe { self.0.add(offset) }
+    }
+}
+
 /// `out = conv(x, weight) + bias`: `x` is `(n, ci, h, w)`, `weight` is
 /// `(co, ci, kh, kw)` (so `[co, ci * kh * kw]` row-major), `bias` has `co`
 /// values, `out` is `(n, co, oh, ow)`; every element of `out` is written.
@@ -100,13 +112,12 @@ pub fn conv2d_forward(
             // image `img`, at `base + ch * per + i` for `i < len`; the last
             // element lies below `out.len()` (checked by the asserts above:
             // `base + (co - 1) * per + len <= (img + 1) * co * per`).
-            let dst = dst;
             // SAFETY: the pointers cover `weight` (co x k), `col` (k x len) and
             // the tile's block of `out` (co rows of len, stride per), all in
             // bounds as computed above; no other task writes that block, and
             // gemm reads its inputs only.
             unsafe {
-                let d = dst.0.add(base);
+                let d = dst.at(base);
                 if let Some(b) = bias {
                     for (ch, &v) in b.iter().enumerate() {
                         std::slice::from_raw_parts_mut(d.add(ch * per), len).fill(v);

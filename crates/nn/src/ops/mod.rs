@@ -14,7 +14,10 @@
 //! built in parallel, the 2x2 transposed convolution is a product and a
 //! shuffle, activations are one pass forward and one backward, GroupNorm a
 //! few passes per (image, group) block, and Adam one pass per parameter
-//! tensor ([`adam::PgrfAdam`]).
+//! tensor ([`adam::PgrfAdam`]). The forward convolution is pgrf's too
+//! (`pgrf_kernels::conv_forward`: im2col over cache-sized row tiles, one
+//! gemm product each), 1.8x faster than Flex's on the U-Net (BENCHMARKS.md,
+//! issue 38).
 //!
 //! The networks call the layer functions here ([`conv2d`],
 //! [`conv_transpose2d`], [`leaky_relu`], [`silu`], [`group_norm`]) instead of the modules'
