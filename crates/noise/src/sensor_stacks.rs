@@ -89,8 +89,10 @@ pub struct StacksWritten {
 /// simulate-sensor` flag at fault, as the command has always printed them.
 #[derive(Debug, thiserror::Error)]
 pub enum StacksError {
-    /// Fewer than two frames per stack.
-    #[error("--frames must be at least 2 (per-pixel variance needs two frames)")]
+    /// Fewer than two frames per stack, or more than 100000.
+    #[error(
+        "--frames must be between 2 (per-pixel variance needs two frames) and 100000, got {frames}"
+    )]
     TooFewFrames {
         /// Frames asked for.
         frames: usize,
@@ -195,7 +197,7 @@ impl StacksConfig {
 
     /// Refuse settings the sensor or calibration cannot use, before any work.
     fn check_settings(&self) -> Result<(), StacksError> {
-        if self.frames < 2 {
+        if !(2..=100_000).contains(&self.frames) {
             return Err(StacksError::TooFewFrames {
                 frames: self.frames,
             });
