@@ -101,17 +101,23 @@ pub enum DarktableOutcome {
     },
 }
 
+/// The darktable file a calibration written to `output` updates, and the
+/// option that named it, for messages: `into` (`--darktable-into`), else
+/// beside the calibration file.
+pub fn darktable_file(into: Option<&Path>, output: &Path) -> (&'static str, PathBuf) {
+    match into {
+        Some(p) => ("--darktable-into", p.to_path_buf()),
+        None => (
+            "-o (its darktable entry)",
+            output.with_extension("noiseprofiles.json"),
+        ),
+    }
+}
+
 impl CalibrateConfig {
-    /// The darktable file and the option that named it, for messages:
-    /// `--darktable-into`, else beside the calibration file.
+    /// [`darktable_file`] of this run.
     pub fn darktable_file(&self) -> (&'static str, PathBuf) {
-        match &self.darktable.into {
-            Some(p) => ("--darktable-into", p.clone()),
-            None => (
-                "-o (its darktable entry)",
-                self.output.with_extension("noiseprofiles.json"),
-            ),
-        }
+        darktable_file(self.darktable.into.as_deref(), &self.output)
     }
 }
 

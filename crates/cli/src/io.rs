@@ -67,7 +67,7 @@ fn declare(command: &Command, io: &mut Io) -> Result<()> {
         Command::MakeDataset(a) => {
             io.folder("-o", &a.output);
         }
-        Command::Calibrate(a) => declare_calibrate(a, io)?,
+        Command::Calibrate(a) => declare_calibrate(a, io),
         Command::Train(a) => declare_train(a, io)?,
         Command::Enhance(a) => declare_enhance(a, io)?,
         Command::Search(a) => {
@@ -96,24 +96,16 @@ fn declare_synth(a: &cmd::synth::SynthArgs, io: &mut Io) {
         .output_opt("--png", a.png.as_ref(), Kind::File);
 }
 
-fn declare_calibrate(a: &cmd::calibrate::CalibrateArgs, io: &mut Io) -> Result<()> {
+fn declare_calibrate(a: &cmd::calibrate::CalibrateArgs, io: &mut Io) {
     io.input("--bias", &a.bias)
         .inputs("--dark", &a.dark)
         .input("--flat", &a.flat)
         .file("-o", &a.output)
         .output_opt("--report", a.report.as_ref(), Kind::Folder)
         .output_opt("--masters", a.masters.as_ref(), Kind::Folder);
-    let darktable = a
-        .darktable_into
-        .clone()
-        .unwrap_or_else(|| a.output.with_extension("noiseprofiles.json"));
-    let flag = if a.darktable_into.is_some() {
-        "--darktable-into"
-    } else {
-        "-o (its darktable entry)"
-    };
+    let (flag, darktable) =
+        pgrf_calib::outputs::darktable_file(a.darktable_into.as_deref(), &a.output);
     io.file(flag, darktable);
-    Ok(())
 }
 
 fn declare_train(a: &cmd::train::TrainArgs, io: &mut Io) -> Result<()> {

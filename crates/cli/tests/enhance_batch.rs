@@ -51,9 +51,16 @@ fn enhance(extra: &[&str]) -> Output {
 }
 
 fn enhance_in(dir: Option<&Path>, extra: &[&str]) -> Output {
+    let mut args = vec!["--quiet"];
+    args.extend(extra);
+    enhance_loud(dir, &args)
+}
+
+/// [`enhance_in`] without `--quiet`: the per-file lines and bars shown.
+fn enhance_loud(dir: Option<&Path>, extra: &[&str]) -> Output {
     let mut cmd = std::process::Command::new(env!("CARGO_BIN_EXE_pgrf"));
     cmd.args(["enhance", "--model", "builtin:spc", "--noise", "K=1,read=4"])
-        .args(["--ratio", "10", "--quiet"])
+        .args(["--ratio", "10"])
         .args(extra);
     if let Some(d) = dir {
         cmd.current_dir(d);
@@ -345,20 +352,7 @@ fn a_bad_file_fails_alone_and_the_batch_exits_3() {
 
     // Without --quiet each file says what became of it, the failure among
     // them, and the summary is still the only error line.
-    let mut cmd = std::process::Command::new(env!("CARGO_BIN_EXE_pgrf"));
-    let loud = cmd
-        .args([
-            "enhance",
-            "--model",
-            "builtin:spc",
-            "--noise",
-            "K=1,read=4",
-            "--ratio",
-            "10",
-        ])
-        .args(["-o", s(&d.join("out2")), s(&inputs)])
-        .output()
-        .unwrap();
+    let loud = enhance_loud(None, &["-o", s(&d.join("out2")), s(&inputs)]);
     let err = String::from_utf8_lossy(&loud.stderr);
     assert_eq!(loud.status.code(), Some(3), "{err}");
     assert_eq!(
@@ -461,20 +455,7 @@ fn bad_shards_and_manifests_are_one_line_errors_and_an_empty_shard_is_no_error()
     let r = enhance_in(None, &["-o", s(&out), s(&inputs), "--shard", "5/8"]);
     ok(&r);
     assert!(!out.exists() || names_in(&out).is_empty());
-    let mut cmd = std::process::Command::new(env!("CARGO_BIN_EXE_pgrf"));
-    let loud = cmd
-        .args([
-            "enhance",
-            "--model",
-            "builtin:spc",
-            "--noise",
-            "K=1,read=4",
-            "--ratio",
-            "10",
-        ])
-        .args(["-o", s(&out), s(&inputs), "--shard", "5/8"])
-        .output()
-        .unwrap();
+    let loud = enhance_loud(None, &["-o", s(&out), s(&inputs), "--shard", "5/8"]);
     ok(&loud);
     let err = String::from_utf8_lossy(&loud.stderr);
     assert!(err.contains("shard 5/8: nothing to do"), "{err}");

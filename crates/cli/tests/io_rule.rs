@@ -27,6 +27,13 @@ fn snapshot(dir: &Path) -> BTreeMap<String, Vec<u8>> {
     files
 }
 
+/// The arguments `parts` joined, then `tail`.
+fn argv(parts: &[&[&str]], tail: Vec<String>) -> Vec<String> {
+    let mut v: Vec<String> = parts.concat().iter().map(|x| x.to_string()).collect();
+    v.extend(tail);
+    v
+}
+
 #[test]
 fn outputs_may_not_be_inside_or_around_inputs_nor_share_a_path() {
     let d = scratch("io_rule", "cases");
@@ -45,58 +52,30 @@ fn outputs_may_not_be_inside_or_around_inputs_nor_share_a_path() {
     let (bias, flat, raws) = (d.join("bias"), d.join("flat"), d.join("raws"));
     let r = d.join("r.csv");
     let inside = |dir: &Path, name: &str| dir.join(name).display().to_string();
-    let eval = |extra: &[&str]| -> Vec<String> {
-        let mut v: Vec<String> = [
-            "eval",
-            "--protocol",
-            "synthetic",
-            "--root",
-            s(&c),
-            "--model",
-            "builtin:spc",
-            "--ratio",
-            "100",
-            "--iso",
-            "1600",
-        ]
-        .iter()
-        .map(|x| x.to_string())
-        .collect();
-        v.extend(extra.iter().map(|x| x.to_string()));
-        v
-    };
-    let train = |extra: &[&str]| -> Vec<String> {
-        let mut v: Vec<String> = ["train", "spc", "--config", s(&t), "-o"]
-            .iter()
-            .map(|x| x.to_string())
-            .collect();
-        if !extra.contains(&"-o") {
-            v.push(inside(&d, "m.safetensors"));
+    let (model, cal) = (inside(&d, "m.safetensors"), inside(&d, "cal.safetensors"));
+    // `-o OUT` unless the case names its own `-o`.
+    let default_o = |extra: &[&str], out: &str| -> Vec<String> {
+        if extra.contains(&"-o") {
+            Vec::new()
         } else {
-            v.pop();
+            vec!["-o".into(), out.into()]
         }
-        v.extend(extra.iter().map(|x| x.to_string()));
-        v
     };
-    let calibrate = |extra: &[&str]| -> Vec<String> {
-        let mut v: Vec<String> = ["calibrate", "--bias", s(&bias), "--flat", s(&flat)]
-            .iter()
-            .map(|x| x.to_string())
-            .collect();
-        if !extra.contains(&"-o") {
-            v.extend(["-o".to_string(), inside(&d, "cal.safetensors")]);
-        }
-        v.extend(extra.iter().map(|x| x.to_string()));
-        v
+    let eval = |extra: &[&str]| {
+        let base = ["eval", "--protocol", "synthetic", "--root", s(&c)];
+        let rest = ["--model", "builtin:spc", "--ratio", "100", "--iso", "1600"];
+        argv(&[&base, &rest, extra], Vec::new())
     };
-    let enhance = |extra: &[&str]| -> Vec<String> {
-        let mut v: Vec<String> = ["enhance", "--model", "builtin:spc"]
-            .iter()
-            .map(|x| x.to_string())
-            .collect();
-        v.extend(extra.iter().map(|x| x.to_string()));
-        v
+    let train = |extra: &[&str]| {
+        let base = ["train", "spc", "--config", s(&t)];
+        argv(&[&base, extra], default_o(extra, &model))
     };
+    let calibrate = |extra: &[&str]| {
+        let base = ["calibrate", "--bias", s(&bias), "--flat", s(&flat)];
+        argv(&[&base, extra], default_o(extra, &cal))
+    };
+    let enhance =
+        |extra: &[&str]| argv(&[&["enhance", "--model", "builtin:spc"], extra], Vec::new());
     let cases: Vec<(Vec<String>, String)> = vec![
         // eval: the RAW, the model, the dataset folder, and itself.
         (

@@ -260,29 +260,29 @@ impl Io {
             }
             let at = resolved(&path);
             for (input, place, is_dir) in &inputs {
-                let input_flag = input.flag.clone();
-                let input_path = input.path.clone();
-                if at == *place || same_file(&path, &input.path) {
+                // `resolved` canonicalises what exists, so an output that is
+                // an input (through links or `..`) resolves to its place.
+                if at == *place {
                     return Err(PathError::IsInput {
                         flag,
                         path,
-                        input: input_path,
+                        input: input.path.clone(),
                     });
                 }
                 if *is_dir && at.starts_with(place) {
                     return Err(PathError::InsideInput {
                         flag,
                         path,
-                        input_flag,
-                        input: input_path,
+                        input_flag: input.flag.clone(),
+                        input: input.path.clone(),
                     });
                 }
                 if *kind == Kind::Folder && place.starts_with(&at) {
                     return Err(PathError::HoldsInput {
                         flag,
                         path,
-                        input_flag,
-                        input: input_path,
+                        input_flag: input.flag.clone(),
+                        input: input.path.clone(),
                     });
                 }
             }

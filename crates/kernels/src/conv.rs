@@ -299,11 +299,12 @@ pub fn space_to_depth(
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
 
-    /// Deterministic pseudo-random values in [-1, 1).
-    fn values(len: usize, seed: u64) -> Vec<f32> {
+    /// Deterministic pseudo-random values in [-1, 1) (a seeded xorshift),
+    /// shared by the kernels' tests.
+    pub(crate) fn values(len: usize, seed: u64) -> Vec<f32> {
         let mut s = seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1;
         (0..len)
             .map(|_| {

@@ -151,6 +151,7 @@ pub fn conv2d_forward(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::conv::tests::values;
 
     /// The definition: a sum over channels and kernel taps, zero padding.
     fn naive(x: &[f32], g: &ConvGeom, w: &[f32], co: usize, b: Option<&[f32]>) -> Vec<f32> {
@@ -183,19 +184,6 @@ mod tests {
             }
         }
         out
-    }
-
-    fn values(len: usize, seed: u64) -> Vec<f32> {
-        // A seeded xorshift: uniform values in [-1, 1).
-        let mut s = seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1;
-        (0..len)
-            .map(|_| {
-                s ^= s << 13;
-                s ^= s >> 7;
-                s ^= s << 17;
-                (s >> 40) as f32 / (1u64 << 23) as f32 - 1.0
-            })
-            .collect()
     }
 
     #[test]

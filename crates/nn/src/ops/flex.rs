@@ -53,6 +53,21 @@ fn matmul(a: FlexTensor, b: FlexTensor) -> FlexTensor {
     <Flex as FloatTensorOps<Flex>>::float_matmul(a, b)
 }
 
+/// The geometry of a convolution of an input of dims `xd` by a kernel of
+/// dims `wd` (both NCHW) under `options`.
+fn conv_geom(xd: &[usize], wd: &[usize], options: &ConvOptions<2>) -> ConvGeom {
+    ConvGeom {
+        n: xd[0],
+        ci: xd[1],
+        h: xd[2],
+        w: xd[3],
+        kh: wd[2],
+        kw: wd[3],
+        stride: options.stride,
+        pad: options.padding,
+    }
+}
+
 /// A convolution with one group and dilation 1 by pgrf's own kernel
 /// ([`pgrf_kernels::conv_forward::conv2d_forward`]: im2col over row tiles
 /// that stay in cache, one gemm product each, bias first); anything else
@@ -64,16 +79,7 @@ pub(super) fn conv2d(
     options: ConvOptions<2>,
 ) -> FlexTensor {
     let (xd, wd) = (dims(&x), dims(&weight));
-    let geom = ConvGeom {
-        n: xd[0],
-        ci: xd[1],
-        h: xd[2],
-        w: xd[3],
-        kh: wd[2],
-        kw: wd[3],
-        stride: options.stride,
-        pad: options.padding,
-    };
+    let geom = conv_geom(&xd, &wd, &options);
     let typed = is_f32(&[&x, &weight]) && bias.as_ref().is_none_or(|b| is_f32(&[b]));
     let Some((oh, ow)) = geom
         .out_hw()
@@ -109,16 +115,7 @@ pub(super) fn conv2d_backward(
     needed: Needed,
 ) -> ConvGrads<Flex> {
     let (xd, wd, dyd) = (dims(&x), dims(&weight), dims(&dy));
-    let geom = ConvGeom {
-        n: xd[0],
-        ci: xd[1],
-        h: xd[2],
-        w: xd[3],
-        kh: wd[2],
-        kw: wd[3],
-        stride: options.stride,
-        pad: options.padding,
-    };
+    let geom = conv_geom(&xd, &wd, &options);
     let fits = geom
         .out_hw()
         .is_some_and(|(oh, ow)| dyd == [geom.n, wd[0], oh, ow] && wd[1] == geom.ci);
