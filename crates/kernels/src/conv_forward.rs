@@ -17,7 +17,7 @@
 // against the slices' lengths before the one unsafe block.
 #![allow(unsafe_code)]
 
-use crate::conv::{fill_im2col_row, ConvGeom};
+use crate::conv::{im2col_tile, ConvGeom};
 use rayon::prelude::*;
 
 /// Bytes of one tile's im2col block: about half a core's L2 cache on the
@@ -29,8 +29,9 @@ const TILE_BYTES: usize = 256 << 10;
 /// product's columns, below which gemm's packing costs more than it saves.
 const MIN_TILE_PIXELS: usize = 256;
 
-/// Output rows per tile for `g` (at least one).
-fn rows_per_tile(g: &ConvGeom, ow: usize) -> usize {
+/// Output rows per tile for `g` (at least one); shared with the weight
+/// gradient's tiles.
+pub(crate) fn rows_per_tile(g: &ConvGeom, ow: usize) -> usize {
     let per_row = g.rows() * ow * std::mem::size_of::<f32>();
     let by_cache = TILE_BYTES / per_row.max(1);
     let by_width = MIN_TILE_PIXELS.div_ceil(ow.max(1));
@@ -40,7 +41,7 @@ fn rows_per_tile(g: &ConvGeom, ow: usize) -> usize {
 /// A raw output pointer handed to the tasks, each of which writes only its
 /// own (image, rows) block.
 #[derive(Clone, Copy)]
-struct Out(*mut f32);
+pub(crate) struct Out(*mut f32);
 // SAFETY: the tasks write disjoint elements (distinct images or distinct
 // output rows of one image), and the buffer outlives the parallel loop.
 unsafe impl Send for Out {}
@@ -52,15 +53,18 @@ impl Out {
     ///
     /// # Safety
     /// `offset` must lie within the buffer.
-    unsafe fn at(self, offset: usize) -> *mut f32 {
+    pub(crate) unsafe fn at(self, offset: usize) -> *mut f32 {
         // SAFETY: the caller keeps `offset` in bounds.
         unsafe { self.0.add(offset) }
     }
 }
 
-/// `out = conv(x, weight) + bias`: `x` is `(n, ci, h, w)`, `weight` is
-/// `(co, ci, kh, kw)` (so `[co, ci * kh * kw]` row-major), `bias` has `co`
-/// values, `out` is `(n, co, oh, ow)`; every element of `out` is written.
+/// `out = conv(x, weight) + bias`, then LeakyReLU with `leaky` as its slope
+/// when given: `x` is `(n, ci, h, w)`, `weight` is `(co, ci, kh, kw)` (so
+/// `[co, ci * kh * kw]` row-major), `bias` has `co` values, `out` is `(n,
+/// co, oh, ow)`; every element of `out` is written. The activation is
+/// applied to each tile right after its product, while the tile is still in
+/// cache (inference: training keeps the pre-activation for the backward).
 /// Parallel over tiles of output rows (all images), each tile's product on
 /// one thread; with fewer tiles than threads (small late layers) the
 /// product itself runs on the pool.
@@ -70,6 +74,7 @@ pub fn conv2d_forward(
     weight: &[f32],
     co: usize,
     bias: Option<&[f32]>,
+    leaky: Option<f32>,
     out: &mut [f32],
 ) {
     let (oh, ow) = g.out_hw().expect("a valid geometry");
@@ -99,14 +104,7 @@ pub fn conv2d_forward(
             let (img, r0) = (t / tiles_per_image, (t % tiles_per_image) * rows);
             let r1 = (r0 + rows).min(oh);
             let len = (r1 - r0) * ow;
-            col.clear();
-            col.resize(k * len, 0.0);
-            let plane = g.h * g.w;
-            for (r, row) in col.chunks_mut(len).enumerate() {
-                let c = r / (g.kh * g.kw);
-                let src = &x[(img * g.ci + c) * plane..][..plane];
-                fill_im2col_row(src, g, r, r0..r1, row);
-            }
+            im2col_tile(x, g, img, r0..r1, col);
             let base = img * co * per + r0 * ow;
             // The tile's block of `out`: rows `r0..r1` of every output plane of
             // image `img`, at `base + ch * per + i` for `i < len`; the last
@@ -144,6 +142,16 @@ pub fn conv2d_forward(
                     false,
                     inner,
                 );
+                if let Some(slope) = leaky {
+                    for ch in 0..co {
+                        let block = std::slice::from_raw_parts_mut(d.add(ch * per), len);
+                        for v in block {
+                            if *v < 0.0 {
+                                *v *= slope;
+                            }
+                        }
+                    }
+                }
             }
         });
 }
@@ -217,7 +225,7 @@ mod tests {
             let b = values(co, 99 + i as u64);
             for bias in [Some(b.as_slice()), None] {
                 let mut out = vec![f32::NAN; n * co * oh * ow];
-                conv2d_forward(&x, &g, &wt, co, bias, &mut out);
+                conv2d_forward(&x, &g, &wt, co, bias, None, &mut out);
                 let want = naive(&x, &g, &wt, co, bias);
                 let worst = out
                     .iter()
@@ -229,6 +237,35 @@ mod tests {
                 assert!(worst < 1e-4, "case {i} {g:?}: worst {worst}");
             }
         }
+    }
+
+    /// The fused LeakyReLU equals the activation applied afterwards, bit
+    /// for bit, on a frame of several tiles.
+    #[test]
+    fn fused_leaky_relu_equals_the_separate_pass() {
+        let g = ConvGeom {
+            n: 2,
+            ci: 32,
+            h: 37,
+            w: 70,
+            kh: 3,
+            kw: 3,
+            stride: [1, 1],
+            pad: [1, 1],
+        };
+        let (oh, ow) = g.out_hw().unwrap();
+        let x = values(g.n * g.ci * g.h * g.w, 21);
+        let wt = values(6 * g.rows(), 22);
+        let b = values(6, 23);
+        let mut plain = vec![0.0f32; g.n * 6 * oh * ow];
+        conv2d_forward(&x, &g, &wt, 6, Some(&b), None, &mut plain);
+        let mut fused = vec![f32::NAN; plain.len()];
+        conv2d_forward(&x, &g, &wt, 6, Some(&b), Some(0.2), &mut fused);
+        let negatives = plain.iter().filter(|v| **v < 0.0).count();
+        assert!(negatives > plain.len() / 4, "{negatives} negative outputs");
+        let mut want = vec![0.0f32; plain.len()];
+        crate::act::leaky_relu(&plain, 0.2, &mut want);
+        assert_eq!(fused, want);
     }
 
     #[test]
@@ -253,7 +290,7 @@ mod tests {
                 .build()
                 .unwrap();
             let mut out = vec![0.0f32; g.n * 16 * oh * ow];
-            pool.install(|| conv2d_forward(&x, &g, &wt, 16, Some(&b), &mut out));
+            pool.install(|| conv2d_forward(&x, &g, &wt, 16, Some(&b), None, &mut out));
             out
         };
         assert_eq!(run(1), run(2));

@@ -18,6 +18,8 @@
 //!   per-channel sums (bias gradients).
 //! - [`conv_forward`]: the forward convolution over cache-sized tiles of
 //!   output rows, one `gemm` product each, bias written first.
+//! - [`conv_backward`]: the weight gradient summed over the same tiles in a
+//!   fixed order, and a stride-1 input gradient as a forward convolution.
 //! - [`act`]: LeakyReLU and SiLU forward and backward, SiLU with a
 //!   branch-free exp the compiler vectorises.
 //! - [`norm`]: GroupNorm with its affine, forward and backward, per
@@ -27,6 +29,7 @@
 pub mod act;
 pub mod adam;
 pub mod conv;
+pub mod conv_backward;
 pub mod conv_forward;
 pub mod norm;
 

@@ -93,8 +93,8 @@ impl<B: Backend> DoubleConv<B> {
 impl<B: PgrfOps> DoubleConv<B> {
     fn forward(&self, x: Tensor<B, 4>) -> Tensor<B, 4> {
         let slope = self.act.negative_slope as f32;
-        let x = ops::leaky_relu(ops::conv2d(&self.first, x), slope);
-        ops::leaky_relu(ops::conv2d(&self.second, x), slope)
+        let x = ops::conv2d_leaky(&self.first, x, slope);
+        ops::conv2d_leaky(&self.second, x, slope)
     }
 }
 

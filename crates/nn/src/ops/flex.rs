@@ -18,6 +18,7 @@ use burn_flex::FlexTensor;
 use pgrf_kernels::act;
 use pgrf_kernels::adam::{self, AdamStep};
 use pgrf_kernels::conv::{self, ConvGeom};
+use pgrf_kernels::conv_backward;
 use pgrf_kernels::norm::{self, GroupShape};
 
 /// Bytes one chunk's im2col buffer may take; larger batches are processed
@@ -78,6 +79,29 @@ pub(super) fn conv2d(
     bias: Option<FlexTensor>,
     options: ConvOptions<2>,
 ) -> FlexTensor {
+    conv2d_then(x, weight, bias, options, None)
+}
+
+/// [`conv2d`] followed by LeakyReLU with `slope`, fused into the
+/// convolution's tiles (inference); burn's convolution then pgrf's
+/// activation where the convolution is not pgrf's.
+pub(super) fn conv2d_leaky(
+    x: FlexTensor,
+    weight: FlexTensor,
+    bias: Option<FlexTensor>,
+    options: ConvOptions<2>,
+    slope: f32,
+) -> FlexTensor {
+    conv2d_then(x, weight, bias, options, Some(slope))
+}
+
+fn conv2d_then(
+    x: FlexTensor,
+    weight: FlexTensor,
+    bias: Option<FlexTensor>,
+    options: ConvOptions<2>,
+    leaky: Option<f32>,
+) -> FlexTensor {
     let (xd, wd) = (dims(&x), dims(&weight));
     let geom = conv_geom(&xd, &wd, &options);
     let typed = is_f32(&[&x, &weight]) && bias.as_ref().is_none_or(|b| is_f32(&[b]));
@@ -85,7 +109,11 @@ pub(super) fn conv2d(
         .out_hw()
         .filter(|_| typed && options.dilation == [1, 1] && options.groups == 1 && wd[1] == geom.ci)
     else {
-        return <Flex as ModuleOps<Flex>>::conv2d(x, weight, bias, options);
+        let y = <Flex as ModuleOps<Flex>>::conv2d(x, weight, bias, options);
+        return match leaky {
+            Some(slope) => leaky_relu(y, slope),
+            None => y,
+        };
     };
     let co = wd[0];
     let (x, weight) = (contiguous(x), contiguous(weight));
@@ -97,15 +125,19 @@ pub(super) fn conv2d(
         values(&weight),
         co,
         bias.as_ref().map(values),
+        leaky,
         &mut out,
     );
     new(out, &[geom.n, co, oh, ow])
 }
 
 /// Gradients of a convolution with one group and dilation 1: the bias's as
-/// per-channel sums of `dy`; per chunk of images, the weight's as `dY ·
-/// colᵀ` and the input's as col2im of `Wᵀ · dY`, with `dY` in the
-/// channel-major layout `[co, images * pixels]`.
+/// per-channel sums of `dy`; the weight's summed over tiles of output rows
+/// ([`pgrf_kernels::conv_backward::conv2d_weight_grad`]); the input's, for
+/// stride 1, as the forward convolution of `dy` by the flipped kernel
+/// ([`pgrf_kernels::conv_backward::conv2d_input_grad`]), otherwise per
+/// chunk of images as col2im of `Wᵀ · dY`, with `dY` in the channel-major
+/// layout `[co, images * pixels]`.
 pub(super) fn conv2d_backward(
     x: FlexTensor,
     weight: FlexTensor,
@@ -127,53 +159,64 @@ pub(super) fn conv2d_backward(
     let per = oh * ow;
     let x = contiguous(x);
     let dy = contiguous(dy);
-    let (xv, dyv) = (values(&x), values(&dy));
+    let weight = contiguous(weight);
+    let (xv, dyv, wv) = (values(&x), values(&dy), values(&weight));
     let bias_grad =
         (needed.bias && bias.is_some()).then(|| new(conv::channel_sums(dyv, n, co, per), &[co]));
-    let mut weight_grad: Option<FlexTensor> = None;
-    let mut x_grad = needed
-        .x
-        .then(|| pgrf_kernels::zeroed(n * geom.ci * geom.h * geom.w));
-    let w_rows = contiguous(weight).reshape(Shape::from(vec![co, k]));
-    let chunk = geom.images_per_chunk(COL_BUDGET);
-    if needed.weight || needed.x {
-        for start in (0..n).step_by(chunk) {
-            let images = start..(start + chunk).min(n);
-            let len = images.len() * per;
-            let mut dyc = pgrf_kernels::zeroed(co * len);
-            conv::to_channel_major(
-                &dyv[start * co * per..images.end * co * per],
-                images.len(),
-                co,
-                per,
-                &mut dyc,
-            );
-            let dyc = new(dyc, &[co, len]);
-            if needed.weight {
-                let mut col = pgrf_kernels::zeroed(k * len);
-                conv::im2col(xv, &geom, images.clone(), &mut col);
-                let part = matmul(dyc.clone(), new(col, &[k, len]).transpose(0, 1));
-                weight_grad = Some(match weight_grad {
-                    None => part,
-                    Some(acc) => <Flex as FloatTensorOps<Flex>>::float_add(acc, part),
-                });
-            }
-            if let Some(dx) = x_grad.as_mut() {
-                let dcol = contiguous(matmul(w_rows.transpose(0, 1), dyc));
-                let plane = geom.ci * geom.h * geom.w;
-                conv::col2im(
-                    values(&dcol),
-                    &geom,
-                    images.len(),
-                    &mut dx[start * plane..images.end * plane],
-                );
-            }
+    let weight_grad = needed.weight.then(|| {
+        let mut dw = vec![0.0f32; co * k];
+        conv_backward::conv2d_weight_grad(xv, &geom, dyv, co, &mut dw);
+        new(dw, &wd)
+    });
+    let x_grad = needed.x.then(|| {
+        let mut dx = pgrf_kernels::zeroed(n * geom.ci * geom.h * geom.w);
+        if conv_backward::input_grad_is_a_forward(&geom) {
+            conv_backward::conv2d_input_grad(dyv, &geom, wv, co, &mut dx);
+        } else {
+            strided_input_grad(dyv, &geom, &weight, co, &mut dx);
         }
-    }
+        new(dx, &xd)
+    });
     ConvGrads {
-        x: x_grad.map(|dx| new(dx, &xd)),
-        weight: weight_grad.map(|g| contiguous(g).reshape(Shape::from(wd.clone()))),
+        x: x_grad,
+        weight: weight_grad,
         bias: bias_grad,
+    }
+}
+
+/// The input gradient of a strided convolution: per chunk of images, col2im
+/// of `Wᵀ · dY` with `dY` in the channel-major layout.
+fn strided_input_grad(
+    dyv: &[f32],
+    geom: &ConvGeom,
+    weight: &FlexTensor,
+    co: usize,
+    dx: &mut [f32],
+) {
+    let (n, k) = (geom.n, geom.rows());
+    let (oh, ow) = geom.out_hw().expect("a valid geometry");
+    let per = oh * ow;
+    let w_rows = weight.clone().reshape(Shape::from(vec![co, k]));
+    let chunk = geom.images_per_chunk(COL_BUDGET);
+    let plane = geom.ci * geom.h * geom.w;
+    for start in (0..n).step_by(chunk) {
+        let images = start..(start + chunk).min(n);
+        let len = images.len() * per;
+        let mut dyc = pgrf_kernels::zeroed(co * len);
+        conv::to_channel_major(
+            &dyv[start * co * per..images.end * co * per],
+            images.len(),
+            co,
+            per,
+            &mut dyc,
+        );
+        let dcol = contiguous(matmul(w_rows.clone().transpose(0, 1), new(dyc, &[co, len])));
+        conv::col2im(
+            values(&dcol),
+            geom,
+            images.len(),
+            &mut dx[start * plane..images.end * plane],
+        );
     }
 }
 

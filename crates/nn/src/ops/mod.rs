@@ -159,6 +159,19 @@ pub trait PgrfOps: Backend {
         Self::conv2d(x, weight, bias, options)
     }
 
+    /// [`PgrfOps::pgrf_conv2d`] followed by [`PgrfOps::pgrf_leaky_relu`]:
+    /// two graph nodes by default (so autodiff keeps the pre-activation),
+    /// one fused pass where a backend without autodiff has it.
+    fn pgrf_conv2d_leaky(
+        x: FloatTensor<Self>,
+        weight: FloatTensor<Self>,
+        bias: Option<FloatTensor<Self>>,
+        options: ConvOptions<2>,
+        slope: f32,
+    ) -> FloatTensor<Self> {
+        Self::pgrf_leaky_relu(Self::pgrf_conv2d(x, weight, bias, options), slope)
+    }
+
     /// Gradients of [`PgrfOps::pgrf_conv2d`] from its inputs and output
     /// gradient `dy`.
     fn pgrf_conv2d_backward(
@@ -424,6 +437,16 @@ impl PgrfOps for burn::backend::Flex {
         flex::conv2d(x, weight, bias, options)
     }
 
+    fn pgrf_conv2d_leaky(
+        x: FloatTensor<Self>,
+        weight: FloatTensor<Self>,
+        bias: Option<FloatTensor<Self>>,
+        options: ConvOptions<2>,
+        slope: f32,
+    ) -> FloatTensor<Self> {
+        flex::conv2d_leaky(x, weight, bias, options, slope)
+    }
+
     fn pgrf_conv2d_backward(
         x: FloatTensor<Self>,
         weight: FloatTensor<Self>,
@@ -560,6 +583,24 @@ pub fn conv2d<B: PgrfOps>(m: &Conv2d<B>, x: Tensor<B, 4>) -> Tensor<B, 4> {
             ))
         }
         _ => m.forward(x),
+    }
+}
+
+/// `leaky_relu(conv2d(m, x), slope)`, fused into one pass where the
+/// backend has pgrf's kernels and no autodiff.
+pub fn conv2d_leaky<B: PgrfOps>(m: &Conv2d<B>, x: Tensor<B, 4>, slope: f32) -> Tensor<B, 4> {
+    match symmetric_padding(m) {
+        Some(padding) if B::pgrf_kernels() && m.groups == 1 && m.dilation == [1, 1] => {
+            let options = ConvOptions::new(m.stride, padding, [1, 1], 1);
+            tensor(B::pgrf_conv2d_leaky(
+                primitive(x),
+                primitive(m.weight.val()),
+                m.bias.as_ref().map(|b| primitive(b.val())),
+                options,
+                slope,
+            ))
+        }
+        _ => leaky_relu(m.forward(x), slope),
     }
 }
 

@@ -135,25 +135,30 @@ fn convolutions_match_burns() {
     }
 }
 
-/// A batch whose im2col buffer exceeds one chunk is processed in chunks
-/// whose partial weight gradients add up to the whole.
+/// A large batch: a stride-1 convolution whose weight gradient has more
+/// row tiles than it has groups of tiles (partials added in order), and a
+/// stride-2 one whose im2col buffer exceeds one chunk, so that its input
+/// gradient is computed in chunks of images.
 #[test]
-fn chunked_weight_gradients_add_up() {
+fn large_batches_add_up() {
     let device = Default::default();
-    // 32 input channels x 9 x 64 x 64 pixels x 4 B = 4.7 MB per image; 16
-    // images exceed the 64 MiB budget.
-    let conv = seeded::<B, _>(&device, 5, || {
-        materialise(
-            Conv2dConfig::new([32, 2], [3, 3])
-                .with_padding(PaddingConfig2d::Same)
-                .init::<B>(&device),
-        )
-    });
-    let params = |m: &Conv2d<B>| (m.weight.val(), m.bias.as_ref().unwrap().val());
-    let x = random([16, 32, 64, 64], 6);
-    let ours = run_conv(&conv, conv2d, params, x.clone(), true, Kernels::Pgrf);
-    let burns = run_conv(&conv, |m, x| m.forward(x), params, x, true, Kernels::Pgrf);
-    compare("chunked conv", ours, burns);
+    // 32 input channels x 9 x 64 x 64 output pixels x 4 B = 4.7 MB per
+    // image at stride 2 on 128 x 128; 16 images exceed the 64 MiB budget.
+    for (stride, side) in [(1, 64), (2, 128)] {
+        let conv = seeded::<B, _>(&device, 5, || {
+            materialise(
+                Conv2dConfig::new([32, 2], [3, 3])
+                    .with_stride([stride, stride])
+                    .with_padding(PaddingConfig2d::Explicit(1, 1, 1, 1))
+                    .init::<B>(&device),
+            )
+        });
+        let params = |m: &Conv2d<B>| (m.weight.val(), m.bias.as_ref().unwrap().val());
+        let x = random([16, 32, side, side], 6);
+        let ours = run_conv(&conv, conv2d, params, x.clone(), true, Kernels::Pgrf);
+        let burns = run_conv(&conv, |m, x| m.forward(x), params, x, true, Kernels::Pgrf);
+        compare(&format!("large batch, stride {stride}"), ours, burns);
+    }
 }
 
 #[test]
@@ -220,6 +225,45 @@ fn activations_match_burns() {
         close(&format!("{name} forward"), &y1, &y2, 1e-4);
         close(&format!("{name} gradient"), &d1, &d2, 1e-4);
     }
+}
+
+/// The convolution with its LeakyReLU: fused in one pass on Flex
+/// (inference) and two graph nodes under autodiff, both equal to burn's
+/// convolution followed by burn's activation within 1e-4, gradients
+/// included; on a frame of several row tiles.
+#[test]
+fn convolution_with_leaky_relu_matches_burns() {
+    type Inf = crate::backend::Cpu;
+    let device = Default::default();
+    let config = Conv2dConfig::new([16, 6], [3, 3]).with_padding(PaddingConfig2d::Same);
+    let conv = seeded::<Inf, _>(&device, 31, || materialise(config.init(&device)));
+    let x = Tensor::<Inf, 4>::random([2, 16, 40, 70], Distribution::Uniform(-1.0, 1.0), &device);
+    let fused = with_kernels(Kernels::Pgrf, || conv2d_leaky(&conv, x.clone(), 0.2));
+    let burns = with_kernels(Kernels::Burn, || {
+        burn::tensor::activation::leaky_relu(conv.forward(x.clone()), 0.2)
+    });
+    close("fused forward", &values(fused), &values(burns), 1e-4);
+
+    let conv = seeded::<B, _>(&device, 31, || materialise(config.init(&device)));
+    let params = |m: &Conv2d<B>| (m.weight.val(), m.bias.as_ref().unwrap().val());
+    let x = random([2, 16, 40, 70], 32);
+    let ours = run_conv(
+        &conv,
+        |m, x| conv2d_leaky(m, x, 0.2),
+        params,
+        x.clone(),
+        true,
+        Kernels::Pgrf,
+    );
+    let burns = run_conv(
+        &conv,
+        |m, x| burn::tensor::activation::leaky_relu(m.forward(x), 0.2),
+        params,
+        x,
+        true,
+        Kernels::Burn,
+    );
+    compare("conv + leaky relu under autodiff", ours, burns);
 }
 
 #[test]
