@@ -154,6 +154,31 @@ pub(crate) fn im2col_tile(
     }
 }
 
+/// The im2col block of output rows `oys` of image `img` as a matrix
+/// `[g.rows(), oys.len() * ow]`: the slice from its first element and its
+/// row stride. A pointwise convolution (1x1 kernel, stride 1, no padding)
+/// reads its input in place (rows `oys` of each plane, row stride `h * w`),
+/// since its im2col block would be a copy of it (30 of the SR3's 94
+/// convolutions); any other is built into `col` by [`im2col_tile`].
+pub(crate) fn tile_matrix<'a>(
+    x: &'a [f32],
+    g: &ConvGeom,
+    img: usize,
+    oys: Range<usize>,
+    col: &'a mut Vec<f32>,
+) -> (&'a [f32], usize) {
+    let pointwise = g.kh == 1 && g.kw == 1 && g.stride == [1, 1] && g.pad == [0, 0];
+    if !pointwise {
+        let len = oys.len() * g.out_hw().expect("a valid geometry").1;
+        im2col_tile(x, g, img, oys, col);
+        return (col, len);
+    }
+    let plane = g.h * g.w;
+    let start = img * g.ci * plane + oys.start * g.w;
+    let end = (img * g.ci + g.ci - 1) * plane + oys.end * g.w;
+    (&x[start..end], plane)
+}
+
 /// The adjoint of [`im2col`]: `dx` (`(images, ci, h, w)`, the chunk's
 /// images) receives the sum of every `dcol` entry at the input pixel it was
 /// copied from; entries that came from padding are dropped. Overwrites `dx`.

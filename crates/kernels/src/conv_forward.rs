@@ -17,7 +17,7 @@
 // against the slices' lengths before the one unsafe block.
 #![allow(unsafe_code)]
 
-use crate::conv::{im2col_tile, ConvGeom};
+use crate::conv::{tile_matrix, ConvGeom};
 use rayon::prelude::*;
 
 /// Bytes of one tile's im2col block: about half a core's L2 cache on the
@@ -104,14 +104,16 @@ pub fn conv2d_forward(
             let (img, r0) = (t / tiles_per_image, (t % tiles_per_image) * rows);
             let r1 = (r0 + rows).min(oh);
             let len = (r1 - r0) * ow;
-            im2col_tile(x, g, img, r0..r1, col);
+            let (m, m_rs) = tile_matrix(x, g, img, r0..r1, col);
+            assert!(m.len() >= (k - 1) * m_rs + len, "tile matrix extent");
             let base = img * co * per + r0 * ow;
             // The tile's block of `out`: rows `r0..r1` of every output plane of
             // image `img`, at `base + ch * per + i` for `i < len`; the last
             // element lies below `out.len()` (checked by the asserts above:
             // `base + (co - 1) * per + len <= (img + 1) * co * per`).
-            // SAFETY: the pointers cover `weight` (co x k), `col` (k x len) and
-            // the tile's block of `out` (co rows of len, stride per), all in
+            // SAFETY: the pointers cover `weight` (co x k), the tile's matrix
+            // `m` (k rows of len, stride m_rs, checked above) and the tile's
+            // block of `out` (co rows of len, stride per), all in
             // bounds as computed above; no other task writes that block, and
             // gemm reads its inputs only.
             unsafe {
@@ -132,9 +134,9 @@ pub fn conv2d_forward(
                     weight.as_ptr(),
                     1,
                     k as isize,
-                    col.as_ptr(),
+                    m.as_ptr(),
                     1,
-                    len as isize,
+                    m_rs as isize,
                     1.0,
                     1.0,
                     false,
@@ -207,6 +209,10 @@ mod tests {
             (2, 4, 9, 7, 2, 2, 0, 6),
             (1, 32, 70, 66, 3, 1, 1, 8),
             (1, 1, 2, 2, 3, 1, 1, 1),
+            // Pointwise, read in place over two row tiles per image; a
+            // padded 1x1 that is not.
+            (2, 8, 300, 40, 1, 1, 0, 5),
+            (1, 3, 5, 4, 1, 1, 1, 2),
         ];
         for (i, &(n, ci, h, w, k, s, p, co)) in cases.iter().enumerate() {
             let g = ConvGeom {

@@ -7,10 +7,11 @@
 //! gradient as a forward convolution over strided `swap_dims` views, copies
 //! the whole output gradient for the bias gradient, scatters the input
 //! gradient serially (col2im), and decomposes activations and Adam into
-//! many full-size passes (BENCHMARKS.md, "Training step"). The backward's
-//! matrix products stay in Flex's gemm; what is here is the data movement
-//! around them, done once, contiguously and in parallel, and the forward
-//! convolution with its own calls to the same `gemm` crate.
+//! many full-size passes (BENCHMARKS.md, "Training step"). The
+//! convolutions here call the `gemm` crate (the one Flex multiplies with)
+//! on tiles of output rows that stay in cache, forward and backward; the
+//! rest is the data movement around products, done once, contiguously and
+//! in parallel.
 //!
 //! - [`conv`]: convolution geometry, im2col and its adjoint col2im, the
 //!   `[channels, n * pixels]` layouts the products run on, the

@@ -184,8 +184,9 @@ pub(super) fn conv2d_backward(
     }
 }
 
-/// The input gradient of a strided convolution: per chunk of images, col2im
-/// of `Wᵀ · dY` with `dY` in the channel-major layout.
+/// The input gradient of a convolution that is not a forward one (strided,
+/// or padded as wide as its kernel): per chunk of images, col2im of `Wᵀ ·
+/// dY` with `dY` in the channel-major layout.
 fn strided_input_grad(
     dyv: &[f32],
     geom: &ConvGeom,
