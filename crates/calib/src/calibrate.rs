@@ -126,7 +126,17 @@ impl CalibrationRun {
                 "DN/e-",
             ),
             row(
-                "Temporal dark noise (median per-pixel read sigma)",
+                "Temporal dark noise sigma_y.dark (EMVA 1288: pair differences of the bias frames; row noise and quantisation included)",
+                m.dark_noise_sigma
+                    .map(|d| format!("{d:.3} ({:.3} e-)", d / m.k))
+                    .unwrap_or_else(|| "-".into()),
+                "DN",
+            ),
+            row(
+                &format!(
+                    "Read noise (median over pixels of the per-pixel sigma, row noise removed; corrected for the sampling error of {} frames)",
+                    m.bias_frames
+                ),
                 format!(
                     "{:.3} ({:.3} e-)",
                     m.read_sigma_median,
@@ -370,7 +380,7 @@ pub fn calibrate(input: &CalibrateInput, progress: &dyn Progress) -> Result<Cali
             need_exposure: false,
             per_exposure: 2,
             tap_pixels: input.tap_pixels,
-            pairs: false,
+            pairs: true,
             progress,
         },
         input.reject,
@@ -486,7 +496,8 @@ pub fn calibrate(input: &CalibrateInput, progress: &dyn Progress) -> Result<Cali
         k_method: gain.method,
         row_sigma: bias.row_sigma,
         frame_offset_sigma: Some(bias.frame_offset_sigma),
-        read_sigma_median: pgrf_core::stats::median_finite(&bias.sigma_read),
+        read_sigma_median: bias.read_sigma_median,
+        dark_noise_sigma: Some(bias.dark_noise_sigma).filter(|v| v.is_finite()),
         dsnu: bias.dsnu,
         prnu: Some(gain.prnu),
         dsnu_highpass: Some(bias.dsnu_highpass).filter(|v| v.is_finite()),
@@ -512,7 +523,7 @@ pub fn calibrate(input: &CalibrateInput, progress: &dyn Progress) -> Result<Cali
         dead_pixels: count(defect::DEAD),
         cold_pixels: count(defect::COLD),
         defect_columns,
-        units: "maps packed (4, H/2, W/2) in R,G1,B,G2 order; fixed_pattern (bias mean - black), sigma_read, response: DN; gain: DN per electron (eq. 3.15 per pixel); dark_rate: electrons per sqrt(s) (sqrt law) or per s (linear law), N_FP absorbed; defects: 0 good, 1 hot, 2 dead, 3 cold, 4 defective column; r2_*: R^2 of the per-pixel dark fits (with the offset term when dark_offset); dark_offset: the dark law's offset c, DN; K, row_sigma, read_sigma_median, dsnu: DN (K: DN/e-)".into(),
+        units: "maps packed (4, H/2, W/2) in R,G1,B,G2 order; fixed_pattern (bias mean - black), sigma_read, response: DN; gain: DN per electron (eq. 3.15 per pixel); dark_rate: electrons per sqrt(s) (sqrt law) or per s (linear law), N_FP absorbed; defects: 0 good, 1 hot, 2 dead, 3 cold, 4 defective column; r2_*: R^2 of the per-pixel dark fits (with the offset term when dark_offset); dark_offset: the dark law's offset c, DN; K: DN/e-; row_sigma, read_sigma_median (median of the true per-pixel sigma, corrected for the frames' sampling error), dark_noise_sigma (EMVA 1288 sigma_y.dark from bias-frame pair differences), dsnu: DN".into(),
     };
     Ok(CalibrationRun {
         calibration: Calibration { meta, maps },

@@ -52,8 +52,16 @@ pub struct CalibMeta {
     /// older than the measurement.
     #[serde(default)]
     pub frame_offset_sigma: Option<f64>,
-    /// Median over pixels of the read-noise sigma (row noise removed), DN.
+    /// Median over pixels of the read-noise sigma (row noise removed), DN,
+    /// corrected for the sampling error of the bias frames' number
+    /// (records before that correction hold the plain median of the map,
+    /// a few per cent low).
     pub read_sigma_median: f64,
+    /// EMVA 1288's temporal dark noise sigma_y.dark, DN: from the
+    /// differences of bias-frame pairs (row noise and quantisation
+    /// included, whole-frame offset drift not); None in older records.
+    #[serde(default)]
+    pub dark_noise_sigma: Option<f64>,
     /// DSNU: spatial standard deviation of the bias offset, DN.
     pub dsnu: f64,
     /// PRNU: spatial standard deviation of the response divided by its mean
@@ -181,6 +189,7 @@ impl CalibMeta {
         for (name, v) in [
             ("row_sigma", self.row_sigma),
             ("read_sigma_median", self.read_sigma_median),
+            ("dark_noise_sigma", self.dark_noise_sigma.unwrap_or(0.0)),
             ("dsnu", self.dsnu),
             ("bias_exposure_s", self.bias_exposure_s),
         ] {

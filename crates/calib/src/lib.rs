@@ -17,6 +17,7 @@ mod messages;
 pub mod mix;
 pub mod outputs;
 mod ppcc;
+mod sample_sd;
 pub mod stack;
 mod stats;
 pub mod synth;

@@ -75,6 +75,7 @@ impl CalibrationRun {
             "K_method": m.k_method,
             "row_sigma": m.row_sigma,
             "read_sigma_median": m.read_sigma_median,
+            "dark_noise_sigma": m.dark_noise_sigma,
             "dsnu": m.dsnu,
             "prnu": m.prnu,
             "dark_law": crate::calibrate::law_name(m.dark_law),

@@ -221,8 +221,8 @@ pub struct ReadOptions<'a> {
     pub per_exposure: usize,
     /// How many pixels to keep temporal samples of (0 for none).
     pub tap_pixels: usize,
-    /// Pair the frames of each exposure for `pair_variance` (flats: one
-    /// more frame held per exposure while its pair is read).
+    /// Pair the frames of each exposure for `pair_variance` (bias and
+    /// flats: one more frame held per exposure while its pair is read).
     pub pairs: bool,
     /// Called once per frame accumulated.
     pub progress: &'a dyn pgrf_core::Progress,

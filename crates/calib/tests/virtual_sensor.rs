@@ -1099,3 +1099,65 @@ fn calibration_is_bit_identical_from_run_to_run() {
     );
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// Issue 39: the read noise (median over pixels of the per-pixel sigma) and
+/// EMVA 1288's temporal dark noise sigma_y.dark, from 8, 16 and 64 bias
+/// frames of a 256 x 192 virtual sensor whose read noise spreads by 25 %
+/// log-normally over its pixels: each within 1 % of the truth (the median
+/// of the true sigma map; sqrt(mean sigma_r^2 + sigma_row^2 + 1/12) for
+/// sigma_y.dark, which holds row noise and rounding). The median of the
+/// per-pixel map itself, the estimate before, is 2-6 % low at 8 and 16.
+#[test]
+fn read_and_dark_noise_hold_at_8_16_and_64_frames() {
+    let mut spec = SensorSpec::preset("a7s2-iso1600").unwrap();
+    spec.width = 256;
+    spec.height = 192;
+    let v = VirtualSensor::new(spec).unwrap();
+    let dir = scratch("readnoise");
+    let mut cam = Shooter {
+        v: &v,
+        dir: dir.clone(),
+        seed: 39_000,
+        fits: false,
+    };
+    let bias = cam.shoot("bias", 64, 0.0, 1.0 / 8000.0, 0.0);
+    let mut flat = cam.shoot("flat", 4, 2000.0, 0.01, 0.0);
+    flat.extend(cam.shoot("flat", 4, 8000.0, 0.04, 0.0));
+    let read = pgrf_core::stats::median_finite(&v.sigma_read);
+    let mean_var = v
+        .sigma_read
+        .iter()
+        .map(|&s| (s as f64).powi(2))
+        .sum::<f64>()
+        / v.sigma_read.len() as f64;
+    let dark = (mean_var + (v.spec.row_sigma as f64).powi(2) + 1.0 / 12.0).sqrt();
+    for n in [8, 16, 64] {
+        let run = calibrate(
+            &CalibrateInput {
+                bias: bias[..n].to_vec(),
+                flat: flat.clone(),
+                ..Default::default()
+            },
+            &pgrf_core::NoProgress,
+        )
+        .unwrap();
+        let m = &run.calibration.meta;
+        let plain = pgrf_core::stats::median_finite(&run.calibration.maps.sigma_read);
+        let sigma_y = m.dark_noise_sigma.unwrap();
+        eprintln!(
+            "{n} frames: read {:.4} (map median {plain:.4}) vs {read:.4}; sigma_y.dark {sigma_y:.4} vs {dark:.4}",
+            m.read_sigma_median
+        );
+        let rel = |a: f64, b: f64| (a / b - 1.0).abs();
+        assert!(
+            rel(m.read_sigma_median, read) < 0.01,
+            "{n} frames: read {} vs {read}",
+            m.read_sigma_median
+        );
+        assert!(
+            rel(sigma_y, dark) < 0.01,
+            "{n} frames: sigma_y.dark {sigma_y} vs {dark}"
+        );
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
