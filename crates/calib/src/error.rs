@@ -345,6 +345,9 @@ pub enum FrameField {
     Iso,
     /// Maker and model.
     Camera,
+    /// The stored row order (a FITS file's ROWORDER): frames stored the
+    /// other way up would be averaged upside down against the rest.
+    RowOrder,
 }
 
 /// Result of every fallible function of the calibration crate.
@@ -366,5 +369,8 @@ fn mismatch(what: FrameField, expected: &str, found: &str) -> String {
         FrameField::Camera => {
             format!("camera '{found}' differs from the other frames' '{expected}'")
         }
+        FrameField::RowOrder => format!(
+            "row order {found} (ROWORDER; a FITS file without one is BOTTOM-UP) differs from the other frames' {expected}"
+        ),
     }
 }

@@ -66,6 +66,13 @@ impl Master {
         )
         .map_err(|e| self.refused(e))?;
         f.mono = key.mono;
+        if key.fits {
+            // The stacks' stored row order, which the master keeps.
+            f.fits = Some(pgrf_raw::FitsHeader {
+                row_order: Some(key.row_order),
+                ..Default::default()
+            });
+        }
         f.iso = key.iso;
         f.exposure_s = Some(self.exposure_s);
         f.make = key.make.clone();
@@ -73,9 +80,11 @@ impl Master {
         Ok(f)
     }
 
-    /// The master as a FITS file: the mean unrounded (32-bit float), with
-    /// IMAGETYP, NCOMBINE, the frames' exposure, ISO, `temperature_c` and
-    /// the measured gain as EGAIN (electrons per ADU, 1 / `k`).
+    /// The master as a FITS file: the mean unrounded (32-bit float,
+    /// normalised to 0-1, so no SATURATE), rows in the stacks' stored order
+    /// with the ROWORDER that says which, with IMAGETYP, NCOMBINE, the
+    /// frames' exposure, ISO, `temperature_c` and the measured gain as
+    /// EGAIN (electrons per ADU, 1 / `k`).
     pub fn fits(&self, key: &FrameKey, k: f64, temperature_c: Option<f32>) -> Result<Vec<u8>> {
         let mut template = self.template(key)?;
         template.temperature_c = temperature_c;

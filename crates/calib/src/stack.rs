@@ -9,7 +9,7 @@
 
 use crate::error::{CalibError, FrameField, Result};
 use crate::stats::PixelStats;
-use pgrf_raw::{decode_file, pack_u16, Cfa, LevelOverrides, RawFrame};
+use pgrf_raw::{decode_file, pack_u16, Cfa, LevelOverrides, RawFrame, RowOrder};
 use std::path::PathBuf;
 
 /// What every frame of a calibration must share.
@@ -25,6 +25,9 @@ pub struct FrameKey {
     pub(crate) mono: bool,
     /// The frames are FITS files: masters are written as FITS.
     pub fits: bool,
+    /// The order the frames' rows are stored in ([`RawFrame::row_order`]):
+    /// the masters keep it and say so.
+    pub row_order: RowOrder,
     pub(crate) iso: Option<u32>,
     /// Black level in DN of the planes R, G1, B, G2.
     pub black: [f32; 4],
@@ -41,6 +44,7 @@ impl FrameKey {
             cfa: f.cfa,
             mono: f.mono,
             fits: f.fits.is_some(),
+            row_order: f.row_order(),
             iso: f.iso,
             black: f.black,
             white: f.white,
@@ -67,6 +71,13 @@ impl FrameKey {
         }
         if (self.cfa, self.mono) != (other.cfa, other.mono) {
             return Some((FrameField::Cfa, self.layout().into(), other.layout().into()));
+        }
+        if self.row_order != other.row_order {
+            return Some((
+                FrameField::RowOrder,
+                self.row_order.keyword().into(),
+                other.row_order.keyword().into(),
+            ));
         }
         if self.iso != other.iso {
             let s = |i: Option<u32>| {

@@ -586,6 +586,8 @@ fn a_monochrome_fits_camera_from_frames_to_masters() {
     let info: Value = serde_json::from_slice(&r.stdout).unwrap();
     assert_eq!(info["cfa"], json!("mono"));
     assert_eq!(info["fits"]["bitpix"], json!(16));
+    // simulate-sensor writes the sensor's top row first, and says so.
+    assert_eq!(info["fits"]["row_order"], json!("TOP-DOWN"));
     assert_eq!(info["temperature_c"], json!(-10.0));
     assert_eq!(info["planes"][0]["plane"], json!("(0,0)"));
 
@@ -622,6 +624,12 @@ fn a_monochrome_fits_camera_from_frames_to_masters() {
     assert!(dark.mono);
     assert_eq!(dark.exposure_s, Some(100.0));
     assert_eq!(dark.fits.as_ref().unwrap().bitpix, -32);
+    // The masters keep the stacks' row order and state it.
+    assert_eq!(dark.row_order(), pgrf_raw::RowOrder::TopDown);
+    assert_eq!(
+        dark.fits.as_ref().unwrap().row_order,
+        Some(pgrf_raw::RowOrder::TopDown)
+    );
 
     let dng = dir.join("bias.dng");
     let r = pgrf(&["convert", s(&bias0), "-o", s(&dng)]);

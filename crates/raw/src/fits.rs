@@ -25,9 +25,13 @@
 //!   seen top-down*, the order camera drivers read the sensor in.
 //! - ROWORDER says how the rows are stored: `TOP-DOWN` (stored row 0 is the
 //!   image's top row, what drivers write) or `BOTTOM-UP` (stored row 0 is the
-//!   bottom row, the FITS standard's display convention). Without ROWORDER
-//!   the file is taken as TOP-DOWN, as Siril does by default
-//!   (`ROW_ORDER_HEADER_TOPDOWN`: from the header, else top-down).
+//!   bottom row, the FITS standard's display convention). For the Bayer
+//!   phase, a file without ROWORDER is read as TOP-DOWN, as Siril's
+//!   debayering does by default (`ROW_ORDER_HEADER_TOPDOWN`: from the
+//!   header, else top-down). Its rows, though, are bottom-up by the FITS
+//!   convention (Siril loads such a file as it is and flips a TOP-DOWN one),
+//!   so what pgrf writes from it says BOTTOM-UP ([`RowOrder`],
+//!   [`crate::RawFrame::row_order`]).
 //! - XBAYROFF/YBAYROFF shift where the pattern starts reading, in columns and
 //!   rows; only their parity matters. An odd XBAYROFF turns RGGB into GRBG,
 //!   an odd YBAYROFF turns RGGB into GBRG.
@@ -85,6 +89,9 @@ pub struct FitsImage {
     pub height: usize,
     /// Samples in ADU, row-major, rows in the order stored in the file (no flip).
     pub data: Vec<u16>,
+    /// ROWORDER as the header states it; `None` when it has none (the rows
+    /// are then bottom-up by the FITS convention).
+    pub row_order: Option<RowOrder>,
     /// Bayer phase of `data[0]` (stored row 0, column 0) when the header
     /// declares a colour filter (BAYERPAT, with ROWORDER and XBAYROFF/YBAYROFF
     /// applied as the module documentation explains); `None`: monochrome.
@@ -125,6 +132,31 @@ pub struct FitsImage {
     pub conversion: Option<String>,
 }
 
+/// How a FITS file stores its rows: its ROWORDER keyword. pgrf never
+/// flips rows; it keeps the stored order and writes back the keyword that
+/// says which it is, so a master lines up with the lights it was made for
+/// in every tool that honours the keyword.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+pub enum RowOrder {
+    /// Stored row 0 is the image's top row (what camera drivers write).
+    #[serde(rename = "TOP-DOWN")]
+    TopDown,
+    /// Stored row 0 is the bottom row (the FITS standard's convention, and
+    /// what a file without ROWORDER is).
+    #[serde(rename = "BOTTOM-UP")]
+    BottomUp,
+}
+
+impl RowOrder {
+    /// The ROWORDER value: "TOP-DOWN" or "BOTTOM-UP".
+    pub fn keyword(self) -> &'static str {
+        match self {
+            RowOrder::TopDown => "TOP-DOWN",
+            RowOrder::BottomUp => "BOTTOM-UP",
+        }
+    }
+}
+
 /// What a FITS frame's header says that the other fields of a [`RawFrame`](crate::RawFrame) do not
 /// hold: kept so `pgrf info` can show it and calibration can compare its
 /// gain with the header's. It is the one field of a [`RawFrame`](crate::RawFrame)
@@ -139,6 +171,8 @@ pub struct FitsHeader {
     pub gain_setting: Option<f64>,
     /// DATE-OBS, as written.
     pub date_obs: Option<String>,
+    /// ROWORDER as the header states it; `None` without one.
+    pub row_order: Option<RowOrder>,
     /// How samples that were not unsigned 16-bit integers became DN.
     pub conversion: Option<String>,
 }
@@ -387,7 +421,8 @@ fn read_primary(name: &Path, bytes: &[u8]) -> Result<FitsImage> {
     };
     let instrument = string(header, "INSTRUME").map_err(decode)?;
     let date_obs = string(header, "DATE-OBS").map_err(decode)?;
-    let bayer = bayer_phase(name, header, height)?;
+    let row_order = row_order(header).map_err(decode)?;
+    let bayer = bayer_phase(name, header, height, row_order)?;
 
     // Pixels.
     let (data, conversion) = match fits.get_data(&hdu).pixels() {
@@ -441,6 +476,7 @@ fn read_primary(name: &Path, bytes: &[u8]) -> Result<FitsImage> {
         height,
         data,
         bayer,
+        row_order,
         bitpix,
         white,
         exposure_s: exposure.map(|(_, t)| t),
@@ -614,9 +650,29 @@ fn floats<T: Copy + Into<f64>>(
     Ok((data, Some(conversion)))
 }
 
+/// ROWORDER: TOP-DOWN or BOTTOM-UP (any case), `None` when absent; any
+/// other value is refused, since what pgrf writes from the frame states it.
+fn row_order(header: &ValueMap) -> std::result::Result<Option<RowOrder>, String> {
+    match string(header, "ROWORDER")? {
+        None => Ok(None),
+        Some(r) => match r.to_ascii_uppercase().as_str() {
+            "TOP-DOWN" => Ok(Some(RowOrder::TopDown)),
+            "BOTTOM-UP" => Ok(Some(RowOrder::BottomUp)),
+            other => Err(format!(
+                "ROWORDER = '{other}' is neither TOP-DOWN nor BOTTOM-UP"
+            )),
+        },
+    }
+}
+
 /// The phase of `data[0]` from BAYERPAT, XBAYROFF, YBAYROFF and ROWORDER
-/// (module documentation).
-fn bayer_phase(name: &Path, header: &ValueMap, height: usize) -> Result<Option<Cfa>> {
+/// (`rows`, module documentation).
+fn bayer_phase(
+    name: &Path,
+    header: &ValueMap,
+    height: usize,
+    rows: Option<RowOrder>,
+) -> Result<Option<Cfa>> {
     let no_phase = || {
         RawError::unsupported(
             name,
@@ -654,23 +710,18 @@ fn bayer_phase(name: &Path, header: &ValueMap, height: usize) -> Result<Option<C
     let dec = |m: String| RawError::decode(name, m);
     let xoff = integer(header, "XBAYROFF").map_err(dec)?.unwrap_or(0);
     let yoff = integer(header, "YBAYROFF").map_err(dec)?.unwrap_or(0);
-    let bottom_up = match string(header, "ROWORDER").map_err(dec)? {
-        None => false,
-        Some(r) => match r.to_ascii_uppercase().as_str() {
-            "TOP-DOWN" => false,
-            "BOTTOM-UP" => true,
-            other => {
-                return Err(dec(format!(
-                    "ROWORDER = '{other}' is neither TOP-DOWN nor BOTTOM-UP"
-                )))
-            }
-        },
-    };
+    let bottom_up = rows == Some(RowOrder::BottomUp);
     Ok(Some(stored_phase(pattern, xoff, yoff, bottom_up, height)))
 }
 
 /// BAYERPAT (top-down convention) to the phase of stored row 0, column 0.
-fn stored_phase(pattern: Cfa, xoff: i64, yoff: i64, bottom_up: bool, height: usize) -> Cfa {
+pub(crate) fn stored_phase(
+    pattern: Cfa,
+    xoff: i64,
+    yoff: i64,
+    bottom_up: bool,
+    height: usize,
+) -> Cfa {
     let flip = if bottom_up { (height + 1) % 2 } else { 0 }; // (H - 1) mod 2
     let dy = (yoff.rem_euclid(2) as usize + flip) % 2;
     let dx = xoff.rem_euclid(2) as usize;

@@ -7,11 +7,17 @@
 //! data and a bias stack measures it, so frames come in with black 0 (give
 //! `--black` where a known pedestal matters). Rows stay in the file's stored
 //! order, and the Bayer phase is that of stored pixel (0, 0) ([`crate::fits`]
-//! works it out from BAYERPAT, ROWORDER and the offsets); frames pgrf writes
-//! are TOP-DOWN with no offsets, so a round trip keeps rows and phase.
+//! works it out from BAYERPAT, ROWORDER and the offsets). What pgrf writes
+//! keeps those rows and says which order they are in
+//! ([`RawFrame::row_order`]: a FITS file's own, BOTTOM-UP when it stated
+//! none; TOP-DOWN for frames from a camera RAW), with BAYERPAT stated so
+//! that a reader applying the convention finds the same phase, so a round
+//! trip keeps rows and phase and a master lines up with its lights.
 
 use crate::error::{RawError, Result};
-use crate::fits::{encode_fits_f32, encode_fits_u16, read_fits, FitsCard, FitsHeader, FitsValue};
+use crate::fits::{
+    encode_fits_f32, encode_fits_u16, read_fits, FitsCard, FitsHeader, FitsValue, RowOrder,
+};
 use crate::frame::{LevelOverrides, RawFrame};
 use pgrf_core::write_atomic;
 use std::path::Path;
@@ -43,32 +49,59 @@ pub(crate) fn frame_from_fits(
         egain_e_per_adu: img.egain_e_per_adu,
         gain_setting: img.gain_setting,
         date_obs: img.date_obs,
+        row_order: img.row_order,
         conversion: img.conversion,
     });
     frame.apply_overrides(overrides)?;
     Ok(frame)
 }
 
+/// The saturation keyword: the white level in the ADU of integer samples.
+/// Masters, whose samples are normalised to 0-1, carry none.
+const SATURATE: &str = "SATURATE";
+
+impl RawFrame {
+    /// The order this frame's rows are in: a FITS frame's stored order
+    /// (its ROWORDER, BOTTOM-UP by the FITS convention when it has none);
+    /// TOP-DOWN for a camera RAW's or a synthesised frame, whose first row
+    /// is the sensor's top row.
+    pub fn row_order(&self) -> RowOrder {
+        match &self.fits {
+            Some(h) => h.row_order.unwrap_or(RowOrder::BottomUp),
+            None => RowOrder::TopDown,
+        }
+    }
+}
+
 /// The header cards every FITS file pgrf writes of `frame` carries: its
-/// exposure, ISO, temperature, camera and (for a colour sensor) its Bayer
-/// pattern, stated TOP-DOWN with no offsets because rows are written in
-/// the frame's order.
+/// row order ([`RawFrame::row_order`]: rows are written as the frame holds
+/// them), exposure, ISO, temperature, camera and (for a colour sensor) its
+/// Bayer pattern with no offsets. BAYERPAT names the pattern as seen
+/// top-down, so a BOTTOM-UP frame of even height, whose stored row 0 is
+/// the top-down row H - 1, states its stored phase shifted by one row
+/// ([`crate::fits`]'s convention, which reads it back to `frame.cfa`).
 fn frame_cards(frame: &RawFrame) -> Vec<FitsCard> {
     let card = |key: &str, value: FitsValue, comment: &str| FitsCard {
         key: key.into(),
         value,
         comment: comment.into(),
     };
+    let rows = frame.row_order();
     let mut cards = vec![card(
         "ROWORDER",
-        FitsValue::Str("TOP-DOWN".into()),
-        "first row stored is the top row",
+        FitsValue::Str(rows.keyword().into()),
+        match rows {
+            RowOrder::TopDown => "first row stored is the top row",
+            RowOrder::BottomUp => "first row stored is the bottom row",
+        },
     )];
     if !frame.mono {
+        let pattern =
+            crate::fits::stored_phase(frame.cfa, 0, 0, rows == RowOrder::BottomUp, frame.height);
         cards.push(card(
             "BAYERPAT",
-            FitsValue::Str(frame.cfa.name().into()),
-            "colour filter of the top-left 2x2 cell",
+            FitsValue::Str(pattern.name().into()),
+            "colour filter of the top-left 2x2 cell, seen top-down",
         ));
         cards.push(card(
             "XBAYROFF",
@@ -82,7 +115,7 @@ fn frame_cards(frame: &RawFrame) -> Vec<FitsCard> {
         ));
     }
     cards.push(card(
-        "SATURATE",
+        SATURATE,
         FitsValue::Int(frame.white as i64),
         "saturation level [ADU]",
     ));
@@ -144,7 +177,8 @@ pub fn write_fits_frame(frame: &RawFrame, path: &Path) -> Result<()> {
 /// floats normalised by 65535 (the [0, 1] convention of Siril and
 /// PixInsight; pgrf reads it back at the DN scale) so the mean keeps its
 /// fraction of a DN, which rounding to integers would lose (a master bias
-/// of 64 frames is known to about a tenth of a DN). `kind` names it in
+/// of 64 frames is known to about a tenth of a DN); no SATURATE, which
+/// would state an ADU level on 0-1 samples. `kind` names it in
 /// IMAGETYP ("Master Bias", ...); `egain`, when given, is the measured
 /// electrons per ADU (1 / K).
 pub fn encode_fits_master(
@@ -163,7 +197,7 @@ pub fn encode_fits_master(
         });
     }
     let mut cards = frame_cards(template);
-    cards.retain(|c| c.key != "EGAIN");
+    cards.retain(|c| c.key != "EGAIN" && c.key != SATURATE);
     cards.insert(
         0,
         FitsCard {
@@ -238,6 +272,85 @@ mod tests {
         }
     }
 
+    /// The header cards of `bytes`, key and raw value field, up to END.
+    fn cards(bytes: &[u8]) -> Vec<(String, String)> {
+        bytes
+            .chunks(80)
+            .map(|c| String::from_utf8_lossy(c).to_string())
+            .take_while(|c| !c.starts_with("END "))
+            .map(|c| (c[..8].trim().to_string(), c[10..].trim().to_string()))
+            .collect()
+    }
+
+    /// A FITS frame keeps its stored row order through pgrf: stated
+    /// TOP-DOWN or BOTTOM-UP, or none (BOTTOM-UP by the FITS convention),
+    /// it is written back as BOTTOM-UP unless it said TOP-DOWN, rows
+    /// untouched, and a colour frame's BAYERPAT is restated so that the
+    /// phase read back is the same (for BOTTOM-UP of even height RGGB
+    /// stored is GBRG seen top-down). A frame from a camera RAW is TOP-DOWN.
+    #[test]
+    fn row_order_is_kept_and_stated() {
+        for (stated, written) in [
+            (None, "'BOTTOM-UP'"),
+            (Some("BOTTOM-UP"), "'BOTTOM-UP'"),
+            (Some("TOP-DOWN"), "'TOP-DOWN'"),
+        ] {
+            for cfa in [None, Some(Cfa::Rggb), Some(Cfa::Gbrg)] {
+                let f = frame(cfa, 11);
+                let mut header = vec![];
+                if let Some(r) = stated {
+                    header.push(FitsCard::new("ROWORDER", FitsValue::Str(r.into()), ""));
+                }
+                if let Some(c) = cfa {
+                    header.push(FitsCard::new(
+                        "BAYERPAT",
+                        FitsValue::Str(c.name().into()),
+                        "",
+                    ));
+                }
+                let bytes = encode_fits_u16(f.width, f.height, &f.mosaic, &header).unwrap();
+                let read =
+                    frame_from_fits(Path::new("in.fits"), &bytes, &Default::default()).unwrap();
+                let out = encode_fits_frame(&read).unwrap();
+                let c = cards(&out);
+                let value = |k: &str| c.iter().find(|(key, _)| key == k).map(|(_, v)| v.clone());
+                assert!(
+                    value("ROWORDER").unwrap().starts_with(written),
+                    "{stated:?} {cfa:?}: {c:?}"
+                );
+                let back =
+                    frame_from_fits(Path::new("out.fits"), &out, &Default::default()).unwrap();
+                assert_eq!(back.mosaic, read.mosaic);
+                assert_eq!(
+                    (back.mono, back.cfa),
+                    (read.mono, read.cfa),
+                    "{stated:?} {cfa:?}"
+                );
+                assert_eq!(back.row_order(), read.row_order());
+                if cfa == Some(Cfa::Rggb) && written == "'BOTTOM-UP'" {
+                    // Height 6 is even: stored row 0 is top-down row 5.
+                    let stored = if stated.is_some() {
+                        Cfa::Gbrg
+                    } else {
+                        Cfa::Rggb
+                    };
+                    assert_eq!(read.cfa, stored, "{stated:?}");
+                    let pattern = if stated.is_some() { "'RGGB" } else { "'GBRG" };
+                    assert!(value("BAYERPAT").unwrap().starts_with(pattern), "{c:?}");
+                }
+            }
+        }
+        let camera = frame(Some(Cfa::Rggb), 12);
+        assert_eq!(camera.row_order(), RowOrder::TopDown);
+        let c = cards(&encode_fits_frame(&camera).unwrap());
+        assert!(c
+            .iter()
+            .any(|(k, v)| k == "ROWORDER" && v.starts_with("'TOP-DOWN'")));
+        assert!(c
+            .iter()
+            .any(|(k, v)| k == "SATURATE" && v.starts_with("60000")));
+    }
+
     /// A master keeps its fractional DN to float precision (relative
     /// 2^-24 of 65535: well under 0.01 DN).
     #[test]
@@ -249,6 +362,8 @@ mod tests {
         let bytes = encode_fits_master(&f, &mosaic, "Master Bias", 64, Some(2.06)).unwrap();
         let img = read_fits(Path::new("m.fits"), &bytes).unwrap();
         assert_eq!(img.bitpix, -32);
+        // Samples in 0-1 carry no ADU saturation level.
+        assert!(!cards(&bytes).iter().any(|(k, _)| k == "SATURATE"));
         assert_eq!(img.egain_e_per_adu, Some(2.06));
         // Read as DN, rounded.
         for (a, b) in img.data.iter().zip(&mosaic) {

@@ -415,6 +415,10 @@ fn bayer_keywords_that_cannot_be_used_are_refused() {
     );
     let e = try_read(&[card("BAYERPAT", s("RGGB")), card("ROWORDER", s("SIDEWAYS"))]);
     assert!(e.contains("ROWORDER = 'SIDEWAYS'"), "{e}");
+    // A monochrome frame's row order matters too: what pgrf writes of it
+    // states it.
+    let e = try_read(&[card("ROWORDER", s("SIDEWAYS"))]);
+    assert!(e.contains("ROWORDER = 'SIDEWAYS'"), "{e}");
     let e = try_read(&[
         card("BAYERPAT", s("RGGB")),
         card("XBAYROFF", FitsValue::Float(0.5)),
@@ -425,7 +429,6 @@ fn bayer_keywords_that_cannot_be_used_are_refused() {
         vec![],
         vec![card("BAYERPAT", s(""))],
         vec![card("BAYERPAT", FitsValue::Bool(false))],
-        vec![card("ROWORDER", s("SIDEWAYS"))], // irrelevant to a mono frame
     ] {
         let bytes = encode_fits_u16(2, 2, &[1, 2, 3, 4], &cards).unwrap();
         assert_eq!(read_fits(&name(), &bytes).unwrap().bayer, None);

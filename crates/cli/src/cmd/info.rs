@@ -147,6 +147,13 @@ fn print_header(f: &RawFrame, info: &Info) {
         if let Some(d) = &h.date_obs {
             println!("date-obs    {d}");
         }
+        println!(
+            "row order   {}",
+            match h.row_order {
+                Some(r) => format!("{} (ROWORDER)", r.keyword()),
+                None => "BOTTOM-UP (no ROWORDER: the FITS convention)".into(),
+            }
+        );
     } else {
         println!("orientation {} (EXIF)", f.orientation);
     }
