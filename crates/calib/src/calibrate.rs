@@ -457,7 +457,8 @@ pub fn calibrate(input: &CalibrateInput, progress: &dyn Progress) -> Result<Cali
         ],
         tolerance,
     )?;
-    let (defect_map, defect_columns) = defects(&bias, Some(&gain), dark.as_ref());
+    let (defect_map, defect_columns) =
+        defects(&bias, Some(&gain), dark.as_ref(), key.cfa.offsets());
 
     let zeros = || ndarray::Array3::zeros(bias.fixed_pattern.raw_dim());
     let maps = CalibMaps {
@@ -523,7 +524,7 @@ pub fn calibrate(input: &CalibrateInput, progress: &dyn Progress) -> Result<Cali
         dead_pixels: count(defect::DEAD),
         cold_pixels: count(defect::COLD),
         defect_columns,
-        units: "maps packed (4, H/2, W/2) in R,G1,B,G2 order; fixed_pattern (bias mean - black), sigma_read, response: DN; gain: DN per electron (eq. 3.15 per pixel); dark_rate: electrons per sqrt(s) (sqrt law) or per s (linear law), N_FP absorbed; defects: 0 good, 1 hot, 2 dead, 3 cold, 4 defective column; r2_*: R^2 of the per-pixel dark fits (with the offset term when dark_offset); dark_offset: the dark law's offset c, DN; K: DN/e-; row_sigma, read_sigma_median (median of the true per-pixel sigma, corrected for the frames' sampling error), dark_noise_sigma (EMVA 1288 sigma_y.dark from bias-frame pair differences), dsnu: DN".into(),
+        units: "maps packed (4, H/2, W/2) in R,G1,B,G2 order; fixed_pattern (bias mean - black), sigma_read, response: DN; gain: DN per electron (eq. 3.15 per pixel); dark_rate: electrons per sqrt(s) (sqrt law) or per s (linear law), N_FP absorbed; defects: 0 good, 1 hot, 2 dead, 3 cold, 4 defective column (defect_columns counts sensor columns); r2_*: R^2 of the per-pixel dark fits (with the offset term when dark_offset); dark_offset: the dark law's offset c, DN; K: DN/e-; row_sigma, read_sigma_median (median of the true per-pixel sigma, corrected for the frames' sampling error), dark_noise_sigma (EMVA 1288 sigma_y.dark from bias-frame pair differences), dsnu: DN".into(),
     };
     Ok(CalibrationRun {
         calibration: Calibration { meta, maps },

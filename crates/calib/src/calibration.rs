@@ -129,8 +129,9 @@ pub struct CalibMeta {
     /// Number of pixels flagged cold (3 in the `defects` map).
     #[serde(default)]
     pub cold_pixels: usize,
-    /// Number of defective columns (of the packed planes; their pixels are
-    /// 4 in the `defects` map where not flagged otherwise).
+    /// Number of defective sensor columns, each counted once (records
+    /// before issue 39 counted per packed plane); their pixels are 4 in the
+    /// `defects` map where not flagged otherwise.
     #[serde(default)]
     pub defect_columns: usize,
     pub(crate) units: String,

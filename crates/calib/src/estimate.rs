@@ -19,7 +19,7 @@ use crate::error::{CalibError, Result};
 use crate::ppcc::ppcc;
 use crate::stack::Stack;
 use ndarray::{Array3, Zip};
-use pgrf_core::stats::{median, median_and_robust_sd, median_finite};
+use pgrf_core::stats::{median_and_robust_sd, median_finite};
 use pgrf_noise::DarkLaw;
 
 /// From bias frames (shortest exposure, no light).
@@ -844,8 +844,8 @@ pub mod defect {
     pub const DEAD: f32 = 2.0;
     /// Bias offset far below the rest.
     pub const COLD: f32 = 3.0;
-    /// In a column whose mean offset or response stands out from the
-    /// other columns of its plane.
+    /// In a sensor column whose offset or response stands out from its
+    /// neighbouring columns' ([`crate::columns`]).
     pub const COLUMN: f32 = 4.0;
 }
 
@@ -861,49 +861,19 @@ fn robust_stats<'a>(values: impl IntoIterator<Item = &'a f32>) -> (f64, f64) {
     (m, sd.max(1e-6))
 }
 
-/// The columns (per plane) whose median of `map` over the plane's rows lies
-/// more than 5 robust standard deviations from the plane's other columns:
-/// a column amplifier's offset or gain, which a pixel-by-pixel threshold
-/// misses because each of its pixels is only a little off (the median, so
-/// that one hot or cold pixel does not make its column look defective).
-pub(crate) fn odd_columns(map: &Array3<f32>) -> Vec<(usize, usize)> {
-    let mut out = Vec::new();
-    for (p, plane) in map.outer_iter().enumerate() {
-        let means: Vec<f32> = plane
-            .columns()
-            .into_iter()
-            .map(|c| {
-                let mut f: Vec<f64> = c
-                    .iter()
-                    .filter(|v| v.is_finite())
-                    .map(|&v| v as f64)
-                    .collect();
-                median(&mut f) as f32
-            })
-            .collect();
-        let (m, sd) = robust_stats(&means);
-        out.extend(
-            means
-                .iter()
-                .enumerate()
-                .filter(|(_, &c)| ((c as f64 - m) / sd).abs() > 5.0)
-                .map(|(j, _)| (p, j)),
-        );
-    }
-    out
-}
-
 /// Defect map ([`defect`] codes): hot (dark rate, or the bias offset
 /// without darks, above median + 10 robust sd), cold (bias offset below
 /// median - 10 robust sd), dead (mean response below half the median), and
-/// the pixels of defective columns ([`odd_columns`] of the bias offset and
-/// of the response) that are not flagged otherwise. Returns the map and the
-/// number of defective columns (plane, column), counted once when both the
-/// offset and the response find one.
+/// the pixels of defective columns (physical sensor columns that stand out
+/// from their neighbours in the bias offset or the response,
+/// [`crate::columns::defective_columns`]; `offsets`: each packed plane's
+/// place in the 2 x 2 cell) that are not flagged otherwise. Returns the map
+/// and the number of defective sensor columns, each counted once.
 pub(crate) fn defects(
     bias: &BiasEstimate,
     gain: Option<&GainEstimate>,
     dark: Option<&DarkEstimate>,
+    offsets: [(usize, usize); 4],
 ) -> (Array3<f32>, usize) {
     let mut out = Array3::<f32>::zeros(bias.fixed_pattern.raw_dim());
     let hot_src = dark.map(|d| &d.rate).unwrap_or(&bias.fixed_pattern);
@@ -931,20 +901,21 @@ pub(crate) fn defects(
             }
         });
     }
-    let mut columns = odd_columns(&bias.fixed_pattern);
+    use crate::columns::{defective_columns, Scale};
+    let mut columns = defective_columns(&bias.fixed_pattern, offsets, Scale::Offset);
     if let Some(g) = gain {
-        columns.extend(odd_columns(&g.response));
+        columns.extend(defective_columns(&g.response, offsets, Scale::Response));
     }
     columns.sort_unstable();
     columns.dedup();
-    for &(p, j) in &columns {
-        out.slice_mut(ndarray::s![p, .., j]).mapv_inplace(|o| {
-            if o == defect::GOOD {
-                defect::COLUMN
-            } else {
-                o
+    for &x in &columns {
+        // The packed planes whose column offset matches hold sensor column x.
+        for (p, &(_, dx)) in offsets.iter().enumerate() {
+            if x % 2 == dx && p < out.dim().0 {
+                out.slice_mut(ndarray::s![p, .., (x - dx) / 2])
+                    .mapv_inplace(|o| if o == defect::GOOD { defect::COLUMN } else { o });
             }
-        });
+        }
     }
     (out, columns.len())
 }

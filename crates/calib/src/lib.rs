@@ -7,6 +7,7 @@
 
 pub mod calibrate;
 mod calibration;
+mod columns;
 mod error;
 pub mod estimate;
 #[cfg(feature = "clap")]

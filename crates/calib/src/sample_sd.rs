@@ -4,9 +4,9 @@
 //! A pixel's temporal noise is measured from n bias frames: its sample
 //! variance is sigma^2 chi^2_nu / nu (nu = n - 1), unbiased, but its square
 //! root is not, and the median over pixels of the per-pixel sample sigma
-//! sits below the median of the true sigma (about 5 % with 8 frames, 2.5 %
-//! with 16, 0.6 % with 64, for a sensor whose read noise spreads by 25 %
-//! over its pixels). In logs the measurement is additive:
+//! sits below the median of the true sigma (on pgrf's virtual sensor, whose
+//! read noise spreads by 25 % over its pixels: 5.8 % with 8 frames, 2.9 %
+//! with 16, 0.6 % with 64). In logs the measurement is additive:
 //!
 //!   ln s = ln sigma + Y,   Y = ln sqrt(chi^2_nu / nu),
 //!

@@ -679,8 +679,9 @@ fn cold_pixels_and_defective_columns_are_mapped() {
     let d = &run.calibration.maps.defects;
     assert_eq!(d[[0, 15, 30]], 3.0, "the cold pixel");
     assert_eq!(m.cold_pixels, 1);
-    // Sensor column 41 holds G1 (rows 0, 2, ...) and B (rows 1, 3, ...).
-    assert_eq!(m.defect_columns, 2, "{:?}", m);
+    // Sensor column 41 holds G1 (rows 0, 2, ...) and B (rows 1, 3, ...):
+    // one sensor column.
+    assert_eq!(m.defect_columns, 1, "{:?}", m);
     for p in [1, 2] {
         assert!(
             d.slice(ndarray::s![p, .., 20]).iter().all(|&c| c == 4.0),
@@ -1160,4 +1161,96 @@ fn read_and_dark_noise_hold_at_8_16_and_64_frames() {
         );
     }
     std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// Issue 39: defective columns are found by comparing each physical
+/// column with its neighbours, after the smooth shapes are taken out. A
+/// 256 x 192 sensor (monochrome, then RGGB) whose offset falls by 12 DN
+/// over its first 120 columns (a CCD's bias ramp), with flats that lose
+/// 30 % of their light towards the corners, and four bad columns: sensor
+/// column 37 reads 4 DN high and 151 3 DN low (offset), 90 responds 8 %
+/// less and 200 6 % more to light. Exactly those four are found, counted
+/// once each (not per Bayer plane), and every pixel of them is coded 4.
+#[test]
+fn defective_columns_are_found_locally_despite_ramps_and_vignetting() {
+    const BAD: [usize; 4] = [37, 90, 151, 200];
+    for mono in [true, false] {
+        let mut spec = SensorSpec::preset("a7s2-iso1600").unwrap();
+        spec.width = 256;
+        spec.height = 192;
+        spec.mono = mono;
+        spec.vignetting = 0.3;
+        let v = VirtualSensor::new(spec).unwrap();
+        let dir = scratch(&format!("localcolumns-{mono}"));
+        let mut cam = Shooter {
+            v: &v,
+            dir: dir.clone(),
+            seed: 39_100,
+            fits: false,
+        };
+        let bias = cam.shoot("bias", 16, 0.0, 1.0 / 8000.0, 0.0);
+        let mut flat = cam.shoot("flat", 8, 2000.0, 0.01, 0.0);
+        flat.extend(cam.shoot("flat", 8, 8000.0, 0.04, 0.0));
+        for f in bias.iter().chain(&flat) {
+            let mut fr = pgrf_raw::decode_file(f, &Default::default()).unwrap();
+            for y in 0..192 {
+                for x in 0..256 {
+                    let px = &mut fr.mosaic[y * 256 + x];
+                    let signal = (*px as f32 - 512.0).max(0.0);
+                    let mut add = if x < 120 {
+                        12.0 * (1.0 - x as f32 / 120.0)
+                    } else {
+                        0.0
+                    };
+                    add += match x {
+                        37 => 4.0,
+                        151 => -3.0,
+                        90 if signal > 200.0 => -0.08 * signal,
+                        200 if signal > 200.0 => 0.06 * signal,
+                        _ => 0.0,
+                    };
+                    *px = (*px as f32 + add).round() as u16;
+                }
+            }
+            write_dng(&fr, f, &DngOptions::default()).unwrap();
+        }
+        let run = calibrate(
+            &CalibrateInput {
+                bias,
+                flat,
+                ..Default::default()
+            },
+            &pgrf_core::NoProgress,
+        )
+        .unwrap();
+        let m = &run.calibration.meta;
+        let d = &run.calibration.maps.defects;
+        // The sensor columns with a pixel coded 4 (packed plane p's column
+        // j is sensor column 2 j + its column offset; the virtual sensor's
+        // planes, monochrome too, are RGGB's sub-lattices).
+        let mut found: Vec<usize> = Vec::new();
+        for (p, (_, dx)) in pgrf_raw::Cfa::Rggb.offsets().into_iter().enumerate() {
+            for ((_, j), &c) in d.index_axis(ndarray::Axis(0), p).indexed_iter() {
+                if c == 4.0 {
+                    found.push(2 * j + dx);
+                }
+            }
+        }
+        found.sort_unstable();
+        found.dedup();
+        eprintln!(
+            "mono {mono}: {} defective columns counted, columns {found:?}",
+            m.defect_columns
+        );
+        assert_eq!(found, BAD, "mono {mono}");
+        assert_eq!(m.defect_columns, 4, "mono {mono}");
+        // Every pixel of each bad column is coded (none is hot, dead or
+        // cold here): 4 columns x 192 rows.
+        assert_eq!(
+            d.iter().filter(|&&c| c == 4.0).count(),
+            4 * 192,
+            "mono {mono}"
+        );
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
 }
