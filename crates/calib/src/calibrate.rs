@@ -216,11 +216,7 @@ impl CalibrationRun {
         ));
         match (m.dark_rate_mean, m.dark_r2_sqrt, m.dark_r2_linear) {
             (Some(rate), Some(rs), Some(rl)) => {
-                let unit = if m.dark_law == Some(DarkLaw::Linear) {
-                    "e-/s"
-                } else {
-                    "e-/sqrt(s)"
-                };
+                let unit = m.dark_rate_unit().unwrap_or_default();
                 let plus = if m.dark_offset { " + c" } else { "" };
                 let at = m
                     .temperature_c
@@ -510,6 +506,9 @@ pub fn calibrate(input: &CalibrateInput, progress: &dyn Progress) -> Result<Cali
         dark_r2_sqrt: dark.as_ref().map(|d| d.r2_sqrt_global),
         dark_r2_linear: dark.as_ref().map(|d| d.r2_linear_global),
         dark_rate_mean: dark.as_ref().map(|d| d.rate_mean),
+        dark_rate_unit: dark
+            .as_ref()
+            .map(|d| crate::calibration::dark_rate_unit(d.law).to_string()),
         dark_offset: dark.as_ref().is_some_and(|d| d.offset),
         dark_offset_mean: dark
             .as_ref()

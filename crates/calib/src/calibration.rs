@@ -98,6 +98,12 @@ pub struct CalibMeta {
     /// Mean dark rate, electrons per sqrt(s) (sqrt law) or per s (linear
     /// law); None without dark frames.
     pub dark_rate_mean: Option<f64>,
+    /// The unit of `dark_rate_mean` and of the `dark_rate` map: "e-/s"
+    /// (linear law) or "e-/sqrt(s)" (sqrt law); None without dark frames
+    /// and in records older than the field ([`CalibMeta::dark_rate_unit`]
+    /// tells it from the law for those).
+    #[serde(default)]
+    pub dark_rate_unit: Option<String>,
     /// Whether the dark law has an offset term c (y = a g(t) + c, chosen
     /// per sensor); false in records older than the term.
     #[serde(default)]
@@ -141,6 +147,14 @@ impl CalibMeta {
     /// The frames' filter layout: a CFA phase ("RGGB") or "mono".
     pub fn layout(&self) -> &str {
         &self.cfa
+    }
+
+    /// The unit of the dark rate: the record's, else (older records) the
+    /// one its law implies; None without a law.
+    pub fn dark_rate_unit(&self) -> Option<&str> {
+        self.dark_rate_unit
+            .as_deref()
+            .or_else(|| self.dark_law.map(dark_rate_unit))
     }
 
     /// The record's values that synthesis and restoration rely on: a frame
@@ -233,6 +247,15 @@ impl CalibMeta {
             }
         }
         Ok(())
+    }
+}
+
+/// The unit of a dark rate under `law`: electrons per second, or per
+/// square root of a second.
+pub(crate) fn dark_rate_unit(law: DarkLaw) -> &'static str {
+    match law {
+        DarkLaw::Linear => "e-/s",
+        DarkLaw::Sqrt => "e-/sqrt(s)",
     }
 }
 

@@ -4,7 +4,7 @@
 
 use crate::outputs::{CalibrateConfig, DarktableOutput, ReportOutput};
 use crate::{CalibError, CalibrateInput, Result};
-use pgrf_core::paths::require_parent_dir;
+use pgrf_core::paths::require_tree_root;
 use pgrf_raw::files::list_files;
 use std::path::{Path, PathBuf};
 
@@ -14,19 +14,19 @@ pub struct CalibrateArgs {
     /// Folder of bias frames (shortest exposure, lens capped).
     #[arg(long)]
     pub bias: PathBuf,
-    /// Folder of dark frames (lens capped, two or more exposure times read from EXIF; any number of frames at each, one is fine).
+    /// Folder of dark frames (lens capped, two or more exposure times, read from each file: a camera RAW's EXIF ExposureTime, a FITS file's EXPTIME or EXPOSURE; any number of frames at each, one is fine).
     #[arg(long)]
     pub dark: Option<PathBuf>,
-    /// Folder of flat-field frames (uniform light; two or more levels, told apart by exposure time).
+    /// Folder of flat-field frames (uniform light; two or more levels, told apart by exposure time: EXIF ExposureTime, or FITS EXPTIME or EXPOSURE).
     #[arg(long)]
     pub flat: PathBuf,
-    /// ISO the frames must have (used when the files carry none).
+    /// ISO the frames must have (used when the files carry none). A camera RAW records it in EXIF; a FITS file only as ISOSPEED (a DSLR's, saved by a capture program); an astronomy camera's FITS has none (its GAIN keyword is a driver setting, not an ISO) and is calibrated without it: only the darktable entry, which darktable files by ISO, is then left out unless --iso names one.
     #[arg(long)]
     pub iso: Option<u32>,
     /// Output calibration file (safetensors maps + JSON record).
     #[arg(short, long)]
     pub output: PathBuf,
-    /// Folder for the report (PNG plots and summary.md); created if missing.
+    /// Folder for the report (PNG plots and summary.md); created if missing, with its parent folders.
     #[arg(long)]
     pub report: Option<PathBuf>,
     /// End with one JSON line of the global results.
@@ -38,7 +38,7 @@ pub struct CalibrateArgs {
     /// How far (°C) a frame's recorded temperature may lie from the frames' median [default: 2].
     #[arg(long)]
     pub temperature_tolerance: Option<f32>,
-    /// Folder for master frames (created if missing): master_bias.dng, one master_dark_EXPOSUREs.dng per dark exposure (master_dark_10s.dng), one master_flat_EXPOSUREs.dng per flat level (each stack's mean, in the camera's mosaic and levels) and defects.png.
+    /// Folder for master frames (created if missing, with its parent folders): master_bias, one master_dark_EXPOSUREs per dark exposure (master_dark_10s), one master_flat_EXPOSUREs per flat level (each stack's mean, in the camera's mosaic and levels: DNG, or FITS when the frames are FITS) and defects.png.
     #[arg(long)]
     pub masters: Option<PathBuf>,
     /// Add the calibrated camera's darktable noise-profile entry (at its ISO) to this darktable noiseprofiles.json, created if missing: a copy of darktable's own file, or one that earlier calibrations at other ISOs wrote; an entry of the same camera at the same ISO is replaced. Without it the entry is written alone beside -o as OUTPUT.noiseprofiles.json. darktable reads such a file with `darktable --noiseprofiles FILE`.
@@ -52,8 +52,9 @@ pub struct CalibrateArgs {
     pub darktable_model: Option<String>,
 }
 
-/// An output folder option: an existing file is refused, and its parent
-/// must exist (the folder itself is created by the run).
+/// An output folder option: an existing file is refused, and so is a path
+/// under a file (the folder and any missing parents are created by the
+/// run).
 fn check_folder(flag: &'static str, dir: &Path, refusal: &str) -> Result<()> {
     if dir.exists() && !dir.is_dir() {
         return Err(CalibError::BadOption {
@@ -61,7 +62,7 @@ fn check_folder(flag: &'static str, dir: &Path, refusal: &str) -> Result<()> {
             message: format!("{flag} {} is a file; give a folder{refusal}", dir.display()),
         });
     }
-    require_parent_dir(dir).map_err(|e| CalibError::BadOption {
+    require_tree_root(dir).map_err(|e| CalibError::BadOption {
         flag,
         message: format!("{flag}: {e}"),
     })

@@ -82,6 +82,7 @@ impl CalibrationRun {
             "dark_r2_sqrt": m.dark_r2_sqrt,
             "dark_r2_linear": m.dark_r2_linear,
             "dark_rate_mean": m.dark_rate_mean,
+            "dark_rate_unit": m.dark_rate_unit(),
             "dark_offset": m.dark_offset,
             "dark_offset_mean": m.dark_offset_mean,
             "K_without_pairs": self.gain.k_without_pairs,

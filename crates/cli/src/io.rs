@@ -101,8 +101,8 @@ fn declare_calibrate(a: &cmd::calibrate::CalibrateArgs, io: &mut Io) {
         .inputs("--dark", &a.dark)
         .input("--flat", &a.flat)
         .file("-o", &a.output)
-        .output_opt("--report", a.report.as_ref(), Kind::Folder)
-        .output_opt("--masters", a.masters.as_ref(), Kind::Folder);
+        .output_opt("--report", a.report.as_ref(), Kind::Tree)
+        .output_opt("--masters", a.masters.as_ref(), Kind::Tree);
     let (flag, darktable) =
         pgrf_calib::outputs::darktable_file(a.darktable_into.as_deref(), &a.output);
     io.file(flag, darktable);

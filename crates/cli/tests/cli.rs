@@ -591,14 +591,46 @@ fn a_monochrome_fits_camera_from_frames_to_masters() {
     assert_eq!(info["temperature_c"], json!(-10.0));
     assert_eq!(info["planes"][0]["plane"], json!("(0,0)"));
 
-    let masters = dir.join("masters");
+    // Report and masters folders whose parents do not exist yet: made,
+    // as the help says.
+    let masters = dir.join("new").join("masters");
+    let report = dir.join("out").join("report");
     let (v, stderr) = calibrate_vs(
         &vs,
         &dir.join("c.safetensors"),
-        &dir.join("report"),
+        &report,
         &["--masters", s(&masters)],
     );
+    assert!(report.join("summary.md").is_file());
     assert_eq!(v["cfa"], json!("mono"));
+    // The dark rate says its unit; the temporal dark noise is EMVA's.
+    assert_eq!(v["dark_rate_unit"], json!("e-/s"));
+    let sigma_y = v["dark_noise_sigma"].as_f64().unwrap();
+    assert!(sigma_y > v["read_sigma_median"].as_f64().unwrap(), "{v}");
+    // Under a file, a report folder cannot be made: one line, no panic.
+    let r = pgrf(&[
+        "calibrate",
+        "--bias",
+        s(&vs.join("bias")),
+        "--flat",
+        s(&vs.join("flat")),
+        "-o",
+        s(&dir.join("d.safetensors")),
+        "--report",
+        s(&bias0.join("report")),
+    ]);
+    let err = String::from_utf8_lossy(&r.stderr);
+    assert!(
+        !r.status.success() && err.starts_with("pgrf: error: --report"),
+        "{err}"
+    );
+    assert_eq!(err.trim_end().lines().count(), 1, "{err}");
+    // The help speaks of FITS where it speaks of EXIF.
+    let help = String::from_utf8_lossy(&pgrf(&["calibrate", "--help"]).stdout).into_owned();
+    assert!(
+        help.contains("EXPTIME") && help.contains("ISOSPEED"),
+        "{help}"
+    );
     // FITS names no maker: no darktable entry unless asked for (and named).
     assert!(stderr.contains("no camera maker or model"), "{stderr}");
     assert!(!dir.join("c.noiseprofiles.json").exists());

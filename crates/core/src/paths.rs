@@ -10,7 +10,8 @@ use std::path::{Path, PathBuf};
 #[derive(Debug, thiserror::Error)]
 pub enum PathError {
     /// The folder that would hold `path` does not exist (commands write
-    /// into folders, they do not make them).
+    /// into folders, they do not make them), or, for a [`Kind::Tree`], its
+    /// nearest existing ancestor `dir` is not a folder.
     #[error("{}: folder {} does not exist", path.display(), dir.display())]
     NoFolder {
         /// The output.
@@ -123,22 +124,58 @@ pub fn same_file(a: &Path, b: &Path) -> bool {
 }
 
 /// `p` made absolute with links and `..` resolved as far as it exists: the
-/// whole path when it exists, else its folder's resolution joined with its
-/// name (an output not written yet), else `p` joined to the current folder.
+/// whole path when it exists, else its nearest existing ancestor's
+/// resolution joined with the rest (an output not written yet, and the
+/// folders a [`Kind::Tree`] creates), else `p` joined to the current folder.
 fn resolved(p: &Path) -> PathBuf {
     if let Ok(c) = p.canonicalize() {
         return c;
     }
-    let dir = p
-        .parent()
-        .filter(|d| !d.as_os_str().is_empty())
-        .unwrap_or(Path::new("."));
-    match (dir.canonicalize(), p.file_name()) {
-        (Ok(d), Some(name)) => d.join(name),
-        _ => std::env::current_dir()
-            .map(|c| c.join(p))
-            .unwrap_or_else(|_| p.to_path_buf()),
+    // The nearest ancestor that exists, resolved; below it nothing exists,
+    // so no link can hide there and `..` and `.` are taken lexically.
+    for base in p.ancestors().skip(1) {
+        let dir = if base.as_os_str().is_empty() {
+            Path::new(".")
+        } else {
+            base
+        };
+        if let (Ok(d), Ok(rest)) = (dir.canonicalize(), p.strip_prefix(base)) {
+            let mut out = d;
+            for c in rest.components() {
+                match c {
+                    std::path::Component::ParentDir => {
+                        out.pop();
+                    }
+                    std::path::Component::Normal(n) => out.push(n),
+                    _ => {}
+                }
+            }
+            return out;
+        }
     }
+    std::env::current_dir()
+        .map(|c| c.join(p))
+        .unwrap_or_else(|_| p.to_path_buf())
+}
+
+/// A [`Kind::Tree`]'s check: the nearest of its ancestors that exists must
+/// be a folder, for the missing ones to be made in it.
+pub fn require_tree_root(p: &Path) -> Result<(), PathError> {
+    let mut dir = p.parent();
+    while let Some(d) = dir.filter(|d| !d.as_os_str().is_empty()) {
+        if d.exists() {
+            return if d.is_dir() {
+                Ok(())
+            } else {
+                Err(PathError::NoFolder {
+                    path: p.to_path_buf(),
+                    dir: d.to_path_buf(),
+                })
+            };
+        }
+        dir = d.parent();
+    }
+    Ok(())
 }
 
 /// What an output is: a file the command writes, or a folder it writes
@@ -147,8 +184,19 @@ fn resolved(p: &Path) -> PathBuf {
 pub enum Kind {
     /// One file.
     File,
-    /// A folder of files.
+    /// A folder of files (its parent must exist).
     Folder,
+    /// A folder of files that the command creates with any missing parent
+    /// folders (`create_dir_all`): the nearest existing ancestor must be a
+    /// folder.
+    Tree,
+}
+
+impl Kind {
+    /// A folder, with or without its parents made.
+    fn is_folder(self) -> bool {
+        matches!(self, Kind::Folder | Kind::Tree)
+    }
 }
 
 /// A path and the option that named it.
@@ -247,13 +295,18 @@ impl Io {
         for (out, kind) in &self.outputs {
             let flag = out.flag.clone();
             let path = out.path.clone();
-            require_parent_dir(&path).map_err(|e| PathError::Flag {
+            let parent = if *kind == Kind::Tree {
+                require_tree_root(&path)
+            } else {
+                require_parent_dir(&path)
+            };
+            parent.map_err(|e| PathError::Flag {
                 flag: flag.clone(),
                 cause: Box::new(e),
             })?;
             match kind {
                 Kind::File if path.is_dir() => return Err(PathError::IsFolder { flag, path }),
-                Kind::Folder if path.exists() && !path.is_dir() => {
+                Kind::Folder | Kind::Tree if path.exists() && !path.is_dir() => {
                     return Err(PathError::IsFile { flag, path })
                 }
                 _ => {}
@@ -277,7 +330,7 @@ impl Io {
                         input: input.path.clone(),
                     });
                 }
-                if *kind == Kind::Folder && place.starts_with(&at) {
+                if kind.is_folder() && place.starts_with(&at) {
                     return Err(PathError::HoldsInput {
                         flag,
                         path,
@@ -287,8 +340,8 @@ impl Io {
                 }
             }
             for (other, place, other_kind) in &seen {
-                let nested = *kind == Kind::Folder
-                    && *other_kind == Kind::Folder
+                let nested = kind.is_folder()
+                    && other_kind.is_folder()
                     && (at.starts_with(place) || place.starts_with(&at));
                 if at == *place || nested {
                     return Err(PathError::Twice {
@@ -345,6 +398,45 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.starts_with("-o ") && e.contains("does not exist"), "{e}");
+        std::fs::remove_dir_all(&d).unwrap();
+    }
+
+    /// A folder made with its parents (`--report out/report` where `out`
+    /// does not exist yet) is accepted, but not under a file, nor (through
+    /// folders not made yet) inside an input folder, nor twice.
+    #[test]
+    fn a_tree_output_may_have_missing_parents() {
+        let d = std::env::temp_dir().join(format!("pgrf-tree-test-{}", std::process::id()));
+        let stack = d.join("bias");
+        std::fs::create_dir_all(&stack).unwrap();
+        std::fs::write(d.join("file"), b"x").unwrap();
+        let check = |outs: &[(&str, PathBuf)]| {
+            let mut io = Io::new();
+            io.input("--bias", &stack);
+            for (flag, p) in outs {
+                io.output(flag, p, Kind::Tree);
+            }
+            io.check().map_err(|e| e.to_string())
+        };
+        assert_eq!(check(&[("--report", d.join("out/more/report"))]), Ok(()));
+        let e = check(&[("--report", d.join("file/report"))]).unwrap_err();
+        assert!(e.starts_with("--report ") && e.contains("file"), "{e}");
+        let e = check(&[("--report", stack.join("new/report"))]).unwrap_err();
+        assert!(e.contains("inside the input folder"), "{e}");
+        let e = check(&[
+            ("--report", d.join("out/r")),
+            ("--masters", d.join("out/../out/r/m")),
+        ])
+        .unwrap_err();
+        assert!(e.contains("both name"), "{e}");
+        // Still refused for a plain folder.
+        let mut io = Io::new();
+        io.folder("-o", d.join("out/report"));
+        assert!(io
+            .check()
+            .unwrap_err()
+            .to_string()
+            .contains("does not exist"));
         std::fs::remove_dir_all(&d).unwrap();
     }
 

@@ -293,6 +293,21 @@ fn widen(lo: f64, hi: f64) -> (f64, f64) {
     }
 }
 
+/// A log axis's range spread to at least `decades` decades about its
+/// geometric centre: a log axis labels powers of ten and their multiples,
+/// so one flat level (a range of a factor 2.6 with its margins) would get
+/// almost no tick labels.
+fn log_span(lo: f64, hi: f64, decades: f64) -> (f64, f64) {
+    let want = 10f64.powf(decades);
+    let ratio = hi / lo;
+    if lo > 0.0 && ratio.is_finite() && ratio < want {
+        let f = (want / ratio).sqrt();
+        (lo / f, hi * f)
+    } else {
+        (lo, hi)
+    }
+}
+
 // ---------------------------------------------------------------------- PTC
 
 /// Log-log axes, because flat levels are normally spaced geometrically
@@ -372,11 +387,14 @@ fn ptc_section(dir: &Path, data: &ReportData, title: &str) -> Result<Section, Re
             }
         }
     }
-    // Half a decade of margin on each side keeps end points off the frame.
+    // A fifth of a decade of margin on each side keeps end points off the
+    // frame; at least one decade each way keeps the axes labelled.
     x_lo /= 1.6;
     x_hi *= 1.6;
     y_lo /= 1.6;
     y_hi *= 1.6;
+    let (x_lo, x_hi) = log_span(x_lo, x_hi, 1.0);
+    let (y_lo, y_hi) = log_span(y_lo, y_hi, 1.0);
 
     let path = dir.join(PTC_PNG);
     let caption = format!("Photon transfer: {title}");
@@ -460,7 +478,9 @@ fn ptc_section(dir: &Path, data: &ReportData, title: &str) -> Result<Section, Re
                 fmt_sig(b, 4)
             );
         }
-        None => text.push_str(" No fit was given."),
+        None => text.push_str(
+            " No fit was given (a photon-transfer fit takes flats at two or more levels).",
+        ),
     }
     if dropped > 0 {
         let _ = write!(
@@ -496,7 +516,7 @@ fn snr_section(dir: &Path, data: &ReportData, title: &str) -> Result<Section, Re
         .ptc_fit
         .filter(|(k, b)| k.is_finite() && *k > 0.0 && b.is_finite());
     let (x_lo, x_hi) = min_max(pts.iter().map(|p| p.0));
-    let (x_lo, x_hi) = (x_lo / 4.0, x_hi * 2.0);
+    let (x_lo, x_hi) = log_span(x_lo / 4.0, x_hi * 2.0, 1.0);
     let model = |x: f64| fit.map(|(k, b)| x / (k * x + b + dark).max(f64::MIN_POSITIVE).sqrt());
     let ideal = |x: f64| fit.map(|(k, _)| (x / k).sqrt());
     let mut ys: Vec<f64> = pts.iter().map(|p| p.1).collect();
@@ -505,7 +525,7 @@ fn snr_section(dir: &Path, data: &ReportData, title: &str) -> Result<Section, Re
         ys.extend(ideal(x));
     }
     let (y_lo, y_hi) = min_max(ys.into_iter().filter(|y| *y > 0.0));
-    let (y_lo, y_hi) = (y_lo / 1.6, y_hi * 1.6);
+    let (y_lo, y_hi) = log_span(y_lo / 1.6, y_hi * 1.6, 1.0);
     let path = dir.join(SNR_PNG);
     let caption = format!("SNR: {title}");
     render_png(&path, (PLOT_W, PLOT_H), |root| {
@@ -551,12 +571,22 @@ fn snr_section(dir: &Path, data: &ReportData, title: &str) -> Result<Section, Re
             .draw()?;
         Ok(())
     })?;
-    let text = format!(
-        "SNR of each flat level (mean over the temporal noise, {} DN² of it without light), log-log, \
-         with the model from the photon-transfer fit and the shot-noise limit; at low signal the \
-         dark noise pulls the levels below the shot-noise line.",
-        fmt_sig(dark, 4)
-    );
+    // The caption names only the lines drawn: without a photon-transfer
+    // fit (one flat level) there is no model and no shot-noise line.
+    let text = match fit {
+        Some(_) => format!(
+            "SNR of each flat level (mean over the temporal noise, {} DN² of it without light), \
+             log-log, with the model from the photon-transfer fit and the shot-noise limit; at \
+             low signal the dark noise pulls the levels below the shot-noise line.",
+            fmt_sig(dark, 4)
+        ),
+        None => format!(
+            "SNR of each flat level (mean over the temporal noise, {} DN² of it without light), \
+             log-log. No model or shot-noise line: they need a photon-transfer fit, which takes \
+             flats at two or more levels.",
+            fmt_sig(dark, 4)
+        ),
+    };
     Ok(Section::written(HEADING, SNR_PNG, path, text))
 }
 
@@ -1331,6 +1361,44 @@ mod tests {
         let md = std::fs::read_to_string(dir.join(SUMMARY_MD)).unwrap();
         assert!(md.contains("2 point(s)"), "{md}");
         let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    /// One flat level, no fit: both plots span at least a decade on each
+    /// axis (so they carry tick labels), and the SNR text promises no line
+    /// it does not draw.
+    #[test]
+    fn one_flat_level_plots_are_labelled_and_say_what_they_draw() {
+        let (lo, hi) = log_span(1000.0 / 1.6, 1000.0 * 1.6, 1.0);
+        assert!((hi / lo - 10.0).abs() < 1e-9 && ((lo * hi).sqrt() - 1000.0).abs() < 1e-9);
+        assert_eq!(log_span(1.0, 500.0, 1.0), (1.0, 500.0));
+        let dir = scratch("onelevel");
+        let z = Array3::<f32>::zeros((4, 2, 2));
+        let data = ReportData {
+            camera: "x".into(),
+            iso: None,
+            ptc_points: vec![PtcPoint {
+                mean_dn: 3000.0,
+                var_dn2: 1400.0,
+            }],
+            ptc_fit: None,
+            sigma_read: z.view(),
+            fixed_pattern: z.view(),
+            r2_sqrt: None,
+            r2_linear: None,
+            dark_offset: false,
+            dark_var_dn2: 40.0,
+            mono: true,
+            summary: vec![],
+        };
+        write_report(&dir, &data).unwrap();
+        assert_png(&dir.join(PTC_PNG), PLOT_W, PLOT_H);
+        assert_png(&dir.join(SNR_PNG), PLOT_W, PLOT_H);
+        let md = std::fs::read_to_string(dir.join(SUMMARY_MD)).unwrap();
+        assert!(md.contains("No model or shot-noise line"), "{md}");
+        assert!(!md.contains("with the model from"), "{md}");
+        if std::env::var_os("PGRF_KEEP_REPORT").is_none() {
+            let _ = std::fs::remove_dir_all(&dir);
+        }
     }
 
     #[test]
