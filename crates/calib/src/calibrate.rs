@@ -97,6 +97,11 @@ impl CalibrationRun {
     pub fn summary(&self) -> Vec<(String, String, String)> {
         let m = &self.calibration.meta;
         let row = |q: &str, v: String, u: &str| (q.to_string(), v, u.to_string());
+        // A DN figure with its electrons beside it, "-" when not measured.
+        let dn_e = |v: Option<f64>| {
+            v.map(|d| format!("{d:.3} ({:.3} e-)", d / m.k))
+                .unwrap_or_else(|| "-".into())
+        };
         let mut summary = vec![
             row(
                 "System gain K",
@@ -127,9 +132,7 @@ impl CalibrationRun {
             ),
             row(
                 "Temporal dark noise sigma_y.dark (EMVA 1288: pair differences of the bias frames; row noise and quantisation included)",
-                m.dark_noise_sigma
-                    .map(|d| format!("{d:.3} ({:.3} e-)", d / m.k))
-                    .unwrap_or_else(|| "-".into()),
+                dn_e(m.dark_noise_sigma),
                 "DN",
             ),
             row(
@@ -137,11 +140,7 @@ impl CalibrationRun {
                     "Read noise (median over pixels of the per-pixel sigma, row noise removed; corrected for the sampling error of {} frames)",
                     m.bias_frames
                 ),
-                format!(
-                    "{:.3} ({:.3} e-)",
-                    m.read_sigma_median,
-                    m.read_sigma_median / m.k
-                ),
+                dn_e(Some(m.read_sigma_median)),
                 "DN",
             ),
             row("Row noise sigma", format!("{:.3}", m.row_sigma), "DN"),
@@ -154,14 +153,12 @@ impl CalibrationRun {
             ),
             row(
                 "DSNU (spatial sd of the dark offset)",
-                format!("{:.3} ({:.3} e-)", m.dsnu, m.dsnu / m.k),
+                dn_e(Some(m.dsnu)),
                 "DN",
             ),
             row(
                 "DSNU, EMVA 1288 (5x5 high-pass, outliers such as hot pixels excluded)",
-                m.dsnu_highpass
-                    .map(|d| format!("{d:.3} ({:.3} e-)", d / m.k))
-                    .unwrap_or_else(|| "-".into()),
+                dn_e(m.dsnu_highpass),
                 "DN",
             ),
             row(
@@ -360,6 +357,22 @@ fn read_checked(
     read_stack(&keep, opt)
 }
 
+/// The per-pixel gain map as the file keeps it: 0 at the pixels the defect
+/// map calls dead, whose eq. 3.15 is a ratio of noise to a signal they do
+/// not have (or NaN where it is none at all).
+fn responding_gain(
+    k_map: &ndarray::Array3<f32>,
+    defects: &ndarray::Array3<f32>,
+) -> ndarray::Array3<f32> {
+    let mut out = k_map.clone();
+    ndarray::Zip::from(&mut out).and(defects).for_each(|k, &d| {
+        if d == defect::DEAD || !k.is_finite() {
+            *k = 0.0;
+        }
+    });
+    out
+}
+
 /// Calibrate a sensor from its bias, flat and (optional) dark stacks: read
 /// each stack with streaming statistics (frames must match the first bias
 /// frame), estimate bias, gain and dark current, flag defects, and assemble
@@ -462,7 +475,7 @@ pub fn calibrate(input: &CalibrateInput, progress: &dyn Progress) -> Result<Cali
         sigma_read: bias.sigma_read.clone(),
         dark_rate: dark.as_ref().map_or_else(zeros, |d| d.rate.clone()),
         defects: defect_map.clone(),
-        gain: Some(gain.k_map.clone()),
+        gain: Some(responding_gain(&gain.k_map, &defect_map)),
         response: Some(gain.response.clone()),
         r2_sqrt: dark.as_ref().map(|d| d.r2_sqrt.clone()),
         r2_linear: dark.as_ref().map(|d| d.r2_linear.clone()),
@@ -523,7 +536,7 @@ pub fn calibrate(input: &CalibrateInput, progress: &dyn Progress) -> Result<Cali
         dead_pixels: count(defect::DEAD),
         cold_pixels: count(defect::COLD),
         defect_columns,
-        units: "maps packed (4, H/2, W/2) in R,G1,B,G2 order; fixed_pattern (bias mean - black), sigma_read, response: DN; gain: DN per electron (eq. 3.15 per pixel); dark_rate: electrons per sqrt(s) (sqrt law) or per s (linear law), N_FP absorbed; defects: 0 good, 1 hot, 2 dead, 3 cold, 4 defective column (defect_columns counts sensor columns); r2_*: R^2 of the per-pixel dark fits (with the offset term when dark_offset); dark_offset: the dark law's offset c, DN; K: DN/e-; row_sigma, read_sigma_median (median of the true per-pixel sigma, corrected for the frames' sampling error), dark_noise_sigma (EMVA 1288 sigma_y.dark from bias-frame pair differences), dsnu: DN".into(),
+        units: format!("{}; fixed_pattern (bias mean - black), sigma_read, response: DN; gain: DN per electron (eq. 3.15 per pixel; 0 at dead pixels); dark_rate: electrons per sqrt(s) (sqrt law) or per s (linear law), N_FP absorbed; defects: 0 good, 1 hot, 2 dead, 3 cold, 4 defective column (defect_columns counts sensor columns); r2_*: R^2 of the per-pixel dark fits (with the offset term when dark_offset); dark_offset: the dark law's offset c, DN; K: DN/e-; row_sigma, read_sigma_median (median of the true per-pixel sigma, corrected for the frames' sampling error), dark_noise_sigma (EMVA 1288 sigma_y.dark from bias-frame pair differences), dsnu: DN", if key.mono { "maps in the file one plane (1, H, W) of the sensor's pixels (in memory packed as its four sub-lattices)" } else { "maps packed (4, H/2, W/2) in R,G1,B,G2 order" }),
     };
     Ok(CalibrationRun {
         calibration: Calibration { meta, maps },

@@ -7,6 +7,7 @@ use ndarray::Array3;
 use pgrf_core::number::shown;
 use pgrf_noise::mapfile::write_maps;
 use pgrf_noise::{DarkLaw, Map, PixelMaps};
+use pgrf_raw::Cfa;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -297,7 +298,12 @@ pub struct Calibration {
 }
 
 /// The per-pixel maps of a calibration, each packed `(4, H/2, W/2)` in the
-/// order R, G1, B, G2. In the file each is a tensor of the field's name.
+/// order R, G1, B, G2 (a monochrome sensor's: its four sub-lattices, in
+/// RGGB's order, as [`pgrf_raw::RawFrame::from_mono`] packs them). In the
+/// file each is a tensor of the field's name: packed for a colour sensor,
+/// for a monochrome one a single plane `(1, H, W)` of the sensor's pixels
+/// as they lie ([`Calibration::save`]), which numpy users read without
+/// knowing pgrf's packing. Every value is finite.
 #[derive(Clone, Debug)]
 pub struct CalibMaps {
     /// Bias mean minus black level, DN: the fixed-pattern offset.
@@ -378,17 +384,58 @@ impl CalibMaps {
     }
 }
 
+/// The Bayer phase whose offsets order a monochrome frame's sub-lattices
+/// in the packed planes ([`pgrf_raw::RawFrame::from_mono`]).
+const MONO_LATTICES: Cfa = Cfa::Rggb;
+
+/// A packed map `(4, H/2, W/2)` laid out as the sensor's pixels, row by
+/// row (`H x W` values): plane p's value (i, j) at photosite (2 i + dy,
+/// 2 j + dx), (dy, dx) the plane's offsets under `cfa`.
+pub(crate) fn sensor_layout(map: &Array3<f32>, cfa: Cfa) -> Vec<f32> {
+    let (_, ph, pw) = map.dim();
+    let w = 2 * pw;
+    let mut out = vec![0.0f32; 4 * ph * pw];
+    for (p, (dy, dx)) in cfa.offsets().into_iter().enumerate() {
+        for ((i, j), &v) in map.index_axis(ndarray::Axis(0), p).indexed_iter() {
+            out[(2 * i + dy) * w + 2 * j + dx] = v;
+        }
+    }
+    out
+}
+
+/// [`sensor_layout`]'s inverse: an `h x w` image (`(1, h, w)`) packed.
+fn packed(image: &Array3<f32>, cfa: Cfa) -> Array3<f32> {
+    let (_, h, w) = image.dim();
+    let offsets = cfa.offsets();
+    Array3::from_shape_fn((4, h / 2, w / 2), |(p, i, j)| {
+        image[[0, 2 * i + offsets[p].0, 2 * j + offsets[p].1]]
+    })
+}
+
 impl Calibration {
     /// Write the calibration file at `path` atomically: one safetensors
-    /// tensor per map (named as [`CalibMaps::named`]) and the record as JSON
-    /// metadata.
+    /// tensor per map (named as [`CalibMaps::named`]; a monochrome
+    /// sensor's as one plane of its pixels, [`CalibMaps`]) and the record
+    /// as JSON metadata.
     pub fn save(&self, path: &Path) -> Result<()> {
         let meta = serde_json::to_value(&self.meta).map_err(CalibError::EncodeRecord)?;
-        let views: Vec<(&str, ndarray::ArrayView3<f32>)> = self
-            .maps
-            .named()
-            .into_iter()
-            .map(|(k, v)| (k, v.view()))
+        let named = self.maps.named();
+        let single: Vec<Array3<f32>> = if self.meta.cfa == "mono" {
+            let (h, w) = (self.meta.height, self.meta.width);
+            named
+                .iter()
+                .map(|(_, m)| {
+                    Array3::from_shape_vec((1, h, w), sensor_layout(m, MONO_LATTICES))
+                        .expect("a packed map holds H x W values")
+                })
+                .collect()
+        } else {
+            Vec::new()
+        };
+        let views: Vec<(&str, ndarray::ArrayView3<f32>)> = named
+            .iter()
+            .enumerate()
+            .map(|(i, (k, v))| (*k, single.get(i).map_or_else(|| v.view(), |s| s.view())))
             .collect();
         write_maps(path, &views, &meta)?;
         Ok(())
@@ -424,13 +471,20 @@ impl Calibration {
             serde_json::from_value(meta).map_err(|e| bad_record(e.to_string()))?;
         meta.check().map_err(bad_record)?;
         let shape = [4, meta.height / 2, meta.width / 2];
-        for (name, a) in &maps {
-            if a.shape() != shape {
+        // A monochrome sensor's maps are one plane of its pixels (records
+        // before that: packed, still read).
+        let mono = meta.cfa == "mono";
+        let single = [1, meta.height, meta.width];
+        let mut maps = maps;
+        for (name, a) in maps.iter_mut() {
+            if mono && a.shape() == single {
+                *a = packed(a, MONO_LATTICES);
+            } else if a.shape() != shape {
                 return Err(CalibError::MapShape {
                     path: path.to_path_buf(),
                     map: name.clone(),
                     shape: a.shape().to_vec(),
-                    expected: shape,
+                    expected: if mono { single } else { shape },
                 });
             }
         }

@@ -234,7 +234,8 @@ pub enum CalibError {
         map: String,
         /// Its shape.
         shape: Vec<usize>,
-        /// The packed shape of the record's frame size.
+        /// The shape the record's frame size asks: packed, or for a
+        /// monochrome sensor one plane of its pixels.
         expected: [usize; 3],
     },
     /// A calibration file without one of the required maps.

@@ -250,7 +250,8 @@ pub struct GainEstimate {
     pub(crate) k: f64,
     /// "ptc" (regression over levels) or "var/mean" (eq. 3.15, one level).
     pub(crate) method: GainMethod,
-    /// Eq. 3.15 per pixel at the brightest level: (var_flat - var_bias) / (mean_flat - mean_bias).
+    /// Eq. 3.15 per pixel at the brightest level: (var_flat - var_bias) /
+    /// (mean_flat - mean_bias); 0 where the pixel does not respond.
     pub(crate) k_map: Array3<f32>,
     /// Eq. 3.15 globally at the brightest level.
     pub(crate) k_var_mean: f64,
@@ -517,10 +518,12 @@ pub(crate) fn estimate_gain(flat: &Stack, bias: &BiasEstimate) -> Result<GainEst
         .and(&bias.var)
         .for_each(|k, &fm, &fv, &m0, &v0| {
             let s = fm - m0;
+            // A pixel that does not respond (a dead one, flagged so) has no
+            // gain to measure: 0, not NaN, so every map stays finite.
             *k = if s > 0.0 {
                 gain_var_mean(fv - v0 - s * s * drift2, s) as f32
             } else {
-                f32::NAN
+                0.0
             };
         });
     let k_var_mean = gain_var_mean(bright_level.var_dn2, bright_level.mean_dn);
@@ -608,8 +611,9 @@ pub struct DarkEstimate {
     pub r2_sqrt_global: f64,
     /// R^2 of the pixel-averaged dark signal under a t (+ c when `offset`).
     pub r2_linear_global: f64,
-    /// Per-pixel R^2 of each law, in the chosen offset form (NaN where the
-    /// pixel's dark signal does not vary).
+    /// Per-pixel R^2 of each law, in the chosen offset form (0 where the
+    /// pixel's dark signal does not vary: nothing to explain, and the maps
+    /// stay finite).
     pub(crate) r2_sqrt: Array3<f32>,
     pub(crate) r2_linear: Array3<f32>,
     /// Per-pixel dark rate in electrons per sqrt(s) or per s (chosen law),
@@ -807,8 +811,9 @@ pub(crate) fn estimate_dark(dark: &Stack, bias: &BiasEstimate, k: f64) -> Result
         }
         let a = fit_dark_law(&gs, &y, &w, offset);
         let b = fit_dark_law(&gl, &y, &w, offset);
-        r2_sqrt[x] = a.r2 as f32;
-        r2_linear[x] = b.r2 as f32;
+        let finite = |r: f64| if r.is_finite() { r as f32 } else { 0.0 };
+        r2_sqrt[x] = finite(a.r2);
+        r2_linear[x] = finite(b.r2);
         let chosen = if law == DarkLaw::Sqrt { a } else { b };
         rate[x] = dark_rate(chosen.a, k);
         c_map[x] = chosen.c as f32;

@@ -88,12 +88,7 @@ impl Master {
     pub fn fits(&self, key: &FrameKey, k: f64, temperature_c: Option<f32>) -> Result<Vec<u8>> {
         let mut template = self.template(key)?;
         template.temperature_c = temperature_c;
-        let mut mosaic = vec![0.0f32; key.width * key.height];
-        for (p, (dy, dx)) in key.cfa.offsets().into_iter().enumerate() {
-            for ((i, j), &v) in self.mean.index_axis(ndarray::Axis(0), p).indexed_iter() {
-                mosaic[(2 * i + dy) * key.width + 2 * j + dx] = v;
-            }
-        }
+        let mosaic = crate::calibration::sensor_layout(&self.mean, key.cfa);
         let kind = match self.name.split('_').nth(1) {
             Some("bias") => "Master Bias",
             Some("dark") => "Master Dark",

@@ -1254,3 +1254,77 @@ fn defective_columns_are_found_locally_despite_ramps_and_vignetting() {
         std::fs::remove_dir_all(&dir).unwrap();
     }
 }
+
+/// Issue 39: a monochrome sensor's calibration file holds its maps as one
+/// plane (1, H, W) of its pixels, and no map holds a NaN: with a dead pixel
+/// at sensor (10, 21) (its flats read the bias level), the gain map there is
+/// 0 and the defect map says dead (2) at that very pixel of the plane. The
+/// file reads back to the same maps; a colour sensor's stay packed.
+#[test]
+fn a_monochrome_calibration_file_has_single_plane_finite_maps() {
+    let mut spec = SensorSpec::preset("a7s2-iso1600").unwrap();
+    spec.width = 64;
+    spec.height = 48;
+    spec.mono = true;
+    let v = VirtualSensor::new(spec).unwrap();
+    let dir = scratch("monomaps");
+    let s = write_stacks(&v, &dir, 8);
+    let bias0 = pgrf_raw::decode_file(&s.bias[0], &Default::default()).unwrap();
+    let dead = 10 * 64 + 21;
+    for f in &s.flat {
+        let mut fr = pgrf_raw::decode_file(f, &Default::default()).unwrap();
+        fr.mosaic[dead] = bias0.mosaic[dead];
+        write_dng(&fr, f, &DngOptions::default()).unwrap();
+    }
+    let run = calibrate(
+        &CalibrateInput {
+            bias: s.bias,
+            dark: s.dark,
+            flat: s.flat,
+            ..Default::default()
+        },
+        &pgrf_core::NoProgress,
+    )
+    .unwrap();
+    let c = &run.calibration;
+    for (name, m) in c.maps.named() {
+        assert!(
+            m.iter().all(|x| x.is_finite()),
+            "{name} has a non-finite value"
+        );
+    }
+    assert_eq!(c.meta.dead_pixels, 1);
+    let path = dir.join("mono.safetensors");
+    c.save(&path).unwrap();
+    let (_, stored) =
+        pgrf_noise::mapfile::decode_maps(&std::fs::read(&path).unwrap(), &path).unwrap();
+    assert_eq!(stored.len(), c.maps.named().len());
+    for (name, m) in &stored {
+        assert_eq!(m.shape(), [1, 48, 64], "{name}");
+    }
+    assert_eq!(stored["defects"][[0, 10, 21]], 2.0);
+    assert_eq!(stored["gain"][[0, 10, 21]], 0.0);
+    assert!(stored["gain"][[0, 10, 22]] > 0.5, "a live neighbour's gain");
+    let back = Calibration::load(&path).unwrap();
+    for ((name, a), (_, b)) in c.maps.named().into_iter().zip(back.maps.named()) {
+        assert_eq!(a, b, "{name}");
+    }
+    // A colour sensor's file keeps the packed planes.
+    let colour = sensor(DarkLaw::Sqrt);
+    let cs = write_stacks(&colour, &dir.join("colour"), 4);
+    let crun = calibrate(
+        &CalibrateInput {
+            bias: cs.bias,
+            flat: cs.flat,
+            ..Default::default()
+        },
+        &pgrf_core::NoProgress,
+    )
+    .unwrap();
+    let cpath = dir.join("colour.safetensors");
+    crun.calibration.save(&cpath).unwrap();
+    let (_, cmaps) =
+        pgrf_noise::mapfile::decode_maps(&std::fs::read(&cpath).unwrap(), &cpath).unwrap();
+    assert!(cmaps.values().all(|m| m.shape() == [4, 48, 64]));
+    std::fs::remove_dir_all(&dir).unwrap();
+}

@@ -1,5 +1,6 @@
-//! Files of named per-pixel maps: safetensors (f32, packed `(4, H/2, W/2)`)
-//! plus one JSON metadata record. Used for calibration files and for the
+//! Files of named per-pixel maps: safetensors (f32, packed `(4, H/2, W/2)`,
+//! or a monochrome sensor's calibration as one plane `(1, H, W)` of its
+//! pixels) plus one JSON metadata record. Used for calibration files and for the
 //! virtual sensor's ground truth, so both load the same way and any tool that
 //! reads safetensors (numpy, PyTorch) can inspect them.
 
@@ -36,7 +37,8 @@ pub fn write_maps(
 }
 
 /// Read a maps file: its JSON record and every tensor, which must be f32 of
-/// rank 3 with 4 planes.
+/// rank 3 with 4 planes (packed) or 1 (a sensor's pixels); which the
+/// record allows is its reader's to check.
 pub fn read_maps(path: &Path) -> Result<(serde_json::Value, BTreeMap<String, Array3<f32>>)> {
     let bytes = std::fs::read(path).map_err(|e| err(path, e))?;
     decode_maps(&bytes, path)
@@ -57,10 +59,10 @@ pub fn decode_maps(
     let mut maps = BTreeMap::new();
     for (name, t) in rec.tensors {
         let s = &t.shape;
-        if s.len() != 3 || s[0] != 4 {
+        if s.len() != 3 || !(s[0] == 4 || s[0] == 1) {
             return Err(err(
                 path,
-                format!("tensor '{name}' has shape {s:?}, expected [4, H, W]"),
+                format!("tensor '{name}' has shape {s:?}, expected [4, H, W] or [1, H, W]"),
             ));
         }
         let a = Array3::from_shape_vec((s[0], s[1], s[2]), t.values).map_err(|e| err(path, e))?;
