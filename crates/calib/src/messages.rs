@@ -50,11 +50,13 @@ impl CalibrateOutcome {
                 .map(|r| format!("pgrf: note: dropped {r}")),
         );
         lines.push(format!(
-            "wrote {}: K {:.4} DN/e- ({}), read sigma median {:.3} DN, row sigma {:.3} DN, DSNU {:.3} DN, dark law {}, {} hot / {} dead pixels",
+            "wrote {}: K {:.4} DN/e- ({}), read sigma median {:.3} DN, temporal dark noise {} DN (EMVA 1288, bias pairs), row sigma {:.3} DN, DSNU {:.3} DN, dark law {}, {} hot / {} dead pixels",
             config.output.display(),
             m.k,
             m.k_method,
             m.read_sigma_median,
+            m.dark_noise_sigma
+                .map_or_else(|| "-".into(), |d| format!("{d:.3}")),
             m.row_sigma,
             m.dsnu,
             crate::calibrate::law_label(m.dark_law, m.dark_offset),
