@@ -536,6 +536,7 @@ pub fn calibrate(input: &CalibrateInput, progress: &dyn Progress) -> Result<Cali
         dead_pixels: count(defect::DEAD),
         cold_pixels: count(defect::COLD),
         defect_columns,
+        row_order: Some(key.row_order),
         units: format!("{}; fixed_pattern (bias mean - black), sigma_read, response: DN; gain: DN per electron (eq. 3.15 per pixel; 0 at dead pixels); dark_rate: electrons per sqrt(s) (sqrt law) or per s (linear law), N_FP absorbed; defects: 0 good, 1 hot, 2 dead, 3 cold, 4 defective column (defect_columns counts sensor columns); r2_*: R^2 of the per-pixel dark fits (with the offset term when dark_offset); dark_offset: the dark law's offset c, DN; K: DN/e-; row_sigma, read_sigma_median (median of the true per-pixel sigma, corrected for the frames' sampling error), dark_noise_sigma (EMVA 1288 sigma_y.dark from bias-frame pair differences), dsnu: DN", if key.mono { "maps in the file one plane (1, H, W) of the sensor's pixels (in memory packed as its four sub-lattices)" } else { "maps packed (4, H/2, W/2) in R,G1,B,G2 order" }),
     };
     Ok(CalibrationRun {

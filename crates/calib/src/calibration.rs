@@ -129,6 +129,11 @@ pub struct CalibMeta {
     /// each with why.
     #[serde(default)]
     pub rejected_frames: Vec<String>,
+    /// The order the calibration frames stored their rows in (FITS
+    /// ROWORDER; TOP-DOWN for camera RAWs): the maps are in it, and a frame
+    /// stored the other way up is refused. None in older records.
+    #[serde(default)]
+    pub row_order: Option<pgrf_raw::RowOrder>,
     /// Number of pixels flagged hot (1 in the `defects` map).
     pub hot_pixels: usize,
     /// Number of pixels flagged dead (2 in the `defects` map).
@@ -526,15 +531,22 @@ impl Calibration {
         Ok(())
     }
 
-    /// Refuse a frame whose filter layout (CFA phase, or "mono") differs
-    /// from the calibration's: the per-pixel maps are stored by packed
-    /// plane, so another phase would put every map on the wrong photosites.
-    /// Not overridable, unlike the camera check.
+    /// Refuse a frame whose filter layout (CFA phase, or "mono") or stored
+    /// row order differs from the calibration's: the per-pixel maps are
+    /// stored by packed plane and row, so another phase or a flipped frame
+    /// would put every map on the wrong photosites. Not overridable, unlike
+    /// the camera check.
     pub fn check_layout(&self, frame: &pgrf_raw::RawFrame) -> Result<()> {
         if self.meta.cfa != frame.layout() {
             return Err(CalibError::WrongLayout {
                 calibration: self.meta.cfa.clone(),
                 frame: frame.layout().into(),
+            });
+        }
+        if let Some(rows) = self.meta.row_order.filter(|&r| r != frame.row_order()) {
+            return Err(CalibError::WrongRowOrder {
+                calibration: rows.keyword(),
+                frame: frame.row_order().keyword(),
             });
         }
         Ok(())

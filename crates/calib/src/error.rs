@@ -180,6 +180,15 @@ pub enum CalibError {
         /// The frame's layout.
         frame: String,
     },
+    /// A calibration applied to a frame whose rows are stored the other way
+    /// up: every map would sit on the mirrored row.
+    #[error("calibration's frames stored their rows {calibration}, the frame's are {frame} (FITS ROWORDER; none is BOTTOM-UP): its maps would lie upside down on the frame")]
+    WrongRowOrder {
+        /// The calibration frames' row order.
+        calibration: &'static str,
+        /// The frame's.
+        frame: &'static str,
+    },
     /// A calibration applied to a noise model without per-pixel maps.
     #[error("a calibration applies to the pgrf noise model (per-pixel maps), not {kind:?}")]
     WrongModel {

@@ -253,3 +253,30 @@ fn a_stack_of_mixed_row_orders_is_refused() {
     );
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// The calibration keeps its frames' row order in its record, and refuses
+/// a light frame stored the other way up (its maps would lie mirrored on
+/// it), while one stored alike passes.
+#[test]
+fn a_calibration_refuses_a_frame_stored_the_other_way_up() {
+    let dir = scratch("apply");
+    let input = write_case(&dir.join("a"), None, false);
+    let other = write_case(&dir.join("b"), Some("TOP-DOWN"), false);
+    let config = CalibrateConfig {
+        input: input.clone(),
+        output: dir.join("calib.safetensors"),
+        ..Default::default()
+    };
+    calibrate_to_files(&config, &pgrf_core::NoProgress, &NoReport).unwrap();
+    let cal = pgrf_calib::Calibration::load(&dir.join("calib.safetensors")).unwrap();
+    assert_eq!(cal.meta.row_order, Some(RowOrder::BottomUp));
+    let alike = decode_file(&input.flat[0], &Default::default()).unwrap();
+    assert!(cal.check_layout(&alike).is_ok());
+    let flipped = decode_file(&other.flat[0], &Default::default()).unwrap();
+    let e = cal.check_layout(&flipped).unwrap_err().to_string();
+    assert!(
+        e.contains("rows BOTTOM-UP") && e.contains("frame's are TOP-DOWN"),
+        "{e}"
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}

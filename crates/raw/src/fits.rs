@@ -136,7 +136,7 @@ pub struct FitsImage {
 /// flips rows; it keeps the stored order and writes back the keyword that
 /// says which it is, so a master lines up with the lights it was made for
 /// in every tool that honours the keyword.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, serde::Deserialize)]
 pub enum RowOrder {
     /// Stored row 0 is the image's top row (what camera drivers write).
     #[serde(rename = "TOP-DOWN")]
