@@ -4,7 +4,8 @@ PyTorch, with the networks of bench/train_torch.py (imported, not copied).
 
 Same input frame (the formula of crates/bench/src/enhance.rs, in
 numpy), same tiling as pgrf_nn::infer (tile rounded down to the network's side
-multiple unless the frame fits; tiles of `tile` overlapping by at least
+multiple unless the frame fits, then shrunk per axis to the smallest multiple
+that covers the axis with as many tiles; tiles overlapping by at least
 `overlap`, stride tile - overlap, the last tile flush with the end; an axis
 that fits is not cut), the same raised-cosine blend weights, the same samplers:
 
@@ -70,7 +71,7 @@ def axis_plan(total, tile, overlap):
     """(starts, len, weights per tile) along one axis."""
     if tile >= total:
         return [0], total, [np.ones(total, np.float32)]
-    assert 0 < overlap and 4 * overlap <= tile, (tile, overlap)
+    assert 0 < overlap and 2 * overlap <= tile, (tile, overlap)
     stride = tile - overlap
     starts, p = [], 0
     while p + tile < total:
@@ -102,10 +103,21 @@ def axis_plan(total, tile, overlap):
 
 
 def plan_for(h, w, tile, overlap, multiple):
+    """pgrf_nn::infer::image::plan_for: the tile rounded down to the
+    network's multiple unless the frame fits, then shrunk per axis to the
+    smallest multiple that covers the axis with as many tiles."""
     m = max(multiple, 1)
     if tile < max(h, w):
         tile = max(tile // m * m, m)
-    return axis_plan(h, tile, overlap), axis_plan(w, tile, overlap), tile
+
+    def balanced(length):
+        if tile >= length:
+            return tile
+        n = -(-(length - overlap) // (tile - overlap))
+        even = -(-(-(-(length + (n - 1) * overlap) // n)) // m) * m
+        return even if 2 * overlap <= even <= tile else tile
+
+    return axis_plan(h, balanced(h), overlap), axis_plan(w, balanced(w), overlap), tile
 
 
 # --------------------------------------------------------------------------

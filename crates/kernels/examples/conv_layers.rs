@@ -2,6 +2,7 @@
 //! (batch 2, 128 x 128 packed input): forward, weight gradient and input
 //! gradient per layer, in GFLOP/s, to show which shapes fall short.
 //! `RAYON_NUM_THREADS=2 cargo run --release -p pgrf-kernels --example conv_layers`
+#![allow(unsafe_code)]
 use pgrf_kernels::conv::ConvGeom;
 use pgrf_kernels::conv_backward::{conv2d_input_grad, conv2d_weight_grad};
 use pgrf_kernels::conv_forward::conv2d_forward;
@@ -42,7 +43,7 @@ fn main() {
         (64, 32, 128),
         (32, 32, 128),
     ];
-    let (mut tf, mut tw, mut tx) = (0.0, 0.0, 0.0);
+    let (mut tf, mut tw, mut tx, mut total) = (0.0, 0.0, 0.0, 0.0);
     println!("ci   co  side   fwd ms  GF/s   dW ms  GF/s   dX ms  GF/s");
     for (ci, co, side) in layers {
         let g = ConvGeom {
@@ -81,7 +82,51 @@ fn main() {
             gflop / dwt * 1e3,
             gflop / dxt * 1e3
         );
-        (tf, tw, tx) = (tf + f, tw + dwt, tx + dxt);
+        (tf, tw, tx, total) = (tf + f, tw + dwt, tx + dxt, total + gflop);
     }
-    println!("total: forward {tf:.1} ms, weight grad {tw:.1} ms, input grad {tx:.1} ms");
+    // The same gemm on one large square product, parallel over the pool:
+    // the ceiling the convolutions' tiles are measured against.
+    let side = 1536;
+    let a: Vec<f32> = (0..side * side)
+        .map(|i| ((i * 7) % 100) as f32 * 1e-2)
+        .collect();
+    let mut c = vec![0.0f32; side * side];
+    let threads = rayon::current_num_threads();
+    let t = median_ms(
+        || {
+            // SAFETY: a, a and c are side x side row-major buffers.
+            unsafe {
+                gemm::gemm(
+                    side,
+                    side,
+                    side,
+                    c.as_mut_ptr(),
+                    1,
+                    side as isize,
+                    false,
+                    a.as_ptr(),
+                    1,
+                    side as isize,
+                    a.as_ptr(),
+                    1,
+                    side as isize,
+                    1.0,
+                    1.0,
+                    false,
+                    false,
+                    false,
+                    gemm::Parallelism::Rayon(threads),
+                )
+            }
+        },
+        5,
+    );
+    let gf = 2.0 * (side as f64).powi(3) * 1e-9 / t * 1e3;
+    println!("gemm {side}^3 product: {t:.1} ms, {gf:.0} GFLOP/s");
+    println!(
+        "total {total:.2} GFLOP each: forward {tf:.1} ms ({:.0} GFLOP/s), weight grad {tw:.1} ms ({:.0}), input grad {tx:.1} ms ({:.0})",
+        total / tf * 1e3,
+        total / tw * 1e3,
+        total / tx * 1e3
+    );
 }
