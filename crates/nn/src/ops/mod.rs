@@ -10,16 +10,18 @@
 //! gradient is a forward convolution over strided views, its bias gradient a
 //! copy of the whole output gradient, its input gradient a serial scatter,
 //! and activations and Adam run as many full-size passes. Here the weight
-//! and input gradients are one matrix product each over an im2col layout
-//! built in parallel, the 2x2 transposed convolution is a product and a
-//! shuffle, activations are one pass forward and one backward, GroupNorm a
-//! few passes per (image, group) block, and Adam one pass per parameter
-//! tensor ([`adam::PgrfAdam`]). The forward convolution is pgrf's too
-//! (`pgrf_kernels::conv_forward`: im2col over cache-sized row tiles, one
-//! gemm product each), 1.8x faster than Flex's on the U-Net (BENCHMARKS.md,
-//! issue 38).
+//! and input gradients are matrix products over im2col tiles, the 2x2
+//! transposed convolution is a product and a shuffle, activations are one
+//! pass forward and one backward, GroupNorm a few passes per (image, group)
+//! block, and Adam one pass per parameter
+//! tensor ([`adam::PgrfAdam`]). The convolution is pgrf's forward and
+//! backward (`pgrf_kernels::conv_forward` and `conv_backward`: im2col over
+//! cache-sized row tiles, one gemm product each; the weight gradient summed
+//! over the tiles in a fixed order, the stride-1 input gradient a forward
+//! convolution by the flipped kernel), with LeakyReLU fused into the
+//! forward's tiles at inference (BENCHMARKS.md, issue 38).
 //!
-//! The networks call the layer functions here ([`conv2d`],
+//! The networks call the layer functions here ([`conv2d`], [`conv2d_leaky`],
 //! [`conv_transpose2d`], [`leaky_relu`], [`silu`], [`group_norm`]) instead of the modules'
 //! `forward`; parameters, records and weight files are burn's modules
 //! unchanged. [`set_kernels`] chooses, for the whole process, between these
