@@ -9,6 +9,8 @@
 #              the tile `pgrf enhance` would choose here; median of $UNET_ITERS after 1 warm-up
 #   sr3-small  reduced SR3 (inner 32, mults 1,2,4,4, attention at level 3) on the full
 #              frame, tile 512, two-stage sampler (2 NFE); one timed run
+#   unet-24mp  the same on a 24 MP frame (packed 4 x 2000 x 3000, a 6000 x 4000 sensor)
+#   sr3-small-24mp  the reduced SR3 on that 24 MP frame, tile 512, two-stage; one timed run
 #   sr3-crop   default SR3 (97.8 M parameters) on a 512 x 512 packed crop (one tile),
 #              two-stage; the full frame at tile 512 is extrapolated from it
 #   sr3-full   default SR3 on the full frame, tile 512 (tens of minutes on 2 cores)
@@ -47,6 +49,8 @@ for c in "${configs[@]}"; do
   case "$c" in
     unet) run "SID U-Net w=32, full frame" "$unet_iters" 1 --net unet --width 32 ;;
     sr3-small) run "SR3 small, full frame" 1 0 "${small[@]}" --tile 512 ;;
+    unet-24mp) run "SID U-Net w=32, 24 MP frame" "$unet_iters" 1 --net unet --width 32 --frame 2000x3000 ;;
+    sr3-small-24mp) run "SR3 small, 24 MP frame" 1 0 "${small[@]}" --frame 2000x3000 --tile 512 ;;
     sr3-crop) run "SR3 default, 512x512 crop" 1 0 --net sr3 --frame 512 --tile 512 ;;
     sr3-full) run "SR3 default, full frame" 1 0 --net sr3 --tile 512 ;;
     euler)

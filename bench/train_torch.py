@@ -68,7 +68,16 @@ class SidUnet(nn.Module):
         self.head = nn.Conv2d(w, cout, 1)
 
     def forward(self, x):
-        assert x.shape[2] % 16 == 0 and x.shape[3] % 16 == 0
+        # pgrf's SidUnet::forward: sides padded up to a multiple of 16 by
+        # reflection (zeros where too small to reflect), output cropped.
+        h, w = x.shape[2], x.shape[3]
+        ph, pw = -h % 16, -w % 16
+        if ph or pw:
+            mode = "reflect" if ph < h and pw < w else "constant"
+            return self._forward(F.pad(x, (0, pw, 0, ph), mode=mode))[:, :, :h, :w]
+        return self._forward(x)
+
+    def _forward(self, x):
         skips = []
         for level, block in enumerate(self.down):
             x = block(x)
