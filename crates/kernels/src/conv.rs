@@ -357,6 +357,43 @@ pub(crate) mod tests {
             .collect()
     }
 
+    /// Convolutions the forward and backward kernels are checked on, as
+    /// `(geometry, output channels)`: odd and even sides, 1x1 to 3x3 kernels,
+    /// strides 1 and 2, paddings 0, 1 and as wide as the kernel, batches,
+    /// tall frames that split into many row tiles (more than the weight
+    /// gradient's groups), pointwise ones read in place over two tiles per
+    /// image, and frames smaller than the kernel's reach.
+    pub(crate) fn kernel_cases() -> Vec<(ConvGeom, usize)> {
+        [
+            (1, 4, 7, 9, 3, 1, 1, 5),
+            (2, 3, 8, 8, 3, 1, 1, 16),
+            (3, 5, 11, 6, 3, 2, 1, 4),
+            (1, 2, 6, 10, 1, 1, 0, 3),
+            (2, 4, 9, 7, 2, 2, 0, 6),
+            (2, 3, 6, 5, 2, 1, 0, 4),
+            (1, 32, 70, 66, 3, 1, 1, 8),
+            (1, 1, 2, 2, 3, 1, 1, 1),
+            (1, 2, 5, 4, 3, 1, 0, 3),
+            (2, 8, 300, 40, 1, 1, 0, 5),
+            (1, 3, 5, 4, 1, 1, 1, 2),
+        ]
+        .into_iter()
+        .map(|(n, ci, h, w, k, s, p, co)| {
+            let g = ConvGeom {
+                n,
+                ci,
+                h,
+                w,
+                kh: k,
+                kw: k,
+                stride: [s, s],
+                pad: [p, p],
+            };
+            (g, co)
+        })
+        .collect()
+    }
+
     /// Reference im2col entry by definition.
     fn reference_entry(x: &[f32], g: &ConvGeom, img: usize, r: usize, oy: usize, ox: usize) -> f32 {
         let (c, ky, kx) = (r / (g.kh * g.kw), (r / g.kw) % g.kh, r % g.kw);

@@ -174,7 +174,7 @@ pub fn conv2d_input_grad(dy: &[f32], g: &ConvGeom, weight: &[f32], co: usize, dx
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::conv::tests::values;
+    use crate::conv::tests::{kernel_cases, values};
 
     /// Both gradients by their definitions, in f64: `dw[o, c, ky, kx] =
     /// Σ dy[j, o, oy, ox] x[j, c, iy, ix]` and `dx[j, c, iy, ix] = Σ dy[j,
@@ -221,37 +221,9 @@ mod tests {
 
     #[test]
     fn gradients_match_their_definitions() {
-        // (n, ci, h, w, k, stride, pad, co): odd and even sides, 1x1 to 3x3,
-        // strides 1 and 2 and a padding as wide as the kernel (weight
-        // gradient only), tall frames that split
-        // into many tiles (more than GROUPS) and frames smaller than the
-        // kernel's reach.
-        let cases = [
-            (1, 4, 7, 9, 3, 1, 1, 5),
-            (2, 3, 8, 8, 3, 1, 1, 16),
-            (3, 5, 11, 6, 3, 2, 1, 4),
-            (1, 2, 6, 10, 1, 1, 0, 3),
-            (2, 4, 9, 7, 2, 2, 0, 6),
-            (2, 3, 6, 5, 2, 1, 0, 4),
-            (1, 32, 70, 66, 3, 1, 1, 8),
-            (1, 1, 2, 2, 3, 1, 1, 1),
-            // Pointwise, read in place over two row tiles per image; a
-            // padded 1x1 that is not.
-            (2, 8, 300, 40, 1, 1, 0, 5),
-            (1, 3, 5, 4, 1, 1, 1, 2),
-            (1, 2, 5, 4, 3, 1, 0, 3),
-        ];
-        for (i, &(n, ci, h, w, k, s, p, co)) in cases.iter().enumerate() {
-            let g = ConvGeom {
-                n,
-                ci,
-                h,
-                w,
-                kh: k,
-                kw: k,
-                stride: [s, s],
-                pad: [p, p],
-            };
+        for (i, (g, co)) in kernel_cases().into_iter().enumerate() {
+            let (n, ci, h, w, k) = (g.n, g.ci, g.h, g.w, g.kh);
+            let (s, p) = (g.stride[0], g.pad[0]);
             let (oh, ow) = g.out_hw().unwrap();
             let x = values(n * ci * h * w, 3 * i as u64 + 1);
             let wt = values(co * ci * k * k, 3 * i as u64 + 2);

@@ -161,7 +161,7 @@ pub fn conv2d_forward(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::conv::tests::values;
+    use crate::conv::tests::{kernel_cases, values};
 
     /// The definition: a sum over channels and kernel taps, zero padding.
     fn naive(x: &[f32], g: &ConvGeom, w: &[f32], co: usize, b: Option<&[f32]>) -> Vec<f32> {
@@ -198,33 +198,8 @@ mod tests {
 
     #[test]
     fn matches_the_definition_over_sizes_strides_and_paddings() {
-        // Odd and even sides, 1x1 / 2x2 / 3x3 kernels, strides 1 and 2,
-        // paddings 0 and 1, a batch, tall frames that split into several
-        // tiles and tiny ones that do not.
-        let cases = [
-            (1, 4, 7, 9, 3, 1, 1, 5),
-            (2, 3, 8, 8, 3, 1, 1, 16),
-            (3, 5, 11, 6, 3, 2, 1, 4),
-            (1, 2, 6, 10, 1, 1, 0, 3),
-            (2, 4, 9, 7, 2, 2, 0, 6),
-            (1, 32, 70, 66, 3, 1, 1, 8),
-            (1, 1, 2, 2, 3, 1, 1, 1),
-            // Pointwise, read in place over two row tiles per image; a
-            // padded 1x1 that is not.
-            (2, 8, 300, 40, 1, 1, 0, 5),
-            (1, 3, 5, 4, 1, 1, 1, 2),
-        ];
-        for (i, &(n, ci, h, w, k, s, p, co)) in cases.iter().enumerate() {
-            let g = ConvGeom {
-                n,
-                ci,
-                h,
-                w,
-                kh: k,
-                kw: k,
-                stride: [s, s],
-                pad: [p, p],
-            };
+        for (i, (g, co)) in kernel_cases().into_iter().enumerate() {
+            let (n, ci, h, w, k) = (g.n, g.ci, g.h, g.w, g.kh);
             let (oh, ow) = g.out_hw().unwrap();
             let x = values(n * ci * h * w, 2 * i as u64 + 1);
             let wt = values(co * ci * k * k, 2 * i as u64 + 2);

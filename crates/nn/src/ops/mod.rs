@@ -571,38 +571,41 @@ fn symmetric_padding<B: Backend>(m: &Conv2d<B>) -> Option<[usize; 2]> {
     }
 }
 
+/// The options pgrf's convolution runs `m` with, where the backend has it
+/// and `m` is within it (one group, dilation 1, symmetric padding); `None`
+/// sends the caller to burn's module.
+fn pgrf_conv_options<B: PgrfOps>(m: &Conv2d<B>) -> Option<ConvOptions<2>> {
+    let padding = symmetric_padding(m)?;
+    (B::pgrf_kernels() && m.groups == 1 && m.dilation == [1, 1])
+        .then(|| ConvOptions::new(m.stride, padding, [1, 1], 1))
+}
+
 /// `m.forward(x)` through pgrf's convolution where the backend has it
 /// (one group, dilation 1, symmetric padding), burn's module otherwise.
 pub fn conv2d<B: PgrfOps>(m: &Conv2d<B>, x: Tensor<B, 4>) -> Tensor<B, 4> {
-    match symmetric_padding(m) {
-        Some(padding) if B::pgrf_kernels() && m.groups == 1 && m.dilation == [1, 1] => {
-            let options = ConvOptions::new(m.stride, padding, [1, 1], 1);
-            tensor(B::pgrf_conv2d(
-                primitive(x),
-                primitive(m.weight.val()),
-                m.bias.as_ref().map(|b| primitive(b.val())),
-                options,
-            ))
-        }
-        _ => m.forward(x),
+    match pgrf_conv_options(m) {
+        Some(options) => tensor(B::pgrf_conv2d(
+            primitive(x),
+            primitive(m.weight.val()),
+            m.bias.as_ref().map(|b| primitive(b.val())),
+            options,
+        )),
+        None => m.forward(x),
     }
 }
 
 /// `leaky_relu(conv2d(m, x), slope)`, fused into one pass where the
 /// backend has pgrf's kernels and no autodiff.
 pub fn conv2d_leaky<B: PgrfOps>(m: &Conv2d<B>, x: Tensor<B, 4>, slope: f32) -> Tensor<B, 4> {
-    match symmetric_padding(m) {
-        Some(padding) if B::pgrf_kernels() && m.groups == 1 && m.dilation == [1, 1] => {
-            let options = ConvOptions::new(m.stride, padding, [1, 1], 1);
-            tensor(B::pgrf_conv2d_leaky(
-                primitive(x),
-                primitive(m.weight.val()),
-                m.bias.as_ref().map(|b| primitive(b.val())),
-                options,
-                slope,
-            ))
-        }
-        _ => leaky_relu(m.forward(x), slope),
+    match pgrf_conv_options(m) {
+        Some(options) => tensor(B::pgrf_conv2d_leaky(
+            primitive(x),
+            primitive(m.weight.val()),
+            m.bias.as_ref().map(|b| primitive(b.val())),
+            options,
+            slope,
+        )),
+        None => leaky_relu(m.forward(x), slope),
     }
 }
 
