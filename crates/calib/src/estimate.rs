@@ -34,10 +34,10 @@ pub struct BiasEstimate {
     /// Source-follower sigma: sqrt(var - row variance).
     pub sigma_read: Array3<f32>,
     /// The median over pixels of the true source-follower sigma, DN:
-    /// [`read_sigma_median`], not the median of `sigma_read` (which sits
+    /// `read_sigma_median` (this module), not the median of `sigma_read` (which sits
     /// low by the sampling error of a few frames).
     pub read_sigma_median: f64,
-    /// EMVA 1288's temporal dark noise sigma_y.dark, DN: [`dark_noise_sigma`].
+    /// EMVA 1288's temporal dark noise sigma_y.dark, DN: `dark_noise_sigma` (this module).
     pub dark_noise_sigma: f64,
     pub(crate) row_sigma: f64,
     /// Standard deviation of the whole-frame offset from frame to frame, DN.
@@ -850,7 +850,7 @@ pub mod defect {
     /// Bias offset far below the rest.
     pub const COLD: f32 = 3.0;
     /// In a sensor column whose offset or response stands out from its
-    /// neighbouring columns' ([`crate::columns`]).
+    /// neighbouring columns' (module `columns`).
     pub const COLUMN: f32 = 4.0;
 }
 
