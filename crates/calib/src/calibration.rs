@@ -619,27 +619,33 @@ impl Calibration {
     /// Cosmetic correction, as astro software applies it after dark
     /// subtraction: every pixel the defect map flags hot, dead or cold is
     /// replaced by the median of its eight nearest neighbours of the same
-    /// colour that are not flagged (in the mosaic: two photosites away), so
-    /// a hot pixel's shot noise, which no dark frame removes, is not handed
-    /// to the denoiser. Defective columns are left: their offset is in the
-    /// fixed pattern. Returns how many pixels were replaced; `frame` must be
-    /// the calibration's size (checked by the caller with the rest of the
-    /// calibration).
+    /// plane that are not flagged, so a hot pixel's shot noise, which no
+    /// dark frame removes, is not handed to the denoiser. In a Bayer mosaic
+    /// the same colour sits two photosites away; a monochrome sensor has
+    /// one colour, so its direct neighbours, half as far and sampling the
+    /// scene where the defect is, replace it. Defective columns are left:
+    /// their offset is in the fixed pattern. Returns how many pixels were
+    /// replaced; `frame` must be the calibration's size (checked by the
+    /// caller with the rest of the calibration).
     pub fn correct_defects(&self, frame: &mut pgrf_raw::RawFrame) -> usize {
         let d = &self.maps.defects;
         let (_, ph, pw) = d.dim();
-        if (2 * ph, 2 * pw) != (frame.height, frame.width) {
+        let (h, w) = (frame.height, frame.width);
+        if (2 * ph, 2 * pw) != (h, w) {
             return 0;
         }
-        let flagged = |v: f32| v == defect::HOT || v == defect::DEAD || v == defect::COLD;
-        let w = frame.width;
+        let cfa = frame.cfa;
+        let replaced = |v: f32| v == defect::HOT || v == defect::DEAD || v == defect::COLD;
+        let flagged = |r: usize, c: usize| replaced(d[[cfa.plane_at(r, c), r / 2, c / 2]]);
+        let step: isize = if frame.mono { 1 } else { 2 };
         let mut fixed = 0;
-        for (p, (dy, dx)) in frame.cfa.offsets().into_iter().enumerate() {
+        for (p, (dy, dx)) in cfa.offsets().into_iter().enumerate() {
             let plane = d.index_axis(ndarray::Axis(0), p);
-            for ((i, j), &c) in plane.indexed_iter() {
-                if !flagged(c) {
+            for ((i, j), &v) in plane.indexed_iter() {
+                if !replaced(v) {
                     continue;
                 }
+                let (r, c) = (2 * i + dy, 2 * j + dx);
                 let mut near: Vec<u16> = Vec::with_capacity(8);
                 for (di, dj) in [
                     (-1, -1),
@@ -651,13 +657,13 @@ impl Calibration {
                     (1, 0),
                     (1, 1),
                 ] {
-                    let (ni, nj) = (i as isize + di, j as isize + dj);
-                    if ni < 0 || nj < 0 || ni >= ph as isize || nj >= pw as isize {
+                    let (nr, nc) = (r as isize + step * di, c as isize + step * dj);
+                    if nr < 0 || nc < 0 || nr >= h as isize || nc >= w as isize {
                         continue;
                     }
-                    let (ni, nj) = (ni as usize, nj as usize);
-                    if !flagged(plane[[ni, nj]]) {
-                        near.push(frame.mosaic[(2 * ni + dy) * w + 2 * nj + dx]);
+                    let (nr, nc) = (nr as usize, nc as usize);
+                    if !flagged(nr, nc) {
+                        near.push(frame.mosaic[nr * w + nc]);
                     }
                 }
                 if near.is_empty() {
@@ -670,7 +676,7 @@ impl Calibration {
                 } else {
                     (near[n / 2 - 1] as u32 + near[n / 2] as u32).div_ceil(2) as u16
                 };
-                frame.mosaic[(2 * i + dy) * w + 2 * j + dx] = med;
+                frame.mosaic[r * w + c] = med;
                 fixed += 1;
             }
         }

@@ -924,6 +924,7 @@ fn a_monochrome_fits_camera_calibrates_with_fits_masters() {
         fits: true,
     };
     let bias = cam.shoot("bias", 32, 0.0, 1.0 / 8000.0, 0.0);
+    let bias0 = bias[0].clone();
     let mut flat = cam.shoot("flat", 8, 2000.0, 1.0, 0.0);
     flat.extend(cam.shoot("flat", 8, 8000.0, 4.0, 0.0));
     let mut dark = Vec::new();
@@ -967,7 +968,62 @@ fn a_monochrome_fits_camera_calibrates_with_fits_masters() {
             assert!((*a as f32 - b).abs() <= 0.5, "{}: {a} vs {b}", master.name);
         }
     }
+    mono_cosmetic_correction_uses_direct_neighbours(&run.calibration, &bias0);
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Cosmetic correction of a monochrome frame: each defective pixel becomes
+/// the median of its eight direct neighbours (one colour: no reason to
+/// skip a photosite). On a frame whose value depends on the row and column
+/// parity (1000 + 10 (r mod 2) + 20 (c mod 2)), the direct neighbours of an
+/// even-even pixel hold 1010, 1020 and 1030 (median 1025) while the
+/// same-parity ones a Bayer correction would take hold 1000: the two rules
+/// give different numbers, and the test pins the direct one.
+fn mono_cosmetic_correction_uses_direct_neighbours(c: &Calibration, path: &Path) {
+    let mut f = pgrf_raw::decode_file(path, &Default::default()).unwrap();
+    assert!(f.mono);
+    let (h, w) = (f.height, f.width);
+    let value = |r: usize, c: usize| 1000 + 10 * (r % 2) as u16 + 20 * (c % 2) as u16;
+    for r in 0..h {
+        for col in 0..w {
+            f.mosaic[r * w + col] = value(r, col);
+        }
+    }
+    let d = &c.maps.defects;
+    let offsets = f.cfa.offsets();
+    let flagged: Vec<(usize, usize)> = d
+        .indexed_iter()
+        .filter(|(_, &v)| v == 1.0 || v == 2.0 || v == 3.0)
+        .map(|((p, i, j), _)| (2 * i + offsets[p].0, 2 * j + offsets[p].1))
+        .collect();
+    assert!(!flagged.is_empty(), "the virtual sensor has a hot pixel");
+    let want: Vec<u16> = flagged
+        .iter()
+        .map(|&(r, col)| {
+            let mut near: Vec<u16> = (-1i64..=1)
+                .flat_map(|dy| (-1i64..=1).map(move |dx| (dy, dx)))
+                .filter(|&d| d != (0, 0))
+                .map(|(dy, dx)| (r as i64 + dy, col as i64 + dx))
+                .filter(|&(y, x)| y >= 0 && x >= 0 && y < h as i64 && x < w as i64)
+                .filter(|&(y, x)| !flagged.contains(&(y as usize, x as usize)))
+                .map(|(y, x)| value(y as usize, x as usize))
+                .collect();
+            near.sort_unstable();
+            let n = near.len();
+            if n % 2 == 1 {
+                near[n / 2]
+            } else {
+                (near[n / 2 - 1] as u32 + near[n / 2] as u32).div_ceil(2) as u16
+            }
+        })
+        .collect();
+    assert_eq!(c.correct_defects(&mut f), flagged.len());
+    for (&(r, col), &v) in flagged.iter().zip(&want) {
+        assert_eq!(f.mosaic[r * w + col], v, "defect at ({r}, {col})");
+        // Never the same-parity value alone: direct neighbours differ in
+        // parity, so their median is not the pixel's own parity class.
+        assert_ne!(v, value(r, col), "defect at ({r}, {col})");
+    }
 }
 
 #[test]
