@@ -552,8 +552,8 @@ fn a_one_frame_dark_ladder_with_an_offset_calibrates() {
 /// The astronomer's workflow through the binary: a cooled monochrome
 /// camera's stacks as FITS (`simulate-sensor --mono --fits`), `info` on one,
 /// `calibrate --masters` (a monochrome record; FITS masters), `convert` of a
-/// FITS frame to a monochrome DNG, a grey `preview`, and `enhance` refusing
-/// the monochrome frame in one line.
+/// FITS frame to a monochrome DNG, a grey `preview`, `enhance` of the
+/// monochrome frame to a monochrome DNG, and `synth --calib` to a FITS frame.
 #[test]
 fn a_monochrome_fits_camera_from_frames_to_masters() {
     let dir = scratch("monofits");
@@ -589,7 +589,17 @@ fn a_monochrome_fits_camera_from_frames_to_masters() {
     // simulate-sensor writes the sensor's top row first, and says so.
     assert_eq!(info["fits"]["row_order"], json!("TOP-DOWN"));
     assert_eq!(info["temperature_c"], json!(-10.0));
-    assert_eq!(info["planes"][0]["plane"], json!("(0,0)"));
+    // One plane, all of the sensor's pixels, and one black level.
+    assert_eq!(info["planes"].as_array().unwrap().len(), 1);
+    assert_eq!(info["planes"][0]["plane"], json!("mono"));
+    assert_eq!(
+        (
+            info["planes"][0]["width"].clone(),
+            info["planes"][0]["height"].clone()
+        ),
+        (json!(128), json!(96))
+    );
+    assert_eq!(info["black"].as_array().unwrap().len(), 1);
 
     // Report and masters folders whose parents do not exist yet: made,
     // as the help says.
@@ -681,19 +691,58 @@ fn a_monochrome_fits_camera_from_frames_to_masters() {
         "not grey"
     );
 
+    // enhance --calib restores the monochrome frame through the packed
+    // networks (the calibration's dark shading, defects and noise applied)
+    // and writes a monochrome DNG of the same size.
+    let out = dir.join("out.dng");
     let r = pgrf(&[
         "enhance",
-        s(&dng),
+        s(&bias0),
+        "--calib",
+        s(&dir.join("c.safetensors")),
         "--model",
         "builtin:spc",
         "--ratio",
         "100",
         "-o",
-        s(&dir.join("out.dng")),
+        s(&out),
     ]);
-    let msg = assert_one_line_failure(&r, "bias.dng");
-    assert!(msg.contains("monochrome"), "{msg}");
-    assert!(!dir.join("out.dng").exists());
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    let e = pgrf_raw::decode_file(&out, &Default::default()).unwrap();
+    assert!(e.mono);
+    assert_eq!((e.width, e.height), (128, 96));
+
+    // synth with the monochrome calibration, to a FITS name: a monochrome
+    // FITS frame of the input's size and row order, one plane in info.
+    let flat0 = std::fs::read_dir(vs.join("flat"))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .min()
+        .unwrap();
+    let syn = dir.join("syn.fits");
+    let r = pgrf(&[
+        "synth",
+        s(&flat0),
+        "--profile",
+        "sony-a7s2",
+        "--calib",
+        s(&dir.join("c.safetensors")),
+        "--ratio",
+        "10",
+        "--seed",
+        "4",
+        "-o",
+        s(&syn),
+    ]);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    let f = pgrf_raw::decode_file(&syn, &Default::default()).unwrap();
+    assert!(f.mono);
+    assert_eq!((f.width, f.height), (128, 96));
+    let h = f.fits.as_ref().expect("a FITS frame");
+    assert_eq!(h.row_order, Some(pgrf_raw::RowOrder::TopDown));
+    let r = pgrf(&["info", s(&syn), "--json"]);
+    let info: Value = serde_json::from_slice(&r.stdout).unwrap();
+    assert_eq!(info["planes"].as_array().unwrap().len(), 1);
     std::fs::remove_dir_all(&dir).unwrap();
 }
 

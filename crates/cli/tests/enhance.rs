@@ -795,3 +795,94 @@ fn without_a_ratio_the_frame_is_metered_and_the_choice_printed() {
         "{e}"
     );
 }
+
+/// A monochrome photo is restored by the built-in Bayer networks through
+/// the 2x2 packing (four half-resolution images of one scene with the
+/// same noise physics) and written back at full resolution as a one-sample
+/// monochrome DNG. On a 256 x 256 grey scene of discs (seeded), darkened
+/// 100x with the A7S2's ISO 1600 noise, the SPC model must lift the PSNR
+/// against the clean frame well above the noisy input's (measured: 22.9 dB
+/// in, 30.1 dB out on the same kind of scene; asserted: +5 dB and above
+/// 27 dB).
+#[test]
+fn a_monochrome_photo_is_restored_and_stays_monochrome() {
+    use pgrf_noise::capture::DarkCapture;
+    use pgrf_noise::{CameraProfile, ModelKind};
+    use rand::{Rng, SeedableRng};
+    let d = scratch("mono");
+    let (w, h, black, white, ratio) = (256usize, 256usize, 512.0f32, 16383u32, 100.0f32);
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
+    let mut scene = vec![0.25f32; w * h];
+    for _ in 0..60 {
+        let (cy, cx) = (rng.gen_range(0.0..h as f32), rng.gen_range(0.0..w as f32));
+        let (r, v) = (rng.gen_range(5.0..40.0f32), rng.gen_range(0.03..0.9f32));
+        for y in 0..h {
+            for x in 0..w {
+                if (y as f32 - cy).powi(2) + (x as f32 - cx).powi(2) < r * r {
+                    scene[y * w + x] = v;
+                }
+            }
+        }
+    }
+    let range = white as f32 - black;
+    let mosaic = scene
+        .iter()
+        .map(|v| (black + v * 0.8 * range).round() as u16)
+        .collect();
+    let mut clean = RawFrame::from_mono(w, h, mosaic, black, white).unwrap();
+    clean.exposure_s = Some(1.0);
+    let dark = DarkCapture {
+        profile: CameraProfile::built_in("sony-a7s2").unwrap(),
+        model: ModelKind::Pgrf,
+        iso: 1600,
+        exposure_s: 0.01,
+        ratio,
+        seed: 3,
+    }
+    .take(&clean)
+    .unwrap();
+    let noisy = d.join("dark.dng");
+    write_dng(&dark, &noisy, &DngOptions::default()).unwrap();
+    let out = d.join("out.dng");
+    let r = pgrf(&[
+        "enhance",
+        s(&noisy),
+        "--model",
+        "builtin:spc",
+        "--ratio",
+        "100",
+        "-o",
+        s(&out),
+    ]);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    let back = decode_file(&out, &LevelOverrides::default()).unwrap();
+    assert!(back.mono, "the result lost its monochrome layout");
+    assert_eq!((back.width, back.height), (w, h));
+    // PSNR on [0, 1] over every pixel (each frame normalised by its levels;
+    // the noisy one amplified by the ratio, as the network is fed it).
+    let norm = |f: &RawFrame, gain: f32| -> Vec<f32> {
+        (f.mosaic.iter())
+            .map(|&v| {
+                ((v as f32 - f.black[0]) * gain / (f.white as f32 - f.black[0])).clamp(0.0, 1.0)
+            })
+            .collect()
+    };
+    let psnr = |a: &[f32], b: &[f32]| {
+        let mse = a
+            .iter()
+            .zip(b)
+            .map(|(x, y)| ((x - y) as f64).powi(2))
+            .sum::<f64>()
+            / a.len() as f64;
+        10.0 * (1.0 / mse).log10()
+    };
+    let truth = norm(&clean, 1.0);
+    let before = psnr(&norm(&dark, ratio), &truth);
+    let after = psnr(&norm(&back, 1.0), &truth);
+    eprintln!("monochrome restoration: PSNR {before:.2} dB in, {after:.2} dB out");
+    assert!(
+        after > before + 5.0 && after > 27.0,
+        "PSNR {before:.2} dB in, {after:.2} dB out"
+    );
+    std::fs::remove_dir_all(&d).unwrap();
+}

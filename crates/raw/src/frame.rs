@@ -34,10 +34,11 @@ pub struct RawFrame {
     /// (always RGGB's: (0,0), (0,1), (1,1), (1,0)).
     pub cfa: Cfa,
     /// A monochrome sensor (no colour filter: astronomy CCDs, Leica
-    /// Monochrom). Per-pixel work (packing, calibration, synthesis) treats
-    /// its 2x2 sub-lattices as four planes of one colour; nothing colour
-    /// applies (no white balance, matrix or demosaic), and what needs a CFA
-    /// (denoisers trained on Bayer data) refuses it ([`RawFrame::require_cfa`]).
+    /// Monochrom). Per-pixel work (packing, calibration, synthesis,
+    /// restoration by the packed four-plane networks) treats its 2x2
+    /// sub-lattices as four planes of one colour; nothing colour applies (no
+    /// white balance, matrix or demosaic), and what needs colour data
+    /// (training sets, colour evaluation) refuses it ([`RawFrame::require_cfa`]).
     pub mono: bool,
     /// Black level in DN of the planes R, G1, B, G2.
     pub black: [f32; 4],

@@ -28,7 +28,9 @@ struct Info<'a> {
     width: usize,
     height: usize,
     cfa: String,
-    black: [f32; 4],
+    /// One black level for a monochrome frame whose planes share it, else
+    /// the four of R, G1, B, G2 (or the sub-lattices').
+    black: Vec<f32>,
     white: u32,
     bits: u32,
     wb: Option<[f32; 3]>,
@@ -83,7 +85,7 @@ fn info<'a>(a: &InfoArgs, f: &'a RawFrame) -> Result<Info<'a>> {
         width: f.width,
         height: f.height,
         cfa: f.layout().to_string(),
-        black: f.black,
+        black: blacks(f),
         white: f.white,
         bits: f.bits,
         wb: f.wb,
@@ -125,7 +127,10 @@ fn print_header(f: &RawFrame, info: &Info) {
         f.sensor_size.0
     );
     if f.mono {
-        println!("cfa         none (monochrome sensor)");
+        println!(
+            "cfa         none (monochrome sensor: one plane of {} x {})",
+            info.width, info.height
+        );
     } else {
         println!("cfa         {}", info.cfa);
     }
@@ -162,17 +167,15 @@ fn print_header(f: &RawFrame, info: &Info) {
 /// Levels, ISO, exposure, temperature and the DNG noise profile.
 fn print_levels(a: &InfoArgs, f: &RawFrame) {
     let opt = |v: Option<String>| v.unwrap_or_else(|| "unknown".into());
-    let names = f.plane_names();
+    let black = match blacks(f)[..] {
+        [one] => one.to_string(),
+        _ => (f.plane_names().iter().zip(f.black))
+            .map(|(n, b)| format!("{n} {b}"))
+            .collect::<Vec<_>>()
+            .join(" "),
+    };
     println!(
-        "black       {} {} {} {} {} {} {} {} DN{}",
-        names[0],
-        f.black[0],
-        names[1],
-        f.black[1],
-        names[2],
-        f.black[2],
-        names[3],
-        f.black[3],
+        "black       {black} DN{}",
         if f.fits.is_some() && a.input.black.is_none() {
             " (FITS records no black level: a bias stack measures it, --black sets one)"
         } else {
@@ -220,6 +223,16 @@ fn print_colour(f: &RawFrame) {
             "matrix      XYZ->camera ({}): {:?}",
             cm.illuminant, cm.xyz_to_cam
         );
+    }
+}
+
+/// The black levels to show: one for a monochrome frame (one signal, one
+/// level) unless overrides gave its sub-lattices different ones.
+fn blacks(f: &RawFrame) -> Vec<f32> {
+    if f.mono && f.black.iter().all(|&b| b == f.black[0]) {
+        vec![f.black[0]]
+    } else {
+        f.black.to_vec()
     }
 }
 

@@ -1,17 +1,20 @@
 //! `pgrf synth`: a clean RAW in, a simulated low-light capture of the same
-//! scene out (as a DNG with the input's size, CFA and levels): by default
+//! scene out (as a DNG, or a FITS file when `-o` names one, with the
+//! input's size, CFA or monochrome layout, and levels): by default
 //! the dark capture the camera would record (un-amplified, EXIF exposure
 //! divided by the ratio), so that `pgrf enhance --ratio R` restores it;
 //! `--brightened` writes it multiplied back by the ratio instead. The
 //! recipe is `pgrf_calib::synth::synthesize`; this reads the frame, writes
-//! the DNG (and preview) and prints.
+//! the result (and preview) and prints.
 
 use crate::input::InputArgs;
 use anyhow::{bail, Result};
 use clap::Args;
 use pgrf_calib::synth::{synthesize, SynthConfig};
 use pgrf_noise::{DarkLaw, ModelKind};
-use pgrf_raw::{render_preview, write_dng, DngOptions, PreviewOptions};
+use pgrf_raw::{
+    render_preview, write_dng, write_fits_frame, DngOptions, FrameFormat, PreviewOptions,
+};
 use std::path::PathBuf;
 
 #[derive(Args, Debug)]
@@ -62,7 +65,9 @@ pub struct SynthArgs {
     /// Random seed: same arguments and seed give byte-identical output.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
-    /// Output DNG.
+    /// Output frame: a FITS file when the name ends .fits, .fit or .fts
+    /// (16-bit, the input's row order, exposure and header kept, as an
+    /// astronomy camera's frames are), else a DNG.
     #[arg(short, long)]
     pub output: PathBuf,
     /// Also write an sRGB preview of the result.
@@ -92,7 +97,12 @@ pub fn run(a: &SynthArgs) -> Result<()> {
     pgrf_calib::synth::check(&config(a))?;
     let frame = a.input.open(&a.clean)?;
     let made = synthesize(&frame, &a.clean, &config(a))?;
-    write_dng(&made.frame, &a.output, &DngOptions::default())?;
+    // A FITS name gets FITS (an astronomy camera's frame stays one); any
+    // other name the DNG synth has always written.
+    match FrameFormat::of_path(&a.output) {
+        Ok(FrameFormat::Fits) => write_fits_frame(&made.frame, &a.output)?,
+        _ => write_dng(&made.frame, &a.output, &DngOptions::default())?,
+    }
     eprintln!(
         "wrote {} ({}): model {:?}{}, ratio {:.1}, exposure {:.4} s, {}, K {:.4} DN/e-, read {:.3} DN, row {:.3} DN, seed {}",
         a.output.display(),

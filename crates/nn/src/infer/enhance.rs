@@ -1,8 +1,16 @@
-//! `pgrf enhance`'s recipe for one file: open the dark photo, check it is a
-//! Bayer mosaic, find the exposure ratio, apply a calibration (dark
-//! shading, defect correction; pgrf-calib's [`Calibration::prepare_light`]),
-//! restore it tile by tile, write the linear DNG and the sRGB preview, and
-//! report what was done. Which files go where: [`jobs::plan_jobs`]; many
+//! `pgrf enhance`'s recipe for one file: open the dark photo, find the
+//! exposure ratio, apply a calibration (dark shading, defect correction;
+//! pgrf-calib's [`Calibration::prepare_light`]), restore it tile by tile,
+//! write the linear DNG and the sRGB preview, and report what was done.
+//!
+//! A monochrome photo is restored too, by the same packing: its 2x2 blocks
+//! become four planes, each a half-resolution image of the same scene with
+//! the same per-pixel noise physics (shot and read noise per photosite, row
+//! noise along the sensor's rows), which is what the four-channel Bayer
+//! networks learned to denoise; only the colour differences between planes
+//! are absent, as in a grey scene. Unpacking gives back the full-resolution
+//! frame, written as a one-sample LinearRaw DNG (how DNG stores a sensor
+//! without a colour filter). Which files go where: [`jobs::plan_jobs`]; many
 //! files, shards, skipping and the manifest: [`batch::run_batch`]; the
 //! flags: [`flags::EnhanceFlags`] (the `clap` feature).
 
@@ -35,15 +43,6 @@ pub enum EnhanceError {
     /// The input could not be opened (the opener's error, unchanged).
     #[error(transparent)]
     Open(BoxError),
-    /// The input is not a Bayer mosaic (the networks learned Bayer data).
-    #[error("{}", path.display())]
-    NotBayer {
-        /// The input.
-        path: PathBuf,
-        /// What the frame is.
-        #[source]
-        source: RawError,
-    },
     /// The calibration file could not be read.
     #[error("--calib")]
     LoadCalibration(#[source] Box<CalibError>),
@@ -246,12 +245,6 @@ pub fn enhance_file<P: Progress>(
 ) -> Result<FileReport, EnhanceError> {
     let t0 = Instant::now();
     let mut frame = open(&job.input).map_err(EnhanceError::Open)?;
-    frame
-        .require_cfa("pgrf enhance (its denoisers learned Bayer data)")
-        .map_err(|source| EnhanceError::NotBayer {
-            path: job.input.clone(),
-            source,
-        })?;
     crate::infer::memory::check_frame(
         restorer,
         &job.input,
