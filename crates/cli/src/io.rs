@@ -125,8 +125,8 @@ fn declare_train(a: &cmd::train::TrainArgs, io: &mut Io) -> Result<()> {
 
 fn declare_enhance(a: &cmd::enhance::EnhanceArgs, io: &mut Io) -> Result<()> {
     let e = &a.enhance;
-    let is_dng = pgrf_nn::infer::enhance::jobs::output_is_dng(&e.output)?;
-    let kind = if is_dng { Kind::File } else { Kind::Folder };
+    let is_file = pgrf_nn::infer::enhance::jobs::output_is_file(&e.output)?;
+    let kind = if is_file { Kind::File } else { Kind::Folder };
     // The files a list names are inputs too (a list that cannot be read
     // is reported by the command itself).
     let listed = (e.from_list.as_deref())

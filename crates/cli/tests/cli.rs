@@ -711,6 +711,26 @@ fn a_monochrome_fits_camera_from_frames_to_masters() {
     let e = pgrf_raw::decode_file(&out, &Default::default()).unwrap();
     assert!(e.mono);
     assert_eq!((e.width, e.height), (128, 96));
+    // Into a folder, a FITS input's result is FITS, its row order kept:
+    // the same pixels as the DNG.
+    let folder = dir.join("enhanced");
+    let r = pgrf(&[
+        "enhance",
+        s(&bias0),
+        "--calib",
+        s(&dir.join("c.safetensors")),
+        "--model",
+        "builtin:spc",
+        "--ratio",
+        "100",
+        "-o",
+        s(&folder),
+    ]);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    let f = pgrf_raw::decode_file(&folder.join("bias_0000.fits"), &Default::default()).unwrap();
+    assert!(f.mono && f.fits.is_some());
+    assert_eq!(f.row_order(), pgrf_raw::RowOrder::TopDown);
+    assert_eq!(f.mosaic, e.mosaic);
 
     // synth with the monochrome calibration, to a FITS name: a monochrome
     // FITS frame of the input's size and row order, one plane in info.

@@ -1,7 +1,8 @@
 //! `pgrf enhance`'s recipe for one file: open the dark photo, find the
 //! exposure ratio, apply a calibration (dark shading, defect correction;
 //! pgrf-calib's [`Calibration::prepare_light`]), restore it tile by tile,
-//! write the linear DNG and the sRGB preview, and report what was done.
+//! write the linear DNG (or FITS: [`pgrf_raw::write_frame`] by `-o`'s
+//! name) and the sRGB preview, and report what was done.
 //!
 //! A monochrome photo is restored too, by the same packing: its 2x2 blocks
 //! become four planes, each a half-resolution image of the same scene with
@@ -10,7 +11,7 @@
 //! networks learned to denoise; only the colour differences between planes
 //! are absent, as in a grey scene. Unpacking gives back the full-resolution
 //! frame, written as a one-sample LinearRaw DNG (how DNG stores a sensor
-//! without a colour filter). Which files go where: [`jobs::plan_jobs`]; many
+//! without a colour filter) or a FITS image without a Bayer pattern. Which files go where: [`jobs::plan_jobs`]; many
 //! files, shards, skipping and the manifest: [`batch::run_batch`]; the
 //! flags: [`flags::EnhanceFlags`] (the `clap` feature).
 
@@ -23,7 +24,7 @@ use pgrf_calib::light::LightError;
 use pgrf_calib::{CalibError, Calibration};
 use pgrf_core::Progress;
 use pgrf_noise::lookup::{find_noise, range_of, FrameNoise, KnownNoise, NoiseFlag};
-use pgrf_raw::{render_preview, write_dng, DngOptions, PreviewOptions, RawError, RawFrame};
+use pgrf_raw::{render_preview, write_frame, DngOptions, PreviewOptions, RawError, RawFrame};
 use serde::Serialize;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -116,7 +117,7 @@ pub struct EnhanceConfig {
 pub struct Job {
     /// The dark photo.
     pub input: PathBuf,
-    /// The DNG to write.
+    /// The DNG (or FITS file) to write.
     pub output: PathBuf,
     /// The sRGB preview to write, if any.
     pub png: Option<PathBuf>,
@@ -276,7 +277,7 @@ pub fn enhance_file<P: Progress>(
     // The input's NoiseProfile describes the noisy input; what noise a
     // network leaves is not known, so the output states none.
     restored.frame.noise_profile = None;
-    write_dng(&restored.frame, &job.output, &DngOptions::default())?;
+    write_frame(&restored.frame, &job.output, &DngOptions::default())?;
     if let Some(png) = &job.png {
         render_preview(&restored.frame, &PreviewOptions::default())?.write_png(png, 8)?;
     }

@@ -57,8 +57,9 @@ pub struct EnhanceFlags {
     /// Apply a calibration of another camera or ISO anyway.
     #[arg(long)]
     pub force: bool,
-    /// Output DNG (one input file), or folder for the results (created if its
-    /// parent exists); files keep their names with a .dng extension.
+    /// Output DNG or FITS (.fits, .fit, .fts) for one input file, or folder
+    /// for the results (created if its parent exists); files keep their names
+    /// with a .dng extension, .fits for FITS inputs.
     #[arg(short, long)]
     pub output: PathBuf,
     /// Also write an sRGB preview: to this .png with one input, next to each

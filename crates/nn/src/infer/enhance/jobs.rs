@@ -84,7 +84,7 @@ pub fn plan_jobs(
     output: &Path,
     previews: Previews,
 ) -> Result<Vec<Job>, NnError> {
-    let is_dng = output_is_dng(output)?;
+    let is_file = output_is_file(output)?;
     let (mut inputs, had_dir) = expand_inputs(paths)?;
     let single = inputs.len() == 1 && !had_dir;
     if let Previews::At(p) = previews {
@@ -103,7 +103,7 @@ pub fn plan_jobs(
         }
         require_parent_dir(p)?;
     }
-    if single && is_dng {
+    if single && is_file {
         require_parent_dir(output)?;
         if same_file(output, &inputs[0]) {
             return Err(refused(
@@ -125,11 +125,11 @@ pub fn plan_jobs(
             png,
         }]);
     }
-    if is_dng {
+    if is_file {
         return Err(refused(
             "-o",
             format!(
-                "-o {}: several inputs need an output folder, not a .dng file",
+                "-o {}: several inputs need an output folder, not one file",
                 output.display()
             ),
         ));
@@ -137,41 +137,47 @@ pub fn plan_jobs(
     folder_jobs(inputs, output, previews != Previews::None)
 }
 
-/// Whether `-o` names a DNG file (else a folder): a `.dng` name, an
-/// existing folder, or a new folder's name without an extension. Another
-/// existing file or another extension (`-o model.safetensors`) is refused
-/// in one line saying what enhance writes, rather than taken for a folder
-/// to create ("File exists").
-pub fn output_is_dng(output: &Path) -> Result<bool, NnError> {
+/// Whether `-o` names one output file (else a folder): a `.dng` name, or
+/// a FITS name (`.fits`, `.fit`, `.fts`; an astronomy camera's frame stays
+/// FITS), an existing folder, or a new folder's name without an extension.
+/// Another existing file or another extension (`-o model.safetensors`) is
+/// refused in one line saying what enhance writes, rather than taken for a
+/// folder to create ("File exists").
+pub fn output_is_file(output: &Path) -> Result<bool, NnError> {
     if output.is_dir() {
         return Ok(false);
     }
-    let ext = output.extension().map(|e| e.to_string_lossy().into_owned());
-    if ext
-        .as_deref()
-        .is_some_and(|e| e.eq_ignore_ascii_case("dng"))
-    {
+    if pgrf_raw::FrameFormat::of_path(output).is_ok() {
         return Ok(true);
     }
     let what = if output.exists() {
         "is an existing file, not a folder".to_string()
     } else {
-        match ext {
-            Some(e) => format!("has the extension .{e}"),
+        match output.extension() {
+            Some(e) => format!("has the extension .{}", e.to_string_lossy()),
             None => return Ok(false),
         }
     };
     Err(refused(
         "-o",
         format!(
-            "-o {} {what}: enhance writes DNG files: name one .dng (one input) or a folder (an existing one, or a new name without an extension)",
+            "-o {} {what}: enhance writes DNG files (FITS for FITS inputs): name one .dng or .fits (one input) or a folder (an existing one, or a new name without an extension)",
             output.display()
         ),
     ))
 }
 
+/// The format a result of `input` is written in when `-o` is a folder: FITS
+/// for a FITS input (what astronomy software reads next), else DNG.
+fn output_format(input: &Path) -> pgrf_raw::FrameFormat {
+    match pgrf_raw::FrameFormat::of_path(input) {
+        Ok(pgrf_raw::FrameFormat::Fits) => pgrf_raw::FrameFormat::Fits,
+        _ => pgrf_raw::FrameFormat::Dng,
+    }
+}
+
 /// One job per input into the output folder (created if missing), keeping
-/// the input's name with a .dng extension.
+/// the input's name with a .dng extension (.fits for a FITS input).
 fn folder_jobs(inputs: Vec<PathBuf>, folder: &Path, png: bool) -> Result<Vec<Job>, NnError> {
     if !folder.is_dir() {
         require_parent_dir(folder)?;
@@ -195,7 +201,8 @@ fn folder_jobs(inputs: Vec<PathBuf>, folder: &Path, png: bool) -> Result<Vec<Job
                 .file_stem()
                 .map(|s| s.to_string_lossy().into_owned())
                 .unwrap_or_else(|| "out".into());
-            let output = folder.join(format!("{stem}.dng"));
+            let ext = output_format(&input).extension();
+            let output = folder.join(format!("{stem}.{ext}"));
             if !seen.insert(output.clone()) {
                 return Err(refused(
                     "-o",
