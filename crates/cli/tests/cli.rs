@@ -693,40 +693,28 @@ fn a_monochrome_fits_camera_from_frames_to_masters() {
 
     // enhance --calib restores the monochrome frame through the packed
     // networks (the calibration's dark shading, defects and noise applied)
-    // and writes a monochrome DNG of the same size.
+    // and writes a monochrome DNG of the same size; into a folder, a FITS
+    // input's result is FITS, its row order kept, with the same pixels.
+    let folder = dir.join("enhanced");
     let out = dir.join("out.dng");
-    let r = pgrf(&[
-        "enhance",
-        s(&bias0),
-        "--calib",
-        s(&dir.join("c.safetensors")),
-        "--model",
-        "builtin:spc",
-        "--ratio",
-        "100",
-        "-o",
-        s(&out),
-    ]);
-    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    for o in [&out, &folder] {
+        let r = pgrf(&[
+            "enhance",
+            s(&bias0),
+            "--calib",
+            s(&dir.join("c.safetensors")),
+            "--model",
+            "builtin:spc",
+            "--ratio",
+            "100",
+            "-o",
+            s(o),
+        ]);
+        assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    }
     let e = pgrf_raw::decode_file(&out, &Default::default()).unwrap();
     assert!(e.mono);
     assert_eq!((e.width, e.height), (128, 96));
-    // Into a folder, a FITS input's result is FITS, its row order kept:
-    // the same pixels as the DNG.
-    let folder = dir.join("enhanced");
-    let r = pgrf(&[
-        "enhance",
-        s(&bias0),
-        "--calib",
-        s(&dir.join("c.safetensors")),
-        "--model",
-        "builtin:spc",
-        "--ratio",
-        "100",
-        "-o",
-        s(&folder),
-    ]);
-    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
     let f = pgrf_raw::decode_file(&folder.join("bias_0000.fits"), &Default::default()).unwrap();
     assert!(f.mono && f.fits.is_some());
     assert_eq!(f.row_order(), pgrf_raw::RowOrder::TopDown);

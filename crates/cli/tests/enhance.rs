@@ -814,8 +814,14 @@ fn a_monochrome_photo_is_restored_and_stays_monochrome() {
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
     let mut scene = vec![0.25f32; w * h];
     for _ in 0..60 {
-        let (cy, cx) = (rng.gen_range(0.0..h as f32), rng.gen_range(0.0..w as f32));
-        let (r, v) = (rng.gen_range(5.0..40.0f32), rng.gen_range(0.03..0.9f32));
+        let (cy, cx) = (
+            rng.random_range(0.0..h as f32),
+            rng.random_range(0.0..w as f32),
+        );
+        let (r, v) = (
+            rng.random_range(5.0..40.0f32),
+            rng.random_range(0.03..0.9f32),
+        );
         for y in 0..h {
             for x in 0..w {
                 if (y as f32 - cy).powi(2) + (x as f32 - cx).powi(2) < r * r {
@@ -867,15 +873,7 @@ fn a_monochrome_photo_is_restored_and_stays_monochrome() {
             })
             .collect()
     };
-    let psnr = |a: &[f32], b: &[f32]| {
-        let mse = a
-            .iter()
-            .zip(b)
-            .map(|(x, y)| ((x - y) as f64).powi(2))
-            .sum::<f64>()
-            / a.len() as f64;
-        10.0 * (1.0 / mse).log10()
-    };
+    let psnr = pgrf_nn::data::validation::psnr;
     let truth = norm(&clean, 1.0);
     let before = psnr(&norm(&dark, ratio), &truth);
     let after = psnr(&norm(&back, 1.0), &truth);
