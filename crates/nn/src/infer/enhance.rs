@@ -66,7 +66,7 @@ pub enum EnhanceError {
     /// model needs them).
     #[error("noise parameters: {0}")]
     Noise(pgrf_noise::NoiseError),
-    /// The DNG or the preview could not be made or written.
+    /// The DNG (or FITS file) or the preview could not be made or written.
     #[error(transparent)]
     Write(#[from] RawError),
 }
@@ -128,7 +128,7 @@ pub struct Job {
 pub struct FileReport {
     /// The input.
     pub input: String,
-    /// The DNG written.
+    /// The DNG (or FITS file) written.
     pub output: String,
     /// The preview written.
     pub png: Option<String>,

@@ -123,7 +123,7 @@ pub enum Status {
 pub struct Record {
     /// The input.
     pub input: String,
-    /// Its DNG.
+    /// Its DNG (or FITS file).
     pub output: String,
     /// Its preview, if asked for.
     pub png: Option<String>,
@@ -283,9 +283,9 @@ impl Manifest {
     }
 }
 
-/// Whether `job`'s outputs are there and read back whole: the DNG decodes
-/// with pgrf's own reader to the input's size and CFA (what enhancing it
-/// would write), and the preview, when asked for, decodes to the same
+/// Whether `job`'s outputs are there and read back whole: the DNG (or
+/// FITS file) decodes with pgrf's own reader to the input's size and CFA or
+/// monochrome layout (what enhancing it would write), and the preview, when asked for, decodes to the same
 /// size (either way round: the preview is turned upright). A file cut short
 /// or damaged in its structure is redone; a run of pgrf never leaves one
 /// (its writes are atomic), but a copy or a full disk may.
@@ -300,7 +300,9 @@ pub fn reads_back(job: &Job, open: &dyn Fn(&Path) -> Result<RawFrame, BoxError>)
         return false;
     };
     let size = (input.width, input.height);
-    if (written.width, written.height) != size || written.cfa != input.cfa {
+    if (written.width, written.height) != size
+        || (written.cfa, written.mono) != (input.cfa, input.mono)
+    {
         return false;
     }
     drop((written, input));
