@@ -18,6 +18,7 @@ mod messages;
 pub mod mix;
 pub mod outputs;
 mod ppcc;
+pub mod reduce;
 mod sample_sd;
 pub mod stack;
 mod stats;

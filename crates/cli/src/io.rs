@@ -68,6 +68,12 @@ fn declare(command: &Command, io: &mut Io) -> Result<()> {
             io.folder("-o", &a.output);
         }
         Command::Calibrate(a) => declare_calibrate(a, io),
+        Command::Reduce(a) => {
+            io.inputs("", &a.lights)
+                .input("--masters", &a.masters)
+                .input("--calib", &a.calib)
+                .output("-o", &a.output, Kind::Tree);
+        }
         Command::Train(a) => declare_train(a, io)?,
         Command::Enhance(a) => declare_enhance(a, io)?,
         Command::Search(a) => {

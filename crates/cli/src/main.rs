@@ -40,6 +40,8 @@ enum Command {
     SimulateSensor(cmd::simulate::SimulateArgs),
     /// Per-pixel calibration from bias, dark and flat-field stacks, with a report.
     Calibrate(cmd::calibrate::CalibrateArgs),
+    /// Calibrate light frames with the masters and calibration of `pgrf calibrate --masters`: (light - bias - scaled dark) / normalised flat, defects replaced.
+    Reduce(cmd::reduce::ReduceArgs),
     /// Render pgrf's built-in colour test chart as a DNG.
     Chart(cmd::chart::ChartArgs),
     /// Train the SPC denoiser or the PGRF flow model on synthetic pairs (procedural scenes or clean RAWs).
@@ -83,6 +85,7 @@ fn main() -> ExitCode {
         Command::Synth(a) => cmd::synth::run(a),
         Command::SimulateSensor(a) => cmd::simulate::run(a),
         Command::Calibrate(a) => cmd::calibrate::run(a),
+        Command::Reduce(a) => cmd::reduce::run(a),
         Command::Train(a) => cmd::train::run(a),
         Command::Enhance(a) => cmd::enhance::run(a),
         Command::Search(a) => cmd::search::run(a),

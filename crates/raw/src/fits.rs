@@ -208,6 +208,46 @@ pub fn read_fits(name: &Path, bytes: &[u8]) -> Result<FitsImage> {
     panic_guard::quietly(|| read_primary(name, bytes)).map_err(|m| RawError::decode(name, m))?
 }
 
+/// The samples of a FITS file in DN as floats, unrounded, beside what
+/// [`read_fits`] reads of it (the file is checked and refused as there): a
+/// master written as 32-bit floats (`encode_fits_master`) knows its mean to
+/// a fraction of a DN, which [`FitsImage::data`]'s integers round away, and
+/// light-frame reduction subtracts it unrounded as every stacking program
+/// does. Normalised 0..1 floats are scaled by 65535 as [`read_fits`] scales
+/// them; integer samples are the same values as [`FitsImage::data`].
+pub fn read_fits_samples(name: &Path, bytes: &[u8]) -> Result<(FitsImage, Vec<f32>)> {
+    let image = read_fits(name, bytes)?;
+    if image.bitpix > 0 {
+        let samples = image.data.iter().map(|&v| f32::from(v)).collect();
+        return Ok((image, samples));
+    }
+    let scale = if (image.conversion.as_deref()).is_some_and(|c| c.ends_with("scaled by 65535")) {
+        65535.0
+    } else {
+        1.0
+    };
+    let n = image.width * image.height;
+    let decode = |m: String| RawError::decode(name, m);
+    let samples = panic_guard::quietly(|| -> Result<Vec<f32>> {
+        let mut fits = Fits::from_reader(Cursor::new(bytes));
+        let Some(Ok(HDU::Primary(hdu))) = fits.next() else {
+            return Err(decode("no primary HDU".into()));
+        };
+        let header = hdu.get_header();
+        let bzero = number(header, "BZERO").map_err(decode)?.unwrap_or(0.0);
+        let bscale = number(header, "BSCALE").map_err(decode)?.unwrap_or(1.0);
+        let physical = |v: f64| ((bzero + bscale * v) * scale) as f32;
+        let samples: Vec<f32> = match fits.get_data(&hdu).pixels() {
+            Pixels::F32(it) => it.take(n).map(|v| physical(f64::from(v))).collect(),
+            Pixels::F64(it) => it.take(n).map(physical).collect(),
+            _ => return Err(decode("BITPIX changed between two reads".into())),
+        };
+        Ok(samples)
+    })
+    .map_err(decode)??;
+    Ok((image, samples))
+}
+
 /// A header card pgrf writes: a keyword, its value and a comment.
 #[derive(Clone, Debug, PartialEq)]
 pub enum FitsValue {
@@ -284,6 +324,19 @@ pub fn encode_fits_f32(
     data: &[f32],
     cards: &[FitsCard],
 ) -> Result<Vec<u8>> {
+    encode_fits_f32_history(width, height, data, cards, &[])
+}
+
+/// [`encode_fits_f32`] with HISTORY cards after the caller's, one per entry
+/// of `history` (longer entries continue on further cards): how a reduced
+/// light frame records the steps that made it, as FITS tools show them.
+pub fn encode_fits_f32_history(
+    width: usize,
+    height: usize,
+    data: &[f32],
+    cards: &[FitsCard],
+    history: &[String],
+) -> Result<Vec<u8>> {
     check_geometry(width, height, data.len())?;
     let bad = data.iter().filter(|v| !v.is_finite()).count();
     if bad > 0 {
@@ -293,6 +346,24 @@ pub fn encode_fits_f32(
         });
     }
     let mut out = header(-32, width, height, &[], cards)?;
+    // Each HISTORY card replaces part of the END card's block: END is
+    // written again after them.
+    out.truncate(out.len() - padding_after_end(&out));
+    for text in history {
+        if !text.bytes().all(|b| (0x20..=0x7e).contains(&b)) {
+            return Err(RawError::FitsCard {
+                key: "HISTORY".into(),
+                reason: "HISTORY text must be printable ASCII".into(),
+            });
+        }
+        let chars: Vec<char> = text.chars().collect();
+        for piece in chars.chunks(CARD - 8) {
+            let piece: String = piece.iter().collect();
+            out.extend_from_slice(format!("{:<80}", format!("HISTORY {piece}")).as_bytes());
+        }
+    }
+    out.extend_from_slice(format!("{:<80}", "END").as_bytes());
+    out.resize(padded(out.len()), b' ');
     out.reserve(padded(data.len() * 4));
     for &v in data {
         out.extend_from_slice(&v.to_be_bytes());
@@ -929,6 +1000,17 @@ fn value_field(card: &[u8]) -> Option<&str> {
 /// `len` rounded up to whole 2880-byte blocks.
 fn padded(len: usize) -> usize {
     len.div_ceil(BLOCK) * BLOCK
+}
+
+/// How many bytes of `header` (whole cards, ending with END and padded
+/// with spaces) lie from the start of its END card on: what to cut to
+/// append cards before a new END.
+fn padding_after_end(header: &[u8]) -> usize {
+    let end = header
+        .chunks(CARD)
+        .rposition(|c| c.starts_with(b"END "))
+        .expect("header() writes END");
+    header.len() - end * CARD
 }
 
 fn check_geometry(width: usize, height: usize, len: usize) -> Result<()> {

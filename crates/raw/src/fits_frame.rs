@@ -222,6 +222,42 @@ pub fn encode_fits_master(
     encode_fits_f32(template.width, template.height, &scaled, &cards)
 }
 
+/// A reduced light frame as FITS: `mosaic` in DN above black (one value
+/// per photosite of `template`'s size; noise takes some below 0, which is
+/// kept), written as 32-bit floats normalised by 65535 as the masters are
+/// ([`encode_fits_master`]), so the frames and masters pgrf writes share one
+/// scale. Carries `template`'s cards (row order, Bayer pattern, EXPTIME,
+/// temperature, camera) but no SATURATE, IMAGETYP 'Light Frame', then the
+/// caller's `cards` (the masters used) and one HISTORY entry per step.
+pub fn encode_fits_light(
+    template: &RawFrame,
+    mosaic: &[f32],
+    cards: &[FitsCard],
+    history: &[String],
+) -> Result<Vec<u8>> {
+    if mosaic.len() != template.width * template.height {
+        return Err(RawError::MasterSize {
+            values: mosaic.len(),
+            width: template.width,
+            height: template.height,
+            needed: template.width * template.height,
+        });
+    }
+    let mut all = vec![FitsCard::new(
+        "IMAGETYP",
+        FitsValue::Str("Light Frame".into()),
+        "calibrated light",
+    )];
+    all.extend(
+        frame_cards(template)
+            .into_iter()
+            .filter(|c| c.key != SATURATE),
+    );
+    all.extend_from_slice(cards);
+    let scaled: Vec<f32> = mosaic.iter().map(|v| v / 65535.0).collect();
+    crate::fits::encode_fits_f32_history(template.width, template.height, &scaled, &all, history)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -349,6 +385,40 @@ mod tests {
         assert!(c
             .iter()
             .any(|(k, v)| k == "SATURATE" && v.starts_with("60000")));
+    }
+
+    /// A reduced light reads back unrounded (`read_fits_samples`), with
+    /// its cards, its HISTORY (a long entry over two cards) before END,
+    /// and no SATURATE.
+    #[test]
+    fn lights_keep_fractions_and_history() {
+        let f = frame(Some(Cfa::Rggb), 5);
+        let mosaic: Vec<f32> = (0..f.width * f.height)
+            .map(|i| 500.25 + i as f32 * 1.5)
+            .collect();
+        let named = [FitsCard::new(
+            "MBIAS",
+            FitsValue::Str("master_bias.fits".into()),
+            "",
+        )];
+        let history = ["first step".to_string(), "x".repeat(100)];
+        let bytes = encode_fits_light(&f, &mosaic, &named, &history).unwrap();
+        let (img, samples) = crate::fits::read_fits_samples(Path::new("l.fits"), &bytes).unwrap();
+        assert_eq!(img.exposure_s, Some(300.0));
+        for (a, b) in samples.iter().zip(&mosaic) {
+            assert!((a - b).abs() <= 1e-3, "{a} vs {b}");
+        }
+        let c = cards(&bytes);
+        let history_cards: Vec<_> = c.iter().filter(|(k, _)| k == "HISTORY").collect();
+        assert_eq!(history_cards.len(), 3, "{c:?}");
+        assert!(c
+            .iter()
+            .any(|(k, v)| k == "MBIAS" && v.starts_with("'master_bias.fits'")));
+        assert!(c
+            .iter()
+            .any(|(k, v)| k == "IMAGETYP" && v.starts_with("'Light Frame'")));
+        assert!(!c.iter().any(|(k, _)| k == "SATURATE"));
+        assert!(encode_fits_light(&f, &mosaic[1..], &named, &history).is_err());
     }
 
     /// A master keeps its fractional DN to float precision (relative

@@ -39,7 +39,7 @@ pub use demosaic::Demosaic;
 pub use dng::{encode_dng, tile_width, write_dng, Compression, DngOptions, DNG_TILE};
 pub use error::{RawError, Result};
 pub use fits::{FitsHeader, RowOrder};
-pub use fits_frame::{encode_fits_frame, encode_fits_master, write_fits_frame};
+pub use fits_frame::{encode_fits_frame, encode_fits_light, encode_fits_master, write_fits_frame};
 pub use frame::{bits_for, ColorMatrix, LevelOverrides, RawFrame};
 pub use frame_file::{write_frame, FrameFormat};
 pub use headerless::{read_headerless, HeaderlessSpec};

@@ -11,6 +11,7 @@ pub mod make_dataset;
 pub mod metrics;
 pub mod preview;
 pub mod profiles;
+pub mod reduce;
 pub mod search;
 pub mod simulate;
 pub mod synth;

@@ -1,0 +1,72 @@
+//! `pgrf reduce`: light frames calibrated with the masters and the
+//! calibration file of `pgrf calibrate --masters DIR -o FILE`. The recipe is
+//! `pgrf_calib::reduce`; this turns the flags into its config.
+
+use crate::progress::Bar;
+use anyhow::{bail, Result};
+use clap::Args;
+use pgrf_calib::reduce::{reduce_to_files, ReduceConfig};
+use std::path::PathBuf;
+
+#[derive(Args, Debug)]
+pub struct ReduceArgs {
+    /// Light frames (FITS or camera RAW), of the calibrated camera, size, filter layout and ISO.
+    #[arg(required = true)]
+    pub lights: Vec<PathBuf>,
+    /// The masters folder `pgrf calibrate --masters DIR` wrote: master_bias, master_dark_<t>s (the one nearest each light's exposure is scaled to it), master_flat_<t>s (the brightest is used).
+    #[arg(long)]
+    pub masters: PathBuf,
+    /// The calibration file of the same run (`pgrf calibrate -o`): its dark law scales the darks, its defect map drives the cosmetic correction.
+    #[arg(long)]
+    pub calib: PathBuf,
+    /// Output folder (created if missing): one file per light, its name kept, FITS (32-bit float, 0-1) for FITS lights, DNG for camera RAWs.
+    #[arg(short, long)]
+    pub output: PathBuf,
+    /// How far (°C) a light's recorded temperature may lie from the calibration's [default: 2].
+    #[arg(long)]
+    pub temperature_tolerance: Option<f32>,
+}
+
+impl ReduceArgs {
+    /// The library's config of these flags.
+    fn config(&self) -> Result<ReduceConfig> {
+        if let Some(t) = self.temperature_tolerance {
+            if !(t.is_finite() && t >= 0.0) {
+                bail!("--temperature-tolerance {t}: must be a number of degrees, 0 or more");
+            }
+        }
+        Ok(ReduceConfig {
+            lights: self.lights.clone(),
+            masters: self.masters.clone(),
+            calib: self.calib.clone(),
+            output: self.output.clone(),
+            temperature_tolerance: self.temperature_tolerance,
+        })
+    }
+}
+
+pub fn run(a: &ReduceArgs) -> Result<()> {
+    let config = a.config()?;
+    let bar = Bar::new("reducing", 0, "lights", false);
+    let outcome = reduce_to_files(&config, &bar)?;
+    for l in &outcome.lights {
+        let dark = match &l.dark {
+            Some((name, scale)) => format!(", {name} x{scale:.4}"),
+            None => String::new(),
+        };
+        eprintln!(
+            "{} -> {} ({} defects replaced{dark})",
+            l.input.display(),
+            l.output.display(),
+            l.replaced
+        );
+    }
+    eprintln!(
+        "reduced {} lights with {}, {} and the {} dark law",
+        outcome.lights.len(),
+        outcome.bias,
+        outcome.flat,
+        outcome.law
+    );
+    Ok(())
+}
