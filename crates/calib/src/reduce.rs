@@ -130,7 +130,7 @@ pub enum ReduceError {
     },
     /// A light whose exposure the master darks do not cover: scaling a
     /// dark beyond the exposures it was measured at extrapolates the law.
-    #[error("{}: exposure {exposure_s} s lies outside the master darks' {lo} .. {hi} s; shoot darks that bracket the lights' exposure", file.display())]
+    #[error("{}: exposure {} s lies outside the master darks' {} .. {} s; shoot darks that bracket the lights' exposure", file.display(), *.exposure_s as f32, *.lo as f32, *.hi as f32)]
     Exposure {
         /// The light.
         file: PathBuf,
