@@ -818,3 +818,75 @@ fn header_of(
     history.push("pixels in DN above black / 65535".into());
     (cards, history)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A defective pixel takes the median of its good same-colour
+    /// neighbours: at step 2 on a Bayer mosaic (its own plane), at step 1
+    /// on a monochrome sensor; defective neighbours are left out.
+    #[test]
+    fn defects_take_the_median_of_good_same_colour_neighbours() {
+        let (w, h) = (6, 6);
+        let data: Vec<f32> = (0..w * h).map(|i| i as f32).collect();
+        let mut bad = vec![false; w * h];
+        bad[2 * w + 2] = true;
+        bad[2 * w + 4] = true;
+        // Step 2 around (2, 2): (0,0) 0, (0,2) 2, (0,4) 4, (2,0) 12,
+        // (4,0) 24, (4,2) 26, (4,4) 28; (2,4) is defective. Median of
+        // seven: 12.
+        let mut bayer = data.clone();
+        assert_eq!(replace_defects(&mut bayer, w, &bad, 2), 2);
+        assert_eq!(bayer[2 * w + 2], 12.0);
+        // Step 1 around (2, 2): 7, 8, 9, 13, 15, 19, 20, 21: median 14.
+        let mut mono = data.clone();
+        replace_defects(&mut mono, w, &bad, 1);
+        assert_eq!(mono[2 * w + 2], 14.0);
+        // Untouched elsewhere.
+        assert_eq!(mono[0], 0.0);
+    }
+
+    fn master(t: f64) -> MasterFrame {
+        MasterFrame {
+            path: PathBuf::from(format!("master_dark_{t}s.fits")),
+            exposure_s: t,
+            samples: vec![100.0; 4],
+        }
+    }
+
+    /// The dark nearest in ratio, a tie to the longer, scaled by the law:
+    /// 20 s from darks of 10 and 40 s is a tie (x2 either way), so 40 s,
+    /// sqrt(20 / 40) = 0.7071; 12 s takes 10 s, linear 1.2.
+    #[test]
+    fn the_nearest_dark_in_ratio_is_scaled_by_the_law() {
+        let mut m = Masters {
+            bias: MasterFrame {
+                path: "master_bias.fits".into(),
+                exposure_s: 0.0,
+                samples: vec![90.0; 4],
+            },
+            darks: vec![master(10.0), master(40.0)],
+            flat: master(1.0),
+            flat_norm: vec![1.0; 4],
+            flat_means: vec![1.0],
+            law: Some(DarkLaw::Sqrt),
+            offset: None,
+            defective: vec![false; 4],
+            size: (2, 2),
+            mono: true,
+            cfa: pgrf_raw::Cfa::Rggb,
+        };
+        let (d, s) = m.dark_for(20.0).unwrap();
+        assert_eq!(d.exposure_s, 40.0);
+        assert!((s - 0.5f64.sqrt()).abs() < 1e-12, "{s}");
+        m.law = Some(DarkLaw::Linear);
+        let (d, s) = m.dark_for(12.0).unwrap();
+        assert_eq!(d.exposure_s, 10.0);
+        assert!((s - 1.2).abs() < 1e-12, "{s}");
+        // (100 - 90) * 1.2 per pixel; with an offset c = 4: 4 + 6 * 1.2.
+        assert!(m.dark_signal(12.0).iter().all(|&v| (v - 12.0).abs() < 1e-5));
+        m.offset = Some(vec![4.0; 4]);
+        assert!(m.dark_signal(12.0).iter().all(|&v| (v - 11.2).abs() < 1e-5));
+    }
+}

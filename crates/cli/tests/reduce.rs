@@ -273,3 +273,71 @@ fn lights_that_do_not_fit_are_refused_naming_the_file() {
     }
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// Camera RAW in, DNG out: the lights (8000 e- through K = 1.5301 DN/e-,
+/// 12241 DN above black) come back as DNGs of the same size, CFA and
+/// levels whose mean above black is that level within 1 % (the flat
+/// divides out the sensor's response, the bias and dark come off).
+#[test]
+fn raw_lights_become_dngs_at_the_light_level() {
+    let dir = scratch("reduce", "dng");
+    let (vs, src) = (dir.join("vs"), dir.join("src"));
+    let size = ["--width", "64", "--height", "48"];
+    let mut a = vec!["simulate-sensor", "--frames", "8"];
+    a.extend(size);
+    a.extend(["--dark-exposures", "0.02,0.05", "-o", s(&vs)]);
+    assert!(pgrf(&a).status.success());
+    let out = pgrf(&[
+        "calibrate",
+        "--bias",
+        s(&vs.join("bias")),
+        "--dark",
+        s(&vs.join("dark")),
+        "--flat",
+        s(&vs.join("flat")),
+        "--masters",
+        s(&vs.join("masters")),
+        "-o",
+        s(&vs.join("calib.safetensors")),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let mut a = vec![
+        "simulate-sensor",
+        "--frames",
+        "2",
+        "--stacks",
+        "flat",
+        "--seed",
+        "9",
+    ];
+    a.extend(size);
+    a.extend(["-o", s(&src)]);
+    assert!(pgrf(&a).status.success());
+    let light = src.join("flat").join("flat_8000e_0000.dng");
+    let reduced = dir.join("out");
+    let run = reduce(&vs, std::slice::from_ref(&light), &reduced);
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let input = pgrf_raw::decode_file(&light, &Default::default()).unwrap();
+    let f =
+        pgrf_raw::decode_file(&reduced.join("flat_8000e_0000.dng"), &Default::default()).unwrap();
+    assert_eq!(
+        (f.width, f.height, f.cfa, f.white),
+        (64, 48, input.cfa, input.white)
+    );
+    assert_eq!(f.black, input.black);
+    let above: f64 = (0..f.mosaic.len())
+        .map(|i| f.mosaic[i] as f64 - f.black_at(i / 64, i % 64) as f64)
+        .sum::<f64>()
+        / f.mosaic.len() as f64;
+    let level = 8000.0 * 1.5301;
+    assert!(((above - level) / level).abs() < 0.01, "{above} vs {level}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
