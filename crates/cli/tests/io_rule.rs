@@ -144,6 +144,19 @@ fn outputs_may_not_be_inside_or_around_inputs_nor_share_a_path() {
             calibrate(&["--report", s(&d)]),
             "(--bias); write the result into a folder".into(),
         ),
+        // reduce: not into the masters folder it reads.
+        (
+            argv(
+                &[&["reduce", s(&c), "--masters", s(&bias)]],
+                vec![
+                    "--calib".into(),
+                    s(&p).into(),
+                    "-o".into(),
+                    inside(&bias, "reduced"),
+                ],
+            ),
+            "--masters".into(),
+        ),
         // enhance: not into the folder it reads, nor around it.
         (
             enhance(&[s(&raws), "-o", &inside(&raws, "clean")]),
