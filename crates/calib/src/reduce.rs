@@ -58,7 +58,7 @@ pub enum ReduceError {
     /// The calibration file, a master or a light could not be read, or an
     /// output not written.
     #[error(transparent)]
-    Calib(#[from] CalibError),
+    Calib(Box<CalibError>),
     /// A frame could not be decoded (the decoder names the file).
     #[error(transparent)]
     Raw(#[from] RawError),
@@ -120,7 +120,7 @@ pub enum ReduceError {
         /// The frame.
         file: PathBuf,
         /// The calibration's refusal.
-        source: CalibError,
+        source: Box<CalibError>,
     },
     /// A light without an exposure time, with darks to scale to it.
     #[error("{}: no exposure time in the light's metadata; the master darks are scaled to it", file.display())]
@@ -182,6 +182,12 @@ pub enum ReduceError {
         /// Why, on one line.
         reason: String,
     },
+}
+
+impl From<CalibError> for ReduceError {
+    fn from(e: CalibError) -> Self {
+        ReduceError::Calib(Box::new(e))
+    }
 }
 
 /// One master frame: its file, exposure and samples in DN (black included),
@@ -329,7 +335,7 @@ fn check_frame(calib: &Calibration, frame: &RawFrame, file: &Path) -> Result<(),
         .and_then(|()| calib.check_layout(frame))
         .map_err(|source| ReduceError::Refused {
             file: file.to_path_buf(),
-            source,
+            source: Box::new(source),
         })
 }
 
@@ -461,7 +467,7 @@ fn normalise_flat(m: &mut Masters) -> Result<(), ReduceError> {
         .map(|(s, &n)| s / n.max(1) as f64)
         .collect();
     for (plane, &mean) in means.iter().enumerate() {
-        if !(mean > 0.0) {
+        if mean.is_nan() || mean <= 0.0 {
             return Err(ReduceError::DarkFlat {
                 file: m.flat.path.clone(),
                 plane,
@@ -606,7 +612,7 @@ pub fn reduce_frame(
     let mut out: Vec<f32> = (0..light.mosaic.len())
         .map(|i| {
             let f = masters.flat_norm[i];
-            if !(f > 0.0) {
+            if f.is_nan() || f <= 0.0 {
                 // No light reaches it in the flat: cosmetic correction
                 // gives it its neighbours' value.
                 defective[i] = true;
