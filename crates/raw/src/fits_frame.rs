@@ -188,14 +188,7 @@ pub fn encode_fits_master(
     frames: usize,
     egain: Option<f64>,
 ) -> Result<Vec<u8>> {
-    if mosaic.len() != template.width * template.height {
-        return Err(RawError::MasterSize {
-            values: mosaic.len(),
-            width: template.width,
-            height: template.height,
-            needed: template.width * template.height,
-        });
-    }
+    check_values(template, mosaic)?;
     let mut cards = frame_cards(template);
     cards.retain(|c| c.key != "EGAIN" && c.key != SATURATE);
     cards.insert(
@@ -222,6 +215,20 @@ pub fn encode_fits_master(
     encode_fits_f32(template.width, template.height, &scaled, &cards)
 }
 
+/// One value per photosite of `template`, or the refusal that says how
+/// many there are and should be.
+fn check_values(template: &RawFrame, mosaic: &[f32]) -> Result<()> {
+    if mosaic.len() != template.width * template.height {
+        return Err(RawError::MasterSize {
+            values: mosaic.len(),
+            width: template.width,
+            height: template.height,
+            needed: template.width * template.height,
+        });
+    }
+    Ok(())
+}
+
 /// A reduced light frame as FITS: `mosaic` in DN above black (one value
 /// per photosite of `template`'s size; noise takes some below 0, which is
 /// kept), written as 32-bit floats normalised by 65535 as the masters are
@@ -235,14 +242,7 @@ pub fn encode_fits_light(
     cards: &[FitsCard],
     history: &[String],
 ) -> Result<Vec<u8>> {
-    if mosaic.len() != template.width * template.height {
-        return Err(RawError::MasterSize {
-            values: mosaic.len(),
-            width: template.width,
-            height: template.height,
-            needed: template.width * template.height,
-        });
-    }
+    check_values(template, mosaic)?;
     let mut all = vec![FitsCard::new(
         "IMAGETYP",
         FitsValue::Str("Light Frame".into()),
