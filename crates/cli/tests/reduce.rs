@@ -11,18 +11,14 @@ use std::path::{Path, PathBuf};
 
 /// A calibrated virtual sensor (64x48 FITS, seed 1, darks at 0.02 and
 /// 0.05 s, -10 °C) and its lights (the 0.04 s flats of a second run, seed
-/// 9): what the reference script makes. Returns (vs, lights).
-fn sensor(dir: &Path, mono: bool) -> (PathBuf, Vec<PathBuf>) {
+/// 9): what the reference script makes (`fits` false: DNG frames).
+/// Returns (vs, lights).
+fn sensor(dir: &Path, mono: bool, fits: bool) -> (PathBuf, Vec<PathBuf>) {
     let (vs, src, lights) = (dir.join("vs"), dir.join("src"), dir.join("lights"));
-    let mut common = vec![
-        "--fits",
-        "--width",
-        "64",
-        "--height",
-        "48",
-        "--temperature",
-        "-10",
-    ];
+    let mut common = vec!["--width", "64", "--height", "48", "--temperature", "-10"];
+    if fits {
+        common.push("--fits");
+    }
     if mono {
         common.push("--mono");
     }
@@ -76,7 +72,8 @@ fn sensor(dir: &Path, mono: bool) -> (PathBuf, Vec<PathBuf>) {
     std::fs::create_dir_all(&lights).unwrap();
     let mut files = Vec::new();
     for i in 0..2 {
-        let name = format!("flat_8000e_{i:04}.fits");
+        let ext = if fits { "fits" } else { "dng" };
+        let name = format!("flat_8000e_{i:04}.{ext}");
         let to = lights.join(&name);
         std::fs::copy(src.join("flat").join(&name), &to).unwrap();
         files.push(to);
@@ -152,7 +149,7 @@ const CCDPROC: [(&str, bool, f64, [f64; 4]); 4] = [
 fn reduced_lights_match_ccdproc() {
     for mono in [false, true] {
         let dir = scratch("reduce", if mono { "mono" } else { "rggb" });
-        let (vs, lights) = sensor(&dir, mono);
+        let (vs, lights) = sensor(&dir, mono, true);
         let out = dir.join("out");
         let run = reduce(&vs, &lights, &out);
         assert!(
@@ -218,7 +215,7 @@ fn reduced_lights_match_ccdproc() {
 #[test]
 fn lights_that_do_not_fit_are_refused_naming_the_file() {
     let dir = scratch("reduce", "refusals");
-    let (vs, lights) = sensor(&dir, false);
+    let (vs, lights) = sensor(&dir, false, true);
     let odd = dir.join("odd");
     let base = [
         "simulate-sensor",
@@ -281,51 +278,16 @@ fn lights_that_do_not_fit_are_refused_naming_the_file() {
 #[test]
 fn raw_lights_become_dngs_at_the_light_level() {
     let dir = scratch("reduce", "dng");
-    let (vs, src) = (dir.join("vs"), dir.join("src"));
-    let size = ["--width", "64", "--height", "48"];
-    let mut a = vec!["simulate-sensor", "--frames", "8"];
-    a.extend(size);
-    a.extend(["--dark-exposures", "0.02,0.05", "-o", s(&vs)]);
-    assert!(pgrf(&a).status.success());
-    let out = pgrf(&[
-        "calibrate",
-        "--bias",
-        s(&vs.join("bias")),
-        "--dark",
-        s(&vs.join("dark")),
-        "--flat",
-        s(&vs.join("flat")),
-        "--masters",
-        s(&vs.join("masters")),
-        "-o",
-        s(&vs.join("calib.safetensors")),
-    ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let mut a = vec![
-        "simulate-sensor",
-        "--frames",
-        "2",
-        "--stacks",
-        "flat",
-        "--seed",
-        "9",
-    ];
-    a.extend(size);
-    a.extend(["-o", s(&src)]);
-    assert!(pgrf(&a).status.success());
-    let light = src.join("flat").join("flat_8000e_0000.dng");
+    let (vs, lights) = sensor(&dir, false, false);
+    let light = &lights[0];
     let reduced = dir.join("out");
-    let run = reduce(&vs, std::slice::from_ref(&light), &reduced);
+    let run = reduce(&vs, std::slice::from_ref(light), &reduced);
     assert!(
         run.status.success(),
         "{}",
         String::from_utf8_lossy(&run.stderr)
     );
-    let input = pgrf_raw::decode_file(&light, &Default::default()).unwrap();
+    let input = pgrf_raw::decode_file(light, &Default::default()).unwrap();
     let f =
         pgrf_raw::decode_file(&reduced.join("flat_8000e_0000.dng"), &Default::default()).unwrap();
     assert_eq!(
