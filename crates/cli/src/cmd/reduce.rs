@@ -13,7 +13,7 @@ pub struct ReduceArgs {
     /// Light frames (FITS or camera RAW), of the calibrated camera, size, filter layout and ISO.
     #[arg(required = true)]
     pub lights: Vec<PathBuf>,
-    /// The masters folder `pgrf calibrate --masters DIR` wrote: master_bias, master_dark_<t>s (the one nearest each light's exposure is scaled to it), master_flat_<t>s (the brightest is used).
+    /// The masters folder `pgrf calibrate --masters DIR` wrote: master_bias, master_dark_EXPOSUREs (e.g. master_dark_10s; the one nearest each light's exposure is scaled to it), master_flat_EXPOSUREs (the brightest is used).
     #[arg(long)]
     pub masters: PathBuf,
     /// The calibration file of the same run (`pgrf calibrate -o`): its dark law scales the darks, its defect map drives the cosmetic correction.
