@@ -111,8 +111,9 @@ pub fn build(spec: &MixSpec) -> Result<CalibratedMix, MixError> {
                 mix: described,
             });
         };
-        let cal = calibrate(one, path, None)?;
-        calibration = Some(cal.identity(path));
+        let cal = CalibrationFile::load(path, None, None)?;
+        cal.apply_to(one)?;
+        calibration = Some(cal.calibration.identity(path));
     }
     Ok(CalibratedMix { mix, calibration })
 }
@@ -127,37 +128,57 @@ pub struct FrameCheck<'a> {
     pub force: bool,
 }
 
-/// Load the calibration file `path` and apply its maps, gain and row noise
-/// to `spec`; with `check`, first refuse one of another camera, ISO, CFA
-/// layout or size than the frame. Returns the calibration.
-pub fn calibrate(
-    spec: &mut PairSpec,
-    path: &Path,
-    check: Option<FrameCheck>,
-) -> Result<Calibration, MixError> {
-    let cal = Calibration::load(path).map_err(|e| MixError::Load(Box::new(e)))?;
-    if let Some(FrameCheck { frame, force }) = check {
-        let mismatch = |source| MixError::Mismatch {
-            path: path.to_path_buf(),
-            cause: Box::new(source),
-        };
-        cal.check_matches(&frame.make, &frame.model, spec.iso, force)
-            .and_then(|()| cal.check_layout(frame))
-            .map_err(mismatch)?;
-        let (ph, pw) = frame.packed_dims();
-        if (cal.meta.height / 2, cal.meta.width / 2) != (ph, pw) {
-            return Err(MixError::Size {
+/// A calibration file as loaded, with its path (for messages).
+#[derive(Clone, Debug)]
+pub struct CalibrationFile {
+    /// Where it was read from.
+    pub path: PathBuf,
+    /// What it holds.
+    pub calibration: Calibration,
+}
+
+impl CalibrationFile {
+    /// Load the calibration file `path`; with `check`, refuse one of
+    /// another camera, of another ISO than `iso` (the capture's), or of
+    /// another CFA layout or size than the frame.
+    pub fn load(
+        path: &Path,
+        check: Option<FrameCheck>,
+        iso: Option<u32>,
+    ) -> Result<CalibrationFile, MixError> {
+        let cal = Calibration::load(path).map_err(|e| MixError::Load(Box::new(e)))?;
+        if let Some(FrameCheck { frame, force }) = check {
+            let mismatch = |source| MixError::Mismatch {
                 path: path.to_path_buf(),
-                calibration: (cal.meta.width, cal.meta.height),
-                frame: (frame.width, frame.height),
-            });
+                cause: Box::new(source),
+            };
+            cal.check_matches(&frame.make, &frame.model, iso, force)
+                .and_then(|()| cal.check_layout(frame))
+                .map_err(mismatch)?;
+            let (ph, pw) = frame.packed_dims();
+            if (cal.meta.height / 2, cal.meta.width / 2) != (ph, pw) {
+                return Err(MixError::Size {
+                    path: path.to_path_buf(),
+                    calibration: (cal.meta.width, cal.meta.height),
+                    frame: (frame.width, frame.height),
+                });
+            }
         }
+        Ok(CalibrationFile {
+            path: path.to_path_buf(),
+            calibration: cal,
+        })
     }
-    cal.apply_to(spec).map_err(|source| MixError::Apply {
-        path: path.to_path_buf(),
-        cause: Box::new(source),
-    })?;
-    Ok(cal)
+
+    /// Apply its maps, gain and row noise to `spec`.
+    pub fn apply_to(&self, spec: &mut PairSpec) -> Result<(), MixError> {
+        self.calibration
+            .apply_to(spec)
+            .map_err(|source| MixError::Apply {
+                path: self.path.clone(),
+                cause: Box::new(source),
+            })
+    }
 }
 
 #[cfg(test)]

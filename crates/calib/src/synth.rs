@@ -7,7 +7,7 @@
 //! (checked against the frame) replaces its maps. Here because it needs the
 //! calibration; the caller reads the frame and writes the result.
 
-use crate::mix::{calibrate, FrameCheck, MixError};
+use crate::mix::{CalibrationFile, FrameCheck, MixError};
 use pgrf_noise::pair::{ExposureSpec, PairSpec, RatioSpec};
 use pgrf_noise::profile::DarkCurrent;
 use pgrf_noise::{CameraProfile, Components, DarkLaw, ModelKind, NoiseError};
@@ -134,37 +134,130 @@ pub fn check(c: &SynthConfig) -> Result<(), SynthError> {
     Ok(())
 }
 
-/// The profile of `c` with its dark current replaced when `c` says,
+/// The profile `c` names with its dark current replaced when `c` says,
 /// after checking the numeric settings ([`check`]).
-fn profile(c: &SynthConfig) -> Result<CameraProfile, SynthError> {
+pub fn load_profile(c: &SynthConfig) -> Result<CameraProfile, SynthError> {
     check(c)?;
     let mut profile = CameraProfile::load(&c.profile)?;
+    with_dark_rate(&mut profile, c);
+    Ok(profile)
+}
+
+/// Replace `profile`'s dark current by `c`'s rate and law, when `c` sets a rate.
+pub fn with_dark_rate(profile: &mut CameraProfile, c: &SynthConfig) {
     if let Some(rate) = c.dark_rate {
         profile.dark_current = Some(DarkCurrent {
             law: c.dark_law,
             rate,
         });
     }
-    Ok(profile)
 }
 
-/// Simulate the low-light capture of the clean frame `frame` (read from
-/// `path`, named in errors) as `c` says.
-pub fn synthesize(
-    frame: &RawFrame,
-    path: &Path,
-    c: &SynthConfig,
-) -> Result<Synthesized, SynthError> {
-    let profile = profile(c)?;
-    let components = Components::parse(&c.components)?;
-    let clean = pack_normalized(frame, true)?;
+/// What a capture depends on besides the packed clean image and the
+/// settings: facts of the clean frame.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CleanFacts {
+    /// Each packed plane's sensor-row parity (the CFA's, for row noise).
+    pub plane_rows: [usize; 4],
+    /// The clean frame's ISO, used when the settings and the profile set none.
+    pub iso: Option<u32>,
+    /// The clean frame's exposure time, seconds: the capture's is it divided
+    /// by the ratio unless the settings give one.
+    pub exposure_s: Option<f64>,
+}
 
+impl CleanFacts {
+    /// The facts of a decoded frame.
+    pub fn of(frame: &RawFrame) -> CleanFacts {
+        CleanFacts {
+            plane_rows: frame.cfa.offsets().map(|(r, _)| r),
+            iso: frame.iso,
+            exposure_s: frame.exposure_s,
+        }
+    }
+}
+
+/// One simulated capture, packed `(4, H/2, W/2)` and normalised like the
+/// clean image, with what it was made with: the one recipe behind `pgrf
+/// synth` and the Python package's `pgrf.synth`, so both give the same
+/// numbers for the same seed.
+#[derive(Clone, Debug)]
+pub struct PackedCapture {
+    /// The noisy image amplified by the ratio (as a network is fed it, not
+    /// clipped); [`PackedCapture::dark`] and [`PackedCapture::brightened`]
+    /// are its two recorded forms.
+    pub noisy: ndarray::Array3<f32>,
+    /// The exposure ratio used.
+    pub ratio: f32,
+    /// The capture's exposure time, seconds.
+    pub exposure_s: f32,
+    /// The ISO, when one was set (else parameters were drawn).
+    pub iso: Option<u32>,
+    /// The PGRF components used.
+    pub components: Components,
+    /// K, the system gain, DN per electron.
+    pub k: f64,
+    /// The read noise's scale in DN (Tukey-lambda's for ELD's default).
+    pub read_dn: f64,
+    /// The row noise's sigma in DN.
+    pub row_dn: f64,
+    /// The dark capture's DNG NoiseProfile, for the Poisson-Gaussian model
+    /// only: variance K x + sigma^2 in DN, normalised by the range. The ELD
+    /// and pgrf models add row noise, heavy tails and per-pixel maps that
+    /// one (S, O) pair cannot state, so theirs is None rather than wrong.
+    pub noise_profile: Option<Vec<[f64; 2]>>,
+}
+
+impl PackedCapture {
+    /// What the camera records: un-amplified, clipped at white, the read
+    /// noise around black kept ([`pgrf_noise::capture::recorded`]).
+    pub fn dark(&self) -> ndarray::Array3<f32> {
+        pgrf_noise::capture::recorded(&self.noisy, self.ratio)
+    }
+
+    /// Multiplied back by the ratio and clipped to [0, 1], as a network is fed it.
+    pub fn brightened(&self) -> ndarray::Array3<f32> {
+        self.noisy.mapv(|v| v.clamp(0.0, 1.0))
+    }
+
+    /// Set the capture's ISO, exposure and NoiseProfile (the last only for
+    /// the dark form: a brightened frame's noise is not its own) on `frame`,
+    /// a frame of the capture's pixels.
+    pub fn stamp(&self, frame: &mut RawFrame, brightened: bool) {
+        if let Some(iso) = self.iso {
+            frame.iso = Some(iso);
+        }
+        frame.exposure_s = Some(self.exposure_s as f64);
+        frame.noise_profile = if brightened {
+            None
+        } else {
+            self.noise_profile.clone()
+        };
+    }
+}
+
+/// Simulate the low-light capture of the packed clean image `clean`
+/// (normalised, R, G1, B, G2) with `profile` (dark current already set, see
+/// [`load_profile`]) and, for the PGRF model, a per-pixel `calibration`
+/// already checked against the frame; `c`'s profile, calibration file and
+/// `force` are the caller's and not read here. `label` names the image in
+/// errors.
+pub fn synthesize_packed(
+    clean: ndarray::ArrayView3<f32>,
+    facts: &CleanFacts,
+    profile: CameraProfile,
+    calibration: Option<&CalibrationFile>,
+    c: &SynthConfig,
+    label: &Path,
+) -> Result<PackedCapture, SynthError> {
+    check(c)?;
+    let components = Components::parse(&c.components)?;
     let only_iso = profile.only_iso();
     let mut spec = PairSpec::new(profile, c.model);
     spec.components = components;
     spec.global = c.global;
     spec.tukey = !c.gaussian_read;
-    spec.iso = c.iso.or(only_iso).or(frame.iso);
+    spec.iso = c.iso.or(only_iso).or(facts.iso);
     spec.ratio = match c.ratio {
         Some(r) => RatioSpec::Fixed(r),
         None => RatioSpec::default(),
@@ -172,51 +265,26 @@ pub fn synthesize(
     // The ratio must be known to derive the exposure from the file's.
     let (ratio, _) = spec.conditions(c.seed)?;
     spec.ratio = RatioSpec::Fixed(ratio);
-    spec.exposure = match (c.exposure_time, frame.exposure_s) {
+    spec.exposure = match (c.exposure_time, facts.exposure_s) {
         (Some(t), _) => ExposureSpec::Fixed(t),
         (None, Some(t)) => ExposureSpec::Fixed((t / ratio as f64) as f32),
         (None, None) => ExposureSpec::default(),
     };
-    if let Some(cal) = &c.calib {
-        let check = FrameCheck {
-            frame,
-            force: c.force,
-        };
-        calibrate(&mut spec, cal, Some(check))?;
+    if let Some(cal) = calibration {
+        cal.apply_to(&mut spec)?;
     }
-    let plane_rows = frame.cfa.offsets().map(|(r, _)| r);
     let pair = spec
-        .synthesize(clean.view(), plane_rows, c.seed)
+        .synthesize(clean, facts.plane_rows, c.seed)
         .map_err(|cause| SynthError::Synthesis {
-            path: path.to_path_buf(),
+            path: label.to_path_buf(),
             cause,
         })?;
-
-    let noisy = if c.brightened {
-        pair.noisy.mapv(|v| v.clamp(0.0, 1.0))
-    } else {
-        pgrf_noise::capture::recorded(&pair.noisy, pair.ratio)
-    };
-    let mut out = unpack_normalized(noisy.view(), frame)?;
-    if let Some(iso) = spec.iso {
-        out.iso = Some(iso);
-    }
-    out.exposure_s = Some(pair.exposure_s as f64);
-    // The NoiseProfile of the capture written: exact for the P-G model
-    // (variance K x + sigma^2 in DN, normalised by the range; a brightened
-    // frame's is the ratio's square times the dark one's at the dark
-    // signal). The ELD and pgrf models add row noise, heavy tails and per-pixel
-    // maps that one (S, O) pair cannot state, so their DNGs carry none rather
-    // than a wrong one; nor does the clean frame's own tag survive.
-    out.noise_profile = (c.model == ModelKind::PoissonGaussian && !c.brightened).then(|| {
-        // The noise was drawn on the profile's scale and normalised by it.
-        let range = spec.dn_range();
-        let p = &pair.params;
-        vec![[p.k / range, (p.sigma_gauss / range).powi(2)]]
-    });
     let p = &pair.params;
-    Ok(Synthesized {
-        frame: out,
+    // The noise was drawn on the profile's scale and normalised by it.
+    let range = spec.dn_range();
+    Ok(PackedCapture {
+        noise_profile: (c.model == ModelKind::PoissonGaussian)
+            .then(|| vec![[p.k / range, (p.sigma_gauss / range).powi(2)]]),
         ratio: pair.ratio,
         exposure_s: pair.exposure_s,
         iso: spec.iso,
@@ -228,6 +296,56 @@ pub fn synthesize(
             p.sigma_gauss
         },
         row_dn: p.sigma_row,
+        noisy: pair.noisy,
+    })
+}
+
+/// Simulate the low-light capture of the clean frame `frame` (read from
+/// `path`, named in errors) as `c` says.
+pub fn synthesize(
+    frame: &RawFrame,
+    path: &Path,
+    c: &SynthConfig,
+) -> Result<Synthesized, SynthError> {
+    let profile = load_profile(c)?;
+    Components::parse(&c.components)?;
+    let clean = pack_normalized(frame, true)?;
+    let calibration = match &c.calib {
+        Some(cal) => {
+            // The ISO the capture will have decides the calibration check.
+            let iso = c.iso.or(profile.only_iso()).or(frame.iso);
+            let check = FrameCheck {
+                frame,
+                force: c.force,
+            };
+            Some(CalibrationFile::load(cal, Some(check), iso)?)
+        }
+        None => None,
+    };
+    let made = synthesize_packed(
+        clean.view(),
+        &CleanFacts::of(frame),
+        profile,
+        calibration.as_ref(),
+        c,
+        path,
+    )?;
+    let noisy = if c.brightened {
+        made.brightened()
+    } else {
+        made.dark()
+    };
+    let mut out = unpack_normalized(noisy.view(), frame)?;
+    made.stamp(&mut out, c.brightened);
+    Ok(Synthesized {
+        frame: out,
+        ratio: made.ratio,
+        exposure_s: made.exposure_s,
+        iso: made.iso,
+        components: made.components,
+        k: made.k,
+        read_dn: made.read_dn,
+        row_dn: made.row_dn,
     })
 }
 

@@ -92,15 +92,17 @@ pub enum SceneError {
     },
     /// A crop window that is empty or reaches past the photo.
     #[error(
-        "invalid input: unprocess: a {side}x{side} window at ({y}, {x}) does not fit a {width}x{height} photo"
+        "invalid input: unprocess: a {cols}x{rows} window at ({y}, {x}) does not fit a {width}x{height} photo"
     )]
     WindowOutside {
         /// Top row of the window.
         y: usize,
         /// Left column of the window.
         x: usize,
-        /// Side of the window, photo pixels.
-        side: usize,
+        /// Width of the window, photo pixels (an even count, at least 2).
+        cols: usize,
+        /// Height of the window, photo pixels (an even count, at least 2).
+        rows: usize,
         /// The photo's width, pixels.
         width: usize,
         /// The photo's height, pixels.

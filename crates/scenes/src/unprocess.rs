@@ -12,9 +12,24 @@
 
 use crate::error::{Result, SceneError};
 use crate::photo::Photo;
+use pgrf_core::seed::mix64;
 use pgrf_raw::color::{camera_from_srgb, srgb_decode};
 use pgrf_raw::{Cfa, ColorMatrix, RawFrame};
+use rand::{Rng, SeedableRng};
+use rand_xoshiro::Xoshiro256PlusPlus;
 use rayon::prelude::*;
+
+/// Range of the per-crop exposure factor of [`Unprocessing::jittered`]
+/// (log-uniform).
+pub const EXPOSURE: (f32, f32) = (0.5, 1.5);
+/// Training's default largest factor on the red and the blue white-balance
+/// multiplier (and its inverse the smallest), log-uniform: about the spread
+/// of daylight, shade and flash on one camera.
+pub const WB_SPREAD: f32 = 1.25;
+/// Largest relative change of a colour-matrix entry.
+pub const MATRIX_SPREAD: f32 = 0.1;
+
+const COLOUR_DOMAIN: u64 = 0x636f_6c6f; // "colo"
 
 /// The camera an image is unprocessed into: its colour, mosaic and levels.
 #[derive(Clone, Debug)]
@@ -115,6 +130,36 @@ impl Unprocessing {
             return Err(SceneError::NonFiniteMatrix);
         }
         Ok(())
+    }
+
+    /// This unprocessing varied as training varies it per crop, drawn from
+    /// `seed` alone (repeatable, independent of the worker count):
+    /// exposure log-uniform in [`EXPOSURE`]; the red and blue
+    /// white-balance multipliers each scaled by a log-uniform factor in
+    /// [1 / `wb_spread`, `wb_spread`]; each camera-from-sRGB matrix entry
+    /// scaled by 1 + U(-[`MATRIX_SPREAD`], [`MATRIX_SPREAD`]), rows then
+    /// renormalised to their former sums (white stays white before the
+    /// white balance).
+    pub fn jittered(&self, seed: u64, wb_spread: f32) -> Unprocessing {
+        let mut u = self.clone();
+        let mut rng = Xoshiro256PlusPlus::seed_from_u64(mix64(seed ^ COLOUR_DOMAIN));
+        let mut log_uniform = |lo: f32, hi: f32| -> f32 {
+            (lo.ln() + (hi.ln() - lo.ln()) * rng.random::<f32>()).exp()
+        };
+        u.exposure = log_uniform(EXPOSURE.0, EXPOSURE.1);
+        u.wb[0] *= log_uniform(1.0 / wb_spread, wb_spread);
+        u.wb[2] *= log_uniform(1.0 / wb_spread, wb_spread);
+        for row in u.cam_from_srgb.iter_mut() {
+            let sum: f32 = row.iter().sum();
+            for v in row.iter_mut() {
+                *v *= 1.0 + MATRIX_SPREAD * (2.0 * rng.random::<f32>() - 1.0);
+            }
+            let new: f32 = row.iter().sum();
+            if new.abs() > 1e-6 {
+                row.iter_mut().for_each(|v| *v *= sum / new);
+            }
+        }
+        u
     }
 
     /// Channel `ch` (0 R, 1 G, 2 B) of the camera for linear sRGB `lin`, as
@@ -249,29 +294,48 @@ pub fn unprocess_packed(
     camera: &CameraSpace,
     u: &Unprocessing,
 ) -> Result<ndarray::Array3<f32>> {
+    unprocess_window(img, (y, x), (patch, patch), camera, u)
+}
+
+/// [`unprocess_packed`] of any window: `(ph, pw)` packed pixels, the
+/// `2 * ph` rows and `2 * pw` columns of `img` from `(y, x)`.
+pub fn unprocess_window(
+    img: &EncodedPhoto,
+    (y, x): (usize, usize),
+    (ph, pw): (usize, usize),
+    camera: &CameraSpace,
+    u: &Unprocessing,
+) -> Result<ndarray::Array3<f32>> {
     u.check()?;
-    if patch == 0 || y + 2 * patch > img.height || x + 2 * patch > img.width {
+    if ph == 0 || pw == 0 || y + 2 * ph > img.height || x + 2 * pw > img.width {
         return Err(SceneError::WindowOutside {
             y,
             x,
-            side: 2 * patch,
+            rows: 2 * ph,
+            cols: 2 * pw,
             width: img.width,
             height: img.height,
         });
     }
     let lut = decode_table(u.inverse_tone);
     let offsets = camera.cfa.offsets();
-    let mut out = ndarray::Array3::<f32>::zeros((4, patch, patch));
+    let mut out = ndarray::Array3::<f32>::zeros((4, ph, pw));
     for (p, &(dr, dc)) in offsets.iter().enumerate() {
         let ch = CHANNEL_OF_PLANE[p];
         let range = camera.white as f32 - camera.black[p];
         let mut plane = out.index_axis_mut(ndarray::Axis(0), p);
-        for ((py, px), o) in plane.indexed_iter_mut() {
-            let i = ((y + 2 * py + dr) * img.width + x + 2 * px + dc) * 3;
-            let c = &img.codes[i..i + 3];
-            let lin = [lut[c[0] as usize], lut[c[1] as usize], lut[c[2] as usize]];
-            *o = quantise(u.camera_fraction(ch, lin), range);
-        }
+        plane
+            .axis_iter_mut(ndarray::Axis(0))
+            .into_par_iter()
+            .enumerate()
+            .for_each(|(py, mut row)| {
+                for (px, o) in row.iter_mut().enumerate() {
+                    let i = ((y + 2 * py + dr) * img.width + x + 2 * px + dc) * 3;
+                    let c = &img.codes[i..i + 3];
+                    let lin = [lut[c[0] as usize], lut[c[1] as usize], lut[c[2] as usize]];
+                    *o = quantise(u.camera_fraction(ch, lin), range);
+                }
+            });
     }
     Ok(out)
 }

@@ -25,24 +25,13 @@
 use crate::data::cache::BudgetCache;
 use crate::data::crop::Crop;
 use crate::error::{NnError, Result};
-use pgrf_core::seed::mix64;
 use pgrf_scenes::photo::read_photo;
 use pgrf_scenes::unprocess::{unprocess_packed, CameraSpace, EncodedPhoto, Unprocessing};
-use rand::{Rng, SeedableRng};
-use rand_xoshiro::Xoshiro256PlusPlus;
 use rayon::prelude::*;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
-/// Range of the per-crop exposure factor (log-uniform).
-pub const EXPOSURE: (f32, f32) = (0.5, 1.5);
-/// Largest factor on the red and the blue white-balance multiplier (and its
-/// inverse the smallest), log-uniform.
-pub const WB_SPREAD: f32 = 1.25;
-/// Largest relative change of a colour-matrix entry.
-pub const MATRIX_SPREAD: f32 = 0.1;
-
-const COLOUR_DOMAIN: u64 = 0x636f_6c6f; // "colo"
+pub use pgrf_scenes::unprocess::{EXPOSURE, MATRIX_SPREAD, WB_SPREAD};
 
 /// File extensions read as photos (case-insensitive).
 pub const PHOTO_EXTENSIONS: [&str; 5] = ["jpg", "jpeg", "png", "tif", "tiff"];
@@ -178,29 +167,10 @@ impl PhotoFolder {
     /// The unprocessing of the crop with seed `seed`: the camera's own, or
     /// jittered as the module documentation says.
     pub fn unprocessing(&self, seed: u64) -> Unprocessing {
-        let mut u = self.plain.clone();
         if !self.opts.jitter {
-            return u;
+            return self.plain.clone();
         }
-        let mut rng = Xoshiro256PlusPlus::seed_from_u64(mix64(seed ^ COLOUR_DOMAIN));
-        let mut log_uniform = |lo: f32, hi: f32| -> f32 {
-            (lo.ln() + (hi.ln() - lo.ln()) * rng.random::<f32>()).exp()
-        };
-        u.exposure = log_uniform(EXPOSURE.0, EXPOSURE.1);
-        let spread = self.opts.wb_spread;
-        u.wb[0] *= log_uniform(1.0 / spread, spread);
-        u.wb[2] *= log_uniform(1.0 / spread, spread);
-        for row in u.cam_from_srgb.iter_mut() {
-            let sum: f32 = row.iter().sum();
-            for v in row.iter_mut() {
-                *v *= 1.0 + MATRIX_SPREAD * (2.0 * rng.random::<f32>() - 1.0);
-            }
-            let new: f32 = row.iter().sum();
-            if new.abs() > 1e-6 {
-                row.iter_mut().for_each(|v| *v *= sum / new);
-            }
-        }
-        u
+        self.plain.jittered(seed, self.opts.wb_spread)
     }
 
     /// A packed `patch` crop of photo `pick` (modulo the count) at `(fy,
