@@ -57,6 +57,13 @@ pub struct Synthesized {
     /// The capture as a frame of the input's size, CFA and levels, its ISO,
     /// exposure and (P-G model, dark) NoiseProfile set.
     pub frame: RawFrame,
+    /// What it was made with.
+    pub info: CaptureInfo,
+}
+
+/// What a simulated capture was made with.
+#[derive(Clone, Debug, PartialEq)]
+pub struct CaptureInfo {
     /// The exposure ratio used.
     pub ratio: f32,
     /// The capture's exposure time, seconds.
@@ -187,20 +194,8 @@ pub struct PackedCapture {
     /// clipped); [`PackedCapture::dark`] and [`PackedCapture::brightened`]
     /// are its two recorded forms.
     pub noisy: ndarray::Array3<f32>,
-    /// The exposure ratio used.
-    pub ratio: f32,
-    /// The capture's exposure time, seconds.
-    pub exposure_s: f32,
-    /// The ISO, when one was set (else parameters were drawn).
-    pub iso: Option<u32>,
-    /// The PGRF components used.
-    pub components: Components,
-    /// K, the system gain, DN per electron.
-    pub k: f64,
-    /// The read noise's scale in DN (Tukey-lambda's for ELD's default).
-    pub read_dn: f64,
-    /// The row noise's sigma in DN.
-    pub row_dn: f64,
+    /// What it was made with.
+    pub info: CaptureInfo,
     /// The dark capture's DNG NoiseProfile, for the Poisson-Gaussian model
     /// only: variance K x + sigma^2 in DN, normalised by the range. The ELD
     /// and pgrf models add row noise, heavy tails and per-pixel maps that
@@ -212,7 +207,7 @@ impl PackedCapture {
     /// What the camera records: un-amplified, clipped at white, the read
     /// noise around black kept ([`pgrf_noise::capture::recorded`]).
     pub fn dark(&self) -> ndarray::Array3<f32> {
-        pgrf_noise::capture::recorded(&self.noisy, self.ratio)
+        pgrf_noise::capture::recorded(&self.noisy, self.info.ratio)
     }
 
     /// Multiplied back by the ratio and clipped to [0, 1], as a network is fed it.
@@ -224,10 +219,10 @@ impl PackedCapture {
     /// the dark form: a brightened frame's noise is not its own) on `frame`,
     /// a frame of the capture's pixels.
     pub fn stamp(&self, frame: &mut RawFrame, brightened: bool) {
-        if let Some(iso) = self.iso {
+        if let Some(iso) = self.info.iso {
             frame.iso = Some(iso);
         }
-        frame.exposure_s = Some(self.exposure_s as f64);
+        frame.exposure_s = Some(self.info.exposure_s as f64);
         frame.noise_profile = if brightened {
             None
         } else {
@@ -285,17 +280,19 @@ pub fn synthesize_packed(
     Ok(PackedCapture {
         noise_profile: (c.model == ModelKind::PoissonGaussian)
             .then(|| vec![[p.k / range, (p.sigma_gauss / range).powi(2)]]),
-        ratio: pair.ratio,
-        exposure_s: pair.exposure_s,
-        iso: spec.iso,
-        components,
-        k: p.k,
-        read_dn: if c.model == ModelKind::Eld && !c.gaussian_read {
-            p.sigma_tukey
-        } else {
-            p.sigma_gauss
+        info: CaptureInfo {
+            ratio: pair.ratio,
+            exposure_s: pair.exposure_s,
+            iso: spec.iso,
+            components,
+            k: p.k,
+            read_dn: if c.model == ModelKind::Eld && !c.gaussian_read {
+                p.sigma_tukey
+            } else {
+                p.sigma_gauss
+            },
+            row_dn: p.sigma_row,
         },
-        row_dn: p.sigma_row,
         noisy: pair.noisy,
     })
 }
@@ -339,13 +336,7 @@ pub fn synthesize(
     made.stamp(&mut out, c.brightened);
     Ok(Synthesized {
         frame: out,
-        ratio: made.ratio,
-        exposure_s: made.exposure_s,
-        iso: made.iso,
-        components: made.components,
-        k: made.k,
-        read_dn: made.read_dn,
-        row_dn: made.row_dn,
+        info: made.info,
     })
 }
 
@@ -398,14 +389,14 @@ mod tests {
         let mean = dn.iter().sum::<f64>() / n;
         let var = dn.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0);
         let mu = level / ratio as f64;
-        let want = made.k * mu + made.read_dn.powi(2) + 1.0 / 12.0;
+        let want = made.info.k * mu + made.info.read_dn.powi(2) + 1.0 / 12.0;
         let se = (want / n).sqrt();
         assert!((mean - mu).abs() < 5.0 * se, "mean {mean} DN vs {mu}");
         assert!(
             (var / want - 1.0).abs() < 0.06,
             "variance {var} DN^2 vs {want} (K {}, read {})",
-            made.k,
-            made.read_dn
+            made.info.k,
+            made.info.read_dn
         );
         // Seeded: the same seed gives the same frame.
         let again = synthesize(&frame, Path::new("flat.dng"), &c).unwrap();

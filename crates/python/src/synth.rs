@@ -98,6 +98,7 @@ fn check_clean(v: &ArrayView3<f32>, what: &str) -> PyResult<()> {
 
 /// One capture's numbers as the dict `pgrf.Capture` is built from.
 fn info<'py>(py: Python<'py>, c: &PackedCapture) -> PyResult<Bound<'py, PyDict>> {
+    let c = &c.info;
     let d = PyDict::new(py);
     d.set_item("ratio", c.ratio)?;
     d.set_item("exposure_s", c.exposure_s)?;

@@ -110,3 +110,31 @@ def test_byte_equal_to_the_command(asset_dng, run_pgrf, tmp_path, model, brighte
         # The P-G capture states its noise in the DNG (S = K / R, O = (sigma / R)^2).
         R = A7S2.dn_range
         assert cap.meta.noise_profile == [pytest.approx((cap.k / R, (cap.read_dn / R) ** 2))]
+
+
+def test_the_gil_is_released_while_pgrf_works():
+    """While one thread synthesises a large frame (one call), Python code in
+    another thread keeps running: it logs times all through the middle half
+    of the call, which it could not do with the GIL held there."""
+    import threading
+    import time
+
+    clean = np.full((4, 1024, 1536), 0.2, np.float32)
+    span, done = [], threading.Event()
+
+    def work():
+        t0 = time.perf_counter()
+        pgrf.synth(clean, A7S2, ratio=100, iso=1600, model="pgrf", seed=1)
+        span.extend([t0, time.perf_counter()])
+        done.set()
+
+    t = threading.Thread(target=work)
+    t.start()
+    stamps = []
+    while not done.is_set():
+        stamps.append(time.perf_counter())
+        time.sleep(0.001)
+    t.join()
+    t0, t1 = span
+    mid = [s for s in stamps if t0 + 0.25 * (t1 - t0) < s < t0 + 0.75 * (t1 - t0)]
+    assert t1 - t0 > 0.02 and len(mid) >= 3, (t1 - t0, len(mid))

@@ -108,13 +108,13 @@ pub fn run(a: &SynthArgs) -> Result<()> {
         a.output.display(),
         if a.brightened { "brightened by the ratio" } else { "dark capture" },
         a.model,
-        if a.model == ModelKind::Pgrf { format!(" [{}{}]", made.components, if a.global { ", noD" } else { "" }) } else { String::new() },
-        made.ratio,
-        made.exposure_s,
-        made.iso.map(|i| format!("ISO {i}")).unwrap_or_else(|| "parameters drawn from the ELD distribution".into()),
-        made.k,
-        made.read_dn,
-        made.row_dn,
+        if a.model == ModelKind::Pgrf { format!(" [{}{}]", made.info.components, if a.global { ", noD" } else { "" }) } else { String::new() },
+        made.info.ratio,
+        made.info.exposure_s,
+        made.info.iso.map(|i| format!("ISO {i}")).unwrap_or_else(|| "parameters drawn from the ELD distribution".into()),
+        made.info.k,
+        made.info.read_dn,
+        made.info.row_dn,
         a.seed
     );
     if let Some(png) = &a.png {
@@ -123,7 +123,7 @@ pub fn run(a: &SynthArgs) -> Result<()> {
             &PreviewOptions {
                 gain: a
                     .png_gain
-                    .unwrap_or(if a.brightened { 1.0 } else { made.ratio }),
+                    .unwrap_or(if a.brightened { 1.0 } else { made.info.ratio }),
                 ..Default::default()
             },
         )?;

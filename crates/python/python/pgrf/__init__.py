@@ -188,8 +188,14 @@ class Capture:
     brightened_meta: Optional[Metadata] = None
 
 
-def _settings(**kw: Any) -> Dict[str, Any]:
-    return kw
+#: The keyword arguments of synth and synth_batch that set the capture.
+_SETTINGS = ("ratio", "iso", "model", "components", "global_maps", "gaussian_read",
+             "exposure_s", "dark_rate", "dark_law")
+
+
+def _settings(args: Dict[str, Any]) -> Dict[str, Any]:
+    """The capture settings among a call's arguments (its ``locals()``)."""
+    return {k: args[k] for k in _SETTINGS}
 
 
 def synth(
@@ -230,17 +236,7 @@ def synth(
     The same arguments and seed give the same arrays, in any thread or
     process, and the numbers ``pgrf synth --seed`` writes for that file.
     """
-    settings = _settings(
-        ratio=ratio,
-        iso=iso,
-        model=model,
-        components=components,
-        global_maps=global_maps,
-        gaussian_read=gaussian_read,
-        exposure_s=exposure_s,
-        dark_rate=dark_rate,
-        dark_law=dark_law,
-    )
+    settings = _settings(locals())
     dark, bright, info, dmeta, bmeta = _pgrf.synth(
         _array(clean, 3, "synth clean"),
         _profile(profile),
@@ -295,17 +291,7 @@ def synth_batch(
     the items are made in parallel. With ``ratio=None`` each item draws its
     own ratio from its seed.
     """
-    settings = _settings(
-        ratio=ratio,
-        iso=iso,
-        model=model,
-        components=components,
-        global_maps=global_maps,
-        gaussian_read=gaussian_read,
-        exposure_s=exposure_s,
-        dark_rate=dark_rate,
-        dark_law=dark_law,
-    )
+    settings = _settings(locals())
     dark, bright, infos = _pgrf.synth_batch(
         _array(clean, 4, "synth_batch clean"),
         _profile(profile),
