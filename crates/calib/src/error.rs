@@ -358,6 +358,8 @@ pub enum FrameField {
     /// The stored row order (a FITS file's ROWORDER): frames stored the
     /// other way up would be averaged upside down against the rest.
     RowOrder,
+    /// XBINNING x YBINNING: binned and unbinned frames do not average.
+    Binning,
 }
 
 /// Result of every fallible function of the calibration crate.
@@ -379,6 +381,9 @@ fn mismatch(what: FrameField, expected: &str, found: &str) -> String {
         FrameField::Camera => {
             format!("camera '{found}' differs from the other frames' '{expected}'")
         }
+        FrameField::Binning => format!(
+            "binning {found} (XBINNING x YBINNING) differs from the other frames' {expected}"
+        ),
         FrameField::RowOrder => format!(
             "row order {found} (ROWORDER; a FITS file without one is BOTTOM-UP) differs from the other frames' {expected}"
         ),

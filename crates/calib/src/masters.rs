@@ -70,6 +70,7 @@ impl Master {
             // The stacks' stored row order, which the master keeps.
             f.fits = Some(pgrf_raw::FitsHeader {
                 row_order: Some(key.row_order),
+                binning: key.binning,
                 ..Default::default()
             });
         }

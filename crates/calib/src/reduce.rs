@@ -106,7 +106,7 @@ pub enum ReduceError {
     Mismatch {
         /// The frame.
         file: PathBuf,
-        /// "size", "filter layout".
+        /// "size", "filter layout", "binning".
         what: &'static str,
         /// The masters' value.
         expected: String,
@@ -237,6 +237,8 @@ pub struct Masters {
     pub mono: bool,
     /// The CFA phase of stored pixel (0, 0).
     pub cfa: pgrf_raw::Cfa,
+    /// The master bias's XBINNING x YBINNING, when its header states one.
+    pub binning: Option<(u32, u32)>,
 }
 
 /// The time factor of `law`: g(t) in dark(t) = a g(t) + c.
@@ -443,6 +445,7 @@ pub fn load_masters(
         size: (bias_frame.width, bias_frame.height),
         mono: bias_frame.mono,
         cfa,
+        binning: bias_frame.fits.as_ref().and_then(|h| h.binning),
     };
     normalise_flat(&mut masters)?;
     Ok(masters)
@@ -522,6 +525,16 @@ fn check_light(
     frame: &RawFrame,
 ) -> Result<(), ReduceError> {
     check_frame(calib, frame, file)?;
+    // A header without XBINNING/YBINNING is taken as unbinned.
+    let light_binning = frame.fits.as_ref().and_then(|h| h.binning);
+    if light_binning.unwrap_or((1, 1)) != masters.binning.unwrap_or((1, 1)) {
+        return Err(ReduceError::Mismatch {
+            file: file.to_path_buf(),
+            what: "binning",
+            expected: crate::stack::binning_name(masters.binning),
+            found: crate::stack::binning_name(light_binning),
+        });
+    }
     let tolerance = config
         .temperature_tolerance
         .unwrap_or(crate::calibrate::TEMPERATURE_TOLERANCE_C);
@@ -882,6 +895,7 @@ mod tests {
             size: (2, 2),
             mono: true,
             cfa: pgrf_raw::Cfa::Rggb,
+            binning: None,
         };
         let (d, s) = m.dark_for(20.0).unwrap();
         assert_eq!(d.exposure_s, 40.0);

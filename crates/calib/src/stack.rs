@@ -28,6 +28,9 @@ pub struct FrameKey {
     /// The order the frames' rows are stored in ([`RawFrame::row_order`]):
     /// the masters keep it and say so.
     pub row_order: RowOrder,
+    /// The FITS frames' XBINNING x YBINNING, when they state it: the
+    /// masters keep it, and lights are checked against it.
+    pub binning: Option<(u32, u32)>,
     pub(crate) iso: Option<u32>,
     /// Black level in DN of the planes R, G1, B, G2.
     pub black: [f32; 4],
@@ -45,6 +48,7 @@ impl FrameKey {
             mono: f.mono,
             fits: f.fits.is_some(),
             row_order: f.row_order(),
+            binning: f.fits.as_ref().and_then(|h| h.binning),
             iso: f.iso,
             black: f.black,
             white: f.white,
@@ -79,6 +83,13 @@ impl FrameKey {
                 other.row_order.keyword().into(),
             ));
         }
+        if self.binning != other.binning {
+            return Some((
+                FrameField::Binning,
+                binning_name(self.binning),
+                binning_name(other.binning),
+            ));
+        }
         if self.iso != other.iso {
             let s = |i: Option<u32>| {
                 i.map(|v| format!("ISO {v}"))
@@ -92,6 +103,14 @@ impl FrameKey {
             return Some((FrameField::Camera, camera(self), camera(other)));
         }
         None
+    }
+}
+
+/// A binning as messages name it: "2x2", or "none stated".
+pub(crate) fn binning_name(b: Option<(u32, u32)>) -> String {
+    match b {
+        Some((x, y)) => format!("{x}x{y}"),
+        None => "none stated".into(),
     }
 }
 

@@ -254,6 +254,36 @@ fn a_stack_of_mixed_row_orders_is_refused() {
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
+/// A binned frame (XBINNING = 2) among unbinned bias frames would be
+/// averaged with pixels of another size: the run stops naming it.
+#[test]
+fn a_stack_of_mixed_binnings_is_refused() {
+    let dir = scratch("binned");
+    let mut input = write_case(&dir.join("a"), None, false);
+    let first = &input.bias[0];
+    let img = pgrf_raw::fits::read_fits(first, &std::fs::read(first).unwrap()).unwrap();
+    let cards = [
+        FitsCard::new("EXPTIME", FitsValue::Float(0.001), ""),
+        FitsCard::new("XBINNING", FitsValue::Int(2), ""),
+    ];
+    let binned = dir.join("binned.fits");
+    std::fs::write(
+        &binned,
+        encode_fits_u16(img.width, img.height, &img.data, &cards).unwrap(),
+    )
+    .unwrap();
+    input.bias.push(binned);
+    let e = pgrf_calib::calibrate(&input, &pgrf_core::NoProgress)
+        .err()
+        .expect("mixed binnings must be refused")
+        .to_string();
+    assert!(
+        e.contains("binned.fits") && e.contains("binning 2x1") && e.contains("none stated"),
+        "{e}"
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
 /// The calibration keeps its frames' row order in its record, and refuses
 /// a light frame stored the other way up (its maps would lie mirrored on
 /// it), while one stored alike passes.

@@ -81,6 +81,25 @@ fn sensor(dir: &Path, mono: bool, fits: bool) -> (PathBuf, Vec<PathBuf>) {
     (vs, files)
 }
 
+/// A FITS file's bytes with one more header card (`KEY = value`) where
+/// its END card was, END moved one card on (the header block has room).
+fn with_card(fits: &[u8], key: &str, value: &str) -> Vec<u8> {
+    let end = (0..fits.len() / 80)
+        .map(|i| i * 80)
+        .find(|&o| {
+            fits[o..o + 80].starts_with(b"END") && fits[o + 3..o + 80].iter().all(|&b| b == b' ')
+        })
+        .expect("an END card");
+    let data = (end + 80).div_ceil(2880) * 2880;
+    assert!(end + 160 <= data, "room in the header block");
+    assert!(fits[end + 80..end + 160].iter().all(|&b| b == b' '));
+    let mut out = fits.to_vec();
+    let card = format!("{:<80}", format!("{key:<8}= {value:>20}"));
+    out[end..end + 80].copy_from_slice(card.as_bytes());
+    out[end + 80..end + 83].copy_from_slice(b"END");
+    out
+}
+
 fn reduce(vs: &Path, lights: &[PathBuf], out: &Path) -> std::process::Output {
     let mut args = vec!["reduce".to_string()];
     args.extend(lights.iter().map(|l| s(l).to_string()));
@@ -254,11 +273,19 @@ fn lights_that_do_not_fit_are_refused_naming_the_file() {
     .join("flat_8000e_0001.fits");
     // Same name as the first light: both would be one output file.
     let twin = warm.with_file_name("flat_8000e_0000.fits");
+    // The second light binned 2x1 (XBINNING = 2 written into its header).
+    let binned = odd.join("binned_8000e_0001.fits");
+    std::fs::write(
+        &binned,
+        with_card(&std::fs::read(&lights[1]).unwrap(), "XBINNING", "2"),
+    )
+    .unwrap();
     for (bad, says) in [
         (&twin, "would be reduced into it"),
         (&small, "size 32x48, the masters' 64x48"),
         (&short, "outside the master darks' 0.02 .. 0.05 s"),
         (&warm, "taken at 0.0 °C, the calibration at -10.0 °C"),
+        (&binned, "binning 2x1, the masters' none stated"),
     ] {
         let out = dir.join("out");
         let run = reduce(&vs, &[lights[0].clone(), bad.clone()], &out);

@@ -126,6 +126,9 @@ pub struct FitsImage {
     pub instrument: Option<String>,
     /// DATE-OBS: the start of the exposure, as written (ISO 8601).
     pub date_obs: Option<String>,
+    /// XBINNING x YBINNING: pixels summed per stored pixel, when the header
+    /// states either (the other is then 1).
+    pub binning: Option<(u32, u32)>,
     /// How samples that were not 16-bit integers were brought to u16 (for
     /// example "BITPIX -32 in 0..1 scaled by 65535"), for `pgrf info`;
     /// `None` for BITPIX 16 read as stored.
@@ -173,6 +176,9 @@ pub struct FitsHeader {
     pub date_obs: Option<String>,
     /// ROWORDER as the header states it; `None` without one.
     pub row_order: Option<RowOrder>,
+    /// XBINNING x YBINNING, when the header states either: masters and
+    /// lights must be binned alike.
+    pub binning: Option<(u32, u32)>,
     /// How samples that were not unsigned 16-bit integers became DN.
     pub conversion: Option<String>,
 }
@@ -492,6 +498,7 @@ fn read_primary(name: &Path, bytes: &[u8]) -> Result<FitsImage> {
     };
     let instrument = string(header, "INSTRUME").map_err(decode)?;
     let date_obs = string(header, "DATE-OBS").map_err(decode)?;
+    let binning = binning(header).map_err(decode)?;
     let row_order = row_order(header).map_err(decode)?;
     let bayer = bayer_phase(name, header, height, row_order)?;
 
@@ -557,6 +564,7 @@ fn read_primary(name: &Path, bytes: &[u8]) -> Result<FitsImage> {
         iso,
         instrument,
         date_obs,
+        binning,
         conversion,
         white_conflict,
     })
@@ -822,6 +830,22 @@ fn number(header: &ValueMap, key: &str) -> std::result::Result<Option<f64>, Stri
 }
 
 /// An integer keyword (a real with no fraction is accepted).
+/// XBINNING and YBINNING (1 to 64 each; an absent one is 1), None when
+/// the header states neither.
+fn binning(header: &ValueMap) -> std::result::Result<Option<(u32, u32)>, String> {
+    let axis = |key: &str| -> std::result::Result<Option<u32>, String> {
+        match integer(header, key)? {
+            None => Ok(None),
+            Some(v) if (1..=64).contains(&v) => Ok(Some(v as u32)),
+            Some(v) => Err(format!("{key} = {v} is not a binning factor (1 to 64)")),
+        }
+    };
+    Ok(match (axis("XBINNING")?, axis("YBINNING")?) {
+        (None, None) => None,
+        (x, y) => Some((x.unwrap_or(1), y.unwrap_or(1))),
+    })
+}
+
 fn integer(header: &ValueMap, key: &str) -> std::result::Result<Option<i64>, String> {
     match header.get(key) {
         Some(Value::Integer { value, .. }) => Ok(Some(*value)),

@@ -50,6 +50,7 @@ pub(crate) fn frame_from_fits(
         gain_setting: img.gain_setting,
         date_obs: img.date_obs,
         row_order: img.row_order,
+        binning: img.binning,
         conversion: img.conversion,
     });
     frame.apply_overrides(overrides)?;
@@ -147,6 +148,14 @@ fn frame_cards(frame: &RawFrame) -> Vec<FitsCard> {
     }
     if let Some(g) = frame.fits.as_ref().and_then(|h| h.egain_e_per_adu) {
         cards.push(card("EGAIN", FitsValue::Float(g), "electrons per ADU"));
+    }
+    if let Some((x, y)) = frame.fits.as_ref().and_then(|h| h.binning) {
+        cards.push(card(
+            "XBINNING",
+            FitsValue::Int(x.into()),
+            "binning, columns",
+        ));
+        cards.push(card("YBINNING", FitsValue::Int(y.into()), "binning, rows"));
     }
     cards.push(card(
         "CREATOR",

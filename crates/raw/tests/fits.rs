@@ -848,3 +848,33 @@ fn pgrf_files_for_astropy() {
     let bytes = encode_fits_f32(w, h, &master, &cards).unwrap();
     std::fs::write(dir.join("pgrf_master_f32.fits"), &bytes).unwrap();
 }
+
+/// XBINNING / YBINNING are read (an absent axis is 1), refused outside
+/// 1..64 in one line, kept by the decoded frame and written back by every
+/// FITS pgrf writes of it (issue 39: reduce refuses lights binned unlike
+/// the masters).
+#[test]
+fn binning_is_read_kept_and_written_back() {
+    use pgrf_raw::{decode_bytes, encode_fits_frame, LevelOverrides};
+    let with = |cards: &[FitsCard]| encode_fits_u16(2, 2, &[1, 2, 3, 4], cards).unwrap();
+    let read = |cards: &[FitsCard]| read_fits(&name(), &with(cards)).unwrap().binning;
+    assert_eq!(read(&[]), None);
+    let two = [
+        card("XBINNING", FitsValue::Int(2)),
+        card("YBINNING", FitsValue::Int(2)),
+    ];
+    assert_eq!(read(&two), Some((2, 2)));
+    assert_eq!(read(&[card("XBINNING", FitsValue::Int(3))]), Some((3, 1)));
+    assert_eq!(read(&[card("YBINNING", FitsValue::Int(4))]), Some((1, 4)));
+    for bad in [0, 65, -2] {
+        let e = error_line(&with(&[card("XBINNING", FitsValue::Int(bad))]));
+        assert!(
+            e.contains(&format!("XBINNING = {bad} is not a binning factor")),
+            "{e}"
+        );
+    }
+    let frame = decode_bytes(&name(), &with(&two), &LevelOverrides::default()).unwrap();
+    assert_eq!(frame.fits.as_ref().unwrap().binning, Some((2, 2)));
+    let again = read_fits(&name(), &encode_fits_frame(&frame).unwrap()).unwrap();
+    assert_eq!(again.binning, Some((2, 2)));
+}

@@ -152,6 +152,9 @@ fn print_header(f: &RawFrame, info: &Info) {
         if let Some(d) = &h.date_obs {
             println!("date-obs    {d}");
         }
+        if let Some((x, y)) = h.binning {
+            println!("binning     {x}x{y} (XBINNING x YBINNING)");
+        }
         println!(
             "row order   {}",
             match h.row_order {
