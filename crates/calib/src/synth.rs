@@ -70,13 +70,14 @@ pub struct CaptureInfo {
     pub exposure_s: f32,
     /// The ISO, when one was set (else parameters were drawn).
     pub iso: Option<u32>,
-    /// The PGRF components used.
+    /// The terms the model drew ([`ModelKind::components`]: the PGRF
+    /// model's are those asked for).
     pub components: Components,
     /// K, the system gain, DN per electron.
     pub k: f64,
     /// The read noise's scale in DN (Tukey-lambda's for ELD's default).
     pub read_dn: f64,
-    /// The row noise's sigma in DN.
+    /// The row noise's sigma in DN; 0 when the model drew none.
     pub row_dn: f64,
 }
 
@@ -284,14 +285,18 @@ pub fn synthesize_packed(
             ratio: pair.ratio,
             exposure_s: pair.exposure_s,
             iso: spec.iso,
-            components,
+            components: c.model.components(components),
             k: p.k,
             read_dn: if c.model == ModelKind::Eld && !c.gaussian_read {
                 p.sigma_tukey
             } else {
                 p.sigma_gauss
             },
-            row_dn: p.sigma_row,
+            row_dn: if c.model.components(components).row() {
+                p.sigma_row
+            } else {
+                0.0
+            },
         },
         noisy: pair.noisy,
     })

@@ -26,6 +26,22 @@ impl Components {
         fixed_pattern: true,
         dark: true,
     };
+    /// The Poisson-Gaussian model's terms: "P,G".
+    pub const PG: Components = Components {
+        photon: true,
+        read: true,
+        ..Components::NONE
+    };
+    /// ELD's model's terms: "P,G,H,Q,F" (its per-channel colour bias is
+    /// the fixed pattern F).
+    pub const ELD: Components = Components {
+        dark: false,
+        ..Components::ALL
+    };
+    /// Whether row noise (H) is drawn.
+    pub fn row(&self) -> bool {
+        self.row
+    }
     pub(crate) const NONE: Components = Components {
         photon: false,
         read: false,
@@ -89,6 +105,8 @@ mod tests {
     fn parse_and_print() {
         assert_eq!(Components::parse("P,G,H,Q,F,A").unwrap(), Components::ALL);
         assert_eq!(Components::parse("PG").unwrap().to_string(), "P,G");
+        assert_eq!(Components::PG, Components::parse("P,G").unwrap());
+        assert_eq!(Components::ELD, Components::parse("P,G,H,Q,F").unwrap());
         assert_eq!(Components::parse("all").unwrap(), Components::ALL);
         assert!(Components::parse("P,X").is_err());
         assert!(Components::parse("p").is_err());

@@ -70,6 +70,17 @@ pub enum ModelKind {
 }
 
 impl ModelKind {
+    /// The terms this model draws when `asked` are asked for: the
+    /// Poisson-Gaussian and ELD models have theirs ([`Components::PG`],
+    /// [`Components::ELD`]); the PGRF model draws those asked.
+    pub fn components(self, asked: Components) -> Components {
+        match self {
+            ModelKind::PoissonGaussian => Components::PG,
+            ModelKind::Eld => Components::ELD,
+            ModelKind::Pgrf => asked,
+        }
+    }
+
     /// The name in flags, files and records.
     pub(crate) fn name(self) -> &'static str {
         match self {
@@ -208,7 +219,7 @@ impl NoiseModel {
             },
             row_sigma: 0.0,
             quant_step: 1.0,
-            components: Components::parse("PG").expect("valid"),
+            components: Components::PG,
             dn_range: profile.dn_range as f32,
             black: profile.black.map(|b| b as f32),
         }
@@ -239,7 +250,7 @@ impl NoiseModel {
             },
             row_sigma: p.sigma_row as f32,
             quant_step: 1.0,
-            components: Components::parse("PGHQF").expect("valid"),
+            components: Components::ELD,
             dn_range: profile.dn_range as f32,
             black: profile.black.map(|b| b as f32),
         }

@@ -25,7 +25,7 @@ impl Calibration {
     /// Read a calibration file (`pgrf calibrate`'s .safetensors).
     #[staticmethod]
     fn load(py: Python<'_>, path: PathBuf) -> PyResult<Calibration> {
-        let cal = run(py, || Cal::load(&path)).map_err(to_py)?;
+        let cal = run(py, || Cal::load(&path))?;
         Ok(Calibration { cal })
     }
 
@@ -48,7 +48,7 @@ impl Calibration {
 
     /// save(path) -> None: write pgrf's calibration file (temporary file and rename).
     fn save(&self, py: Python<'_>, path: PathBuf) -> PyResult<()> {
-        run(py, || self.cal.save(&path)).map_err(to_py)
+        run(py, || self.cal.save(&path))
     }
 }
 
@@ -77,7 +77,7 @@ pub fn calibrate(
         temperature_tolerance,
         reject,
     };
-    let run_ = run(py, || pgrf_calib::calibrate(&input, &pgrf_core::NoProgress)).map_err(to_py)?;
+    let run_ = run(py, || pgrf_calib::calibrate(&input, &pgrf_core::NoProgress))?;
     Ok(Calibration {
         cal: run_.calibration,
     })

@@ -187,8 +187,7 @@ pub fn read<'py>(
         let frame = pgrf_raw::decode_file(&path, &pgrf_raw::LevelOverrides::default())?;
         let packed = pack_normalized(&frame, clip)?;
         Ok::<_, pgrf_raw::RawError>((packed, frame))
-    })
-    .map_err(to_py)?;
+    })?;
     let meta = meta_dict(py, &frame)?;
     Ok((packed.into_pyarray(py), meta))
 }
@@ -211,7 +210,6 @@ pub fn write_dng(
         let frame = unpack_normalized(view, &template)?;
         pgrf_raw::write_dng(&frame, &path, &pgrf_raw::DngOptions::default())
     })
-    .map_err(to_py)
 }
 
 /// read_photo(path) -> ndarray
@@ -220,7 +218,7 @@ pub fn write_dng(
 /// values in [0, 1], for `unprocess`.
 #[pyfunction]
 pub fn read_photo<'py>(py: Python<'py>, path: PathBuf) -> PyResult<Bound<'py, PyArray3<f32>>> {
-    let photo = run(py, || pgrf_scenes::photo::read_photo(&path)).map_err(to_py)?;
+    let photo = run(py, || pgrf_scenes::photo::read_photo(&path))?;
     let arr = ndarray::Array3::from_shape_vec((photo.height, photo.width, 3), photo.rgb)
         .map_err(to_py)?;
     Ok(arr.into_pyarray(py))

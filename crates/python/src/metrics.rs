@@ -2,7 +2,7 @@
 //! (the ELD protocol, pgrf-eval's), so a score computed in a training loop
 //! is the score `pgrf eval` prints.
 
-use crate::errors::{bad, to_py};
+use crate::errors::bad;
 use crate::threads::run;
 use numpy::PyReadonlyArray3;
 use pgrf_eval::{evaluate as eval_pair, Protocol};
@@ -40,6 +40,6 @@ pub fn scores(
 ) -> PyResult<(f64, f64, Option<f64>)> {
     let p = self::protocol(protocol, illuminance_correct)?;
     let (o, r) = (output.as_array(), reference.as_array());
-    let s = run(py, || eval_pair(o, r, &p)).map_err(to_py)?;
+    let s = run(py, || eval_pair(o, r, &p))?;
     Ok((s.psnr, s.ssim, s.gain))
 }

@@ -116,8 +116,7 @@ impl Profile {
     #[pyo3(signature = (path, base="sony-a7s2"))]
     fn calibration(py: Python<'_>, path: PathBuf, base: &str) -> PyResult<Profile> {
         let mut p = load(base.to_string())?;
-        let file =
-            crate::threads::run(py, || CalibrationFile::load(&path, None, None)).map_err(to_py)?;
+        let file = crate::threads::run(py, || CalibrationFile::load(&path, None, None))?;
         p.spec = format!("{base} + calibration {}", path.display());
         p.calibration = Some(Arc::new(file));
         Ok(p)

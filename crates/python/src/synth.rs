@@ -236,8 +236,7 @@ pub fn synth<'py>(
         let made = capture(view, &facts, profile, &s, seed)?;
         let (dark, bright) = rayon::join(|| made.dark(), || made.brightened());
         Ok::<_, pgrf_calib::synth::SynthError>((made, dark, bright))
-    })
-    .map_err(to_py)?;
+    })?;
     let metas = match template {
         Some(mut t) => {
             t.mosaic = Vec::new();
@@ -307,8 +306,7 @@ pub fn synth_batch<'py>(
         };
         let (dark, bright) = rayon::join(|| stack(&|m| m.dark()), || stack(&|m| m.brightened()));
         Ok::<_, pgrf_calib::synth::SynthError>((made, dark, bright))
-    })
-    .map_err(to_py)?;
+    })?;
     let infos = made
         .iter()
         .map(|m| info(py, m))

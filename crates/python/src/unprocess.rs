@@ -75,7 +75,6 @@ pub fn unprocess<'py>(
         };
         let enc = EncodedPhoto::from_photo(&photo);
         unprocess_window(&enc, (0, 0), (h / 2, w / 2), &cam, &u)
-    })
-    .map_err(to_py)?;
+    })?;
     Ok(out.into_pyarray(py))
 }

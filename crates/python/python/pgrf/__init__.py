@@ -166,26 +166,27 @@ class Capture:
 
     #: What the camera records: the clean image / ratio plus noise, clipped
     #: at white, the read noise around black kept (values may be negative).
-    dark: np.ndarray
+    dark: np.ndarray = field(repr=False)
     #: ``dark`` multiplied back by the ratio and clipped to [0, 1]: a network's input.
-    brightened: np.ndarray
+    brightened: np.ndarray = field(repr=False)
     ratio: float
     exposure_s: float
     #: The ISO, when one was set (else parameters were drawn from the profile's fits).
     iso: Optional[int]
-    #: The PGRF components used, e.g. "P,G,H,Q,F,A".
+    #: The terms the model drew, e.g. "P,G" for "pg", "P,G,H,Q,F" for
+    #: "eld" (F: its colour bias), those asked for with "pgrf".
     components: str
     #: System gain K, DN per electron.
     k: float
     #: Read-noise scale, DN (Tukey-lambda's for ELD's model).
     read_dn: float
-    #: Row-noise sigma, DN.
+    #: Row-noise sigma, DN (0 when the model draws none).
     row_dn: float
     #: With ``meta``: the dark capture's metadata (ISO, exposure, NoiseProfile
     #: as ``pgrf synth`` writes them): ``write_dng(path, cap.dark, cap.meta)``.
-    meta: Optional[Metadata] = None
+    meta: Optional[Metadata] = field(default=None, repr=False)
     #: With ``meta``: the brightened capture's metadata.
-    brightened_meta: Optional[Metadata] = None
+    brightened_meta: Optional[Metadata] = field(default=None, repr=False)
 
 
 #: The keyword arguments of synth and synth_batch that set the capture.
@@ -258,8 +259,8 @@ def synth(
 class BatchCapture:
     """Simulated captures of a batch: arrays ``(N, 4, H/2, W/2)`` and per-item numbers."""
 
-    dark: np.ndarray
-    brightened: np.ndarray
+    dark: np.ndarray = field(repr=False)
+    brightened: np.ndarray = field(repr=False)
     #: One dict per item: ratio, exposure_s, iso, components, k, read_dn, row_dn.
     info: List[Dict[str, Any]]
 
