@@ -44,10 +44,8 @@ RAW_EXTS = {".dng", ".arw", ".cr2", ".cr3", ".nef", ".nrw", ".raf", ".orf", ".rw
 def worker_init_fn(worker_id):
     """Give each DataLoader worker one pgrf thread (and one torch thread):
     the workers are the parallelism, and N workers x all cores would only
-    oversubscribe. Needed too, not only for speed, whenever the main
-    process called pgrf before the DataLoader forked its workers: threads do
-    not survive fork(), and a worker reusing the parent's pgrf thread pool
-    waits forever; set_threads gives each worker a pool of its own."""
+    oversubscribe. (pgrf makes its thread pool anew in a forked worker, so
+    this is for speed only; results do not depend on it.)"""
     pgrf.set_threads(1)
     torch.set_num_threads(1)
 
