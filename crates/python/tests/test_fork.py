@@ -18,6 +18,8 @@ def capture():
 
 @pytest.mark.skipif(sys.platform != "linux", reason="fork is the Linux DataLoader's default")
 @pytest.mark.parametrize("threads", [None, 2])
+# Python 3.12+ warns of exactly the case tested: fork() of a process with threads.
+@pytest.mark.filterwarnings("ignore:This process .* is multi-threaded")
 def test_a_forked_child_synthesises_what_the_parent_does(threads):
     pgrf.set_threads(threads)
     try:
