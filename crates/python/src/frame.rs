@@ -81,7 +81,9 @@ fn item<'py, T: pyo3::conversion::FromPyObjectOwned<'py>>(
 }
 
 /// The frame described by metadata `d` (a `pgrf.Metadata`'s fields), with
-/// a zero mosaic: the header's frame when there is one (its layout must be
+/// no pixels (an empty mosaic: no size a caller states is allocated before
+/// it is checked against an array it holds, see [`with_pixels`]): the
+/// header's frame when there is one (its layout must be
 /// the one `d` states), else one built from the fields; the descriptive
 /// fields (ISO, exposure, camera, white balance, matrices, orientation,
 /// temperature, NoiseProfile) are `d`'s.
@@ -129,17 +131,20 @@ pub fn frame_of_meta(d: &Bound<'_, PyDict>) -> PyResult<RawFrame> {
                     f.bits
                 )));
             }
-            f.mosaic = vec![0; width * height];
+            f.mosaic = Vec::new();
             f
         }
         None => {
-            let mosaic = vec![0u16; width * height];
+            // Levels and layout checked on a 2 x 2 frame, then given the
+            // stated size: the pixels are the caller's to add.
             let mut f = if mono {
-                RawFrame::from_mono(width, height, mosaic, black[0], white)
+                RawFrame::from_mono(2, 2, vec![0; 4], black[0], white)
             } else {
-                RawFrame::from_mosaic(width, height, mosaic, cfa, black, white)
+                RawFrame::from_mosaic(2, 2, vec![0; 4], cfa, black, white)
             }
             .map_err(to_py)?;
+            (f.width, f.height, f.mosaic) = (width, height, Vec::new());
+            f.sensor_size = (height, width);
             f.black = black;
             if !(1..=16).contains(&bits) || (white as u64) >= 1 << bits {
                 return Err(bad(format!(
@@ -167,6 +172,20 @@ pub fn frame_of_meta(d: &Bound<'_, PyDict>) -> PyResult<RawFrame> {
     frame.temperature_c = item(d, "temperature_c")?;
     frame.noise_profile = item::<Option<Vec<(f64, f64)>>>(d, "noise_profile")?
         .map(|v| v.into_iter().map(|(s, o)| [s, o]).collect());
+    Ok(frame)
+}
+
+/// `frame` (from [`frame_of_meta`]) with a zero mosaic, once `packed` is
+/// known to be its packed shape `(4, H/2, W/2)`.
+pub fn with_pixels(mut frame: RawFrame, packed: &[usize], what: &str) -> PyResult<RawFrame> {
+    let (ph, pw) = frame.packed_dims();
+    if packed != [4, ph, pw] {
+        return Err(bad(format!(
+            "{what}: shape {packed:?}, the frame the metadata describes ({}x{}) packs to (4, {ph}, {pw})",
+            frame.width, frame.height
+        )));
+    }
+    frame.mosaic = vec![0; frame.width * frame.height];
     Ok(frame)
 }
 
@@ -204,8 +223,8 @@ pub fn write_dng(
     packed: PyReadonlyArray3<'_, f32>,
     meta: &Bound<'_, PyDict>,
 ) -> PyResult<()> {
-    let template = frame_of_meta(meta)?;
     let view = packed.as_array();
+    let template = with_pixels(frame_of_meta(meta)?, view.shape(), "write_dng packed")?;
     run(py, || {
         let frame = unpack_normalized(view, &template)?;
         pgrf_raw::write_dng(&frame, &path, &pgrf_raw::DngOptions::default())

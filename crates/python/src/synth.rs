@@ -239,7 +239,6 @@ pub fn synth<'py>(
     })?;
     let metas = match template {
         Some(mut t) => {
-            t.mosaic = Vec::new();
             let mut b = t.clone();
             made.stamp(&mut t, false);
             made.stamp(&mut b, true);

@@ -93,3 +93,15 @@ def test_threads_are_bounded():
     with pytest.raises(ValueError, match="1024"):
         pgrf.set_threads(100000)
     pgrf.set_threads(None)
+
+
+def test_a_stated_size_is_not_allocated_before_it_is_checked(tmp_path):
+    """A Metadata stating a 65536 x 65536 frame (8 GiB of pixels) with a
+    small array: refused by the shape check, nothing allocated for it."""
+    meta = pgrf.Metadata(width=65536, height=65536, cfa="RGGB", black=(0.0,) * 4, white=4095, bits=12)
+    small = np.zeros((4, 4, 4), np.float32)
+    with pytest.raises(ValueError, match=r"packs to \(4, 32768, 32768\)"):
+        pgrf.write_dng(tmp_path / "x.dng", small, meta)
+    with pytest.raises(ValueError, match=r"packs to \(4, 32768, 32768\)"):
+        pgrf.synth(small, A7S2, meta=meta)
+    assert not list(tmp_path.iterdir())
