@@ -301,6 +301,20 @@ impl CalibrationRun {
 /// 2 degrees already moves it by a quarter.
 pub const TEMPERATURE_TOLERANCE_C: f32 = 2.0;
 
+/// Refuse a temperature tolerance (`--temperature-tolerance`, of
+/// `pgrf calibrate` and `pgrf reduce`) that is not a number of °C, 0 or more.
+pub fn check_temperature_tolerance(t: Option<f32>) -> Result<()> {
+    match t {
+        Some(t) if !(t.is_finite() && t >= 0.0) => Err(CalibError::BadOption {
+            flag: "--temperature-tolerance",
+            message: format!(
+                "--temperature-tolerance must be a non-negative number of °C, got {t}"
+            ),
+        }),
+        _ => Ok(()),
+    }
+}
+
 /// The median temperature of the frames that record one, after checking
 /// that none lies further than `tolerance` from it (the file furthest out
 /// is named).
@@ -379,6 +393,7 @@ fn responding_gain(
 /// the per-pixel maps (packed `(4, H/2, W/2)`, R, G1, B, G2) and the record.
 /// Reports frames read to `progress`.
 pub fn calibrate(input: &CalibrateInput, progress: &dyn Progress) -> Result<CalibrationRun> {
+    check_temperature_tolerance(input.temperature_tolerance)?;
     let (mut notes, mut rejected) = (Vec::new(), Vec::new());
     let bias_stack = read_checked(
         &input.bias,

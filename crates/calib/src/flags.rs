@@ -83,16 +83,7 @@ impl CalibrateArgs {
         if let Some(dir) = &self.report {
             check_folder("--report", dir, " for the report")?;
         }
-        if let Some(t) = self.temperature_tolerance {
-            if !(t.is_finite() && t >= 0.0) {
-                return Err(CalibError::BadOption {
-                    flag: "--temperature-tolerance",
-                    message: format!(
-                        "--temperature-tolerance must be a non-negative number of °C, got {t}"
-                    ),
-                });
-            }
-        }
+        crate::calibrate::check_temperature_tolerance(self.temperature_tolerance)?;
         if let Some(dir) = &self.masters {
             check_folder("--masters", dir, "")?;
         }

@@ -661,6 +661,7 @@ pub fn reduce_to_files(
     config: &ReduceConfig,
     progress: &dyn Progress,
 ) -> Result<ReduceOutcome, ReduceError> {
+    crate::calibrate::check_temperature_tolerance(config.temperature_tolerance)?;
     let calib = Calibration::load(&config.calib)?;
     let masters = load_masters(&config.masters, &calib, &config.calib)?;
     let outputs: Vec<PathBuf> = config
@@ -841,6 +842,45 @@ fn header_of(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A temperature tolerance that is no number of °C, 0 or more, is
+    /// refused by the library before any file is read (the paths here do
+    /// not exist), for reduce and calibrate alike (the Python package calls
+    /// them without the command's flag checks).
+    #[test]
+    fn a_bad_temperature_tolerance_is_refused_before_any_file_is_read() {
+        let nowhere = PathBuf::from("/nonexistent/pgrf");
+        for t in [-1.0, f32::NAN, f32::INFINITY] {
+            let config = ReduceConfig {
+                lights: vec![nowhere.join("light.fits")],
+                masters: nowhere.join("masters"),
+                calib: nowhere.join("calib.safetensors"),
+                output: nowhere.join("out"),
+                temperature_tolerance: Some(t),
+            };
+            let e = reduce_to_files(&config, &pgrf_core::NoProgress)
+                .unwrap_err()
+                .to_string();
+            assert!(
+                e.contains("--temperature-tolerance must be a non-negative number of °C"),
+                "{e}"
+            );
+            let input = crate::CalibrateInput {
+                bias: vec![nowhere.join("b1.fits"), nowhere.join("b2.fits")],
+                flat: vec![nowhere.join("f1.fits"), nowhere.join("f2.fits")],
+                temperature_tolerance: Some(t),
+                ..Default::default()
+            };
+            let e = crate::calibrate(&input, &pgrf_core::NoProgress)
+                .err()
+                .expect("refused")
+                .to_string();
+            assert!(
+                e.contains("--temperature-tolerance must be a non-negative number of °C"),
+                "{e}"
+            );
+        }
+    }
 
     /// A defective pixel takes the median of its good same-colour
     /// neighbours: at step 2 on a Bayer mosaic (its own plane), at step 1

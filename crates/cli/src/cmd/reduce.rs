@@ -3,7 +3,7 @@
 //! `pgrf_calib::reduce`; this turns the flags into its config.
 
 use crate::progress::Bar;
-use anyhow::{bail, Result};
+use anyhow::Result;
 use clap::Args;
 use pgrf_calib::reduce::{reduce_to_files, ReduceConfig};
 use std::path::PathBuf;
@@ -28,25 +28,20 @@ pub struct ReduceArgs {
 }
 
 impl ReduceArgs {
-    /// The library's config of these flags.
-    fn config(&self) -> Result<ReduceConfig> {
-        if let Some(t) = self.temperature_tolerance {
-            if !(t.is_finite() && t >= 0.0) {
-                bail!("--temperature-tolerance {t}: must be a number of degrees, 0 or more");
-            }
-        }
-        Ok(ReduceConfig {
+    /// The library's config of these flags (it checks them).
+    fn config(&self) -> ReduceConfig {
+        ReduceConfig {
             lights: self.lights.clone(),
             masters: self.masters.clone(),
             calib: self.calib.clone(),
             output: self.output.clone(),
             temperature_tolerance: self.temperature_tolerance,
-        })
+        }
     }
 }
 
 pub fn run(a: &ReduceArgs) -> Result<()> {
-    let config = a.config()?;
+    let config = a.config();
     let bar = Bar::new("reducing", 0, "lights", false);
     let outcome = reduce_to_files(&config, &bar)?;
     for l in &outcome.lights {
