@@ -13,6 +13,7 @@ pub mod capture;
 pub mod catalog;
 mod components;
 pub mod darktable;
+pub mod describe;
 mod error;
 pub mod estimate;
 pub mod lookup;

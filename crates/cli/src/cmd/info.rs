@@ -3,10 +3,8 @@
 use crate::input::InputArgs;
 use anyhow::Result;
 use clap::Args;
-use pgrf_noise::lookup::{find_noise, KnownNoise};
-use pgrf_raw::stats::{plane_stats, PlaneStats};
+use pgrf_noise::describe::FrameInfo;
 use pgrf_raw::RawFrame;
-use serde::Serialize;
 use std::path::PathBuf;
 
 #[derive(Args, Debug)]
@@ -20,47 +18,15 @@ pub struct InfoArgs {
     pub input: InputArgs,
 }
 
-#[derive(Serialize)]
-struct Info<'a> {
-    file: String,
-    make: &'a str,
-    model: &'a str,
-    width: usize,
-    height: usize,
-    cfa: String,
-    /// One black level for a monochrome frame whose planes share it, else
-    /// the four of R, G1, B, G2 (or the sub-lattices').
-    black: Vec<f32>,
-    white: u32,
-    bits: u32,
-    wb: Option<[f32; 3]>,
-    color_matrices: &'a [pgrf_raw::ColorMatrix],
-    iso: Option<u32>,
-    exposure_s: Option<f64>,
-    temperature_c: Option<f32>,
-    /// The DNG NoiseProfile's (S, O) pairs, when the file has one.
-    noise_profile: Option<&'a [[f64; 2]]>,
-    /// What a noise-aware model would be told of the frame's noise
-    /// (`pgrf_noise::lookup`): K, read and row noise in DN and the source,
-    /// or why none was found.
-    noise_parameters: serde_json::Value,
-    /// FITS header fields beyond the common ones (FITS input only).
-    fits: Option<&'a pgrf_raw::FitsHeader>,
-    orientation: u16,
-    visible_origin: [usize; 2],
-    sensor_size: [usize; 2],
-    planes: Vec<PlaneStats>,
-}
-
 pub fn run(a: &InfoArgs) -> Result<()> {
     let f = a.input.open(&a.file)?;
-    let info = info(a, &f)?;
+    let info = FrameInfo::of(&a.file, &f)?;
     if a.json {
         println!("{}", serde_json::to_string(&info)?);
         return Ok(());
     }
     print_header(&f, &info);
-    print_levels(a, &f);
+    print_levels(a, &f, &info);
     print_colour(&f);
     println!("plane       min     max     mean      saturated");
     for s in &info.planes {
@@ -76,40 +42,8 @@ pub fn run(a: &InfoArgs) -> Result<()> {
     Ok(())
 }
 
-/// What `--json` prints of `f`.
-fn info<'a>(a: &InfoArgs, f: &'a RawFrame) -> Result<Info<'a>> {
-    Ok(Info {
-        file: a.file.display().to_string(),
-        make: &f.make,
-        model: &f.model,
-        width: f.width,
-        height: f.height,
-        cfa: f.layout().to_string(),
-        black: blacks(f),
-        white: f.white,
-        bits: f.bits,
-        wb: f.wb,
-        color_matrices: &f.color_matrices,
-        iso: f.iso,
-        exposure_s: f.exposure_s,
-        temperature_c: f.temperature_c,
-        noise_profile: f.noise_profile.as_deref(),
-        noise_parameters: match find_noise(f, &KnownNoise::default()) {
-            Ok(n) => serde_json::json!({
-                "K": n.k, "read": n.read, "row": n.row, "source": n.source.to_string()
-            }),
-            Err(e) => serde_json::json!({ "error": e.to_string() }),
-        },
-        fits: f.fits.as_ref(),
-        orientation: f.orientation,
-        visible_origin: [f.sensor_origin.0, f.sensor_origin.1],
-        sensor_size: [f.sensor_size.0, f.sensor_size.1],
-        planes: plane_stats(f)?,
-    })
-}
-
 /// The file, camera, geometry and layout (and a FITS file's header).
-fn print_header(f: &RawFrame, info: &Info) {
+fn print_header(f: &RawFrame, info: &FrameInfo) {
     println!("file        {}", info.file);
     let camera = [info.make, info.model]
         .into_iter()
@@ -168,9 +102,9 @@ fn print_header(f: &RawFrame, info: &Info) {
 }
 
 /// Levels, ISO, exposure, temperature and the DNG noise profile.
-fn print_levels(a: &InfoArgs, f: &RawFrame) {
+fn print_levels(a: &InfoArgs, f: &RawFrame, info: &FrameInfo) {
     let opt = |v: Option<String>| v.unwrap_or_else(|| "unknown".into());
-    let black = match blacks(f)[..] {
+    let black = match info.black[..] {
         [one] => one.to_string(),
         _ => (f.plane_names().iter().zip(f.black))
             .map(|(n, b)| format!("{n} {b}"))
@@ -201,7 +135,7 @@ fn print_levels(a: &InfoArgs, f: &RawFrame) {
             pairs.join("; ")
         );
     }
-    match find_noise(f, &KnownNoise::default()) {
+    match &info.noise {
         Ok(n) => println!("noise-aware models would use: {n}"),
         Err(e) => println!("noise-aware models would use: nothing found ({e})"),
     }
@@ -226,16 +160,6 @@ fn print_colour(f: &RawFrame) {
             "matrix      XYZ->camera ({}): {:?}",
             cm.illuminant, cm.xyz_to_cam
         );
-    }
-}
-
-/// The black levels to show: one for a monochrome frame (one signal, one
-/// level) unless overrides gave its sub-lattices different ones.
-fn blacks(f: &RawFrame) -> Vec<f32> {
-    if f.mono && f.black.iter().all(|&b| b == f.black[0]) {
-        vec![f.black[0]]
-    } else {
-        f.black.to_vec()
     }
 }
 
