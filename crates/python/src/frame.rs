@@ -31,8 +31,10 @@ impl Header {
     }
 }
 
-/// The metadata of `frame` as the dict `pgrf.Metadata` is built from.
-pub fn meta_dict<'py>(py: Python<'py>, frame: &RawFrame) -> PyResult<Bound<'py, PyDict>> {
+/// The metadata of `frame` as the dict `pgrf.Metadata` is built from; the
+/// frame itself, its pixels dropped, becomes the dict's header (taken by
+/// value: no copy of a full mosaic only to drop it).
+pub fn meta_dict<'py>(py: Python<'py>, mut frame: RawFrame) -> PyResult<Bound<'py, PyDict>> {
     let d = PyDict::new(py);
     d.set_item("width", frame.width)?;
     d.set_item("height", frame.height)?;
@@ -60,9 +62,8 @@ pub fn meta_dict<'py>(py: Python<'py>, frame: &RawFrame) -> PyResult<Bound<'py, 
             .as_ref()
             .map(|v| v.iter().map(|p| (p[0], p[1])).collect::<Vec<_>>()),
     )?;
-    let mut header = frame.clone();
-    header.mosaic = Vec::new();
-    d.set_item("header", Header { frame: header })?;
+    frame.mosaic = Vec::new();
+    d.set_item("header", Header { frame })?;
     Ok(d)
 }
 
@@ -175,9 +176,8 @@ pub fn frame_of_meta(d: &Bound<'_, PyDict>) -> PyResult<RawFrame> {
     Ok(frame)
 }
 
-/// `frame` (from [`frame_of_meta`]) with a zero mosaic, once `packed` is
-/// known to be its packed shape `(4, H/2, W/2)`.
-pub fn with_pixels(mut frame: RawFrame, packed: &[usize], what: &str) -> PyResult<RawFrame> {
+/// Refuse an array `packed` that is not `frame`'s packed shape `(4, H/2, W/2)`.
+pub fn check_packed(frame: &RawFrame, packed: &[usize], what: &str) -> PyResult<()> {
     let (ph, pw) = frame.packed_dims();
     if packed != [4, ph, pw] {
         return Err(bad(format!(
@@ -185,6 +185,13 @@ pub fn with_pixels(mut frame: RawFrame, packed: &[usize], what: &str) -> PyResul
             frame.width, frame.height
         )));
     }
+    Ok(())
+}
+
+/// `frame` (from [`frame_of_meta`]) with a zero mosaic, once `packed` is
+/// known to be its packed shape ([`check_packed`]).
+pub fn with_pixels(mut frame: RawFrame, packed: &[usize], what: &str) -> PyResult<RawFrame> {
+    check_packed(&frame, packed, what)?;
     frame.mosaic = vec![0; frame.width * frame.height];
     Ok(frame)
 }
@@ -207,7 +214,7 @@ pub fn read<'py>(
         let packed = pack_normalized(&frame, clip)?;
         Ok::<_, pgrf_raw::RawError>((packed, frame))
     })?;
-    let meta = meta_dict(py, &frame)?;
+    let meta = meta_dict(py, frame)?;
     Ok((packed.into_pyarray(py), meta))
 }
 

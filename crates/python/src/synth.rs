@@ -3,8 +3,8 @@
 //! `pgrf synth` runs, so the same image, settings and seed give the same
 //! numbers in Python as on the command line.
 
-use crate::errors::{bad, to_py};
-use crate::frame::{frame_of_meta, meta_dict};
+use crate::errors::bad;
+use crate::frame::{check_packed, frame_of_meta, meta_dict};
 use crate::profile::Profile;
 use crate::threads::run;
 use ndarray::{Array3, Array4, ArrayView3, Axis};
@@ -13,7 +13,7 @@ use pgrf_calib::synth::{
     synthesize_packed, with_dark_rate, CleanFacts, PackedCapture, SynthConfig,
 };
 use pgrf_noise::{DarkLaw, ModelKind};
-use pgrf_raw::Cfa;
+use pgrf_raw::{Cfa, RawFrame};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use rayon::prelude::*;
@@ -54,16 +54,16 @@ impl Settings {
     }
 }
 
-/// The clean image's facts: from the metadata when given (its CFA, ISO and
+/// The clean image's facts: from the metadata's frame when given (its CFA, ISO and
 /// exposure, as `pgrf synth` takes them from the file), else from `cfa`.
-fn facts(meta: Option<&Bound<'_, PyDict>>, cfa: Option<&str>) -> PyResult<CleanFacts> {
-    if let Some(m) = meta {
+fn facts(frame: Option<&RawFrame>, cfa: Option<&str>) -> PyResult<CleanFacts> {
+    if let Some(f) = frame {
         if cfa.is_some() {
             return Err(bad(
                 "synth: give meta or cfa, not both (meta holds the CFA)",
             ));
         }
-        return Ok(CleanFacts::of(&frame_of_meta(m)?));
+        return Ok(CleanFacts::of(f));
     }
     let cfa: Cfa = match cfa {
         None => Cfa::Rggb,
@@ -125,9 +125,10 @@ fn setting<'py, T: pyo3::conversion::FromPyObjectOwned<'py>>(
     }
 }
 
-/// The keyword arguments of `pgrf.synth` (a dict the Python side builds),
-/// checked: unknown keys, models, laws, components and out-of-range
-/// numbers are refused before any work.
+/// The keyword arguments of `pgrf.synth` (a dict the Python side builds):
+/// unknown keys, models and laws refused here; components and numbers out
+/// of range by the recipe, before it draws anything
+/// ([`synthesize_packed`]'s first checks).
 fn parse_settings(d: &Bound<'_, PyDict>) -> PyResult<Settings> {
     const KEYS: [&str; 9] = [
         "ratio",
@@ -158,8 +159,7 @@ fn parse_settings(d: &Bound<'_, PyDict>) -> PyResult<Settings> {
         .parse()
         .map_err(|e: String| bad(format!("synth dark_law: {e}")))?;
     let components: String = setting(d, "components", "P,G,H,Q,F,A".to_string())?;
-    pgrf_noise::Components::parse(&components).map_err(to_py)?;
-    let s = Settings {
+    Ok(Settings {
         ratio: setting(d, "ratio", None)?,
         iso: setting(d, "iso", None)?,
         model,
@@ -169,9 +169,7 @@ fn parse_settings(d: &Bound<'_, PyDict>) -> PyResult<Settings> {
         exposure_s: setting(d, "exposure_s", None)?,
         dark_rate: setting(d, "dark_rate", None)?,
         dark_law,
-    };
-    pgrf_calib::synth::check(&s.config(0)).map_err(to_py)?;
-    Ok(s)
+    })
 }
 
 /// One capture of `clean` with `profile` and `s`.
@@ -219,18 +217,12 @@ pub fn synth<'py>(
     Option<Bound<'py, PyDict>>,
 )> {
     let s = parse_settings(settings)?;
-    let facts = facts(meta, cfa)?;
     let view = clean.as_array();
     check_clean(&view, "synth clean")?;
     let template = meta.map(frame_of_meta).transpose()?;
+    let facts = facts(template.as_ref(), cfa)?;
     if let Some(t) = &template {
-        let (ph, pw) = t.packed_dims();
-        if view.shape() != [4, ph, pw] {
-            return Err(bad(format!(
-                "synth: clean has shape {:?}, the frame meta describes packs to (4, {ph}, {pw})",
-                view.shape()
-            )));
-        }
+        check_packed(t, view.shape(), "synth clean")?;
     }
     let (made, dark, bright) = run(py, || {
         let made = capture(view, &facts, profile, &s, seed)?;
@@ -242,7 +234,7 @@ pub fn synth<'py>(
             let mut b = t.clone();
             made.stamp(&mut t, false);
             made.stamp(&mut b, true);
-            (Some(meta_dict(py, &t)?), Some(meta_dict(py, &b)?))
+            (Some(meta_dict(py, t)?), Some(meta_dict(py, b)?))
         }
         None => (None, None),
     };
