@@ -945,3 +945,69 @@ fn a_flow_model_trained_within_windows_restores_with_them() {
         assert!(!bad.exists());
     }
 }
+
+/// Issue 51's training settings reach the files that record them: a run
+/// with values below black kept and crops weighted by their own MSE says so
+/// in its header, its network's configuration keeps the input convention
+/// (so every command feeds it unclamped), its training record the loss, and
+/// it starts from weights trained on clamped input.
+#[test]
+fn values_below_black_and_the_loss_are_recorded() {
+    let d = scratch("below-black");
+    let train = |out: &Path, extra: &[&str]| {
+        let mut args = vec![
+            "train",
+            "spc",
+            "--steps",
+            "2",
+            "--patch",
+            "32",
+            "--batch",
+            "2",
+            "--width",
+            "4",
+            "--val-pairs",
+            "1",
+            "--workers",
+            "1",
+            "-o",
+            s(out),
+        ];
+        args.extend_from_slice(extra);
+        pgrf(&args)
+    };
+    let clamped = d.join("clamped.safetensors");
+    let r = train(&clamped, &[]);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    let kept = d.join("kept.safetensors");
+    let r = train(
+        &kept,
+        &[
+            "--keep-below-black",
+            "--item-weight",
+            "log",
+            "--loss",
+            "mse",
+            "--init",
+            s(&clamped),
+        ],
+    );
+    let err = String::from_utf8_lossy(&r.stderr);
+    assert!(r.status.success(), "{err}");
+    assert!(err.contains("values below black kept"), "{err}");
+    assert!(
+        err.contains("loss the mean of ln MSE over the crops"),
+        "{err}"
+    );
+    let meta = pgrf_nn::weights::read_meta(&kept).unwrap();
+    assert!(meta.arch.keeps_below_black());
+    let config = meta.training.unwrap().config.unwrap();
+    assert!(config.keep_below_black);
+    assert_eq!(config.item_weight, pgrf_nn::ItemWeight::Log);
+    assert_eq!(config.loss, pgrf_nn::Distance::Mse);
+    // The clamped run's record has neither key (older readers see nothing new).
+    let clamped_record = record(&clamped);
+    assert_eq!(clamped_record["config"]["keep_below_black"], false);
+    let training = &clamped_record["training"]["config"];
+    assert!(training.get("item_weight").is_none() && training.get("loss").is_none());
+}

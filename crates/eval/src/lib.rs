@@ -26,6 +26,7 @@ pub use evaluation::{run_protocol, worst_path, EvalConfig, EvalError, Evaluation
 pub use method::{CaseInfo, CaseNoise, MethodUnderTest};
 
 pub use metrics::cast;
+pub use metrics::{artefacts, seams, speckles, Seams, Speckles};
 pub use metrics::{
     colour_cast, evaluate, illuminance_correct, illuminance_gain, psnr, ssim, CameraColour, Cast,
     IlluminanceGain, MetricError, Protocol, Scores, SsimOptions,

@@ -43,7 +43,8 @@ pub trait MethodUnderTest {
     fn name(&self) -> &str;
 
     /// The restoration of `input` (packed `(4, h, w)` R, G1, B, G2,
-    /// normalised, multiplied by `case.ratio` and clamped to [0, 1]), of the
+    /// normalised, multiplied by `case.ratio` and clipped at 1, values below
+    /// black kept: a network that reads them clamped clamps them itself), of the
     /// same shape, or a one-line reason.
     fn restore(&self, input: ArrayView3<f32>, case: &CaseInfo<'_>) -> Result<Array3<f32>, String>;
 }

@@ -160,6 +160,18 @@ pub struct TrainConfig {
     )]
     #[serde(skip_serializing_if = "is_zero")]
     pub calibrated_share: f64,
+    /// Feed the network the capture's values below black as recorded (negative after the black is subtracted; only white clips) instead of clamping them at 0 as SID does: the clamp lifts dark areas and removes half of the read noise a denoiser needs to see (MODELS.md, issue 51). Recorded in the network's configuration; enhance, eval and search feed the network as it was trained.
+    #[cfg_attr(feature = "clap", arg(long, action = clap::ArgAction::Set, num_args = 0..=1, default_missing_value = "true", default_value_t = false, hide_default_value = true))]
+    #[serde(skip_serializing_if = "is_false")]
+    pub keep_below_black: bool,
+    /// How each crop's loss counts: none (every pixel alike: the noisiest crops dominate), noise (each crop's error over its noise level) or log (each crop's error over its own current value: the mean of ln L1, so every crop's dB counts alike) [default: none].
+    #[cfg_attr(feature = "clap", arg(long, value_enum, default_value_t = d().item_weight, hide_default_value = true))]
+    #[serde(skip_serializing_if = "is_unweighted")]
+    pub item_weight: ItemWeight,
+    /// The distance the loss averages: l1 (the papers') or mse (what PSNR measures; with --item-weight log the loss is the mean over crops of ln MSE, whose gradient is the mean PSNR's) [default: l1].
+    #[cfg_attr(feature = "clap", arg(long, value_enum, default_value_t = d().loss, hide_default_value = true))]
+    #[serde(skip_serializing_if = "is_l1")]
+    pub loss: Distance,
     /// Width of the first level: SID U-Net channels [default: 32]; for the flow model the SR3 inner channels unless --inner-channels is given.
     #[cfg_attr(feature = "clap", arg(long))]
     pub width: Option<usize>,
@@ -232,6 +244,76 @@ pub struct TrainConfig {
     /// cpu or cuda [default: cpu].
     #[cfg_attr(feature = "clap", arg(long, default_value_t = d().device, hide_default_value = true))]
     pub device: crate::backend::DeviceKind,
+}
+
+/// The distance between output and target the loss averages (`pgrf train
+/// --loss`); `step::batch_loss` applies it.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
+pub enum Distance {
+    /// Mean absolute error: the papers' loss (SID, ELD, Algorithm 1).
+    #[default]
+    L1,
+    /// Mean squared error: what PSNR measures.
+    Mse,
+}
+
+/// What a training step minimises: the distance and how the batch's items
+/// count (`step::batch_loss`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct LossRule {
+    /// Per-element distance.
+    pub distance: Distance,
+    /// Per-item weighting.
+    pub weight: ItemWeight,
+}
+
+impl TrainConfig {
+    /// The loss this configuration trains with.
+    pub fn loss_rule(&self) -> LossRule {
+        LossRule {
+            distance: self.loss,
+            weight: self.item_weight,
+        }
+    }
+}
+
+/// Records of L1 runs stay as they were (no `loss`).
+fn is_l1(d: &Distance) -> bool {
+    *d == Distance::L1
+}
+
+/// How each item of a training batch counts in the loss (`pgrf train
+/// --item-weight`); `step::batch_loss` applies it.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
+pub enum ItemWeight {
+    /// Every element alike: the batch's mean absolute error (every run
+    /// before issue 51). The noisiest items' errors are the largest, so they
+    /// dominate the sum.
+    #[default]
+    None,
+    /// Each item's mean error divided by its noise standard deviation at its
+    /// mean level: an item at x1-x20 counts as much as one at x300.
+    Noise,
+    /// Each item's mean distance divided by its own current value (not
+    /// differentiated): the gradient of the mean of its logarithm over the
+    /// items, so a tenth less error counts alike at every noise level, as a
+    /// mean of PSNRs in dB does (with `--loss mse`, exactly the gradient of
+    /// the mean PSNR).
+    Log,
+}
+
+/// Records of unweighted runs stay as they were (no `item_weight`).
+fn is_unweighted(w: &ItemWeight) -> bool {
+    *w == ItemWeight::None
+}
+
+/// Records of runs that clamped the input at black stay as they were.
+fn is_false(v: &bool) -> bool {
+    !*v
 }
 
 /// How `pgrf train` draws each crop's exposure ratio in its range.
@@ -312,6 +394,9 @@ impl Default for TrainConfig {
             no_augment: false,
             calibrated_dark_level: false,
             calibrated_share: 0.0,
+            keep_below_black: false,
+            item_weight: ItemWeight::None,
+            loss: Distance::L1,
             width: None,
             residual: false,
             conditioning: Conditioning::None,

@@ -69,6 +69,6 @@ pub mod weights;
 
 pub use arch::{Architecture, Net, SidUnet, SidUnetConfig, Sr3Config, Sr3Unet};
 pub use backend::DeviceKind;
-pub use config::{Method, TrainConfig, TrainOutputs};
+pub use config::{Distance, ItemWeight, LossRule, Method, TrainConfig, TrainOutputs};
 pub use error::{NnError, Result};
 pub use infer::{restore_frame, Restore, SamplerChoice, Tiling};

@@ -8,6 +8,8 @@
 
 use crate::arch::sid_unet::SidUnet;
 use crate::arch::sr3::Sr3Unet;
+use crate::condition::NoiseLevel;
+use crate::config::{Distance, ItemWeight, LossRule};
 use crate::flow::flow_loss;
 use crate::ops::{PgrfAutodiff, PgrfOps};
 use burn::optim::{GradientsParams, Optimizer};
@@ -16,6 +18,72 @@ use burn::tensor::{ElementConversion, Tensor};
 /// Mean absolute error over every element.
 pub(crate) fn l1<B: PgrfOps>(a: Tensor<B, 4>, b: Tensor<B, 4>) -> Tensor<B, 1> {
     (a - b).abs().mean()
+}
+
+/// The smallest per-item error [`ItemWeight::Log`] divides by: 1e-5 of
+/// white (its square for the MSE), far below any capture's noise, so an
+/// item restored almost exactly cannot take the whole batch's weight.
+const LOG_WEIGHT_FLOOR: f32 = 1e-5;
+
+/// The batch's loss from its per-element errors `err` `(n, c, h, w)`: the
+/// mean distance (`rule.distance`: absolute or squared) over every element,
+/// or each item's mean distance weighted as `rule.weight` says, the weights
+/// scaled to a mean of 1 over the batch (so the learning rate means what it
+/// meant unweighted). `levels` (one per item) and `clean` (the targets) give
+/// each item's noise level for [`ItemWeight::Noise`]; that weight is the
+/// inverse of the level's deviation for L1 and of its variance for the MSE,
+/// so that both weigh an item's error in units of its noise.
+pub(crate) fn batch_loss<B: PgrfOps>(
+    err: Tensor<B, 4>,
+    rule: LossRule,
+    levels: &[NoiseLevel],
+    clean: &Tensor<B, 4>,
+) -> Tensor<B, 1> {
+    let (a, floor) = match rule.distance {
+        Distance::L1 => (err.abs(), LOG_WEIGHT_FLOOR),
+        Distance::Mse => (err.clone() * err, LOG_WEIGHT_FLOOR * LOG_WEIGHT_FLOOR),
+    };
+    let [n, c, h, w] = a.dims();
+    if rule.weight == ItemWeight::None || n < 2 {
+        return a.mean();
+    }
+    let per_item = a.reshape([n, c * h * w]).mean_dim(1).reshape([n]);
+    let inverse = match rule.weight {
+        ItemWeight::None => unreachable!("returned above"),
+        ItemWeight::Noise => {
+            let sigma = noise_sigma(levels, clean);
+            match rule.distance {
+                Distance::L1 => sigma.recip(),
+                Distance::Mse => (sigma.clone() * sigma).recip(),
+            }
+        }
+        ItemWeight::Log => (per_item.clone().detach().clamp_min(floor)).recip(),
+    };
+    let weights = inverse.clone() / inverse.mean();
+    (per_item * weights).mean()
+}
+
+/// Each item's noise standard deviation at its mean clean level,
+/// sqrt(gain E[x] + floor) ([`NoiseLevel`]), shape `(n)`, not tracked.
+fn noise_sigma<B: PgrfOps>(levels: &[NoiseLevel], clean: &Tensor<B, 4>) -> Tensor<B, 1> {
+    let [n, c, h, w] = clean.dims();
+    let device = clean.device();
+    let mean = clean
+        .clone()
+        .detach()
+        .reshape([n, c * h * w])
+        .mean_dim(1)
+        .reshape([n])
+        .clamp_min(0.0);
+    let pick = |f: fn(&NoiseLevel) -> f32| {
+        let v: Vec<f32> = (0..n).map(|i| levels.get(i).map_or(0.0, f)).collect();
+        Tensor::<B, 1>::from_floats(v.as_slice(), &device)
+    };
+    let gain = pick(|l| l.gain);
+    let floor = pick(|l| l.floor);
+    (gain * mean + floor)
+        .clamp_min(LOG_WEIGHT_FLOOR * LOG_WEIGHT_FLOOR)
+        .sqrt()
 }
 
 /// The denoiser's loss: L1(net(noisy x ratio), clean), `noisy` being the
@@ -89,6 +157,90 @@ mod tests {
         let clean = Tensor::<B, 1>::from_floats(data.as_slice(), device).reshape([n, 4, h, w]);
         let noise = Tensor::<B, 4>::random([n, 4, h, w], Distribution::Normal(0.0, 0.1), device);
         (clean.clone() + noise, clean)
+    }
+
+    /// Two items whose every element errs by `e[i]` (signs alternating).
+    fn errors(e: [f32; 2], device: &burn::tensor::Device<B>) -> Tensor<B, 4> {
+        let n = 4 * 8 * 8;
+        let v: Vec<f32> = (0..2 * n)
+            .map(|k| e[k / n] * if k % 2 == 0 { 1.0 } else { -1.0 })
+            .collect();
+        Tensor::<B, 1>::from_floats(v.as_slice(), device)
+            .reshape([2, 4, 8, 8])
+            .require_grad()
+    }
+
+    /// The weighting's value and its gradient, against the formulas: plain
+    /// mean; log (harmonic mean of the items' errors, and each item's
+    /// gradient times its error equal, so a relative change counts alike);
+    /// noise (weights 1/sigma at the items' mean levels, scaled to mean 1).
+    #[test]
+    fn items_are_weighted_as_stated() {
+        let device = Default::default();
+        let clean = Tensor::<B, 4>::full([2, 4, 8, 8], 0.25, &device);
+        // sigma^2 = gain * 0.25 + floor: 0.1^2 and 0.01^2.
+        let levels = [
+            NoiseLevel {
+                gain: 0.036,
+                floor: 0.001,
+            },
+            NoiseLevel {
+                gain: 0.0,
+                floor: 1e-4,
+            },
+        ];
+        let e = [0.1f32, 0.001];
+        let value = |weight| -> f32 {
+            let rule = LossRule {
+                distance: Distance::L1,
+                weight,
+            };
+            batch_loss(errors(e, &device), rule, &levels, &clean).into_scalar()
+        };
+        assert!((value(ItemWeight::None) - 0.0505).abs() < 1e-6);
+        let harmonic = 2.0 / (1.0 / 0.1 + 1.0 / 0.001);
+        assert!(
+            (value(ItemWeight::Log) - harmonic).abs() < 1e-7,
+            "{}",
+            value(ItemWeight::Log)
+        );
+        // Noise: weights (10, 100) / 55.
+        let want = (0.1 * 10.0 / 55.0 + 0.001 * 100.0 / 55.0) / 2.0;
+        assert!(
+            (value(ItemWeight::Noise) - want).abs() < 1e-6,
+            "{}",
+            value(ItemWeight::Noise)
+        );
+
+        let x = errors(e, &device);
+        let log = LossRule {
+            distance: Distance::L1,
+            weight: ItemWeight::Log,
+        };
+        let g = batch_loss(x.clone(), log, &levels, &clean).backward();
+        let grad: Vec<f32> = x.grad(&g).unwrap().into_data().to_vec().unwrap();
+        let n = 4 * 8 * 8;
+        let (g0, g1) = (grad[0].abs() * n as f32, grad[n].abs() * n as f32);
+        // d loss / d e_i = w_i / 2 / n with w = (10, 1000) / 505: w_i e_i equal.
+        assert!((g0 * 0.1 - g1 * 0.001).abs() < 1e-4 * g0 * 0.1, "{g0} {g1}");
+        assert!((g1 - 1000.0 / 1010.0).abs() < 1e-4, "{g1}");
+
+        // MSE: plain mean of squares; log-weighted, the harmonic mean of the
+        // items' MSEs (the gradient of the mean of ln MSE, i.e. of the mean
+        // PSNR); noise-weighted by 1/sigma^2: weights (100, 10000) / 5050.
+        let mse = |weight| -> f32 {
+            let rule = LossRule {
+                distance: Distance::Mse,
+                weight,
+            };
+            batch_loss(errors(e, &device), rule, &levels, &clean).into_scalar()
+        };
+        let (m0, m1) = (0.1f32 * 0.1, 0.001f32 * 0.001);
+        assert!((mse(ItemWeight::None) - (m0 + m1) / 2.0).abs() < 1e-8);
+        let harmonic = 2.0 / (1.0 / m0 + 1.0 / m1);
+        assert!((mse(ItemWeight::Log) - harmonic).abs() < 1e-3 * harmonic);
+        let want = (m0 * 100.0 + m1 * 10_000.0) / 5050.0 / 2.0;
+        assert!((mse(ItemWeight::Noise) - want).abs() < 1e-3 * want);
     }
 
     #[test]

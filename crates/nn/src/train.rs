@@ -310,7 +310,7 @@ fn header(
     noise: &NoiseSource,
 ) -> String {
     format!(
-        "training {} on {} ({}x{} crops{}, batch {}), noise {} from {}{}{}, {} steps, lr {:e} ({:?}){}, {} on {}",
+        "training {} on {} ({}x{} crops{}, batch {}), noise {} from {}{}{}, {} steps, lr {:e} ({:?}){}{}, {} on {}",
         arch.describe(),
         train.describe(),
         c.patch,
@@ -331,9 +331,25 @@ fn header(
         c.lr,
         c.schedule,
         if c.time_max < 1.0 { format!(", times t ~ U(0, {})", c.time_max) } else { String::new() },
+        loss_words(c),
         c.device,
         crate::backend::describe(c.device),
     )
+}
+
+/// The loss in words for the header when it is not the plain L1 mean.
+fn loss_words(c: &TrainConfig) -> String {
+    use crate::config::{Distance, ItemWeight};
+    let d = match c.loss {
+        Distance::L1 => "L1",
+        Distance::Mse => "MSE",
+    };
+    match (c.loss, c.item_weight) {
+        (Distance::L1, ItemWeight::None) => String::new(),
+        (_, ItemWeight::None) => format!(", loss {d}"),
+        (_, ItemWeight::Noise) => format!(", loss {d} of each crop over its noise level"),
+        (_, ItemWeight::Log) => format!(", loss the mean of ln {d} over the crops"),
+    }
 }
 
 /// One run's pieces besides its configuration, resolved by [`run`], and the
@@ -667,6 +683,7 @@ fn train<B: PgrfAutodiff>(
             noisy,
             clean,
             &batch.levels,
+            s.loss_rule(),
             || to_tensor::<B>(&batch.x0, shape, device),
             || Tensor::<B, 1>::from_data(TensorData::new(batch.t.clone(), [s.batch]), device),
         );

@@ -206,6 +206,8 @@ fn fill_defaults(value: &mut serde_json::Value) {
                 .or_insert(serde_json::Value::Bool(false));
             c.entry("conditioning")
                 .or_insert(serde_json::Value::String("none".into()));
+            c.entry("keep_below_black")
+                .or_insert(serde_json::Value::Bool(false));
         }
     }
 }

@@ -11,7 +11,9 @@
 //! - ratio = (ISO x exposure time of the reference) / (ISO x exposure time of
 //!   the noisy frame), from the files' EXIF (e.g. 100 x 4 s / (800 x 0.005 s)
 //!   = 100);
-//! - input x ratio clamped to [0, 1], reference clamped (both normalised
+//! - input x ratio clamped to [0, 1] (pgrf: clipped at 1, values below black
+//!   kept for the networks that read them, clamped by the others), reference
+//!   clamped (both normalised
 //!   with white 16383 as ELD's `pack_raw_bayer`);
 //! - measured on full images (`crop=False`) with ELD's illuminance correction
 //!   (`correct=True`), as `test_ELD.py` calls `engine.eval`.

@@ -14,8 +14,9 @@
 //! Loading follows ELD's datasets (`pack_raw_bayer`, `ELDEvalDataset`,
 //! `SIDDataset`): noisy packed R,G1,B,G2, normalised by black per channel
 //! and the white level (16383 for ELD/SID, see
-//! [`DatasetKind::default_white`]), multiplied by the ratio and clamped to
-//! [0, 1]; reference packed, normalised and clamped to [0, 1].
+//! [`DatasetKind::default_white`]), multiplied by the ratio and clipped at 1
+//! (values below black kept; a network that reads them clamped clamps them
+//! itself); reference packed, normalised and clamped to [0, 1].
 
 pub mod eld;
 pub mod miniature;
@@ -199,7 +200,9 @@ pub(crate) fn load_pair(s: &Sample, levels: &LevelOverrides) -> Result<LoadedPai
         return err(format!("{}: exposure ratio {ratio} is not positive", s.id));
     }
     let mut input = pack_normalized(&n, false).map_err(|e| DatasetError(e.to_string()))?;
-    input.mapv_inplace(|v| (v * ratio).clamp(0.0, 1.0));
+    // Clipped at white only: a network that reads values below black
+    // clamped clamps them itself.
+    input.mapv_inplace(|v| (v * ratio).min(1.0));
     let reference = pack_normalized(&r, true).map_err(|e| DatasetError(e.to_string()))?;
     // What the lookup finds for the noisy file (None where nothing can be
     // found: only a noise-aware method needs it, and says so).

@@ -132,7 +132,7 @@ fn dump_case(
         "case": case.title,
         "ratio": case.pair.ratio,
         "shape": input.shape(),
-        "input": "amplified capture clamped to [0, 1], normalised by the reference's levels",
+        "input": "amplified capture clipped at 1 (values below black kept: a network that reads them clamped clamps them itself), normalised by the reference's levels",
     });
     if let Some(s) = &case.synthesis {
         let capture = centre_crop(s.capture.view(), crop);

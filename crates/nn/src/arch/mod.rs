@@ -21,14 +21,14 @@ pub use sid_unet::{SidUnet, SidUnetConfig};
 pub use sr3::{Sr3Config, Sr3Unet};
 
 use crate::condition::{Conditioned, Conditioning, NoiseLevel};
-use crate::config::{Method, TrainConfig};
+use crate::config::{LossRule, Method, TrainConfig};
 use crate::data::Extras;
 use crate::error::{NnError, Result};
 use crate::flow::flow_loss;
 use crate::flow::sample::{two_stage, Sampler};
 use crate::named::{self, NamedTensor};
 use crate::ops::PgrfOps;
-use crate::step::denoiser_loss;
+use crate::step::{batch_loss, denoiser_loss};
 use burn::module::Module;
 use burn::tensor::backend::Backend;
 use burn::tensor::Tensor;
@@ -142,6 +142,12 @@ impl Architecture {
         self.spec().conditioning()
     }
 
+    /// Whether the network reads the capture's values below black as
+    /// recorded; else its input is clamped at 0 (SID's convention).
+    pub fn keeps_below_black(&self) -> bool {
+        self.spec().keeps_below_black()
+    }
+
     /// The tensors of a weight file under the names PyTorch code for this
     /// network knows (`pgrf export-weights`), and that naming in words.
     pub(crate) fn export_names<'a>(
@@ -177,7 +183,7 @@ impl Architecture {
     /// without conditioning, which [`Architecture::widen_unconditioned`]
     /// extends.
     pub fn can_start_from(&self, file: &Architecture) -> bool {
-        let json = |a: &Architecture| serde_json::to_value(a).ok();
+        let json = same_tensors_json;
         json(file) == json(self)
             || (self.conditioning().extra_channels() > 0
                 && json(file) == json(&self.unconditioned()))
@@ -197,7 +203,7 @@ impl Architecture {
         tensors: &mut BTreeMap<String, NamedTensor>,
     ) -> bool {
         let extra = self.conditioning().extra_channels();
-        let json = |a: &Architecture| serde_json::to_value(a).ok();
+        let json = same_tensors_json;
         if extra == 0 || json(file) != json(&self.unconditioned()) {
             return false;
         }
@@ -242,6 +248,33 @@ impl Architecture {
             self.init(device).map(crate::seeded::materialise)
         })
     }
+}
+
+/// The noisy input as a network reads it: every caller hands the amplified
+/// capture clipped at white only, and a network that does not keep values
+/// below black (`keep_below_black` false: SID's convention, every file
+/// before issue 51) gets them clamped at 0 here, the one place that
+/// convention lives.
+pub(crate) fn input_as_read<B: Backend>(
+    keep_below_black: bool,
+    noisy: Tensor<B, 4>,
+) -> Tensor<B, 4> {
+    if keep_below_black {
+        noisy
+    } else {
+        noisy.clamp_min(0.0)
+    }
+}
+
+/// The record of `a` as JSON without what leaves its tensors as they are:
+/// whether values below black are kept changes what the input holds, not
+/// the network, so weights trained either way can start a run of the other.
+fn same_tensors_json(a: &Architecture) -> Option<serde_json::Value> {
+    let mut v = serde_json::to_value(a).ok()?;
+    if let Some(c) = v.get_mut("config").and_then(|c| c.as_object_mut()) {
+        c.remove("keep_below_black");
+    }
+    Some(v)
 }
 
 impl TrainConfig {
@@ -327,6 +360,19 @@ impl<B: PgrfOps> Net<B> {
         }
     }
 
+    /// Whether the network reads values below black as recorded.
+    pub(crate) fn keeps_below_black(&self) -> bool {
+        match self {
+            Net::Spc(n) => n.keeps_below_black(),
+            Net::Pgrf(n) => n.keeps_below_black(),
+        }
+    }
+
+    /// The noisy input as this network reads it ([`input_as_read`]).
+    fn as_read(&self, noisy: Tensor<B, 4>) -> Tensor<B, 4> {
+        input_as_read(self.keeps_below_black(), noisy)
+    }
+
     /// The denoised batch: one pass for SPC, the two-stage sampler at `t2`
     /// for the flow model. `noisy` is T, `(n, 4, h, w)`, item i at noise
     /// level `levels[i]` (unused, and may be empty, by an unconditioned
@@ -338,7 +384,7 @@ impl<B: PgrfOps> Net<B> {
         x0: Tensor<B, 4>,
         t2: f32,
     ) -> Tensor<B, 4> {
-        let c = Conditioned::new(self.conditioning(), noisy, levels);
+        let c = Conditioned::new(self.conditioning(), self.as_read(noisy), levels);
         let y = match self {
             Net::Spc(n) => n.forward(c.input.clone()),
             Net::Pgrf(n) => two_stage(n, c.input.clone(), x0, t2),
@@ -360,7 +406,7 @@ impl<B: PgrfOps> Net<B> {
         sampler: Sampler,
     ) -> Tensor<B, 4> {
         let levels: Vec<NoiseLevel> = level.into_iter().collect();
-        let c = Conditioned::new(self.conditioning(), cond, &levels);
+        let c = Conditioned::new(self.conditioning(), self.as_read(cond), &levels);
         let y = match self {
             Net::Spc(n) => n.forward(c.input.clone()),
             Net::Pgrf(n) => {
@@ -385,35 +431,40 @@ impl<B: PgrfOps> Net<B> {
     /// loss is taken after its output is mapped back, and its flow loss in
     /// the k-sigma domain divided by each item's scale: both in input units,
     /// so that low-noise items (large scales) do not outweigh the rest.
+    /// `rule` says which distance and how the items' errors add up
+    /// ([`crate::step::batch_loss`]; the default rule is the plain L1 mean).
     pub(crate) fn loss(
         &self,
         noisy: Tensor<B, 4>,
         clean: Tensor<B, 4>,
         levels: &[NoiseLevel],
+        rule: LossRule,
         x0: impl FnOnce() -> Tensor<B, 4>,
         t: impl FnOnce() -> Tensor<B, 1>,
     ) -> Tensor<B, 1> {
         let kind = self.conditioning();
-        if kind == Conditioning::None {
+        let noisy = self.as_read(noisy);
+        if kind == Conditioning::None && rule == LossRule::default() {
             return match self {
                 Net::Spc(n) => denoiser_loss(n, noisy, clean),
                 Net::Pgrf(n) => flow_loss(n, noisy, clean, x0(), t()),
             };
         }
         let c = Conditioned::new(kind, noisy, levels);
-        match self {
-            Net::Spc(n) => crate::step::l1(c.input_units_of(n.forward(c.input.clone())), clean),
+        let err = match self {
+            Net::Spc(n) => c.input_units_of(n.forward(c.input.clone())) - clean.clone(),
             Net::Pgrf(n) => {
-                let x1 = c.domain_of(clean);
+                let x1 = c.domain_of(clean.clone());
                 let (x0, t) = (x0(), t());
                 let xt = crate::flow::interpolate(x1.clone(), x0.clone(), t.clone());
                 let err = x1 - x0 - n.forward(xt, c.input.clone(), t);
                 match c.inverse_scale() {
-                    Some(s) => (err * s).abs().mean(),
-                    None => err.abs().mean(),
+                    Some(s) => err * s,
+                    None => err,
                 }
             }
-        }
+        };
+        batch_loss(err, rule, levels, &clean)
     }
 }
 
@@ -503,6 +554,55 @@ mod tests {
         }
     }
 
+    /// Values below black reach a network that keeps them and come back
+    /// out of it: a fresh residual network (identity) restores a capture
+    /// whose mean is below black to the same negative mean, while one that
+    /// reads the input clamped (every file before issue 51) restores the
+    /// clamp. Weights trained either way start a run of the other.
+    #[test]
+    fn values_below_black_survive_a_network_that_keeps_them() {
+        let device = Default::default();
+        // Mean -0.02: a dark capture whose black the metadata puts too high.
+        let x =
+            Tensor::<Cpu, 4>::random([2, 4, 16, 16], Distribution::Normal(-0.02, 0.05), &device);
+        let x0 = Tensor::<Cpu, 4>::zeros([2, 4, 16, 16], &device);
+        let x_mean: f32 = x.clone().mean().into_scalar();
+        let clamped_mean: f32 = x.clone().clamp_min(0.0).mean().into_scalar();
+        assert!(
+            x_mean < -0.015 && clamped_mean > 0.01,
+            "{x_mean} {clamped_mean}"
+        );
+        for method in [Method::Spc, Method::Pgrf] {
+            for keep in [true, false] {
+                let arch = TrainConfig {
+                    keep_below_black: keep,
+                    ..config(Conditioning::LogSigmaMap)
+                }
+                .architecture(method)
+                .unwrap();
+                assert_eq!(arch.keeps_below_black(), keep);
+                let net = arch.init_seeded::<Cpu>(&device, 3).unwrap();
+                let y = net.restore(x.clone(), &levels(), x0.clone(), 0.5);
+                let mean: f32 = y.mean().into_scalar();
+                let want = if keep { x_mean } else { clamped_mean };
+                assert!(
+                    (mean - want).abs() < 2e-4,
+                    "{method:?} keep {keep}: mean {mean}, want {want}"
+                );
+            }
+            let keep = TrainConfig {
+                keep_below_black: true,
+                ..config(Conditioning::LogSigmaMap)
+            }
+            .architecture(method)
+            .unwrap();
+            let clamp = config(Conditioning::LogSigmaMap)
+                .architecture(method)
+                .unwrap();
+            assert!(keep.can_start_from(&clamp) && clamp.can_start_from(&keep));
+        }
+    }
+
     /// Every conditioning of both networks: the record names it, the first
     /// layer reads its planes, the restored batch and the loss have the
     /// plain shapes, and a fresh residual network restores its input
@@ -547,6 +647,7 @@ mod tests {
                     x.clone(),
                     clean.clone(),
                     &levels(),
+                    LossRule::default(),
                     || x0.clone(),
                     || t.clone(),
                 );
@@ -583,6 +684,7 @@ mod tests {
                     x.clone(),
                     clean.clone(),
                     &levels(),
+                    LossRule::default(),
                     || zero.clone(),
                     || t.clone(),
                 )

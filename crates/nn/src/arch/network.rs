@@ -63,6 +63,10 @@ pub(crate) trait NetworkConfig {
     /// How the network is told its input's noise level.
     fn conditioning(&self) -> Conditioning;
 
+    /// Whether the network reads the capture's values below black as
+    /// recorded (else clamped at 0).
+    fn keeps_below_black(&self) -> bool;
+
     /// The parameter name of the convolution that reads the input planes.
     /// Both networks put the conditioning's planes right after the four
     /// noisy ones, so that convolution's input channels 4..4 + extra are

@@ -57,6 +57,12 @@ pub struct SidUnetConfig {
     /// ([`crate::condition`]); absent in files written before it existed.
     #[config(default = "Conditioning::None")]
     pub conditioning: Conditioning,
+    /// Read the capture's values below black as recorded (negative after the
+    /// black is subtracted), instead of clamped at 0 (SID's convention, and
+    /// every file written before it existed): the clamp biases dark areas up
+    /// and hides half of the read noise (MODELS.md, issue 51).
+    #[config(default = false)]
+    pub keep_below_black: bool,
 }
 
 #[derive(Module, Debug)]
@@ -113,6 +119,8 @@ pub struct SidUnet<B: Backend> {
     residual: bool,
     #[module(skip)]
     conditioning: Conditioning,
+    #[module(skip)]
+    keep_below_black: bool,
 }
 
 impl SidUnetConfig {
@@ -156,6 +164,7 @@ impl SidUnetConfig {
             },
             residual: self.residual,
             conditioning: self.conditioning,
+            keep_below_black: self.keep_below_black,
         }
     }
 }
@@ -208,6 +217,12 @@ impl<B: Backend> SidUnet<B> {
         self.conditioning
     }
 
+    /// Whether the network reads values below black as recorded
+    /// ([`SidUnetConfig::keep_below_black`]).
+    pub fn keeps_below_black(&self) -> bool {
+        self.keep_below_black
+    }
+
     /// The layers [`SidUnet::forward`] runs on a `(batch, 4, h, w)` input, in
     /// order, at the sizes they run at (after the padding to a multiple of
     /// 16), read from this network's modules; see [`crate::layers`]. Max
@@ -239,6 +254,7 @@ impl SidUnetConfig {
         let cfg = SidUnetConfig::new()
             .with_residual(c.residual)
             .with_conditioning(c.conditioning)
+            .with_keep_below_black(c.keep_below_black)
             .with_in_channels(4 + c.conditioning.extra_channels());
         let w = c.width.unwrap_or(cfg.width);
         if w == 0 {
@@ -255,10 +271,11 @@ impl NetworkConfig for SidUnetConfig {
 
     fn describe(&self) -> String {
         format!(
-            "SPC denoiser (SID U-Net, width {}{}{})",
+            "SPC denoiser (SID U-Net, width {}{}{}{})",
             self.width,
             if self.residual { ", residual" } else { "" },
-            conditioning_words(self.conditioning)
+            conditioning_words(self.conditioning),
+            below_black_words(self.keep_below_black)
         )
     }
 
@@ -275,6 +292,10 @@ impl NetworkConfig for SidUnetConfig {
 
     fn conditioning(&self) -> Conditioning {
         self.conditioning
+    }
+
+    fn keeps_below_black(&self) -> bool {
+        self.keep_below_black
     }
 
     fn input_conv(&self) -> &'static str {
@@ -355,6 +376,16 @@ pub(super) fn conditioning_words(c: Conditioning) -> String {
     match c {
         Conditioning::None => String::new(),
         c => format!(", {} conditioned", c.name()),
+    }
+}
+
+/// ", values below black kept" for descriptions; nothing for a network that
+/// reads them clamped (descriptions of older files stay as they were).
+pub(super) fn below_black_words(keep: bool) -> &'static str {
+    if keep {
+        ", values below black kept"
+    } else {
+        ""
     }
 }
 

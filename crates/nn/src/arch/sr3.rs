@@ -84,6 +84,10 @@ pub struct Sr3Config {
     /// ([`crate::condition`]); absent in files written before it existed.
     #[config(default = "Conditioning::None")]
     pub conditioning: Conditioning,
+    /// Read T's values below black as recorded instead of clamped at 0
+    /// ([`super::SidUnetConfig::keep_below_black`]).
+    #[config(default = false)]
+    pub keep_below_black: bool,
 }
 
 impl Sr3Config {
@@ -229,6 +233,7 @@ impl Sr3Config {
             levels,
             res_blocks: self.res_blocks,
             conditioning: self.conditioning,
+            keep_below_black: self.keep_below_black,
             window: 0,
         })
     }
@@ -263,6 +268,7 @@ impl Sr3Config {
             .with_dropout(c.dropout.unwrap_or(d.dropout))
             .with_residual(c.residual)
             .with_conditioning(c.conditioning)
+            .with_keep_below_black(c.keep_below_black)
             .with_in_channels(8 + c.conditioning.extra_channels());
         cfg.validate()
             .map_err(|e| NnError::Config(format!("flow network: {e}")))?;
@@ -286,11 +292,12 @@ impl NetworkConfig for Sr3Config {
 
     fn describe(&self) -> String {
         format!(
-            "PGRF flow model (SR3, {} channels x {:?}{}{})",
+            "PGRF flow model (SR3, {} channels x {:?}{}{}{})",
             self.inner_channels,
             self.channel_mults,
             if self.residual { ", residual" } else { "" },
-            super::sid_unet::conditioning_words(self.conditioning)
+            super::sid_unet::conditioning_words(self.conditioning),
+            super::sid_unet::below_black_words(self.keep_below_black)
         )
     }
 
@@ -372,6 +379,10 @@ impl NetworkConfig for Sr3Config {
 
     fn conditioning(&self) -> Conditioning {
         self.conditioning
+    }
+
+    fn keeps_below_black(&self) -> bool {
+        self.keep_below_black
     }
 
     fn input_conv(&self) -> &'static str {
@@ -563,6 +574,8 @@ pub struct Sr3Unet<B: Backend> {
     res_blocks: usize,
     #[module(skip)]
     conditioning: Conditioning,
+    #[module(skip)]
+    keep_below_black: bool,
     /// Side of the windows (level 0, packed pixels) over which GroupNorm
     /// and attention take their statistics; 0: the whole input, as in
     /// training ([`Sr3Unet::with_window`]).
@@ -672,6 +685,11 @@ impl<B: Backend> Sr3Unet<B> {
     /// How the network is told its input's noise level.
     pub fn conditioning(&self) -> Conditioning {
         self.conditioning
+    }
+
+    /// Whether T's values below black are read as recorded.
+    pub fn keeps_below_black(&self) -> bool {
+        self.keep_below_black
     }
 
     /// The network with its GroupNorm and attention statistics taken over

@@ -39,7 +39,8 @@ pub(crate) enum Extras {
 /// One batch, NCHW f32 (`(n, 4, P, P)` flattened), ready to become tensors.
 #[derive(Clone, Debug)]
 pub(crate) struct Batch {
-    /// Network input: noisy capture amplified by its ratio, clamped to [0, 1].
+    /// Network input: noisy capture amplified by its ratio, clipped at 1
+    /// (values below black kept).
     pub(crate) noisy: Vec<f32>,
     /// Target: the clean crops X1 in [0, 1].
     pub(crate) clean: Vec<f32>,
@@ -76,7 +77,7 @@ fn rng_for(seed: u64, domain: u64, index: u64) -> Xoshiro256PlusPlus {
 /// One training item, `(4, P, P)` arrays flattened.
 #[derive(Clone, Debug)]
 pub(crate) struct Sample {
-    /// Amplified noisy crop, clamped to [0, 1].
+    /// Amplified noisy crop, clipped at 1 (values below black kept).
     pub(crate) noisy: Vec<f32>,
     /// Clean crop in [0, 1].
     pub(crate) clean: Vec<f32>,
@@ -136,7 +137,9 @@ pub(crate) fn make_sample(
     }
     let synth_seed = rng.random::<u64>();
     let pair = local.synthesize(clean.view(), crop.plane_rows, synth_seed)?;
-    let noisy: Vec<f32> = pair.noisy.iter().map(|v| v.clamp(0.0, 1.0)).collect();
+    // Clipped at white only: a network that reads values below black
+    // clamped gets them clamped by `Net` itself (`Net::as_read`).
+    let noisy: Vec<f32> = pair.noisy.iter().map(|v| v.min(1.0)).collect();
     let clean: Vec<f32> = pair.clean.iter().copied().collect();
     let (x0, t) = match s.extras {
         Extras::None => (Vec::new(), 0.0),
@@ -336,7 +339,8 @@ mod tests {
         assert_ne!(a[0].clean, a[1].clean);
         assert_eq!(a[0].noisy.len(), 2 * 4 * 32 * 32);
         assert_eq!(a[0].t.len(), 2);
-        assert!(a[0].noisy.iter().all(|v| (0.0..=1.0).contains(v)));
+        // Clipped at white only (values below black kept).
+        assert!(a[0].noisy.iter().all(|v| v.is_finite() && *v <= 1.0));
         // X0 ~ N(0, 1): 8192 draws, mean within 5 SE, variance within 10 %.
         let n = a[0].x0.len() as f64;
         let m = a[0].x0.iter().map(|&v| v as f64).sum::<f64>() / n;

@@ -42,6 +42,12 @@ pub trait Velocity<B: PgrfOps> {
     fn conditioning(&self) -> Conditioning {
         Conditioning::None
     }
+
+    /// Whether the field reads T's values below black as recorded (else
+    /// its callers clamp T at 0: `arch::input_as_read`).
+    fn keeps_below_black(&self) -> bool {
+        false
+    }
 }
 
 impl<B: PgrfOps> Velocity<B> for Sr3Unet<B> {
@@ -51,6 +57,10 @@ impl<B: PgrfOps> Velocity<B> for Sr3Unet<B> {
 
     fn conditioning(&self) -> Conditioning {
         Sr3Unet::conditioning(self)
+    }
+
+    fn keeps_below_black(&self) -> bool {
+        Sr3Unet::keeps_below_black(self)
     }
 }
 

@@ -1,7 +1,8 @@
 //! From a decoded dark frame to the network's input, the way the training
 //! pairs were made: packed, normalised by each plane's black and white
 //! levels, optionally minus the calibrated dark shading, multiplied by the
-//! exposure ratio and clamped to [0, 1].
+//! exposure ratio and clipped at 1; values below black stay negative (a
+//! network that reads them clamped clamps them itself: `Net::as_read`).
 
 use crate::error::{NnError, Result};
 use ndarray::{Array3, Axis};
@@ -9,7 +10,8 @@ use pgrf_raw::{pack_normalized, RawFrame};
 
 /// The network input of a dark capture: `(4, H/2, W/2)` packed R, G1, B, G2,
 /// each plane normalised by its black and white levels, multiplied by
-/// `ratio` (the exposure ratio, > 0) and clamped to [0, 1]. `dark_dn`:
+/// `ratio` (the exposure ratio, > 0) and clipped at 1, values below black
+/// kept (negative). `dark_dn`:
 /// per-pixel dark level above black in DN (packed like the frame), e.g. a
 /// calibration's fixed pattern plus dark current, subtracted before the
 /// ratio.
@@ -25,7 +27,7 @@ pub fn network_input(
         });
     }
     let mut x = normalised_minus_dark(frame, dark_dn)?;
-    x.par_mapv_inplace(|v| (v * ratio).clamp(0.0, 1.0));
+    x.par_mapv_inplace(|v| (v * ratio).min(1.0));
     Ok(x)
 }
 
@@ -200,11 +202,19 @@ mod tests {
     }
 
     #[test]
-    fn input_is_normalised_amplified_and_clamped() {
-        let f = frame();
+    fn input_is_normalised_amplified_and_clipped_at_white_only() {
+        let mut f = frame();
+        // Pixel (1, 1) (packed plane B at (0, 0)) recorded 7 DN below black.
+        f.mosaic[5] = 505;
         let x = network_input(&f, 100.0, None).unwrap();
         // Pixel (0, 0) = 512 -> 0; pixel (0, 2) = 532 -> 20/15871 * 100.
         assert_eq!(x[[0, 0, 0]], 0.0);
+        // Below black stays below, amplified like the rest: -7/15871 * 100.
+        assert!(
+            (x[[2, 0, 0]] + 700.0 / 15871.0).abs() < 1e-6,
+            "{}",
+            x[[2, 0, 0]]
+        );
         assert!((x[[0, 0, 1]] - 2000.0 / 15871.0).abs() < 1e-6);
         let big = network_input(&f, 1e4, None).unwrap();
         assert_eq!(big[[2, 1, 1]], 1.0);

@@ -19,6 +19,7 @@
 //! ([`Searched::table`], [`Searched::json`]).
 
 use super::sample::{first_stage, second_stage, two_stage, Velocity};
+use crate::arch::input_as_read;
 use crate::backend::{on_device, DeviceKind, OnBackend};
 use crate::condition::Conditioned;
 use crate::data::build::validation_source;
@@ -428,7 +429,8 @@ pub(crate) fn search_with<B: PgrfOps>(
             *acc.1 += s.ssim / count as f64;
             Ok(())
         };
-        let c = Conditioned::new(net.conditioning(), tensor(&pair.noisy)?, &[pair.level]);
+        let noisy = input_as_read(net.keeps_below_black(), tensor(&pair.noisy)?);
+        let c = Conditioned::new(net.conditioning(), noisy, &[pair.level]);
         let cond = c.input.clone();
         let x0 = tensor(&pair.x0)?;
         let xz = first_stage(net, cond.clone(), x0.clone());
@@ -490,6 +492,7 @@ fn average<B: PgrfOps>(
     for (i, pair) in list.iter().enumerate() {
         let clean = view(&pair.clean, patch)?;
         let noisy = to_tensor::<B>(&pair.noisy, patch, device)?;
+        let noisy = input_as_read(net.keeps_below_black(), noisy);
         let c = Conditioned::new(net.conditioning(), noisy, &[pair.level]);
         let cond = c.input.clone();
         let mut sum: Option<Tensor<B, 4>> = None;
@@ -612,7 +615,9 @@ mod tests {
         (net, val)
     }
 
-    /// Mean (PSNR, SSIM) over the pairs of `f(cond, x0)`.
+    /// Mean (PSNR, SSIM) over the pairs of `f(cond, x0)`, the condition as
+    /// the fixture's network reads it (clamped at 0: it does not keep values
+    /// below black).
     fn mean_scores(
         val: &ValSet,
         f: impl Fn(Tensor<Cpu, 4>, Tensor<Cpu, 4>) -> Tensor<Cpu, 4>,
@@ -623,7 +628,9 @@ mod tests {
         let mut acc = (0.0, 0.0);
         for pair in &val.pairs {
             let out = f(
-                to_tensor::<Cpu>(&pair.noisy, p, &dev).unwrap(),
+                to_tensor::<Cpu>(&pair.noisy, p, &dev)
+                    .unwrap()
+                    .clamp_min(0.0),
                 to_tensor::<Cpu>(&pair.x0, p, &dev).unwrap(),
             );
             let s = evaluate(
