@@ -83,6 +83,25 @@ fn identical_files_score_infinite_psnr_and_unit_ssim() {
     assert_eq!(v["ssim"], 1.0);
     assert_eq!(v["gain"], Value::Null);
     assert!(v["protocol"].as_str().unwrap().contains("x255"), "{v}");
+    // No error, no artefact: no speckle, and no seam asked for.
+    assert_eq!(v["speckles"]["count"], 0, "{v}");
+    assert_eq!(v["seam"], Value::Null);
+    let v = json(&pgrf(&[
+        "metrics",
+        s(&r),
+        s(&r),
+        "--seam-period",
+        "8",
+        "--json",
+    ]));
+    assert_eq!(
+        (
+            v["seam"]["worst"].as_f64(),
+            v["seam"]["median_step"].as_f64()
+        ),
+        (Some(0.0), Some(0.0)),
+        "{v}"
+    );
     let out = pgrf(&["metrics", s(&r), s(&r)]);
     assert!(out.status.success());
     let text = String::from_utf8_lossy(&out.stdout);

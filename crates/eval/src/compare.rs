@@ -2,7 +2,7 @@
 //! decoded, normalised by their own black and white levels, packed and
 //! measured under the ELD protocol, with the line that says how.
 
-use crate::{evaluate, MetricError, Protocol, Scores};
+use crate::{evaluate, seams, speckles, MetricError, Protocol, Scores, Seams, Speckles};
 use pgrf_raw::{decode_file, pack_normalized, Cfa, LevelOverrides, RawError, RawFrame};
 use std::path::{Path, PathBuf};
 
@@ -47,15 +47,22 @@ pub struct FileScores {
     pub scores: Scores,
     /// One line: packing, normalisation and the protocol's steps.
     pub protocol: String,
+    /// Speckles in the reference's flat regions ([`crate::artefacts`]).
+    pub speckles: Speckles,
+    /// The worst seam at the borders every `seam_period` packed pixels,
+    /// when a period was given.
+    pub seams: Option<Seams>,
 }
 
 /// Measure file `output` against file `reference` (same size and CFA
 /// phase), each normalised by its own levels, under ELD's protocol with or
-/// without its illuminance correction.
+/// without its illuminance correction; speckles always, and seams at the
+/// borders every `seam_period` packed pixels when given.
 pub fn compare_files(
     output: &Path,
     reference: &Path,
     illuminance_correct: bool,
+    seam_period: Option<usize>,
 ) -> Result<FileScores, CompareError> {
     let o = LevelOverrides::default();
     let (out, refr) = rayon::join(|| decode_file(output, &o), || decode_file(reference, &o));
@@ -72,8 +79,14 @@ pub fn compare_files(
     let pr = pack_normalized(&refr, true)?;
     let protocol = Protocol::eld(illuminance_correct);
     let scores = evaluate(po.view(), pr.view(), &protocol)?;
+    let speckles = speckles(po.view(), pr.view())?;
+    let seams = seam_period
+        .map(|p| seams(po.view(), pr.view(), p))
+        .transpose()?;
     Ok(FileScores {
         scores,
+        speckles,
+        seams,
         protocol: format!(
             "packed R,G1,B,G2, each file normalised by its own black/white levels, {}",
             protocol.describe()
@@ -101,10 +114,12 @@ mod tests {
         let (a, b) = (d.join("a.dng"), d.join("b.dng"));
         pgrf_raw::write_dng(&chart(128, 96), &a, &Default::default()).unwrap();
         pgrf_raw::write_dng(&chart(64, 64), &b, &Default::default()).unwrap();
-        let same = compare_files(&a, &a, false).unwrap();
+        let same = compare_files(&a, &a, false, Some(32)).unwrap();
         assert!(same.scores.psnr.is_infinite() && same.scores.ssim == 1.0);
+        assert_eq!(same.speckles.count, 0);
+        assert_eq!(same.seams.unwrap().worst, 0.0);
         assert!(same.protocol.starts_with("packed R,G1,B,G2, each file"));
-        let e = compare_files(&a, &b, true).unwrap_err();
+        let e = compare_files(&a, &b, true, None).unwrap_err();
         assert!(matches!(e, CompareError::Mismatch { .. }));
         assert!(e.to_string().ends_with(
             "(128x96 RGGB) with {} (64x64 RGGB): sizes or CFA phases differ"

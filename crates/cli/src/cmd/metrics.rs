@@ -23,7 +23,13 @@ pub struct MetricsArgs {
     /// (over unsaturated reference pixels) before measuring.
     #[arg(long)]
     pub illuminance_correct: bool,
-    /// Print one JSON line: {"psnr": .., "ssim": .., "gain": .., "protocol": ..}.
+    /// Also measure seams: the error's step across the borders every N packed pixels (the tile or
+    /// window grid a network ran on, e.g. 128 for the built-in PGRF's windows) over the median step
+    /// between neighbouring columns (rows); near 1 where there is no seam.
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(2..))]
+    pub seam_period: Option<u32>,
+    /// Print one JSON line: {"psnr": .., "ssim": .., "gain": .., "speckles": {"count", "flat_pixels",
+    /// "sigma"}, "seam": {"worst", "axis", "at", "median_step"} or null, "protocol": ..}.
     #[arg(long)]
     pub json: bool,
 }
@@ -35,15 +41,21 @@ struct Report {
     ssim: f64,
     /// The illuminance gain applied; null without --illuminance-correct.
     gain: Option<f64>,
+    speckles: pgrf_eval::Speckles,
+    /// Null without --seam-period.
+    seam: Option<pgrf_eval::Seams>,
     protocol: String,
 }
 
 pub fn run(a: &MetricsArgs) -> Result<()> {
-    let m = pgrf_eval::compare_files(&a.output, &a.reference, a.illuminance_correct)?;
+    let period = a.seam_period.map(|p| p as usize);
+    let m = pgrf_eval::compare_files(&a.output, &a.reference, a.illuminance_correct, period)?;
     let report = Report {
         psnr: m.scores.psnr.is_finite().then_some(m.scores.psnr),
         ssim: m.scores.ssim,
         gain: m.scores.gain,
+        speckles: m.speckles,
+        seam: m.seams,
         protocol: m.protocol,
     };
     if a.json {
@@ -57,6 +69,17 @@ pub fn run(a: &MetricsArgs) -> Result<()> {
     println!("SSIM     {:.6}", report.ssim);
     if let Some(g) = report.gain {
         println!("gain     {g:.6}");
+    }
+    let s = &report.speckles;
+    println!(
+        "speckles {} of {} flat-region pixels beyond 5 robust sd ({:.5} of white)",
+        s.count, s.flat_pixels, s.sigma
+    );
+    if let Some(s) = &report.seam {
+        println!(
+            "seams    worst {:.2}x the median step, at {} {} (median step {:.5})",
+            s.worst, s.axis, s.at, s.median_step
+        );
     }
     println!("protocol {}", report.protocol);
     Ok(())

@@ -8,6 +8,8 @@
 //!   low-texture blocks (not part of ELD's protocol; pgrf's synthetic one).
 //! - `black`: the black-level figures, the mean and median restoration error
 //!   where the reference is black (pgrf's synthetic protocol; issue 36).
+//! - [`artefacts`]: speckles in flat regions and seams at tile or window
+//!   borders, the artefacts of issue 51 item 6.
 //! - [`correct`]: ELD's single least-squares brightness gain over unsaturated pixels.
 //! - [`protocol`]: the evaluation protocol that strings them together (clamp,
 //!   optional correction, x255 as floats) and says in one line what it measured.
@@ -15,6 +17,7 @@
 //! All accumulation is f64 and every parallel reduction adds its partial sums
 //! in a fixed order, so a result does not depend on the number of threads.
 
+pub mod artefacts;
 mod black;
 pub mod cast;
 mod correct;
@@ -25,6 +28,7 @@ mod psnr;
 mod ssim;
 mod sum;
 
+pub use artefacts::{seams, speckles, Seams, Speckles};
 pub use black::{black_level, BlackLevel};
 pub use cast::{colour_cast, CameraColour, Cast};
 pub use correct::{illuminance_correct, illuminance_gain, IlluminanceGain};
