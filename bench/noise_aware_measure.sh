@@ -14,6 +14,9 @@
 # what `pgrf enhance` does with a camera it has no profile of (OUT/NAME-blind.csv; the CSVs hold
 # the told and the true K and read noise).
 #
+# With NO_BM3D=1 the BM3D column is left out (its outputs depend only on the seeded captures, so
+# a table measured once stands for new models: MODELS.md's), and the run costs only the models'.
+#
 # Usage: bench/noise_aware_measure.sh OUT MODEL...   (MODEL: builtin:spc, a weight file, ...)
 #   PHOTOS (default ~/.cache/pgrf/photos, tools/fetch_photos.sh's folder) must hold the
 #   held-out photos plasma-workspace-wallpapers__Kite.jpg and __Path.jpg.
@@ -27,7 +30,7 @@ photos="${PHOTOS:-$HOME/.cache/pgrf/photos}"
 data=../shared/data/raw
 cargo build --release --locked -p pgrf-cli >/dev/null
 pgrf=target/release/pgrf
-python3 -c "import bm3d" 2>/dev/null || python3 -m pip install --quiet bm3d==4.0.3 numpy
+[ -n "${NO_BM3D:-}" ] || python3 -c "import bm3d" 2>/dev/null || python3 -m pip install --quiet bm3d==4.0.3 numpy
 mkdir -p "$out/realset"
 cp -n "$data/canon550d_colorchart.dng" "$data/kodak_dc50.kdc" "$out/realset/"
 [ -e "$out/realset/dslr_crop.dng" ] || "$pgrf" convert "$data/dslr_crop_768x512_rggb14.raw" \
@@ -47,11 +50,15 @@ run() { # NAME PROFILE ISOS
         "$pgrf" "${common[@]}" --dump "$out/dump-$name.part" >/dev/null
         mv "$out/dump-$name.part" "$out/dump-$name"
     fi
-    python3 bench/vst_bm3d.py "$out/dump-$name" "$out/bm3d-$name" --resume --jobs "${JOBS:-1}"
-    "$pgrf" "${common[@]}" "${models[@]}" --outputs "vst-bm3d=$out/bm3d-$name" \
+    local bm3d=()
+    if [ -z "${NO_BM3D:-}" ]; then
+        python3 bench/vst_bm3d.py "$out/dump-$name" "$out/bm3d-$name" --resume --jobs "${JOBS:-1}"
+        bm3d=(--outputs "vst-bm3d=$out/bm3d-$name")
+    fi
+    "$pgrf" "${common[@]}" "${models[@]}" "${bm3d[@]}" \
         --csv "$out/$name.csv" --markdown "$out/$name.md"
     if [ -n "${BLIND:-}" ]; then
-        "$pgrf" "${common[@]}" "${models[@]}" --outputs "vst-bm3d=$out/bm3d-$name" --blind-noise \
+        "$pgrf" "${common[@]}" "${models[@]}" "${bm3d[@]}" --blind-noise \
             --csv "$out/$name-blind.csv" --markdown "$out/$name-blind.md"
     fi
 }
