@@ -25,6 +25,7 @@
 use super::error::MetricError;
 use super::Result;
 use ndarray::ArrayView3;
+use pgrf_core::stats::{median, median_and_robust_sd};
 
 /// A flat-region pixel further than this many robust standard deviations
 /// from the median error is a speckle.
@@ -88,34 +89,29 @@ fn flat(reference: ArrayView3<f32>) -> ndarray::Array3<bool> {
     })
 }
 
-fn median(mut v: Vec<f64>) -> f64 {
-    if v.is_empty() {
-        return 0.0;
-    }
-    v.sort_by(f64::total_cmp);
-    let n = v.len();
-    if n % 2 == 1 {
-        v[n / 2]
-    } else {
-        0.5 * (v[n / 2 - 1] + v[n / 2])
-    }
-}
-
 /// Each pixel's error minus the median error of its (up to) 8 same-plane
 /// neighbours: the pixel itself left out, so that for white error the two
-/// are independent and the difference keeps Gaussian tails.
+/// are independent and the difference keeps Gaussian tails. The neighbours
+/// are held on the stack: this runs once per pixel.
 fn local_deviation(e: &ndarray::Array3<f64>) -> ndarray::Array3<f64> {
     let (_, h, w) = e.dim();
     ndarray::Array3::from_shape_fn(e.dim(), |(p, y, x)| {
-        let mut n = Vec::with_capacity(8);
+        let mut n = [0.0f64; 8];
+        let mut k = 0;
         for j in y.saturating_sub(1)..=(y + 1).min(h - 1) {
             for i in x.saturating_sub(1)..=(x + 1).min(w - 1) {
                 if (j, i) != (y, x) {
-                    n.push(e[[p, j, i]]);
+                    n[k] = e[[p, j, i]];
+                    k += 1;
                 }
             }
         }
-        e[[p, y, x]] - median(n)
+        // A 1 x 1 plane has no neighbour: nothing to stand out from.
+        if k == 0 {
+            0.0
+        } else {
+            e[[p, y, x]] - median(&mut n[..k])
+        }
     })
 }
 
@@ -124,21 +120,32 @@ pub fn speckles(output: ArrayView3<f32>, reference: ArrayView3<f32>) -> Result<S
     check(output, reference)?;
     let e = local_deviation(&error(output, reference));
     let mask = flat(reference);
-    let flat_errors: Vec<f64> = e
+    let mut flat_errors: Vec<f64> = e
         .iter()
         .zip(mask.iter())
         .filter(|(_, &m)| m)
         .map(|(&v, _)| v)
         .collect();
-    let centre = median(flat_errors.clone());
-    let sigma = 1.4826 * median(flat_errors.iter().map(|v| (v - centre).abs()).collect());
-    let count = flat_errors
-        .iter()
-        .filter(|v| (*v - centre).abs() > SPECKLE_SIGMAS * sigma && sigma > 0.0)
-        .count();
+    let flat_pixels = flat_errors.len();
+    if flat_pixels == 0 {
+        return Ok(Speckles {
+            count: 0,
+            flat_pixels,
+            sigma: 0.0,
+        });
+    }
+    let (centre, sigma) = median_and_robust_sd(&mut flat_errors);
+    let count = if sigma > 0.0 {
+        flat_errors
+            .iter()
+            .filter(|v| (*v - centre).abs() > SPECKLE_SIGMAS * sigma)
+            .count()
+    } else {
+        0
+    };
     Ok(Speckles {
         count,
-        flat_pixels: flat_errors.len(),
+        flat_pixels,
         sigma,
     })
 }
@@ -161,7 +168,7 @@ fn steps(e: &ndarray::Array3<f64>, axis: usize) -> Vec<f64> {
                     d.push((a - b).abs());
                 }
             }
-            median(d)
+            median(&mut d)
         })
         .collect()
 }
@@ -186,7 +193,7 @@ pub fn seams(output: ArrayView3<f32>, reference: ArrayView3<f32>, period: usize)
     };
     for (axis, name) in [(2usize, "column"), (1, "row")] {
         let s = steps(&e, axis);
-        let med = median(s.clone());
+        let med = median(&mut s.clone());
         let mut k = period;
         while k < s.len() + 1 {
             let ratio = if med > 0.0 { s[k - 1] / med } else { 0.0 };

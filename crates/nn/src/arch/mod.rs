@@ -183,10 +183,10 @@ impl Architecture {
     /// without conditioning, which [`Architecture::widen_unconditioned`]
     /// extends.
     pub fn can_start_from(&self, file: &Architecture) -> bool {
-        let json = same_tensors_json;
-        json(file) == json(self)
+        let file = same_tensors_json(file);
+        file == same_tensors_json(self)
             || (self.conditioning().extra_channels() > 0
-                && json(file) == json(&self.unconditioned()))
+                && file == same_tensors_json(&self.unconditioned()))
     }
 
     /// Make the tensors of an unconditioned network (`file`, this network
@@ -203,8 +203,7 @@ impl Architecture {
         tensors: &mut BTreeMap<String, NamedTensor>,
     ) -> bool {
         let extra = self.conditioning().extra_channels();
-        let json = same_tensors_json;
-        if extra == 0 || json(file) != json(&self.unconditioned()) {
+        if extra == 0 || same_tensors_json(file) != same_tensors_json(&self.unconditioned()) {
             return false;
         }
         let Some(t) = tensors.get_mut(self.spec().input_conv()) else {
