@@ -216,23 +216,33 @@ class Sr3Unet(nn.Module):
 # --------------------------------------------------------------------------
 # Timing
 # --------------------------------------------------------------------------
-def timed(fn, warmup, iters):
+def sync(device):
+    if device.type == "cuda":
+        torch.cuda.synchronize(device)
+
+
+def timed(fn, warmup, iters, device):
     for _ in range(warmup):
         fn()
+    sync(device)
     ts = []
     for _ in range(iters):
         t0 = time.perf_counter()
         fn()
+        sync(device)
         ts.append((time.perf_counter() - t0) * 1e3)
     return statistics.median(ts), min(ts)
 
 
 def bench(name, args, gen):
     n, s = args.batch, args.size
+    dev = torch.device(args.device)
+    if dev.type == "cuda":
+        torch.cuda.reset_peak_memory_stats(dev)
     if name == "unet":
-        net = SidUnet(args.width)
-        noisy = torch.rand(n, 4, s, s, generator=gen)
-        clean = torch.rand(n, 4, s, s, generator=gen)
+        net = SidUnet(args.width).to(dev)
+        noisy = torch.rand(n, 4, s, s, generator=gen).to(dev)
+        clean = torch.rand(n, 4, s, s, generator=gen).to(dev)
 
         def fwd():
             with torch.no_grad():
@@ -241,11 +251,11 @@ def bench(name, args, gen):
         def loss_fn():
             return (net(noisy) - clean).abs().mean()
     else:
-        net = Sr3Unet()
-        cond = torch.rand(n, 4, s, s, generator=gen)
-        x1 = torch.rand(n, 4, s, s, generator=gen)
-        x0 = torch.randn(n, 4, s, s, generator=gen)
-        t = torch.rand(n, generator=gen)
+        net = Sr3Unet().to(dev)
+        cond = torch.rand(n, 4, s, s, generator=gen).to(dev)
+        x1 = torch.rand(n, 4, s, s, generator=gen).to(dev)
+        x0 = torch.randn(n, 4, s, s, generator=gen).to(dev)
+        t = torch.rand(n, generator=gen).to(dev)
         t4 = t.reshape(n, 1, 1, 1)
         xt_fixed = x1 * t4 + x0 * (1 - t4)
 
@@ -268,11 +278,13 @@ def bench(name, args, gen):
         opt.step()
         return loss.item()
 
-    fwd_ms, fwd_min = timed(fwd, args.warmup, args.iters)
-    step_ms, step_min = timed(step, args.warmup, args.iters)
+    fwd_ms, fwd_min = timed(fwd, args.warmup, args.iters, dev)
+    step_ms, step_min = timed(step, args.warmup, args.iters, dev)
     if args.profile:
         profile(name, fwd, step)
+    peak = torch.cuda.max_memory_allocated(dev) / 2**20 if dev.type == "cuda" else None
     return {
+        "peak_gpu_mib": peak,
         "params": params,
         "rust_params": RUST_PARAMS[name] if args.width == 32 or name == "sr3" else None,
         "forward_ms": fwd_ms,
@@ -306,6 +318,10 @@ def main():
                     help="torch.set_num_threads (default: torch's own choice)")
     ap.add_argument("--expect-params", type=str, default=None,
                     help='JSON {"unet": N, "sr3": N} from pgrf-bench train; checked')
+    ap.add_argument("--device", default="cpu",
+                    help="cpu or cuda (the GPU's default stream, synchronised around each timed call)")
+    ap.add_argument("--no-tf32", action="store_true",
+                    help="on CUDA, convolutions in strict f32 (cuDNN's TF32 off; PyTorch allows it by default)")
     ap.add_argument("--profile", action="store_true",
                     help="also print torch.profiler tables to stderr")
     args = ap.parse_args()
@@ -315,6 +331,9 @@ def main():
     if args.expect_params:
         for k, v in json.loads(args.expect_params).items():
             RUST_PARAMS[k] = v
+    if args.no_tf32:
+        torch.backends.cudnn.allow_tf32 = False
+        torch.backends.cuda.matmul.allow_tf32 = False
     torch.manual_seed(0)
     gen = torch.Generator().manual_seed(0)
     nets = ["unet", "sr3"] if args.net == "both" else [args.net]
@@ -322,6 +341,8 @@ def main():
         "torch": torch.__version__,
         "threads": torch.get_num_threads(),
         "mkldnn": torch.backends.mkldnn.is_available(),
+        "device": torch.cuda.get_device_name() if args.device.startswith("cuda") else "cpu",
+        "cudnn_tf32": torch.backends.cudnn.allow_tf32 if args.device.startswith("cuda") else None,
         "batch": args.batch,
         "size": args.size,
         "width": args.width,

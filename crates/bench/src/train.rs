@@ -20,10 +20,11 @@ use burn::tensor::backend::Backend;
 use burn::tensor::{Distribution, ElementConversion, Tensor};
 use clap::{Args, ValueEnum};
 use pgrf_core::stats::median;
-use pgrf_nn::backend::{Cpu, CpuTrain};
 use pgrf_nn::flow::{flow_loss, interpolate};
 use pgrf_nn::ops::adam::PgrfAdam;
+use pgrf_nn::ops::PgrfAutodiff;
 use pgrf_nn::step::{denoiser_loss, denoiser_step, flow_step};
+use pgrf_nn::DeviceKind;
 use pgrf_nn::{SidUnetConfig, Sr3Config};
 use serde::Serialize;
 use std::time::Instant;
@@ -81,6 +82,10 @@ pub struct TrainArgs {
     /// `pgrf` does: measures what `pgrf_core::mem::keep_freed_buffers` buys.
     #[arg(long)]
     pub default_malloc: bool,
+    /// cpu, or cuda (needs a build with `--features cuda`); the CPU-only
+    /// `--breakdown` is refused on CUDA.
+    #[arg(long, default_value = "cpu")]
+    pub device: pgrf_nn::DeviceKind,
     /// Print one JSON line instead of text.
     #[arg(long)]
     pub json: bool,
@@ -102,7 +107,7 @@ struct NetResult {
 #[derive(Serialize)]
 struct Report {
     burn: &'static str,
-    backend: &'static str,
+    backend: String,
     kernels: String,
     malloc: &'static str,
     threads: usize,
@@ -125,21 +130,19 @@ pub fn run(a: &TrainArgs) -> Result<()> {
         a.size > 0 && a.size.is_multiple_of(16),
         "--size must be a positive multiple of 16"
     );
+    ensure!(
+        !(a.breakdown && a.device == DeviceKind::Cuda),
+        "--breakdown times the CPU's layers; leave it out with --device cuda"
+    );
     pgrf_nn::ops::set_kernels(a.kernels);
-    let want = |n| a.net == NetChoice::Both || a.net == n;
-    let unet = if want(NetChoice::Unet) {
-        Some(bench_unet(a)?)
-    } else {
-        None
-    };
-    let sr3 = if want(NetChoice::Sr3) {
-        Some(bench_sr3(a)?)
-    } else {
-        None
-    };
+    let (unet, sr3) = pgrf_nn::backend::on_train_device(a.device, Bench(a))
+        .map_err(|e| anyhow::anyhow!("{e}"))?;
     let r = Report {
         burn: BURN_VERSION,
-        backend: "flex",
+        backend: match a.device {
+            DeviceKind::Cpu => "flex".into(),
+            DeviceKind::Cuda => pgrf_nn::backend::describe(a.device),
+        },
         kernels: a.kernels.to_string(),
         malloc: if a.default_malloc {
             "glibc defaults"
@@ -160,8 +163,8 @@ pub fn run(a: &TrainArgs) -> Result<()> {
         return Ok(());
     }
     println!(
-        "burn {} (Flex CPU, {} operations, malloc: {}), {} threads, batch {} x 4 x {} x {}, median of {} after {} warm-up",
-        r.burn, r.kernels, r.malloc, r.threads, r.batch, r.size, r.size, r.iters, r.warmup
+        "burn {} ({}, {} operations, malloc: {}), {} threads, batch {} x 4 x {} x {}, median of {} after {} warm-up",
+        r.burn, r.backend, r.kernels, r.malloc, r.threads, r.batch, r.size, r.size, r.iters, r.warmup
     );
     for (name, res) in [("SID U-Net", &r.unet), ("SR3", &r.sr3)] {
         let Some(res) = res else { continue };
@@ -174,6 +177,29 @@ pub fn run(a: &TrainArgs) -> Result<()> {
         }
     }
     Ok(())
+}
+
+/// Both networks' timings on one training backend (the CPU's or CUDA's).
+struct Bench<'a>(&'a TrainArgs);
+
+impl pgrf_nn::backend::OnTrainBackend for Bench<'_> {
+    type Output = (Option<NetResult>, Option<NetResult>);
+    fn run<B: PgrfAutodiff>(self, device: B::Device) -> pgrf_nn::Result<Self::Output> {
+        let a = self.0;
+        let want = |n| a.net == NetChoice::Both || a.net == n;
+        let err = |e: anyhow::Error| pgrf_nn::NnError::Invalid(format!("{e:#}"));
+        let unet = if want(NetChoice::Unet) {
+            Some(bench_unet::<B>(a, &device).map_err(err)?)
+        } else {
+            None
+        };
+        let sr3 = if want(NetChoice::Sr3) {
+            Some(bench_sr3::<B>(a, &device).map_err(err)?)
+        } else {
+            None
+        };
+        Ok((unet, sr3))
+    }
 }
 
 /// Median and minimum of `iters` timed calls after `warmup` untimed ones, ms
@@ -214,17 +240,18 @@ fn split_steps(a: &TrainArgs) -> usize {
 /// Milliseconds between consecutive instants: `[t1 - t0, t2 - t1, t3 - t2]`.
 /// The real training step of `net` split into forward (loss), backward and
 /// optimiser, timed `split_steps(a)` times after one untimed step.
-fn split_step<M, O>(
+fn split_step<B, M, O>(
     a: &TrainArgs,
+    device: &B::Device,
     mut net: M,
     optim: &mut O,
-    loss_of: impl Fn(&M) -> Tensor<CpuTrain, 1>,
+    loss_of: impl Fn(&M) -> Tensor<B, 1>,
 ) -> (M, Vec<[f64; 3]>)
 where
-    M: burn::module::AutodiffModule<CpuTrain>,
-    O: Optimizer<M, CpuTrain>,
+    B: PgrfAutodiff,
+    M: burn::module::AutodiffModule<B>,
+    O: Optimizer<M, B>,
 {
-    let device = Default::default();
     let mut split = Vec::new();
     for i in 0..split_steps(a) + 1 {
         let t0 = Instant::now();
@@ -232,10 +259,11 @@ where
         let _: f32 = loss.clone().into_scalar().elem();
         let t1 = Instant::now();
         let grads = loss.backward();
+        sync::<B>(device);
         let t2 = Instant::now();
         let grads = GradientsParams::from_grads(grads, &net);
         net = optim.step(LR, net, grads);
-        sync::<CpuTrain>(&device);
+        sync::<B>(device);
         if i > 0 {
             split.push(split_ms([t0, t1, t2, Instant::now()]));
         }
@@ -247,26 +275,24 @@ fn split_ms(t: [Instant; 4]) -> [f64; 3] {
     [0, 1, 2].map(|i| (t[i + 1] - t[i]).as_secs_f64() * 1e3)
 }
 
-fn bench_unet(a: &TrainArgs) -> Result<NetResult> {
-    let device = Default::default();
+fn bench_unet<B: PgrfAutodiff>(a: &TrainArgs, device: &B::Device) -> Result<NetResult> {
     let shape = [a.batch, 4, a.size, a.size];
     let cfg = SidUnetConfig::new().with_width(a.width);
 
-    let net = cfg.init::<Cpu>(&device);
+    let net = cfg.init::<B::InnerBackend>(device);
     let params = net.num_params();
-    let noisy = uniform::<Cpu>(shape, &device);
+    let noisy = uniform::<B::InnerBackend>(shape, device);
     let fwd_iters = if a.step_only { 0 } else { a.iters };
     let (forward_ms, forward_ms_min) = time_it(a.warmup.min(fwd_iters), fwd_iters, || {
         std::hint::black_box(net.forward(noisy.clone()));
-        sync::<Cpu>(&device);
+        sync::<B::InnerBackend>(device);
     });
     drop(net);
 
-    let mut net = Some(cfg.init::<CpuTrain>(&device));
-    let mut optim =
-        OptimizerAdaptor::<PgrfAdam, _, CpuTrain>::from(PgrfAdam::new(0.9, 0.999, 1e-8));
-    let noisy = uniform::<CpuTrain>(shape, &device);
-    let clean = uniform::<CpuTrain>(shape, &device);
+    let mut net = Some(cfg.init::<B>(device));
+    let mut optim = OptimizerAdaptor::<PgrfAdam, _, B>::from(PgrfAdam::new(0.9, 0.999, 1e-8));
+    let noisy = uniform::<B>(shape, device);
+    let clean = uniform::<B>(shape, device);
     let (train_step_ms, train_step_ms_min) = time_it(a.warmup, a.iters, || {
         let (n, loss) = denoiser_step(
             net.take().expect("net"),
@@ -277,10 +303,11 @@ fn bench_unet(a: &TrainArgs) -> Result<NetResult> {
         );
         std::hint::black_box(loss);
         net = Some(n);
+        sync::<B>(device);
     });
 
     let breakdown = if a.breakdown {
-        let (net, split) = split_step(a, net.take().expect("net"), &mut optim, |n| {
+        let (net, split) = split_step(a, device, net.take().expect("net"), &mut optim, |n| {
             denoiser_loss(n, noisy.clone(), clean.clone())
         });
         let layers = net.layers(a.size, a.size);
@@ -306,35 +333,34 @@ fn bench_unet(a: &TrainArgs) -> Result<NetResult> {
     })
 }
 
-fn bench_sr3(a: &TrainArgs) -> Result<NetResult> {
-    let device = Default::default();
+fn bench_sr3<B: PgrfAutodiff>(a: &TrainArgs, device: &B::Device) -> Result<NetResult> {
     let shape = [a.batch, 4, a.size, a.size];
     let cfg = Sr3Config::new();
     let t_host: Vec<f32> = (0..a.batch)
         .map(|i| (i as f32 + 0.5) / a.batch as f32)
         .collect();
 
-    let net = cfg.init::<Cpu>(&device).map_err(anyhow::Error::msg)?;
+    type I<B> = <B as burn::tensor::backend::AutodiffBackend>::InnerBackend;
+    let net = cfg.init::<I<B>>(device).map_err(anyhow::Error::msg)?;
     let params = net.num_params();
-    let cond = uniform::<Cpu>(shape, &device);
-    let x1 = uniform::<Cpu>(shape, &device);
-    let x0 = Tensor::<Cpu, 4>::random(shape, Distribution::Normal(0.0, 1.0), &device);
-    let t = Tensor::<Cpu, 1>::from_floats(t_host.as_slice(), &device);
+    let cond = uniform::<I<B>>(shape, device);
+    let x1 = uniform::<I<B>>(shape, device);
+    let x0 = Tensor::<I<B>, 4>::random(shape, Distribution::Normal(0.0, 1.0), device);
+    let t = Tensor::<I<B>, 1>::from_floats(t_host.as_slice(), device);
     let xt = interpolate(x1, x0, t.clone());
     let fwd_iters = if a.step_only { 0 } else { a.iters };
     let (forward_ms, forward_ms_min) = time_it(a.warmup.min(fwd_iters), fwd_iters, || {
         std::hint::black_box(net.forward(xt.clone(), cond.clone(), t.clone()));
-        sync::<Cpu>(&device);
+        sync::<I<B>>(device);
     });
     drop(net);
 
-    let mut net = Some(cfg.init::<CpuTrain>(&device).map_err(anyhow::Error::msg)?);
-    let mut optim =
-        OptimizerAdaptor::<PgrfAdam, _, CpuTrain>::from(PgrfAdam::new(0.9, 0.999, 1e-8));
-    let cond = uniform::<CpuTrain>(shape, &device);
-    let x1 = uniform::<CpuTrain>(shape, &device);
-    let x0 = Tensor::<CpuTrain, 4>::random(shape, Distribution::Normal(0.0, 1.0), &device);
-    let t = Tensor::<CpuTrain, 1>::from_floats(t_host.as_slice(), &device);
+    let mut net = Some(cfg.init::<B>(device).map_err(anyhow::Error::msg)?);
+    let mut optim = OptimizerAdaptor::<PgrfAdam, _, B>::from(PgrfAdam::new(0.9, 0.999, 1e-8));
+    let cond = uniform::<B>(shape, device);
+    let x1 = uniform::<B>(shape, device);
+    let x0 = Tensor::<B, 4>::random(shape, Distribution::Normal(0.0, 1.0), device);
+    let t = Tensor::<B, 1>::from_floats(t_host.as_slice(), device);
     let (train_step_ms, train_step_ms_min) = time_it(a.warmup, a.iters, || {
         let (n, loss) = flow_step(
             net.take().expect("net"),
@@ -347,10 +373,11 @@ fn bench_sr3(a: &TrainArgs) -> Result<NetResult> {
         );
         std::hint::black_box(loss);
         net = Some(n);
+        sync::<B>(device);
     });
 
     let breakdown = if a.breakdown {
-        let (net, split) = split_step(a, net.take().expect("net"), &mut optim, |n| {
+        let (net, split) = split_step(a, device, net.take().expect("net"), &mut optim, |n| {
             flow_loss(n, cond.clone(), x1.clone(), x0.clone(), t.clone())
         });
         let layers = net.layers(a.size, a.size);

@@ -15,10 +15,10 @@ pub type CpuTrain = Autodiff<Cpu>;
 
 /// Inference on an NVIDIA GPU (with kernel fusion and autotuning).
 #[cfg(feature = "cuda")]
-pub(crate) type Gpu = burn::backend::Cuda;
+pub type Gpu = burn::backend::Cuda;
 /// Training on an NVIDIA GPU.
 #[cfg(feature = "cuda")]
-pub(crate) type GpuTrain = Autodiff<Gpu>;
+pub type GpuTrain = Autodiff<Gpu>;
 
 /// Where a command runs its network: parsed from `--device cpu|cuda`
 /// (`gpu` also names CUDA), written as `cpu` / `cuda` in TOML and JSON.
@@ -54,12 +54,47 @@ impl std::fmt::Display for DeviceKind {
 }
 
 impl DeviceKind {
-    /// Refuses `cuda` in a build without the feature, with the fix in the message.
+    /// Refuses `cuda` in a build without the feature, or where the driver,
+    /// NVRTC or a device is missing, with the fix in the message.
     pub fn check_available(self) -> Result<(), String> {
         if self == Self::Cuda && !cfg!(feature = "cuda") {
             return Err("this pgrf was built without CUDA; rebuild with `cargo build --release --features cuda`".into());
         }
+        #[cfg(feature = "cuda")]
+        if self == Self::Cuda {
+            cuda_ready()?;
+        }
         Ok(())
+    }
+}
+
+/// Whether burn's CUDA runtime can start here: it loads the driver
+/// (libcuda) and the runtime compiler (libnvrtc) by name and panics when
+/// either is missing or no device answers, so pgrf asks first.
+#[cfg(feature = "cuda")]
+#[allow(unsafe_code)]
+fn cuda_ready() -> Result<(), String> {
+    // SAFETY: these only try to open the libraries by name (dlopen).
+    let (driver, nvrtc) = unsafe {
+        (
+            cudarc::driver::sys::is_culib_present(),
+            cudarc::nvrtc::sys::is_culib_present(),
+        )
+    };
+    if !driver {
+        return Err("no NVIDIA driver found (libcuda.so.1 could not be loaded): install the driver, or add the folder that holds libcuda.so.1 to LD_LIBRARY_PATH".into());
+    }
+    if !nvrtc {
+        return Err("CUDA's runtime compiler was not found (libnvrtc.so could not be loaded): install the CUDA toolkit, or add its lib64 folder to LD_LIBRARY_PATH".into());
+    }
+    cudarc::driver::result::init()
+        .map_err(|e| format!("the NVIDIA driver did not start: {e:?}"))?;
+    match cudarc::driver::result::device::get_count() {
+        Ok(n) if n > 0 => Ok(()),
+        Ok(_) => Err("the NVIDIA driver reports no CUDA device".into()),
+        Err(e) => Err(format!(
+            "the NVIDIA driver could not count its devices: {e:?}"
+        )),
     }
 }
 
@@ -75,7 +110,7 @@ pub trait OnBackend {
 }
 
 /// Work generic over a training (autodiff) backend, run by [`on_train_device`].
-pub(crate) trait OnTrainBackend {
+pub trait OnTrainBackend {
     /// What the work returns.
     type Output;
     /// Run on backend `B` and its default device.
@@ -95,10 +130,7 @@ pub fn on_device<J: OnBackend>(kind: DeviceKind, job: J) -> crate::Result<J::Out
 }
 
 /// Run `job` on the training backend of `kind` (refused without CUDA).
-pub(crate) fn on_train_device<J: OnTrainBackend>(
-    kind: DeviceKind,
-    job: J,
-) -> crate::Result<J::Output> {
+pub fn on_train_device<J: OnTrainBackend>(kind: DeviceKind, job: J) -> crate::Result<J::Output> {
     kind.check_available().map_err(crate::NnError::Device)?;
     match kind {
         DeviceKind::Cpu => job.run::<CpuTrain>(Default::default()),
