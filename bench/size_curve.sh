@@ -42,7 +42,7 @@ mkdir -p "$out"
 
 # Shared by every run: data, noise, crops and validation of models/next.
 common=(--data "$photos@3,procedural@1" --profile "sony-a7s2@3,nikon-d850@1"
-    --noise pgrf --iso-range 400,12800 --ratio-min 20 --ratio-max 300
+    --noise-model pgrf --iso-range 400,12800 --ratio-min 20 --ratio-max 300
     --batch 4 --workers 1 --clip-grad 1 --schedule eld --steps 200000
     --residual --val-every 200 --val-pairs 16 --log-every 50
     --checkpoint-every 100000)

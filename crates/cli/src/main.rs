@@ -6,6 +6,7 @@ mod cmd;
 mod input;
 mod io;
 mod progress;
+mod renamed;
 mod shipped;
 
 use clap::{Parser, Subcommand};
@@ -26,7 +27,7 @@ struct Cli {
 
 #[derive(Subcommand, Debug)]
 enum Command {
-    /// Show the whole product on built-in data: a procedural scene captured x100 and x200 too dark, restored by the built-in SPC and PGRF models, scored and pictured.
+    /// Show the whole product on built-in data: a Canon EOS 550D photo of a colour chart captured x100 and x200 too dark, restored by the built-in SPC and PGRF models, scored and pictured.
     Demo(cmd::demo::DemoArgs),
     /// Print what pgrf reads from a RAW file: size, CFA, levels, white balance, colour matrix, exposure.
     Info(cmd::info::InfoArgs),
@@ -70,6 +71,16 @@ fn main() -> ExitCode {
         Ok(cli) => cli,
         Err(e) => return usage_error(e),
     };
+    let command = match &cli.command {
+        Command::Synth(_) => "synth",
+        Command::Train(_) => "train",
+        Command::Eval(_) => "eval",
+        _ => "",
+    };
+    let args: Vec<String> = std::env::args().collect();
+    for note in renamed::notes(command, &args) {
+        eprintln!("pgrf: note: {note}");
+    }
     pgrf_nn::ops::set_kernels(cli.kernels);
     pgrf_noise::darktable::set_profiles_path(cli.darktable_profiles.clone());
     pgrf_core::mem::keep_freed_buffers();

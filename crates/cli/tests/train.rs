@@ -644,7 +644,7 @@ fn print_config_round_trips_through_a_config_file() {
         "17",
         "--channel-mults",
         "1,2",
-        "--noise",
+        "--noise-model",
         "eld",
         "--print-config",
     ]);
@@ -662,6 +662,25 @@ fn print_config_round_trips_through_a_config_file() {
     std::fs::write(&cfg, &text).unwrap();
     let again = pgrf(&["train", "flow", "--config", s(&cfg), "--print-config"]);
     assert_eq!(String::from_utf8(again.stdout).unwrap(), text);
+    // --noise, the old name of --noise-model, still works with a note.
+    let old = pgrf(&[
+        "train",
+        "flow",
+        "--steps",
+        "17",
+        "--channel-mults",
+        "1,2",
+        "--noise",
+        "eld",
+        "--print-config",
+    ]);
+    assert_eq!(String::from_utf8(old.stdout).unwrap(), text);
+    let err = String::from_utf8_lossy(&old.stderr);
+    assert_eq!(
+        err.lines().filter(|l| l.contains("note:")).collect::<Vec<_>>(),
+        ["pgrf: note: `train --noise` is now `train --noise-model`; the old spelling goes in the next release"],
+        "{err}"
+    );
     let _ = std::fs::remove_dir_all(&d);
 }
 

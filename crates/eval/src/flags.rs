@@ -23,7 +23,7 @@ the file names, capped at 300, rows x100/x250/x300; scenes 10034, 10045, 10172 l
 images; no correction.\n\
   synthetic  --root FILE|FOLDER... of clean RAW files (or JPEG/PNG/TIFF photos: downscaled 2x and unprocessed \
 into the Sony A7S2's camera space); each is made dark at every --iso x --ratio condition (default ISO \
-800,1600,3200,6400 x ratio 50,100,200,300) with the --profile's noise (--noise pgrf|eld|pg) at that ISO: \
+800,1600,3200,6400 x ratio 50,100,200,300) with the --profile's noise (--noise-model pgrf|eld|pg) at that ISO: \
 reference / ratio -> noise model -> x ratio, minus the capture's dark-level offset (the profile's black-level \
 error at the ISO: the camera counts as calibrated, as with `pgrf enhance --calib`), clamped [0,1]; each file's own black/white levels; full images; no \
 correction (the exposure is known). Capture seed = mix64(mix64(mix64(SEED ^ fnv1a64(file name)) ^ ISO) ^ f32 bits \
@@ -129,8 +129,8 @@ pub struct EvalFlags {
     /// Synthetic: camera noise profile: a built-in name, darktable:"MAKER MODEL", dng:FILE.dng or a JSON file (default sony-a7s2).
     #[arg(long)]
     pub profile: Option<String>,
-    /// Synthetic: noise model, pgrf, eld or pg (default pgrf).
-    #[arg(long)]
+    /// Synthetic: noise model, pgrf, eld or pg (default pgrf; `--noise`, its old name, still works).
+    #[arg(long = "noise-model", alias = "noise")]
     pub noise: Option<ModelKind>,
     /// Synthetic: hand the methods each capture as an uncalibrated camera writes it, its dark-level offset (the profile's black-level error) kept, instead of subtracted as a calibration would.
     #[arg(long)]
@@ -206,7 +206,7 @@ impl EvalFlags {
             .collect()
     }
 
-    /// The synthetic captures from --iso, --ratio, --profile, --noise and
+    /// The synthetic captures from --iso, --ratio, --profile, --noise-model and
     /// --seed; those flags are refused with the other protocols.
     fn synthetic_spec(&self) -> Result<SyntheticSpec, EvalError> {
         if self.protocol != DatasetKind::Synthetic {
@@ -214,7 +214,7 @@ impl EvalFlags {
                 ("--iso", self.iso.is_some()),
                 ("--ratio", self.ratio.is_some()),
                 ("--profile", self.profile.is_some()),
-                ("--noise", self.noise.is_some()),
+                ("--noise-model", self.noise.is_some()),
                 ("--uncalibrated", self.uncalibrated),
                 ("--blind-noise", self.blind_noise),
             ] {

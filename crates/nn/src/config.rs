@@ -88,8 +88,8 @@ pub struct TrainConfig {
     /// Per-pixel calibration file (from `pgrf calibrate`) for the pgrf noise model.
     #[cfg_attr(feature = "clap", arg(long))]
     pub calib: Option<PathBuf>,
-    /// Noise model of the synthetic pairs: pg, eld or pgrf [default: pgrf].
-    #[cfg_attr(feature = "clap", arg(long, default_value_t = d().noise, hide_default_value = true))]
+    /// Noise model of the synthetic pairs: pg, eld or pgrf [default: pgrf] (`--noise`, its old name, still works).
+    #[cfg_attr(feature = "clap", arg(long = "noise-model", alias = "noise", default_value_t = d().noise, hide_default_value = true))]
     pub noise: ModelKind,
     /// Fixed ISO (default: parameters drawn from the profile's ELD distribution).
     #[cfg_attr(feature = "clap", arg(long))]

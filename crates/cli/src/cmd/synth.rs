@@ -32,9 +32,9 @@ pub struct SynthArgs {
     /// parameters are drawn from the profile's ELD distribution.
     #[arg(long)]
     pub iso: Option<u32>,
-    /// Noise model: pg (Poisson-Gaussian), eld, pgrf.
-    #[arg(long, default_value = "pgrf")]
-    pub model: ModelKind,
+    /// Noise model: pg (Poisson-Gaussian), eld, pgrf (`--model`, its old name, still works).
+    #[arg(long, alias = "model", default_value = "pgrf")]
+    pub noise_model: ModelKind,
     /// PGRF components: any of P (photon shot), G (read), H (row), Q (quantisation), F (fixed pattern), A (dark current).
     #[arg(long, default_value = "P,G,H,Q,F,A")]
     pub components: String,
@@ -107,8 +107,8 @@ pub fn run(a: &SynthArgs) -> Result<()> {
         "wrote {} ({}): model {:?}{}, ratio {:.1}, exposure {:.4} s, {}, K {:.4} DN/e-, read {:.3} DN, row {:.3} DN, seed {}",
         a.output.display(),
         if a.brightened { "brightened by the ratio" } else { "dark capture" },
-        a.model,
-        if a.model == ModelKind::Pgrf { format!(" [{}{}]", made.info.components, if a.global { ", noD" } else { "" }) } else { String::new() },
+        a.noise_model,
+        if a.noise_model == ModelKind::Pgrf { format!(" [{}{}]", made.info.components, if a.global { ", noD" } else { "" }) } else { String::new() },
         made.info.ratio,
         made.info.exposure_s,
         made.info.iso.map(|i| format!("ISO {i}")).unwrap_or_else(|| "parameters drawn from the ELD distribution".into()),
@@ -139,7 +139,7 @@ fn config(a: &SynthArgs) -> SynthConfig {
         profile: a.profile.clone(),
         ratio: a.ratio,
         iso: a.iso,
-        model: a.model,
+        model: a.noise_model,
         components: a.components.clone(),
         global: a.global,
         gaussian_read: a.gaussian_read,

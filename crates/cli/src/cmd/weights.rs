@@ -59,7 +59,7 @@ pub fn run_import(a: &ImportArgs) -> Result<()> {
     match &from.convention {
         Some(c) => eprintln!("convention ({}): {c}", from.repository.as_deref().unwrap_or("")),
         None => eprintln!(
-            "no --from: the file records no input convention (README, \"Published models\", lists each repository's)"
+            "no --from: the file records no input convention (docs/guide.md, \"Published models\", lists each repository's)"
         ),
     }
     Ok(())

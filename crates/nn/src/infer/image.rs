@@ -30,7 +30,7 @@ pub const DEFAULT_OVERLAP: usize = 64;
 
 /// The smallest tile a user may ask for when the frame does not fit in one.
 /// Measured on the demo photo's 1024 x 768 window at x100 with the shipped
-/// SID U-Net and overlap 64 (README, "Tiling"): tiles of 128 differ from one
+/// SID U-Net and overlap 64 (docs/guide.md, "Tiling"): tiles of 128 differ from one
 /// whole-frame pass by 49.5 dB PSNR, of 144 by 51.4, of 192 by 53.9; the
 /// convolutional network's tiles converge as they grow, so 144 is where
 /// the result stops depending on the tiling (> 50 dB). A flow network
@@ -59,12 +59,12 @@ fn bad(flag: &'static str, message: String) -> NnError {
 pub fn check_tiling_args(tile: Option<usize>, overlap: Option<usize>) -> Result<()> {
     if let Some(t) = tile.filter(|&t| t < MIN_TILE) {
         return Err(bad("--tile", format!(
-            "--tile {t} is below {MIN_TILE}: smaller tiles make the result depend on the tiling (its PSNR against one whole-frame pass falls below 50 dB; README, \"Tiling\"); give --tile {MIN_TILE} or more, or leave it out"
+            "--tile {t} is below {MIN_TILE}: smaller tiles make the result depend on the tiling (its PSNR against one whole-frame pass falls below 50 dB; docs/guide.md, \"Tiling\"); give --tile {MIN_TILE} or more, or leave it out"
         )));
     }
     if let Some(o) = overlap.filter(|&o| o < MIN_OVERLAP) {
         return Err(bad("--overlap", format!(
-            "--overlap {o} is below {MIN_OVERLAP}: with less the tiles' borders show in the result (README, \"Tiling\"); give --overlap {MIN_OVERLAP} or more, or leave it out"
+            "--overlap {o} is below {MIN_OVERLAP}: with less the tiles' borders show in the result (docs/guide.md, \"Tiling\"); give --overlap {MIN_OVERLAP} or more, or leave it out"
         )));
     }
     Ok(())
@@ -76,7 +76,7 @@ pub fn check_tiling_args(tile: Option<usize>, overlap: Option<usize>) -> Result<
 /// discards at an inner border is a quarter of the overlap, and below 16
 /// discarded pixels the networks' border effects reach the blend (tiles of
 /// 128 with overlap 32 differed from one whole-frame pass by 49 dB PSNR,
-/// with overlap 64 by more than 50: README, "Tiling").
+/// with overlap 64 by more than 50: docs/guide.md, "Tiling").
 pub(crate) fn overlap_for(tile: usize) -> usize {
     DEFAULT_OVERLAP.min(tile / 2)
 }
