@@ -95,14 +95,18 @@ impl CalibrationRun {
     /// vocabulary (system gain, temporal dark noise, DSNU, PRNU, dark
     /// current, ...), formatted for the report's summary table.
     pub fn summary(&self) -> Vec<(String, String, String)> {
+        let mut summary = self.gain_rows();
+        summary.extend(self.noise_rows());
+        summary.extend(self.response_rows());
+        summary.extend(self.dark_rows());
+        summary.extend(self.record_rows());
+        summary
+    }
+
+    /// The system gain, by each of the ways it was measured.
+    fn gain_rows(&self) -> Vec<Row> {
         let m = &self.calibration.meta;
-        let row = |q: &str, v: String, u: &str| (q.to_string(), v, u.to_string());
-        // A DN figure with its electrons beside it, "-" when not measured.
-        let dn_e = |v: Option<f64>| {
-            v.map(|d| format!("{d:.3} ({:.3} e-)", d / m.k))
-                .unwrap_or_else(|| "-".into())
-        };
-        let mut summary = vec![
+        vec![
             row(
                 "System gain K",
                 match m.k_sigma {
@@ -130,6 +134,18 @@ impl CalibrationRun {
                 ),
                 "DN/e-",
             ),
+        ]
+    }
+
+    /// Temporal and spatial noise, in DN with electrons beside them.
+    fn noise_rows(&self) -> Vec<Row> {
+        let m = &self.calibration.meta;
+        // A DN figure with its electrons beside it, "-" when not measured.
+        let dn_e = |v: Option<f64>| {
+            v.map(|d| format!("{d:.3} ({:.3} e-)", d / m.k))
+                .unwrap_or_else(|| "-".into())
+        };
+        vec![
             row(
                 "Temporal dark noise sigma_y.dark (EMVA 1288: pair differences of the bias frames; row noise and quantisation included)",
                 dn_e(m.dark_noise_sigma),
@@ -175,7 +191,13 @@ impl CalibrationRun {
                     .unwrap_or_else(|| "-".into()),
                 "%",
             ),
-        ];
+        ]
+    }
+
+    /// Saturation, linearity, SNR by level and the DNG noise profile.
+    fn response_rows(&self) -> Vec<Row> {
+        let m = &self.calibration.meta;
+        let mut summary = Vec::new();
         summary.push(row(
             "Saturation capacity (EMVA 1288: the level of largest variance)",
             match m.saturation_capacity_e {
@@ -211,6 +233,13 @@ impl CalibrationRun {
             format!("S {s:.4e}, O {o:.4e}"),
             "",
         ));
+        summary
+    }
+
+    /// Dark current and its fit, or why it was not measured.
+    fn dark_rows(&self) -> Vec<Row> {
+        let m = &self.calibration.meta;
+        let mut summary = Vec::new();
         match (m.dark_rate_mean, m.dark_r2_sqrt, m.dark_r2_linear) {
             (Some(rate), Some(rs), Some(rl)) => {
                 let unit = m.dark_rate_unit().unwrap_or_default();
@@ -246,6 +275,13 @@ impl CalibrationRun {
                 "",
             )),
         }
+        summary
+    }
+
+    /// Temperature, warnings, rejected frames, defects, normality and frame counts.
+    fn record_rows(&self) -> Vec<Row> {
+        let m = &self.calibration.meta;
+        let mut summary = Vec::new();
         summary.push(row(
             "Capture temperature (median of the frames)",
             m.temperature_c
@@ -294,6 +330,13 @@ impl CalibrationRun {
         ));
         summary
     }
+}
+
+/// One summary row: quantity, value, unit.
+type Row = (String, String, String);
+
+fn row(q: &str, v: String, u: &str) -> Row {
+    (q.to_string(), v, u.to_string())
 }
 
 /// How far apart (degrees C) the frames of one calibration may have been
