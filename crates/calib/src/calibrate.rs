@@ -436,8 +436,122 @@ fn responding_gain(
 /// the per-pixel maps (packed `(4, H/2, W/2)`, R, G1, B, G2) and the record.
 /// Reports frames read to `progress`.
 pub fn calibrate(input: &CalibrateInput, progress: &dyn Progress) -> Result<CalibrationRun> {
-    check_temperature_tolerance(input.temperature_tolerance)?;
+    let tolerance = tolerance_of(input)?;
     let (mut notes, mut rejected) = (Vec::new(), Vec::new());
+    let (bias_stack, key) = read_bias(input, progress, &mut notes, &mut rejected)?;
+    let bias = estimate_bias(&bias_stack, key.black)?;
+    let opts = |kind, per_exposure, pairs| {
+        after_bias(kind, &bias_stack.key, per_exposure, pairs, progress)
+    };
+    let flat_stack = read_checked(
+        &input.flat,
+        &opts("flat", 2, true),
+        input.reject,
+        &mut notes,
+        &mut rejected,
+    )?;
+    check_temperatures(
+        &[&bias_stack.temperatures, &flat_stack.temperatures],
+        tolerance,
+    )?;
+    let gain = estimate_gain(&flat_stack, &bias)?;
+    let mut masters = Vec::new();
+    if input.masters {
+        masters = [
+            masters_of(&bias_stack, "bias"),
+            masters_of(&flat_stack, "flat"),
+        ]
+        .concat();
+    }
+    let (dark, dark_frames, dark_temps) = if input.dark.is_empty() {
+        (None, Vec::new(), Vec::new())
+    } else {
+        let dark_stack = read_checked(
+            &input.dark,
+            &opts("dark", 1, false),
+            input.reject,
+            &mut notes,
+            &mut rejected,
+        )?;
+        if input.masters {
+            masters.extend(masters_of(&dark_stack, "dark"));
+        }
+        let dark = estimate_dark(&dark_stack, &bias, gain.k)?;
+        let frames = dark_stack.groups.iter().map(|g| g.files.len()).collect();
+        (Some(dark), frames, dark_stack.temperatures)
+    };
+    let temperature_c = check_temperatures(
+        &[
+            &bias_stack.temperatures,
+            &flat_stack.temperatures,
+            &dark_temps,
+        ],
+        tolerance,
+    )?;
+    let (defect_map, defect_columns) =
+        defects(&bias, Some(&gain), dark.as_ref(), key.cfa.offsets());
+    let maps = maps_of(&bias, &gain, dark.as_ref(), defect_map);
+    let meta = meta_of(&Measured {
+        key: &key,
+        bias: &bias,
+        bias_exposure_s: bias_stack.groups[0].exposure_s,
+        gain: &gain,
+        dark: dark.as_ref(),
+        dark_frames,
+        temperature_c,
+        notes,
+        rejected,
+        defects: &maps.defects,
+        defect_columns,
+    });
+    Ok(CalibrationRun {
+        calibration: Calibration { meta, maps },
+        bias,
+        gain,
+        dark,
+        masters,
+        key,
+    })
+}
+
+/// The temperature tolerance asked for (checked), else the default.
+fn tolerance_of(input: &CalibrateInput) -> Result<f32> {
+    check_temperature_tolerance(input.temperature_tolerance)?;
+    Ok(input
+        .temperature_tolerance
+        .unwrap_or(TEMPERATURE_TOLERANCE_C))
+}
+
+/// How the flat and dark stacks are read: several exposures, each frame
+/// matching the bias frames' key.
+fn after_bias<'a>(
+    kind: &'a str,
+    expect: &'a FrameKey,
+    per_exposure: usize,
+    pairs: bool,
+    progress: &'a dyn Progress,
+) -> ReadOptions<'a> {
+    ReadOptions {
+        kind,
+        expect: Some(expect),
+        single_exposure: false,
+        need_exposure: true,
+        per_exposure,
+        tap_pixels: 0,
+        pairs,
+        progress,
+    }
+}
+
+/// The bias stack, read with the checks every frame must pass, and its
+/// frames' shared key (the ISO asked for where the files record none; a
+/// recorded ISO other than the one asked for is refused).
+fn read_bias(
+    input: &CalibrateInput,
+    progress: &dyn Progress,
+    notes: &mut Vec<String>,
+    rejected: &mut Vec<String>,
+) -> Result<(Stack, FrameKey)> {
     let bias_stack = read_checked(
         &input.bias,
         &ReadOptions {
@@ -451,8 +565,8 @@ pub fn calibrate(input: &CalibrateInput, progress: &dyn Progress) -> Result<Cali
             progress,
         },
         input.reject,
-        &mut notes,
-        &mut rejected,
+        notes,
+        rejected,
     )?;
     let mut key = bias_stack.key.clone();
     if let (Some(want), Some(got)) = (input.iso, key.iso) {
@@ -467,82 +581,59 @@ pub fn calibrate(input: &CalibrateInput, progress: &dyn Progress) -> Result<Cali
     if key.iso.is_none() {
         key.iso = input.iso;
     }
-    let bias = estimate_bias(&bias_stack, key.black)?;
-    let opts = |kind, per_exposure, pairs| ReadOptions {
-        kind,
-        expect: Some(&bias_stack.key),
-        single_exposure: false,
-        need_exposure: true,
-        per_exposure,
-        tap_pixels: 0,
-        pairs,
-        progress,
-    };
-    let flat_stack = read_checked(
-        &input.flat,
-        &opts("flat", 2, true),
-        input.reject,
-        &mut notes,
-        &mut rejected,
-    )?;
-    let tolerance = input
-        .temperature_tolerance
-        .unwrap_or(TEMPERATURE_TOLERANCE_C);
-    check_temperatures(
-        &[&bias_stack.temperatures, &flat_stack.temperatures],
-        tolerance,
-    )?;
-    let gain = estimate_gain(&flat_stack, &bias)?;
-    let mut masters = Vec::new();
-    if input.masters {
-        masters.extend(masters_of(&bias_stack, "bias"));
-        masters.extend(masters_of(&flat_stack, "flat"));
-    }
-    let mut dark_temps = Vec::new();
-    let (dark, dark_frames) = if input.dark.is_empty() {
-        (None, Vec::new())
-    } else {
-        let dark_stack = read_checked(
-            &input.dark,
-            &opts("dark", 1, false),
-            input.reject,
-            &mut notes,
-            &mut rejected,
-        )?;
-        let frames = dark_stack.groups.iter().map(|g| g.files.len()).collect();
-        dark_temps = dark_stack.temperatures.clone();
-        if input.masters {
-            masters.extend(masters_of(&dark_stack, "dark"));
-        }
-        (Some(estimate_dark(&dark_stack, &bias, gain.k)?), frames)
-    };
-    let temperature_c = check_temperatures(
-        &[
-            &bias_stack.temperatures,
-            &flat_stack.temperatures,
-            &dark_temps,
-        ],
-        tolerance,
-    )?;
-    let (defect_map, defect_columns) =
-        defects(&bias, Some(&gain), dark.as_ref(), key.cfa.offsets());
+    Ok((bias_stack, key))
+}
 
+/// The per-pixel maps of the calibration file.
+fn maps_of(
+    bias: &BiasEstimate,
+    gain: &GainEstimate,
+    dark: Option<&DarkEstimate>,
+    defect_map: ndarray::Array3<f32>,
+) -> CalibMaps {
     let zeros = || ndarray::Array3::zeros(bias.fixed_pattern.raw_dim());
-    let maps = CalibMaps {
+    CalibMaps {
         fixed_pattern: bias.fixed_pattern.clone(),
         sigma_read: bias.sigma_read.clone(),
-        dark_rate: dark.as_ref().map_or_else(zeros, |d| d.rate.clone()),
-        defects: defect_map.clone(),
+        dark_rate: dark.map_or_else(zeros, |d| d.rate.clone()),
         gain: Some(responding_gain(&gain.k_map, &defect_map)),
+        defects: defect_map,
         response: Some(gain.response.clone()),
-        r2_sqrt: dark.as_ref().map(|d| d.r2_sqrt.clone()),
-        r2_linear: dark.as_ref().map(|d| d.r2_linear.clone()),
-        dark_offset: dark.as_ref().and_then(|d| d.offset_dn.clone()),
-    };
-    let count = |code: f32| defect_map.iter().filter(|&&d| d == code).count();
+        r2_sqrt: dark.map(|d| d.r2_sqrt.clone()),
+        r2_linear: dark.map(|d| d.r2_linear.clone()),
+        dark_offset: dark.and_then(|d| d.offset_dn.clone()),
+    }
+}
+
+/// What the calibration measured, for its record ([`meta_of`]).
+struct Measured<'a> {
+    key: &'a FrameKey,
+    bias: &'a BiasEstimate,
+    bias_exposure_s: f64,
+    gain: &'a GainEstimate,
+    dark: Option<&'a DarkEstimate>,
+    dark_frames: Vec<usize>,
+    temperature_c: Option<f32>,
+    notes: Vec<String>,
+    rejected: Vec<String>,
+    defects: &'a ndarray::Array3<f32>,
+    defect_columns: usize,
+}
+
+/// The calibration file's record (camera, levels, frames, the figures of
+/// EMVA 1288 and the dark law, defect counts, units).
+fn meta_of(r: &Measured) -> CalibMeta {
+    let Measured {
+        key,
+        bias,
+        gain,
+        dark,
+        ..
+    } = *r;
+    let count = |code: f32| r.defects.iter().filter(|&&d| d == code).count();
     let mut pp = bias.ppcc_pixels.clone();
     pp.sort_by(|a, b| a.total_cmp(b));
-    let meta = CalibMeta {
+    CalibMeta {
         kind: "pgrf-calibration".into(),
         schema: 1,
         pgrf_version: env!("CARGO_PKG_VERSION").into(),
@@ -555,9 +646,9 @@ pub fn calibrate(input: &CalibrateInput, progress: &dyn Progress) -> Result<Cali
         black: key.black,
         white: key.white,
         bias_frames: bias.frames,
-        bias_exposure_s: bias_stack.groups[0].exposure_s,
-        dark_exposures_s: dark.as_ref().map(|d| d.exposures.clone()).unwrap_or_default(),
-        dark_frames,
+        bias_exposure_s: r.bias_exposure_s,
+        dark_exposures_s: dark.map(|d| d.exposures.clone()).unwrap_or_default(),
+        dark_frames: r.dark_frames.clone(),
         flat_exposures_s: gain.levels.iter().map(|l| l.exposure_s).collect(),
         flat_frames: gain.levels.iter().map(|l| l.frames).collect(),
         k: gain.k,
@@ -573,36 +664,28 @@ pub fn calibrate(input: &CalibrateInput, progress: &dyn Progress) -> Result<Cali
         k_sigma: Some(gain.k_sigma).filter(|v| v.is_finite()),
         saturation_capacity_e: gain.saturation_dn.map(|d| d / gain.k),
         linearity_error: gain.linearity_error,
-        dark_law: dark.as_ref().map(|d| d.law),
-        dark_r2_sqrt: dark.as_ref().map(|d| d.r2_sqrt_global),
-        dark_r2_linear: dark.as_ref().map(|d| d.r2_linear_global),
-        dark_rate_mean: dark.as_ref().map(|d| d.rate_mean),
+        dark_law: dark.map(|d| d.law),
+        dark_r2_sqrt: dark.map(|d| d.r2_sqrt_global),
+        dark_r2_linear: dark.map(|d| d.r2_linear_global),
+        dark_rate_mean: dark.map(|d| d.rate_mean),
         dark_rate_unit: dark
             .as_ref()
             .map(|d| crate::calibration::dark_rate_unit(d.law).to_string()),
-        dark_offset: dark.as_ref().is_some_and(|d| d.offset),
+        dark_offset: dark.is_some_and(|d| d.offset),
         dark_offset_mean: dark
             .as_ref()
             .filter(|d| d.offset)
             .map(|d| d.offset_mean_dn),
-        temperature_c,
-        warnings: gain.warnings.iter().cloned().chain(notes).collect(),
-        rejected_frames: rejected,
+        temperature_c: r.temperature_c,
+        warnings: gain.warnings.iter().cloned().chain(r.notes.iter().cloned()).collect(),
+        rejected_frames: r.rejected.clone(),
         ppcc_pixel_median: pp.get(pp.len() / 2).copied(),
         ppcc_pooled: bias.ppcc_pooled.is_finite().then_some(bias.ppcc_pooled),
         hot_pixels: count(defect::HOT),
         dead_pixels: count(defect::DEAD),
         cold_pixels: count(defect::COLD),
-        defect_columns,
+        defect_columns: r.defect_columns,
         row_order: Some(key.row_order),
         units: format!("{}; fixed_pattern (bias mean - black), sigma_read, response: DN; gain: DN per electron (eq. 3.15 per pixel; 0 at dead pixels); dark_rate: electrons per sqrt(s) (sqrt law) or per s (linear law), N_FP absorbed; defects: 0 good, 1 hot, 2 dead, 3 cold, 4 defective column (defect_columns counts sensor columns); r2_*: R^2 of the per-pixel dark fits (with the offset term when dark_offset); dark_offset: the dark law's offset c, DN; K: DN/e-; row_sigma, read_sigma_median (median of the true per-pixel sigma, corrected for the frames' sampling error), dark_noise_sigma (EMVA 1288 sigma_y.dark from bias-frame pair differences), dsnu: DN", if key.mono { "maps in the file one plane (1, H, W) of the sensor's pixels (in memory packed as its four sub-lattices)" } else { "maps packed (4, H/2, W/2) in R,G1,B,G2 order" }),
-    };
-    Ok(CalibrationRun {
-        calibration: Calibration { meta, maps },
-        bias,
-        gain,
-        dark,
-        masters,
-        key,
-    })
+    }
 }
