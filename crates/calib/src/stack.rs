@@ -10,7 +10,7 @@
 use crate::error::{CalibError, FrameField, Result};
 use crate::stats::PixelStats;
 use pgrf_raw::{decode_file, pack_u16, Cfa, LevelOverrides, RawFrame, RowOrder};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 /// What every frame of a calibration must share.
 #[derive(Clone, Debug, PartialEq)]
@@ -298,114 +298,163 @@ pub fn read_stack(files: &[PathBuf], opt: &ReadOptions) -> Result<Stack> {
             });
         }
         drop(tx);
-        let mut pending = std::collections::BTreeMap::new();
-        let mut want = 0usize;
-        // Owns the receiver, so an early error return drops it and unblocks
-        // the decoders before the scope joins them.
-        let in_order = std::iter::from_fn(move || loop {
-            if let Some(frame) = pending.remove(&want) {
-                want += 1;
-                return Some(Ok((want - 1, frame)));
-            }
-            match rx.recv() {
-                Ok(Ok((i, frame))) => {
-                    pending.insert(i, frame);
-                }
-                Ok(Err(e)) => return Some(Err(e)),
-                Err(_) => return None,
-            }
-        });
-        let mut key: Option<FrameKey> = opt.expect.cloned();
-        let mut groups: Vec<Group> = Vec::new();
-        let mut tap_index: Vec<usize> = Vec::new();
-        let mut tap: Vec<Vec<f32>> = Vec::new();
-        let mut temperatures = Vec::new();
-        for msg in in_order {
+        let mut acc = Accumulator::new(opt);
+        for msg in in_file_order(rx) {
             let (i, frame) = msg?;
-            let file = &files[i];
-            let k = FrameKey::of(&frame);
-            match &key {
-                Some(want) => {
-                    if let Some((what, expected, found)) = want.mismatch(&k) {
-                        return Err(CalibError::MismatchedFrame {
-                            file: file.clone(),
-                            stack: opt.kind.into(),
-                            what,
-                            expected,
-                            found,
-                        });
-                    }
-                }
-                None => key = Some(k),
-            }
-            if let Some(c) = frame.temperature_c {
-                temperatures.push((file.clone(), c));
-            }
-            let t = frame.exposure_s;
-            if opt.need_exposure && t.is_none() {
-                return Err(CalibError::NoExposure {
-                    file: file.clone(),
-                    stack: opt.kind.into(),
-                });
-            }
-            let t = t.unwrap_or(0.0);
-            let packed = pack_u16(&frame)?;
-            let (ph, pw) = (packed.shape()[1], packed.shape()[2]);
-            let slot = groups
-                .iter()
-                .position(|g| (g.exposure_s - t).abs() <= 1e-6 * t.max(1e-9));
-            let slot = match slot {
-                Some(s) => s,
-                None => {
-                    if opt.single_exposure && !groups.is_empty() {
-                        return Err(CalibError::MixedExposure {
-                            file: file.clone(),
-                            stack: opt.kind.into(),
-                            expected: groups[0].exposure_s,
-                            found: t,
-                        });
-                    }
-                    groups.push(Group {
-                        exposure_s: t,
-                        stats: PixelStats::new(ph, pw, frame.cfa.offsets().map(|(r, _)| r)),
-                        files: Vec::new(),
-                        frame_means: Vec::new(),
-                        frame_noise: Vec::new(),
-                        pair_vars: Vec::new(),
-                        held: None,
-                    });
-                    groups.len() - 1
-                }
-            };
-            let data = packed.as_slice().expect("standard layout");
-            if opt.tap_pixels > 0 && tap_index.is_empty() {
-                let stride = (data.len() / opt.tap_pixels).max(1);
-                tap_index = (0..data.len())
-                    .step_by(stride)
-                    .take(opt.tap_pixels)
-                    .collect();
-                tap = vec![Vec::new(); tap_index.len()];
-            }
-            if slot == 0 {
-                for (t, &ix) in tap.iter_mut().zip(&tap_index) {
-                    t.push(data[ix] as f32);
-                }
-            }
-            let g = &mut groups[slot];
-            g.stats.push(data);
-            g.files.push(file.clone());
-            g.frame_means
-                .push(data.iter().map(|&v| v as f64).sum::<f64>() / data.len() as f64);
-            g.frame_noise.push(frame_noise(data, pw));
-            if opt.pairs {
-                match g.held.take() {
-                    Some(first) => g.pair_vars.push(pair_variance(&first, data)),
-                    None => g.held = Some(data.to_vec()),
-                }
-            }
-            opt.progress.advance(1);
+            acc.add(&files[i], &frame)?;
         }
-        for g in &groups {
+        acc.finish()
+    })
+}
+
+/// The decoded frames in file order: frames that arrive early wait until
+/// those before them are in. Owns the receiver, so an early error return
+/// drops it and unblocks the decoders before their scope joins them.
+fn in_file_order(
+    rx: std::sync::mpsc::Receiver<Result<(usize, RawFrame)>>,
+) -> impl Iterator<Item = Result<(usize, RawFrame)>> {
+    let mut pending = std::collections::BTreeMap::new();
+    let mut want = 0usize;
+    std::iter::from_fn(move || loop {
+        if let Some(frame) = pending.remove(&want) {
+            want += 1;
+            return Some(Ok((want - 1, frame)));
+        }
+        match rx.recv() {
+            Ok(Ok((i, frame))) => {
+                pending.insert(i, frame);
+            }
+            Ok(Err(e)) => return Some(Err(e)),
+            Err(_) => return None,
+        }
+    })
+}
+
+/// A stack being read: the frames' shared key, one group per exposure,
+/// the tapped pixels' values and the frames' temperatures.
+struct Accumulator<'o, 'a> {
+    opt: &'o ReadOptions<'a>,
+    key: Option<FrameKey>,
+    groups: Vec<Group>,
+    tap_index: Vec<usize>,
+    tap: Vec<Vec<f32>>,
+    temperatures: Vec<(PathBuf, f32)>,
+}
+
+impl<'o, 'a> Accumulator<'o, 'a> {
+    fn new(opt: &'o ReadOptions<'a>) -> Self {
+        Accumulator {
+            opt,
+            key: opt.expect.cloned(),
+            groups: Vec::new(),
+            tap_index: Vec::new(),
+            tap: Vec::new(),
+            temperatures: Vec::new(),
+        }
+    }
+
+    /// Check `frame` (read from `file`) against the stack and add it to
+    /// its exposure's group.
+    fn add(&mut self, file: &Path, frame: &RawFrame) -> Result<()> {
+        let opt = self.opt;
+        let k = FrameKey::of(frame);
+        match &self.key {
+            Some(want) => {
+                if let Some((what, expected, found)) = want.mismatch(&k) {
+                    return Err(CalibError::MismatchedFrame {
+                        file: file.to_path_buf(),
+                        stack: opt.kind.into(),
+                        what,
+                        expected,
+                        found,
+                    });
+                }
+            }
+            None => self.key = Some(k),
+        }
+        if let Some(c) = frame.temperature_c {
+            self.temperatures.push((file.to_path_buf(), c));
+        }
+        if opt.need_exposure && frame.exposure_s.is_none() {
+            return Err(CalibError::NoExposure {
+                file: file.to_path_buf(),
+                stack: opt.kind.into(),
+            });
+        }
+        let t = frame.exposure_s.unwrap_or(0.0);
+        let packed = pack_u16(frame)?;
+        let (ph, pw) = (packed.shape()[1], packed.shape()[2]);
+        let slot = self.slot(file, t, || {
+            PixelStats::new(ph, pw, frame.cfa.offsets().map(|(r, _)| r))
+        })?;
+        let data = packed.as_slice().expect("standard layout");
+        self.tap_pixels(slot, data);
+        let g = &mut self.groups[slot];
+        g.stats.push(data);
+        g.files.push(file.to_path_buf());
+        g.frame_means
+            .push(data.iter().map(|&v| v as f64).sum::<f64>() / data.len() as f64);
+        g.frame_noise.push(frame_noise(data, pw));
+        if opt.pairs {
+            match g.held.take() {
+                Some(first) => g.pair_vars.push(pair_variance(&first, data)),
+                None => g.held = Some(data.to_vec()),
+            }
+        }
+        opt.progress.advance(1);
+        Ok(())
+    }
+
+    /// The group of exposure `t`, a new one (with `stats`) if none has it
+    /// yet; a second exposure in a single-exposure stack is refused.
+    fn slot(&mut self, file: &Path, t: f64, stats: impl FnOnce() -> PixelStats) -> Result<usize> {
+        let found = self
+            .groups
+            .iter()
+            .position(|g| (g.exposure_s - t).abs() <= 1e-6 * t.max(1e-9));
+        if let Some(s) = found {
+            return Ok(s);
+        }
+        if self.opt.single_exposure && !self.groups.is_empty() {
+            return Err(CalibError::MixedExposure {
+                file: file.to_path_buf(),
+                stack: self.opt.kind.into(),
+                expected: self.groups[0].exposure_s,
+                found: t,
+            });
+        }
+        self.groups.push(Group {
+            exposure_s: t,
+            stats: stats(),
+            files: Vec::new(),
+            frame_means: Vec::new(),
+            frame_noise: Vec::new(),
+            pair_vars: Vec::new(),
+            held: None,
+        });
+        Ok(self.groups.len() - 1)
+    }
+
+    /// Record the tapped pixels of a frame of the first exposure (chosen,
+    /// evenly spaced, at the first frame).
+    fn tap_pixels(&mut self, slot: usize, data: &[u16]) {
+        let n = self.opt.tap_pixels;
+        if n > 0 && self.tap_index.is_empty() {
+            let stride = (data.len() / n).max(1);
+            self.tap_index = (0..data.len()).step_by(stride).take(n).collect();
+            self.tap = vec![Vec::new(); self.tap_index.len()];
+        }
+        if slot == 0 {
+            for (t, &ix) in self.tap.iter_mut().zip(&self.tap_index) {
+                t.push(data[ix] as f32);
+            }
+        }
+    }
+
+    /// The stack, every exposure with its frames, in exposure order.
+    fn finish(mut self) -> Result<Stack> {
+        let opt = self.opt;
+        for g in &self.groups {
             if g.files.len() < opt.per_exposure {
                 return Err(CalibError::TooFewAtExposure {
                     stack: opt.kind.into(),
@@ -415,17 +464,18 @@ pub fn read_stack(files: &[PathBuf], opt: &ReadOptions) -> Result<Stack> {
                 });
             }
         }
-        for g in &mut groups {
+        for g in &mut self.groups {
             g.held = None;
         }
-        groups.sort_by(|a, b| a.exposure_s.total_cmp(&b.exposure_s));
+        self.groups
+            .sort_by(|a, b| a.exposure_s.total_cmp(&b.exposure_s));
         Ok(Stack {
-            key: key.ok_or_else(|| CalibError::EmptyStack {
+            key: self.key.ok_or_else(|| CalibError::EmptyStack {
                 stack: opt.kind.into(),
             })?,
-            groups,
-            tap,
-            temperatures,
+            groups: self.groups,
+            tap: self.tap,
+            temperatures: self.temperatures,
         })
-    })
+    }
 }
