@@ -17,7 +17,7 @@
 
 use crate::error::{CalibError, Result};
 use crate::ppcc::ppcc;
-use crate::stack::Stack;
+use crate::stack::{Group, Stack};
 use ndarray::{Array3, Zip};
 use pgrf_core::stats::{median_and_robust_sd, median_finite};
 use pgrf_noise::DarkLaw;
@@ -426,120 +426,20 @@ fn clipped_fraction(mean: &Array3<f64>, var: &Array3<f64>, white: u32) -> f64 {
 /// Flat-field estimates: K by photon transfer ([`photon_transfer`]) or
 /// eq. 3.15 ([`gain_var_mean`]), the per-pixel gain map, PRNU.
 pub(crate) fn estimate_gain(flat: &Stack, bias: &BiasEstimate) -> Result<GainEstimate> {
-    let mut levels: Vec<PtcLevel> = Vec::new();
-    // Mean and variance of the brightest level so far: each is a full-frame
-    // f64 copy, so they are kept from the loop rather than recomputed.
-    let mut bright: Option<(Array3<f64>, Array3<f64>, usize)> = None;
     let bias_var = bias.var.mean().unwrap_or(0.0);
-    let mut saturated: Vec<PtcLevel> = Vec::new();
-    let mut clipped_note = None;
-    for g in &flat.groups {
-        let (m, v) = (g.stats.mean(), g.stats.var());
-        let n = m.len() as f64;
-        let mean_dn = Zip::from(&m)
-            .and(&bias.mean)
-            .fold(0.0, |acc, a, b| acc + (a - b))
-            / n;
-        let var_dn2_stack = Zip::from(&v)
-            .and(&bias.var)
-            .fold(0.0, |acc, a, b| acc + (a - b))
-            / n;
-        if g.pair_vars.is_empty() {
-            return Err(CalibError::NoFlatPair {
-                exposure_s: g.exposure_s,
-            });
-        }
-        let var_dn2 = g.pair_vars.iter().sum::<f64>() / g.pair_vars.len() as f64 - bias_var;
-        let black = bias.mean.mean().unwrap_or(0.0);
-        let signal: Vec<f64> = g.frame_means.iter().map(|m| m - black).collect();
-        let sm = signal.iter().sum::<f64>() / signal.len() as f64;
-        let drift = (signal.iter().map(|s| (s - sm).powi(2)).sum::<f64>()
-            / (signal.len() as f64 - 1.0).max(1.0))
-        .sqrt()
-            / sm.abs().max(f64::MIN_POSITIVE);
-        if mean_dn <= 0.0 {
-            return Err(CalibError::FlatNotBrighter {
-                exposure_s: g.exposure_s,
-                mean_dn,
-            });
-        }
-        let level = PtcLevel {
-            exposure_s: g.exposure_s,
-            mean_dn,
-            var_dn2,
-            var_dn2_stack,
-            drift,
-            frames: g.files.len(),
-        };
-        let clipped = clipped_fraction(&m, &v, flat.key.white);
-        if clipped > MAX_CLIPPED {
-            // A clipped level has too little variance for the gain, but it
-            // is where the saturation capacity shows (EMVA 1288 runs its
-            // flats up to saturation).
-            saturated.push(level);
-            clipped_note = Some((g.exposure_s, clipped));
-            continue;
-        }
-        if bright
-            .as_ref()
-            .is_none_or(|(_, _, i)| mean_dn > levels[*i].mean_dn)
-        {
-            bright = Some((m, v, levels.len()));
-        }
-        levels.push(level);
-    }
-    let (bm, bv, bi) = match (bright, clipped_note) {
-        (Some(b), _) => b,
-        (None, Some((t, clipped))) => {
-            return Err(CalibError::SaturatedFlats {
-                exposure_s: t,
-                clipped,
-                white: flat.key.white,
-            })
-        }
-        (None, None) => {
-            return Err(CalibError::EmptyStack {
-                stack: "flat".into(),
-            })
-        }
-    };
+    let FlatLevels {
+        levels,
+        saturated,
+        bright: (bm, bv, bi),
+    } = flat_levels(flat, bias, bias_var)?;
     let bright_level = levels[bi];
-    // Per-frame normalisation of the per-pixel variance: a change of the
-    // light by a factor (1 + e_f) moves pixel x by s(x) e_f, adding
-    // s(x)^2 var(e) to its temporal variance, where s is its signal; the
-    // level's drift (the frames' relative spread of mean signal) gives
-    // var(e), and it is taken out pixel by pixel.
-    let drift2 = bright_level.drift.powi(2);
-    let mut k_map = Array3::<f32>::zeros(bm.raw_dim());
-    Zip::from(&mut k_map)
-        .and(&bm)
-        .and(&bv)
-        .and(&bias.mean)
-        .and(&bias.var)
-        .for_each(|k, &fm, &fv, &m0, &v0| {
-            let s = fm - m0;
-            // A pixel that does not respond (a dead one, flagged so) has no
-            // gain to measure: 0, not NaN, so every map stays finite.
-            *k = if s > 0.0 {
-                gain_var_mean(fv - v0 - s * s * drift2, s) as f32
-            } else {
-                0.0
-            };
-        });
+    let k_map = gain_map(&bm, &bv, bias, bright_level.drift.powi(2));
     let k_var_mean = gain_var_mean(bright_level.var_dn2, bright_level.mean_dn);
     // PRNU from the spread of the per-pixel signal at the brightest level.
     let response = Zip::from(&bm)
         .and(&bias.mean)
         .map_collect(|a, b| (a - b) as f32);
-    let sig: Vec<f64> = response.iter().map(|&v| v as f64).collect();
-    let sm = sig.iter().sum::<f64>() / sig.len() as f64;
-    let sv = sig.iter().map(|s| (s - sm).powi(2)).sum::<f64>() / sig.len() as f64;
-    // The response is flat mean minus bias mean: the fixed pattern cancels,
-    // and the temporal noise of both means is left in it.
-    let temporal = (bright_level.var_dn2 + bias_var) / bright_level.frames as f64
-        + bias_var / bias.frames as f64;
-    let prnu = (sv - temporal).max(0.0).sqrt() / sm;
-    let prnu_highpass = (highpass_variance(&response) - temporal).max(0.0).sqrt() / sm;
+    let (prnu, prnu_highpass) = prnu_of(&response, &bright_level, bias, bias_var);
 
     let ptc_fit = photon_transfer(&levels);
     let (k, method) = match ptc_fit {
@@ -594,6 +494,157 @@ pub(crate) fn estimate_gain(flat: &Stack, bias: &BiasEstimate) -> Result<GainEst
         ptc_fit,
         prnu,
     })
+}
+
+/// The flat stack's levels: those usable for the gain, those too clipped
+/// for it (where the saturation capacity shows), and the brightest usable
+/// one's per-pixel mean and variance with its index.
+struct FlatLevels {
+    levels: Vec<PtcLevel>,
+    saturated: Vec<PtcLevel>,
+    bright: (Array3<f64>, Array3<f64>, usize),
+}
+
+fn flat_levels(flat: &Stack, bias: &BiasEstimate, bias_var: f64) -> Result<FlatLevels> {
+    let mut levels: Vec<PtcLevel> = Vec::new();
+    // Mean and variance of the brightest level so far: each is a full-frame
+    // f64 copy, so they are kept from the loop rather than recomputed.
+    let mut bright: Option<(Array3<f64>, Array3<f64>, usize)> = None;
+    let mut saturated: Vec<PtcLevel> = Vec::new();
+    let mut clipped_note = None;
+    for g in &flat.groups {
+        let (m, v) = (g.stats.mean(), g.stats.var());
+        let level = level_of(g, &m, &v, bias, bias_var)?;
+        let clipped = clipped_fraction(&m, &v, flat.key.white);
+        if clipped > MAX_CLIPPED {
+            // A clipped level has too little variance for the gain, but it
+            // is where the saturation capacity shows (EMVA 1288 runs its
+            // flats up to saturation).
+            saturated.push(level);
+            clipped_note = Some((g.exposure_s, clipped));
+            continue;
+        }
+        if bright
+            .as_ref()
+            .is_none_or(|(_, _, i)| level.mean_dn > levels[*i].mean_dn)
+        {
+            bright = Some((m, v, levels.len()));
+        }
+        levels.push(level);
+    }
+    let bright = match (bright, clipped_note) {
+        (Some(b), _) => b,
+        (None, Some((t, clipped))) => {
+            return Err(CalibError::SaturatedFlats {
+                exposure_s: t,
+                clipped,
+                white: flat.key.white,
+            })
+        }
+        (None, None) => {
+            return Err(CalibError::EmptyStack {
+                stack: "flat".into(),
+            })
+        }
+    };
+    Ok(FlatLevels {
+        levels,
+        saturated,
+        bright,
+    })
+}
+
+/// One flat level's point of the photon-transfer curve: mean signal over
+/// the bias, the temporal variance from frame pairs (and from the stack),
+/// and the light's drift between frames.
+fn level_of(
+    g: &Group,
+    m: &Array3<f64>,
+    v: &Array3<f64>,
+    bias: &BiasEstimate,
+    bias_var: f64,
+) -> Result<PtcLevel> {
+    let n = m.len() as f64;
+    let mean_dn = Zip::from(m)
+        .and(&bias.mean)
+        .fold(0.0, |acc, a, b| acc + (a - b))
+        / n;
+    let var_dn2_stack = Zip::from(v)
+        .and(&bias.var)
+        .fold(0.0, |acc, a, b| acc + (a - b))
+        / n;
+    if g.pair_vars.is_empty() {
+        return Err(CalibError::NoFlatPair {
+            exposure_s: g.exposure_s,
+        });
+    }
+    let var_dn2 = g.pair_vars.iter().sum::<f64>() / g.pair_vars.len() as f64 - bias_var;
+    let black = bias.mean.mean().unwrap_or(0.0);
+    let signal: Vec<f64> = g.frame_means.iter().map(|m| m - black).collect();
+    let sm = signal.iter().sum::<f64>() / signal.len() as f64;
+    let drift = (signal.iter().map(|s| (s - sm).powi(2)).sum::<f64>()
+        / (signal.len() as f64 - 1.0).max(1.0))
+    .sqrt()
+        / sm.abs().max(f64::MIN_POSITIVE);
+    if mean_dn <= 0.0 {
+        return Err(CalibError::FlatNotBrighter {
+            exposure_s: g.exposure_s,
+            mean_dn,
+        });
+    }
+    Ok(PtcLevel {
+        exposure_s: g.exposure_s,
+        mean_dn,
+        var_dn2,
+        var_dn2_stack,
+        drift,
+        frames: g.files.len(),
+    })
+}
+
+/// Each pixel's gain by eq. 3.15 at the brightest level (`bm`, `bv`), its
+/// variance freed of the light's drift: a change of the light by a factor
+/// (1 + e_f) moves pixel x by s(x) e_f, adding s(x)^2 var(e) to its
+/// temporal variance, where s is its signal; the level's drift (the
+/// frames' relative spread of mean signal) gives var(e) = `drift2`.
+fn gain_map(bm: &Array3<f64>, bv: &Array3<f64>, bias: &BiasEstimate, drift2: f64) -> Array3<f32> {
+    let mut k_map = Array3::<f32>::zeros(bm.raw_dim());
+    Zip::from(&mut k_map)
+        .and(bm)
+        .and(bv)
+        .and(&bias.mean)
+        .and(&bias.var)
+        .for_each(|k, &fm, &fv, &m0, &v0| {
+            let s = fm - m0;
+            // A pixel that does not respond (a dead one, flagged so) has no
+            // gain to measure: 0, not NaN, so every map stays finite.
+            *k = if s > 0.0 {
+                gain_var_mean(fv - v0 - s * s * drift2, s) as f32
+            } else {
+                0.0
+            };
+        });
+    k_map
+}
+
+/// PRNU (and its EMVA 1288 high-pass form) from the spread of the
+/// per-pixel response at the brightest level, less the temporal noise the
+/// means still hold (the response is flat mean minus bias mean: the fixed
+/// pattern cancels, the temporal noise of both means is left in it).
+fn prnu_of(
+    response: &Array3<f32>,
+    bright: &PtcLevel,
+    bias: &BiasEstimate,
+    bias_var: f64,
+) -> (f64, f64) {
+    let sig: Vec<f64> = response.iter().map(|&v| v as f64).collect();
+    let sm = sig.iter().sum::<f64>() / sig.len() as f64;
+    let sv = sig.iter().map(|s| (s - sm).powi(2)).sum::<f64>() / sig.len() as f64;
+    let temporal =
+        (bright.var_dn2 + bias_var) / bright.frames as f64 + bias_var / bias.frames as f64;
+    let prnu = (sv - temporal).max(0.0).sqrt() / sm;
+    let prnu_highpass = (highpass_variance(response) - temporal).max(0.0).sqrt() / sm;
+    (prnu, prnu_highpass)
 }
 
 /// From dark frames (two or more exposure times, any number of frames at
