@@ -13,7 +13,7 @@ use crate::frame::{bits_for, ColorMatrix, LevelOverrides, RawFrame};
 use crate::panic_guard::quietly;
 use rawler::decoders::{RawDecodeParams, RawMetadata};
 use rawler::imgop::xyz::Illuminant;
-use rawler::rawimage::{RawImage, RawImageData, RawPhotometricInterpretation};
+use rawler::rawimage::{CFAConfig, RawImage, RawImageData, RawPhotometricInterpretation};
 use rawler::rawsource::RawSource;
 use std::path::Path;
 
@@ -121,86 +121,10 @@ fn frame_from_rawler(
     mut image: RawImage,
     exif: Option<RawMetadata>,
 ) -> Result<RawFrame> {
-    // A monochrome file (one-sample LinearRaw DNG: Leica Monochrom, pgrf's
-    // own mono DNGs; or BlackIsZero) has no CFA; its mosaic is read all the
-    // same. Three-sample linear data is already demosaiced.
-    let config = match &image.photometric {
-        RawPhotometricInterpretation::Cfa(config) => Some(config.clone()),
-        RawPhotometricInterpretation::LinearRaw if image.cpp != 1 => {
-            return Err(RawError::unsupported(
-                path,
-                format!(
-                    "linear (already demosaiced) raw data with {} channels; pgrf needs the sensor's mosaic",
-                    image.cpp
-                ),
-            ))
-        }
-        RawPhotometricInterpretation::LinearRaw | RawPhotometricInterpretation::BlackIsZero => {
-            None
-        }
-    };
-    if image.cpp != 1 {
-        return Err(RawError::unsupported(
-            path,
-            format!(
-                "{} samples per pixel; pgrf needs a one-sample Bayer mosaic",
-                image.cpp
-            ),
-        ));
-    }
-    let data = match &image.data {
-        RawImageData::Integer(d) => d,
-        RawImageData::Float(_) => {
-            return Err(RawError::unsupported(
-                path,
-                "floating-point raw data; pgrf reads integer sensor data",
-            ))
-        }
-    };
-    if data.len() != image.width * image.height {
-        return Err(RawError::decode(
-            path,
-            format!(
-                "decoder returned {} samples for a {}x{} image",
-                data.len(),
-                image.width,
-                image.height
-            ),
-        ));
-    }
-
-    // Visible area: the active area when the file declares one.
-    let (x0, y0, w, h) = match image.active_area {
-        Some(r) => (r.p.x, r.p.y, r.d.w, r.d.h),
-        None => (0, 0, image.width, image.height),
-    };
-    if w < 2 || h < 2 || x0 + w > image.width || y0 + h > image.height {
-        return Err(RawError::decode(
-            path,
-            format!(
-                "active area {w}x{h} at ({y0},{x0}) does not fit the {}x{} readout",
-                image.width, image.height
-            ),
-        ));
-    }
-
+    let config = mosaic_layout(path, &image)?;
+    let (x0, y0, w, h) = visible_area(path, &image)?;
     let cfa = match &config {
-        Some(config) => {
-            let cfa_name = config.cfa.to_string();
-            if config.cfa.width != 2 || config.cfa.height != 2 {
-                return Err(RawError::unsupported(
-                    path,
-                    format!(
-                        "{}x{} colour filter array '{}' (X-Trans or other non-Bayer sensor); pgrf needs a 2x2 Bayer CFA",
-                        config.cfa.height, config.cfa.width, cfa_name
-                    ),
-                ));
-            }
-            let full_cfa: Cfa = cfa_name
-                .parse()
-                .map_err(|e: String| RawError::unsupported(path, e))?;
-            full_cfa.shifted(y0, x0)
-        }
+        Some(config) => bayer_phase(path, config, y0, x0)?,
         // The packed planes of a monochrome frame are its sub-lattices in
         // RGGB order (RawFrame::cfa).
         None => Cfa::Rggb,
@@ -212,25 +136,7 @@ fn frame_from_rawler(
         .0
         .first()
         .ok_or_else(|| RawError::decode(path, "no white level"))?;
-
-    let mosaic = if x0 == 0 && w == image.width {
-        // Full-width visible area (DNGs pgrf writes, many cameras): take the
-        // decoder's buffer instead of copying 24 MB per 12 MP frame.
-        let full = image.width;
-        let mut v = match std::mem::replace(&mut image.data, RawImageData::Integer(Vec::new())) {
-            RawImageData::Integer(v) => v,
-            RawImageData::Float(_) => unreachable!("checked above"),
-        };
-        v.truncate((y0 + h) * full);
-        v.drain(..y0 * full);
-        v
-    } else {
-        let mut m = Vec::with_capacity(w * h);
-        for row in y0..y0 + h {
-            m.extend_from_slice(&data[row * image.width + x0..row * image.width + x0 + w]);
-        }
-        m
-    };
+    let mosaic = visible_mosaic(&mut image, (x0, y0, w, h));
 
     let wb = {
         let c = image.wb_coeffs;
@@ -276,6 +182,118 @@ fn frame_from_rawler(
         RawError::decode(path, format!("file metadata gives unusable levels ({e})"))
     })?;
     Ok(frame)
+}
+
+/// The decoded image's CFA configuration, None for a monochrome mosaic,
+/// after checking that it is a one-sample integer mosaic of the size it
+/// claims. A monochrome file (one-sample LinearRaw DNG: Leica Monochrom,
+/// pgrf's own mono DNGs; or BlackIsZero) has no CFA; its mosaic is read all
+/// the same. Three-sample linear data is already demosaiced.
+fn mosaic_layout(path: &Path, image: &RawImage) -> Result<Option<CFAConfig>> {
+    let config = match &image.photometric {
+        RawPhotometricInterpretation::Cfa(config) => Some(config.clone()),
+        RawPhotometricInterpretation::LinearRaw if image.cpp != 1 => {
+            return Err(RawError::unsupported(
+                path,
+                format!(
+                    "linear (already demosaiced) raw data with {} channels; pgrf needs the sensor's mosaic",
+                    image.cpp
+                ),
+            ))
+        }
+        RawPhotometricInterpretation::LinearRaw | RawPhotometricInterpretation::BlackIsZero => {
+            None
+        }
+    };
+    if image.cpp != 1 {
+        return Err(RawError::unsupported(
+            path,
+            format!(
+                "{} samples per pixel; pgrf needs a one-sample Bayer mosaic",
+                image.cpp
+            ),
+        ));
+    }
+    let data = match &image.data {
+        RawImageData::Integer(d) => d,
+        RawImageData::Float(_) => {
+            return Err(RawError::unsupported(
+                path,
+                "floating-point raw data; pgrf reads integer sensor data",
+            ))
+        }
+    };
+    if data.len() != image.width * image.height {
+        return Err(RawError::decode(
+            path,
+            format!(
+                "decoder returned {} samples for a {}x{} image",
+                data.len(),
+                image.width,
+                image.height
+            ),
+        ));
+    }
+    Ok(config)
+}
+
+/// The visible area `(x0, y0, w, h)`: the active area when the file
+/// declares one (it must fit the readout), else the whole readout.
+fn visible_area(path: &Path, image: &RawImage) -> Result<(usize, usize, usize, usize)> {
+    let (x0, y0, w, h) = match image.active_area {
+        Some(r) => (r.p.x, r.p.y, r.d.w, r.d.h),
+        None => (0, 0, image.width, image.height),
+    };
+    if w < 2 || h < 2 || x0 + w > image.width || y0 + h > image.height {
+        return Err(RawError::decode(
+            path,
+            format!(
+                "active area {w}x{h} at ({y0},{x0}) does not fit the {}x{} readout",
+                image.width, image.height
+            ),
+        ));
+    }
+    Ok((x0, y0, w, h))
+}
+
+/// The Bayer phase of the visible area's first pixel (2x2 CFAs only).
+fn bayer_phase(path: &Path, config: &CFAConfig, y0: usize, x0: usize) -> Result<Cfa> {
+    let cfa_name = config.cfa.to_string();
+    if config.cfa.width != 2 || config.cfa.height != 2 {
+        return Err(RawError::unsupported(
+            path,
+            format!(
+                "{}x{} colour filter array '{}' (X-Trans or other non-Bayer sensor); pgrf needs a 2x2 Bayer CFA",
+                config.cfa.height, config.cfa.width, cfa_name
+            ),
+        ));
+    }
+    let full_cfa: Cfa = cfa_name
+        .parse()
+        .map_err(|e: String| RawError::unsupported(path, e))?;
+    Ok(full_cfa.shifted(y0, x0))
+}
+
+/// The visible area's samples (an integer image, checked by
+/// [`mosaic_layout`]).
+fn visible_mosaic(image: &mut RawImage, (x0, y0, w, h): (usize, usize, usize, usize)) -> Vec<u16> {
+    let full = image.width;
+    let data = std::mem::replace(&mut image.data, RawImageData::Integer(Vec::new()));
+    let RawImageData::Integer(mut v) = data else {
+        unreachable!("mosaic_layout refuses floating-point data")
+    };
+    if x0 == 0 && w == full {
+        // Full-width visible area (DNGs pgrf writes, many cameras): take the
+        // decoder's buffer instead of copying 24 MB per 12 MP frame.
+        v.truncate((y0 + h) * full);
+        v.drain(..y0 * full);
+        return v;
+    }
+    let mut m = Vec::with_capacity(w * h);
+    for row in y0..y0 + h {
+        m.extend_from_slice(&v[row * full + x0..row * full + x0 + w]);
+    }
+    m
 }
 
 /// Per-plane black level. rawler stores the DNG-style repeat pattern anchored
