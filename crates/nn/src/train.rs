@@ -12,7 +12,7 @@ use crate::backend::{on_train_device, OnTrainBackend};
 use crate::checkpoint::{self, CheckpointState};
 use crate::config::{Method, TrainConfig, TrainOutputs};
 use crate::data::validation::{psnr, ValSet};
-use crate::data::{Loader, SampleSpec, Source};
+use crate::data::{Batch, Loader, SampleSpec, Source};
 use crate::ema::Ema;
 use crate::error::{NnError, Result};
 use crate::ops::adam::PgrfAdam;
@@ -517,99 +517,14 @@ fn train<B: PgrfAutodiff>(
     stop: &AtomicBool,
 ) -> Result<Outcome> {
     let s = j.config;
-    if s.batch == 0 || s.patch == 0 {
-        return Err(NnError::BadSetting {
-            flag: "--batch",
-            message: "batch and patch must be at least 1".into(),
-        });
-    }
-    if !(s.lr > 0.0 && s.lr.is_finite()) {
-        return Err(NnError::BadSetting {
-            flag: "--lr",
-            message: format!("learning rate must be > 0, got {}", s.lr),
-        });
-    }
-    let arch_json = serde_json::to_value(&j.arch).map_err(|e| NnError::Invalid(e.to_string()))?;
-    let mut net: Net<B> = j.arch.init_seeded(device, s.seed)?;
-    let started_from = match &s.init {
-        None => None,
-        // A resumed run takes its weights from the checkpoint: only the
-        // record is read then.
-        Some(path) if j.resume => Some(StartedFrom::of(
-            path,
-            &crate::weights::require_arch(path, &j.arch)?,
-        )),
-        Some(path) => {
-            let (trained, meta, widened) = crate::model::load_init::<B>(path, &j.arch, device)?;
-            if widened {
-                progress.note(&format!(
-                    "starting from {}'s unconditioned weights: the noise planes' input weights start at zero",
-                    path.display()
-                ));
-            }
-            net = trained;
-            Some(StartedFrom::of(path, &meta))
-        }
-    };
-    // burn's Adam defaults (beta 0.9, 0.999) with epsilon 1e-8; one pass per
-    // parameter tensor on the CPU (crate::ops::adam), burn's Adam elsewhere.
-    let mut optim = OptimizerAdaptor::<PgrfAdam, Net<B>, B>::from(PgrfAdam::new(0.9, 0.999, 1e-8));
-    if let Some(c) = s.clip_grad {
-        optim = optim.with_grad_clipping(GradientClippingConfig::Norm(c).init());
-    }
-    let recorder = Rec::default();
-
-    let (mut start, mut elapsed0, mut last_val) = (0u64, 0.0f64, None);
-    // The loss of the checkpoint's last step: a resumed run that runs no
-    // step (its weight file lost) records it.
-    let mut resumed_loss = None;
-    let mut saved_ema = None;
-    if j.resume {
-        let ck = checkpoint::load(&j.outputs.checkpoint)?;
-        let st = &ck.state;
-        check_resumable(st, &j.arch, s, &j.outputs.checkpoint)?;
-        resumed_loss = st.last_loss;
-        let bad = |e: burn::record::RecorderError| NnError::BadFile {
-            path: j.outputs.checkpoint.clone(),
-            reason: e.to_string(),
-        };
-        net = net.load_record(recorder.load(ck.model, device).map_err(bad)?);
-        optim = optim.load_record(recorder.load(ck.optim, device).map_err(bad)?);
-        saved_ema = ck.ema;
-        start = st.step;
-        elapsed0 = st.elapsed_s;
-        last_val = st.last_val_psnr;
-        progress.note(&format!(
-            "resumed from {} at step {start}",
-            j.outputs.checkpoint.display()
-        ));
-    }
-    // Statistics windows as the frames will be restored with (none: each
-    // crop whole); not part of the weights, so set after any loading.
-    net = net
-        .with_window(s.window.unwrap_or(0))
-        .map_err(|e| NnError::BadSetting {
-            flag: "--window",
-            message: format!("--window: {e}"),
-        })?;
-    let mut ema = match (s.ema, saved_ema) {
-        (None, _) => None,
-        (Some(d), Some(bytes)) => Some(Ema::from_bytes(d, &bytes, &j.outputs.checkpoint)?),
-        (Some(d), None) => {
-            if j.resume {
-                progress.note(
-                    "the checkpoint holds no moving average: it starts from the resumed weights",
-                );
-            }
-            Some(Ema::start(d, net.parameters()))
-        }
-    };
+    check_step_settings(s)?;
+    let (mut run, mut net) = Run::<B>::new(j, device, progress)?;
+    let start = run.start;
     let mut log = Log::open(
         Some(&j.outputs.log),
         j.resume.then_some(start),
-        ema.is_some(),
+        run.ema.is_some(),
     )?;
-
     let sample = SampleSpec {
         patch: s.patch,
         seed: s.seed,
@@ -617,57 +532,11 @@ fn train<B: PgrfAutodiff>(
         extras: j.arch.extras(s.time_max),
     };
     let mut loader = Loader::start(source, mix, sample, s.batch, start, s.workers, 2)?;
-    let shape = [s.batch, 4, s.patch, s.patch];
     let clock = Instant::now();
     let mut losses = Vec::new();
     let mut window = (0.0f64, 0u64);
     let mut interrupted = false;
     let mut step = start;
-    let save_checkpoint = |net: &Net<B>,
-                           optim: &OptimizerAdaptor<PgrfAdam, Net<B>, B>,
-                           ema: Option<&Ema>,
-                           step: u64,
-                           elapsed: f64,
-                           last_loss: Option<f32>,
-                           last_val: Option<f32>|
-     -> Result<()> {
-        let bad = |e: burn::record::RecorderError| NnError::Invalid(e.to_string());
-        let model = recorder
-            .record(net.clone().into_record(), ())
-            .map_err(bad)?;
-        let opt = recorder.record(optim.to_record(), ()).map_err(bad)?;
-        let state = CheckpointState {
-            task: j.arch.method(),
-            arch: arch_json.clone(),
-            step,
-            steps: s.steps,
-            seed: s.seed,
-            batch: s.batch,
-            patch: s.patch,
-            elapsed_s: elapsed,
-            last_loss,
-            last_val_psnr: last_val,
-        };
-        let ema = ema.map(Ema::to_bytes).transpose()?.unwrap_or_default();
-        checkpoint::save(&j.outputs.checkpoint, &state, &model, &opt, &ema)
-    };
-    // Validation of the weights a run stores (the moving average when it
-    // keeps one) and, with an average, of the raw weights: (stored, raw).
-    let validate_both =
-        |net: &Net<B>, ema: Option<&Ema>, v: &ValSet| -> Result<(f32, Option<f32>)> {
-            let raw = validate(&net.valid(), v, s.val_t2, device);
-            Ok(match ema {
-                None => (raw, None),
-                Some(e) => {
-                    let avg = e
-                        .network::<B::InnerBackend>(&j.arch, device)?
-                        .with_window(s.window.unwrap_or(0))
-                        .map_err(NnError::Invalid)?;
-                    (validate(&avg, v, s.val_t2, device), Some(raw))
-                }
-            })
-        };
-
     progress.start(s.steps, "steps");
     progress.set_position(start);
     while step < s.steps {
@@ -677,25 +546,8 @@ fn train<B: PgrfAutodiff>(
         }
         let batch = loader.next_batch()?;
         let lr = s.schedule.lr(s.lr, step, s.steps);
-        let noisy = to_tensor::<B>(&batch.noisy, shape, device);
-        let clean = to_tensor::<B>(&batch.clean, shape, device);
-        let loss = net.loss(
-            noisy,
-            clean,
-            &batch.levels,
-            s.loss_rule(),
-            || to_tensor::<B>(&batch.x0, shape, device),
-            || Tensor::<B, 1>::from_data(TensorData::new(batch.t.clone(), [s.batch]), device),
-        );
-        let value: f32 = loss.clone().into_scalar().elem();
-        if !value.is_finite() {
-            return Err(NnError::Diverged { step, loss: value });
-        }
-        let grads = GradientsParams::from_grads(loss.backward(), &net);
-        net = optim.step(lr, net, grads);
-        if let Some(e) = ema.as_mut() {
-            e.update(step, &net.parameters());
-        }
+        let value;
+        (net, value) = run.step(net, &batch, step, lr)?;
         step += 1;
         losses.push(value);
         window.0 += value as f64;
@@ -704,45 +556,30 @@ fn train<B: PgrfAutodiff>(
         let ips = ((step - start) as usize * s.batch) as f64 / secs.max(1e-9);
         progress.set_position(step);
         progress.message(&format!("loss {value:.4}  lr {lr:.1e}  {ips:.2} img/s"));
-        let mut val_now = None;
-        if let Some(v) = val {
-            if s.val_every > 0 && step % s.val_every == 0 && step < s.steps {
-                let (p, raw) = validate_both(&net, ema.as_ref(), v)?;
-                progress.note(&format!(
-                    "step {step}: validation PSNR {p:.2} dB{}",
-                    raw.map(|r| format!(" (moving average; raw weights {r:.2} dB)"))
-                        .unwrap_or_default()
-                ));
-                last_val = Some(p);
-                val_now = Some((p, raw));
+        let val_now = match val {
+            Some(v) if s.val_every > 0 && step % s.val_every == 0 && step < s.steps => {
+                Some(run.validation(&net, v, step, progress)?)
             }
-        }
+            _ => None,
+        };
         // The last step's row is written after the final validation.
         if (step % s.log_every.max(1) == 0 || val_now.is_some()) && step < s.steps {
             let mean = (window.0 / window.1.max(1) as f64) as f32;
-            log.row(step, mean, lr, ips, val_now, elapsed0 + secs);
+            log.row(step, mean, lr, ips, val_now, run.elapsed0 + secs);
             window = (0.0, 0);
         }
         if s.checkpoint_every > 0 && step % s.checkpoint_every == 0 && step < s.steps {
-            save_checkpoint(
-                &net,
-                &optim,
-                ema.as_ref(),
-                step,
-                elapsed0 + secs,
-                Some(value),
-                last_val,
-            )?;
+            run.save_checkpoint(&net, step, run.elapsed0 + secs, Some(value))?;
         }
     }
     drop(loader);
     let seconds = clock.elapsed().as_secs_f64();
     let images_per_s = ((step - start) as usize * s.batch) as f64 / seconds.max(1e-9);
-    let (mut val_psnr, mut val_input_psnr) = (last_val, None);
+    let (mut val_psnr, mut val_input_psnr) = (run.last_val, None);
     let mut final_val = None;
     if let Some(v) = val {
         if !interrupted {
-            let (p, raw) = validate_both(&net, ema.as_ref(), v)?;
+            let (p, raw) = run.validate_both(&net, v)?;
             val_psnr = Some(p);
             final_val = Some((p, raw));
         }
@@ -757,23 +594,22 @@ fn train<B: PgrfAutodiff>(
     if window.1 > 0 {
         let mean = (window.0 / window.1 as f64) as f32;
         let lr = s.schedule.lr(s.lr, step.saturating_sub(1), s.steps);
-        log.row(step, mean, lr, images_per_s, final_val, elapsed0 + seconds);
+        log.row(
+            step,
+            mean,
+            lr,
+            images_per_s,
+            final_val,
+            run.elapsed0 + seconds,
+        );
     }
-    let last_loss = losses.last().copied().or(resumed_loss);
+    let last_loss = losses.last().copied().or(run.resumed_loss);
     // NaN (null in the record, read back as NaN) only for a run stopped
     // before its first step.
     let final_loss = last_loss.unwrap_or(f32::NAN);
-    save_checkpoint(
-        &net,
-        &optim,
-        ema.as_ref(),
-        step,
-        elapsed0 + seconds,
-        last_loss,
-        val_psnr,
-    )?;
-    let mut meta = WeightMeta::new(j.arch.clone(), j.noise.clone());
-    meta.training = Some(TrainingSummary {
+    run.last_val = val_psnr;
+    run.save_checkpoint(&net, step, run.elapsed0 + seconds, last_loss)?;
+    let summary = TrainingSummary {
         steps: step,
         batch: s.batch,
         patch: s.patch,
@@ -782,18 +618,13 @@ fn train<B: PgrfAutodiff>(
         final_loss,
         val_psnr,
         val_psnr_raw: final_val.and_then(|(_, raw)| raw),
-        seconds: elapsed0 + seconds,
+        seconds: run.elapsed0 + seconds,
         images_per_s,
         device: s.device.to_string(),
         config: Some(s.clone()),
-        started_from,
-    });
-    match &ema {
-        Some(e) => e
-            .network::<B::InnerBackend>(&j.arch, device)?
-            .save(&j.outputs.weights, &meta)?,
-        None => net.valid().save(&j.outputs.weights, &meta)?,
-    }
+        started_from: run.started_from.clone(),
+    };
+    run.save_weights(&net, summary)?;
     progress.finish();
     Ok(Outcome {
         start_step: start,
@@ -807,4 +638,290 @@ fn train<B: PgrfAutodiff>(
         interrupted,
         already_finished: false,
     })
+}
+
+/// Refuse settings no step can run with.
+fn check_step_settings(s: &TrainConfig) -> Result<()> {
+    if s.batch == 0 || s.patch == 0 {
+        return Err(NnError::BadSetting {
+            flag: "--batch",
+            message: "batch and patch must be at least 1".into(),
+        });
+    }
+    if !(s.lr > 0.0 && s.lr.is_finite()) {
+        return Err(NnError::BadSetting {
+            flag: "--lr",
+            message: format!("learning rate must be > 0, got {}", s.lr),
+        });
+    }
+    Ok(())
+}
+
+/// What the loop of [`train`] works on besides the network (which the
+/// loop owns, so that each step updates it in place): its optimiser and
+/// moving average, and where the run stands (its first step, the time and
+/// the last validation of the runs before it).
+struct Run<'j, 'a, B: PgrfAutodiff> {
+    j: &'j Job<'a>,
+    device: &'j B::Device,
+    optim: OptimizerAdaptor<PgrfAdam, Net<B>, B>,
+    ema: Option<Ema>,
+    recorder: Rec,
+    arch_json: serde_json::Value,
+    started_from: Option<StartedFrom>,
+    start: u64,
+    elapsed0: f64,
+    last_val: Option<f32>,
+    /// The loss of the checkpoint's last step: a resumed run that runs no
+    /// step (its weight file lost) records it.
+    resumed_loss: Option<f32>,
+}
+
+impl<'j, 'a, B: PgrfAutodiff> Run<'j, 'a, B> {
+    /// The network as the run starts: fresh (seeded), from `init`'s weights,
+    /// or from the checkpoint when resuming; Adam (burn's defaults, epsilon
+    /// 1e-8, one pass per parameter tensor on the CPU), clipped gradients
+    /// if asked, the moving average.
+    fn new(
+        j: &'j Job<'a>,
+        device: &'j B::Device,
+        progress: &dyn Progress,
+    ) -> Result<(Self, Net<B>)> {
+        let s = j.config;
+        let arch_json =
+            serde_json::to_value(&j.arch).map_err(|e| NnError::Invalid(e.to_string()))?;
+        let (mut net, started_from) = initial_net::<B>(j, device, progress)?;
+        let mut optim =
+            OptimizerAdaptor::<PgrfAdam, Net<B>, B>::from(PgrfAdam::new(0.9, 0.999, 1e-8));
+        if let Some(c) = s.clip_grad {
+            optim = optim.with_grad_clipping(GradientClippingConfig::Norm(c).init());
+        }
+        let recorder = Rec::default();
+        let mut at = Resumed::default();
+        if j.resume {
+            (net, optim, at) = resume(j, net, optim, &recorder, device, progress)?;
+        }
+        let mut run = Run {
+            j,
+            device,
+            optim,
+            ema: None,
+            recorder,
+            arch_json,
+            started_from,
+            start: at.step,
+            elapsed0: at.elapsed_s,
+            last_val: at.last_val,
+            resumed_loss: at.last_loss,
+        };
+        let saved_ema = at.ema;
+        // Statistics windows as the frames will be restored with (none: each
+        // crop whole); not part of the weights, so set after any loading.
+        let net = net
+            .with_window(s.window.unwrap_or(0))
+            .map_err(|e| NnError::BadSetting {
+                flag: "--window",
+                message: format!("--window: {e}"),
+            })?;
+        run.ema = match (s.ema, saved_ema) {
+            (None, _) => None,
+            (Some(d), Some(bytes)) => Some(Ema::from_bytes(d, &bytes, &j.outputs.checkpoint)?),
+            (Some(d), None) => {
+                if j.resume {
+                    progress.note(
+                        "the checkpoint holds no moving average: it starts from the resumed weights",
+                    );
+                }
+                Some(Ema::start(d, net.parameters()))
+            }
+        };
+        Ok((run, net))
+    }
+
+    /// One optimiser step on `batch` at learning rate `lr`; its loss.
+    fn step(&mut self, net: Net<B>, batch: &Batch, step: u64, lr: f64) -> Result<(Net<B>, f32)> {
+        let (s, device) = (self.j.config, self.device);
+        let shape = [s.batch, 4, s.patch, s.patch];
+        let loss = net.loss(
+            to_tensor::<B>(&batch.noisy, shape, device),
+            to_tensor::<B>(&batch.clean, shape, device),
+            &batch.levels,
+            s.loss_rule(),
+            || to_tensor::<B>(&batch.x0, shape, device),
+            || Tensor::<B, 1>::from_data(TensorData::new(batch.t.clone(), [s.batch]), device),
+        );
+        let value: f32 = loss.clone().into_scalar().elem();
+        if !value.is_finite() {
+            return Err(NnError::Diverged { step, loss: value });
+        }
+        let grads = GradientsParams::from_grads(loss.backward(), &net);
+        let net = self.optim.step(lr, net, grads);
+        if let Some(e) = self.ema.as_mut() {
+            e.update(step, &net.parameters());
+        }
+        Ok((net, value))
+    }
+
+    /// Validation during the run, said to `progress`: (stored, raw).
+    fn validation(
+        &mut self,
+        net: &Net<B>,
+        v: &ValSet,
+        step: u64,
+        progress: &dyn Progress,
+    ) -> Result<(f32, Option<f32>)> {
+        let (p, raw) = self.validate_both(net, v)?;
+        progress.note(&format!(
+            "step {step}: validation PSNR {p:.2} dB{}",
+            raw.map(|r| format!(" (moving average; raw weights {r:.2} dB)"))
+                .unwrap_or_default()
+        ));
+        self.last_val = Some(p);
+        Ok((p, raw))
+    }
+
+    /// Validation of the weights a run stores (the moving average when it
+    /// keeps one) and, with an average, of the raw weights: (stored, raw).
+    fn validate_both(&self, net: &Net<B>, v: &ValSet) -> Result<(f32, Option<f32>)> {
+        let s = self.j.config;
+        let raw = validate(&net.valid(), v, s.val_t2, self.device);
+        Ok(match &self.ema {
+            None => (raw, None),
+            Some(e) => {
+                let avg = e
+                    .network::<B::InnerBackend>(&self.j.arch, self.device)?
+                    .with_window(s.window.unwrap_or(0))
+                    .map_err(NnError::Invalid)?;
+                (validate(&avg, v, s.val_t2, self.device), Some(raw))
+            }
+        })
+    }
+
+    /// Write the checkpoint at `step` (network, Adam state, moving average,
+    /// counters; the last validation is the run's own).
+    fn save_checkpoint(
+        &self,
+        net: &Net<B>,
+        step: u64,
+        elapsed: f64,
+        last_loss: Option<f32>,
+    ) -> Result<()> {
+        let (j, s) = (self.j, self.j.config);
+        let bad = |e: burn::record::RecorderError| NnError::Invalid(e.to_string());
+        let model = self
+            .recorder
+            .record(net.clone().into_record(), ())
+            .map_err(bad)?;
+        let opt = self
+            .recorder
+            .record(self.optim.to_record(), ())
+            .map_err(bad)?;
+        let state = CheckpointState {
+            task: j.arch.method(),
+            arch: self.arch_json.clone(),
+            step,
+            steps: s.steps,
+            seed: s.seed,
+            batch: s.batch,
+            patch: s.patch,
+            elapsed_s: elapsed,
+            last_loss,
+            last_val_psnr: self.last_val,
+        };
+        let ema = self
+            .ema
+            .as_ref()
+            .map(Ema::to_bytes)
+            .transpose()?
+            .unwrap_or_default();
+        checkpoint::save(&j.outputs.checkpoint, &state, &model, &opt, &ema)
+    }
+
+    /// Write the weight file: the moving average when the run keeps one.
+    fn save_weights(&self, net: &Net<B>, training: TrainingSummary) -> Result<()> {
+        let j = self.j;
+        let mut meta = WeightMeta::new(j.arch.clone(), j.noise.clone());
+        meta.training = Some(training);
+        match &self.ema {
+            Some(e) => e
+                .network::<B::InnerBackend>(&j.arch, self.device)?
+                .save(&j.outputs.weights, &meta),
+            None => net.valid().save(&j.outputs.weights, &meta),
+        }
+    }
+}
+
+/// Where a resumed run's checkpoint left it (all zero for a new run).
+#[derive(Default)]
+struct Resumed {
+    step: u64,
+    elapsed_s: f64,
+    last_val: Option<f32>,
+    last_loss: Option<f32>,
+    /// The moving average's bytes, if the checkpoint holds one.
+    ema: Option<Vec<u8>>,
+}
+
+/// Load the checkpoint's network and optimiser into `net` and `optim`, and
+/// where it stands.
+fn resume<B: PgrfAutodiff>(
+    j: &Job,
+    net: Net<B>,
+    optim: OptimizerAdaptor<PgrfAdam, Net<B>, B>,
+    recorder: &Rec,
+    device: &B::Device,
+    progress: &dyn Progress,
+) -> Result<(Net<B>, OptimizerAdaptor<PgrfAdam, Net<B>, B>, Resumed)> {
+    let ck = checkpoint::load(&j.outputs.checkpoint)?;
+    let st = &ck.state;
+    check_resumable(st, &j.arch, j.config, &j.outputs.checkpoint)?;
+    let bad = |e: burn::record::RecorderError| NnError::BadFile {
+        path: j.outputs.checkpoint.clone(),
+        reason: e.to_string(),
+    };
+    let net = net.load_record(recorder.load(ck.model, device).map_err(bad)?);
+    let optim = optim.load_record(recorder.load(ck.optim, device).map_err(bad)?);
+    progress.note(&format!(
+        "resumed from {} at step {}",
+        j.outputs.checkpoint.display(),
+        st.step
+    ));
+    let at = Resumed {
+        step: st.step,
+        elapsed_s: st.elapsed_s,
+        last_val: st.last_val_psnr,
+        last_loss: st.last_loss,
+        ema: ck.ema,
+    };
+    Ok((net, optim, at))
+}
+
+/// The network a run starts from before any checkpoint: seeded fresh
+/// weights, or `init`'s (a resumed run reads only `init`'s record).
+fn initial_net<B: PgrfAutodiff>(
+    j: &Job,
+    device: &B::Device,
+    progress: &dyn Progress,
+) -> Result<(Net<B>, Option<StartedFrom>)> {
+    let net: Net<B> = j.arch.init_seeded(device, j.config.seed)?;
+    match &j.config.init {
+        None => Ok((net, None)),
+        Some(path) if j.resume => Ok((
+            net,
+            Some(StartedFrom::of(
+                path,
+                &crate::weights::require_arch(path, &j.arch)?,
+            )),
+        )),
+        Some(path) => {
+            let (trained, meta, widened) = crate::model::load_init::<B>(path, &j.arch, device)?;
+            if widened {
+                progress.note(&format!(
+                    "starting from {}'s unconditioned weights: the noise planes' input weights start at zero",
+                    path.display()
+                ));
+            }
+            Ok((trained, Some(StartedFrom::of(path, &meta))))
+        }
+    }
 }
