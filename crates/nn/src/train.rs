@@ -24,7 +24,7 @@ use burn::optim::grad_clipping::GradientClippingConfig;
 use burn::optim::{GradientsParams, Optimizer};
 use burn::record::{BinBytesRecorder, FullPrecisionSettings, Recorder};
 use burn::tensor::{ElementConversion, Tensor, TensorData};
-use pgrf_calib::mix::{MixError, MixSpec};
+use pgrf_calib::mix::{CalibratedMix, MixError, MixSpec};
 use pgrf_core::Progress;
 use pgrf_noise::mix::PairMix;
 use std::io::Write;
@@ -91,25 +91,7 @@ pub fn run(
 ) -> Result<Trained> {
     let c = config;
     let outputs = c.outputs()?;
-    if c.steps == 0 && c.init.is_none() {
-        // Random weights recorded as a trained model: never what is wanted.
-        // With --init a run of no step copies that file's weights and adds
-        // up its history (its loss is NaN, null in the record, which reads
-        // back as NaN).
-        return Err(NnError::BadSetting {
-            flag: "--steps",
-            message: "--steps 0 trains nothing: give --steps 1 or more (or --init FILE, whose weights --steps 0 copies)".into(),
-        });
-    }
-    if resume && !outputs.checkpoint.exists() {
-        return Err(NnError::BadSetting {
-            flag: "--resume",
-            message: format!(
-                "--resume: no checkpoint at {}",
-                outputs.checkpoint.display()
-            ),
-        });
-    }
+    check_before_work(c, &outputs, resume)?;
     let arch = c.architecture(method)?;
     if resume {
         let state = checkpoint::load(&outputs.checkpoint)?.state;
@@ -129,46 +111,15 @@ pub fn run(
     check_memory(c, &arch)?;
     let iso_range = c.iso_range()?;
     let (lo, hi) = (c.ratio_min, c.ratio_max);
-    let built = pgrf_calib::mix::build(&MixSpec {
-        profile: &c.profile,
-        model: c.noise,
-        iso: c.iso,
-        iso_range,
-        ratio: c.ratio_draw.spec(lo, hi),
-        calibrated_dark_level: c.calibrated_dark_level,
-        calibrated_share: c.calibrated_share,
-        calibration: c.calib.as_deref(),
-    })
-    .map_err(|e| match e {
-        MixError::Profile(e) => NnError::BadSetting {
-            flag: "--profile",
-            message: format!("--profile: {e}"),
-        },
-        MixError::CalibrationWithMix { path, mix } => NnError::BadSetting {
-            flag: "--calib",
-            message: format!(
-                "--calib {} describes one sensor; it cannot go with a mix of profiles ({mix})",
-                path.display()
-            ),
-        },
-        e => NnError::Calibration(e),
-    })?;
+    let built = pairs_noise(c, iso_range)?;
     let sources = crate::data::build::sources(c)?;
     for w in &sources.warnings {
         warn(w);
     }
     let mix = Arc::new(built.mix);
-    let val = if c.val_pairs > 0 {
-        Some(ValSet::build(
-            &sources.val,
-            &mix,
-            c.val_patch(),
-            c.val_pairs,
-            c.seed,
-        )?)
-    } else {
-        None
-    };
+    let val = (c.val_pairs > 0)
+        .then(|| ValSet::build(&sources.val, &mix, c.val_patch(), c.val_pairs, c.seed))
+        .transpose()?;
     let noise = NoiseSource {
         profile: Some(c.profile.clone()),
         calibration: built.calibration,
@@ -197,6 +148,60 @@ pub fn run(
         outcome,
         method,
         outputs,
+    })
+}
+
+/// What is refused before any work: a run of no step without `init`, and
+/// a resume without its checkpoint.
+fn check_before_work(c: &TrainConfig, outputs: &TrainOutputs, resume: bool) -> Result<()> {
+    if c.steps == 0 && c.init.is_none() {
+        // Random weights recorded as a trained model: never what is wanted.
+        // With --init a run of no step copies that file's weights and adds
+        // up its history (its loss is NaN, null in the record, which reads
+        // back as NaN).
+        return Err(NnError::BadSetting {
+            flag: "--steps",
+            message: "--steps 0 trains nothing: give --steps 1 or more (or --init FILE, whose weights --steps 0 copies)".into(),
+        });
+    }
+    if resume && !outputs.checkpoint.exists() {
+        return Err(NnError::BadSetting {
+            flag: "--resume",
+            message: format!(
+                "--resume: no checkpoint at {}",
+                outputs.checkpoint.display()
+            ),
+        });
+    }
+    Ok(())
+}
+
+/// The pairs' noise: the profiles (or mix) and the calibration, with the
+/// errors named by the flags that set them.
+fn pairs_noise(c: &TrainConfig, iso_range: Option<(u32, u32)>) -> Result<CalibratedMix> {
+    pgrf_calib::mix::build(&MixSpec {
+        profile: &c.profile,
+        model: c.noise,
+        iso: c.iso,
+        iso_range,
+        ratio: c.ratio_draw.spec(c.ratio_min, c.ratio_max),
+        calibrated_dark_level: c.calibrated_dark_level,
+        calibrated_share: c.calibrated_share,
+        calibration: c.calib.as_deref(),
+    })
+    .map_err(|e| match e {
+        MixError::Profile(e) => NnError::BadSetting {
+            flag: "--profile",
+            message: format!("--profile: {e}"),
+        },
+        MixError::CalibrationWithMix { path, mix } => NnError::BadSetting {
+            flag: "--calib",
+            message: format!(
+                "--calib {} describes one sensor; it cannot go with a mix of profiles ({mix})",
+                path.display()
+            ),
+        },
+        e => NnError::Calibration(e),
     })
 }
 
@@ -573,13 +578,54 @@ fn train<B: PgrfAutodiff>(
         }
     }
     drop(loader);
-    let seconds = clock.elapsed().as_secs_f64();
+    let end = LoopEnd {
+        start,
+        step,
+        losses,
+        window,
+        interrupted,
+        seconds: clock.elapsed().as_secs_f64(),
+    };
+    let outcome = finish(&mut run, &net, val, end, &mut log)?;
+    progress.finish();
+    Ok(outcome)
+}
+
+/// Where the loop of [`train`] stopped.
+struct LoopEnd {
+    start: u64,
+    step: u64,
+    losses: Vec<f32>,
+    /// Sum and count of the losses since the last log row.
+    window: (f64, u64),
+    interrupted: bool,
+    seconds: f64,
+}
+
+/// The end of a run: the final validation (unless stopped), the last log
+/// row, the checkpoint and the weight file with its training record.
+fn finish<B: PgrfAutodiff>(
+    run: &mut Run<B>,
+    net: &Net<B>,
+    val: Option<&ValSet>,
+    end: LoopEnd,
+    log: &mut Log,
+) -> Result<Outcome> {
+    let s = run.j.config;
+    let LoopEnd {
+        start,
+        step,
+        losses,
+        window,
+        interrupted,
+        seconds,
+    } = end;
     let images_per_s = ((step - start) as usize * s.batch) as f64 / seconds.max(1e-9);
     let (mut val_psnr, mut val_input_psnr) = (run.last_val, None);
     let mut final_val = None;
     if let Some(v) = val {
         if !interrupted {
-            let (p, raw) = run.validate_both(&net, v)?;
+            let (p, raw) = run.validate_both(net, v)?;
             val_psnr = Some(p);
             final_val = Some((p, raw));
         }
@@ -608,7 +654,7 @@ fn train<B: PgrfAutodiff>(
     // before its first step.
     let final_loss = last_loss.unwrap_or(f32::NAN);
     run.last_val = val_psnr;
-    run.save_checkpoint(&net, step, run.elapsed0 + seconds, last_loss)?;
+    run.save_checkpoint(net, step, run.elapsed0 + seconds, last_loss)?;
     let summary = TrainingSummary {
         steps: step,
         batch: s.batch,
@@ -624,8 +670,7 @@ fn train<B: PgrfAutodiff>(
         config: Some(s.clone()),
         started_from: run.started_from.clone(),
     };
-    run.save_weights(&net, summary)?;
-    progress.finish();
+    run.save_weights(net, summary)?;
     Ok(Outcome {
         start_step: start,
         end_step: step,
