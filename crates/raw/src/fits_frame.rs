@@ -82,11 +82,7 @@ impl RawFrame {
 /// the top-down row H - 1, states its stored phase shifted by one row
 /// ([`crate::fits`]'s convention, which reads it back to `frame.cfa`).
 fn frame_cards(frame: &RawFrame) -> Vec<FitsCard> {
-    let card = |key: &str, value: FitsValue, comment: &str| FitsCard {
-        key: key.into(),
-        value,
-        comment: comment.into(),
-    };
+    let card = FitsCard::new;
     let rows = frame.row_order();
     let mut cards = vec![card(
         "ROWORDER",
@@ -133,16 +129,7 @@ fn frame_cards(frame: &RawFrame) -> Vec<FitsCard> {
             "sensor temperature [C]",
         ));
     }
-    let camera = [frame.make.as_str(), frame.model.as_str()]
-        .into_iter()
-        .filter(|s| !s.is_empty())
-        .collect::<Vec<_>>()
-        .join(" ");
-    let camera: String = camera
-        .chars()
-        .filter(|c| c.is_ascii_graphic() || *c == ' ')
-        .take(60)
-        .collect();
+    let camera = instrument(frame);
     if !camera.is_empty() {
         cards.push(card("INSTRUME", FitsValue::Str(camera), "camera"));
     }
@@ -163,6 +150,21 @@ fn frame_cards(frame: &RawFrame) -> Vec<FitsCard> {
         "",
     ));
     cards
+}
+
+/// The camera as INSTRUME states it: make and model, printable ASCII, at
+/// most 60 characters (empty when the file names no camera).
+fn instrument(frame: &RawFrame) -> String {
+    let camera = [frame.make.as_str(), frame.model.as_str()]
+        .into_iter()
+        .filter(|s| !s.is_empty())
+        .collect::<Vec<_>>()
+        .join(" ");
+    camera
+        .chars()
+        .filter(|c| c.is_ascii_graphic() || *c == ' ')
+        .take(60)
+        .collect()
 }
 
 /// `frame` as a FITS file: unsigned 16-bit samples (BITPIX 16, BZERO

@@ -426,7 +426,13 @@ fn integers(
             }
         )));
     }
-    let conversion = match bitpix {
+    Ok((out, integer_conversion(bitpix, bzero, bscale, scaled)))
+}
+
+/// What was done to integer samples to make them u16 ADU, None for plain
+/// (or BZERO-offset) BITPIX 16.
+fn integer_conversion(bitpix: i32, bzero: f64, bscale: f64, scaled: &str) -> Option<String> {
+    match bitpix {
         16 if bscale == 1.0 => None,
         16 => Some(format!(
             "BITPIX 16 scaled by BZERO = {bzero}, BSCALE = {bscale}"
@@ -435,8 +441,7 @@ fn integers(
         _ => Some(format!(
             "BITPIX {bitpix} integers{scaled}, all within 0..65535"
         )),
-    };
-    Ok((out, conversion))
+    }
 }
 
 /// Floating-point samples: no NaN or infinity; normalised 0..1 data (Siril,
