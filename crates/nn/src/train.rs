@@ -393,6 +393,9 @@ impl OnTrainBackend for Job<'_> {
 
 type Rec = BinBytesRecorder<FullPrecisionSettings>;
 
+/// The optimiser of a training run.
+type Adam<B> = OptimizerAdaptor<PgrfAdam, Net<B>, B>;
+
 fn to_tensor<B: PgrfOps>(v: &[f32], shape: [usize; 4], device: &B::Device) -> Tensor<B, 4> {
     Tensor::from_data(TensorData::new(v.to_vec(), shape), device)
 }
@@ -709,7 +712,7 @@ fn check_step_settings(s: &TrainConfig) -> Result<()> {
 struct Run<'j, 'a, B: PgrfAutodiff> {
     j: &'j Job<'a>,
     device: &'j B::Device,
-    optim: OptimizerAdaptor<PgrfAdam, Net<B>, B>,
+    optim: Adam<B>,
     ema: Option<Ema>,
     recorder: Rec,
     arch_json: serde_json::Value,
@@ -736,8 +739,7 @@ impl<'j, 'a, B: PgrfAutodiff> Run<'j, 'a, B> {
         let arch_json =
             serde_json::to_value(&j.arch).map_err(|e| NnError::Invalid(e.to_string()))?;
         let (mut net, started_from) = initial_net::<B>(j, device, progress)?;
-        let mut optim =
-            OptimizerAdaptor::<PgrfAdam, Net<B>, B>::from(PgrfAdam::new(0.9, 0.999, 1e-8));
+        let mut optim = Adam::<B>::from(PgrfAdam::new(0.9, 0.999, 1e-8));
         if let Some(c) = s.clip_grad {
             optim = optim.with_grad_clipping(GradientClippingConfig::Norm(c).init());
         }
@@ -912,11 +914,11 @@ struct Resumed {
 fn resume<B: PgrfAutodiff>(
     j: &Job,
     net: Net<B>,
-    optim: OptimizerAdaptor<PgrfAdam, Net<B>, B>,
+    optim: Adam<B>,
     recorder: &Rec,
     device: &B::Device,
     progress: &dyn Progress,
-) -> Result<(Net<B>, OptimizerAdaptor<PgrfAdam, Net<B>, B>, Resumed)> {
+) -> Result<(Net<B>, Adam<B>, Resumed)> {
     let ck = checkpoint::load(&j.outputs.checkpoint)?;
     let st = &ck.state;
     check_resumable(st, &j.arch, j.config, &j.outputs.checkpoint)?;
