@@ -27,19 +27,7 @@ pub struct StackArgs {
 pub fn run(a: &StackArgs) -> Result<()> {
     let files = list_files(&a.dir)?;
     let t = Instant::now();
-    let stack = read_stack(
-        &files,
-        &ReadOptions {
-            kind: "bias",
-            expect: None,
-            single_exposure: true,
-            need_exposure: false,
-            per_exposure: 2,
-            tap_pixels: 0,
-            pairs: false,
-            progress: &pgrf_core::NoProgress,
-        },
-    )?;
+    let stack = read_stack(&files, &ReadOptions::bias(0, false, &pgrf_core::NoProgress))?;
     let bias = pgrf_calib::estimate::estimate_bias(&stack, stack.key.black)?;
     let total_s = t.elapsed().as_secs_f64();
     let peak = pgrf_core::mem::peak_rss_mib().unwrap_or(f64::NAN);

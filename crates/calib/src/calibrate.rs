@@ -441,7 +441,7 @@ pub fn calibrate(input: &CalibrateInput, progress: &dyn Progress) -> Result<Cali
     let (bias_stack, key) = read_bias(input, progress, &mut notes, &mut rejected)?;
     let bias = estimate_bias(&bias_stack, key.black)?;
     let opts = |kind, per_exposure, pairs| {
-        after_bias(kind, &bias_stack.key, per_exposure, pairs, progress)
+        ReadOptions::after_bias(kind, &bias_stack.key, per_exposure, pairs, progress)
     };
     let flat_stack = read_checked(
         &input.flat,
@@ -522,27 +522,6 @@ fn tolerance_of(input: &CalibrateInput) -> Result<f32> {
         .unwrap_or(TEMPERATURE_TOLERANCE_C))
 }
 
-/// How the flat and dark stacks are read: several exposures, each frame
-/// matching the bias frames' key.
-fn after_bias<'a>(
-    kind: &'a str,
-    expect: &'a FrameKey,
-    per_exposure: usize,
-    pairs: bool,
-    progress: &'a dyn Progress,
-) -> ReadOptions<'a> {
-    ReadOptions {
-        kind,
-        expect: Some(expect),
-        single_exposure: false,
-        need_exposure: true,
-        per_exposure,
-        tap_pixels: 0,
-        pairs,
-        progress,
-    }
-}
-
 /// The bias stack, read with the checks every frame must pass, and its
 /// frames' shared key (the ISO asked for where the files record none; a
 /// recorded ISO other than the one asked for is refused).
@@ -554,16 +533,7 @@ fn read_bias(
 ) -> Result<(Stack, FrameKey)> {
     let bias_stack = read_checked(
         &input.bias,
-        &ReadOptions {
-            kind: "bias",
-            expect: None,
-            single_exposure: true,
-            need_exposure: false,
-            per_exposure: 2,
-            tap_pixels: input.tap_pixels,
-            pairs: true,
-            progress,
-        },
+        &ReadOptions::bias(input.tap_pixels, true, progress),
         input.reject,
         notes,
         rejected,

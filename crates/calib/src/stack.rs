@@ -258,6 +258,44 @@ pub struct ReadOptions<'a> {
     pub progress: &'a dyn pgrf_core::Progress,
 }
 
+impl<'a> ReadOptions<'a> {
+    /// A bias stack: one exposure, none needed, at least two frames;
+    /// `pairs` for the pair variance, `tap_pixels` pixels tapped.
+    pub fn bias(tap_pixels: usize, pairs: bool, progress: &'a dyn pgrf_core::Progress) -> Self {
+        ReadOptions {
+            kind: "bias",
+            expect: None,
+            single_exposure: true,
+            need_exposure: false,
+            per_exposure: 2,
+            tap_pixels,
+            pairs,
+            progress,
+        }
+    }
+
+    /// A flat or dark stack read after the bias: several exposures, each
+    /// frame matching the bias frames' key `expect`.
+    pub fn after_bias(
+        kind: &'a str,
+        expect: &'a FrameKey,
+        per_exposure: usize,
+        pairs: bool,
+        progress: &'a dyn pgrf_core::Progress,
+    ) -> Self {
+        ReadOptions {
+            kind,
+            expect: Some(expect),
+            single_exposure: false,
+            need_exposure: true,
+            per_exposure,
+            tap_pixels: 0,
+            pairs,
+            progress,
+        }
+    }
+}
+
 /// Decode and accumulate `files`.
 pub fn read_stack(files: &[PathBuf], opt: &ReadOptions) -> Result<Stack> {
     if files.len() < 2 && opt.per_exposure >= 2 {
