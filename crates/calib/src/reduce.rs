@@ -762,12 +762,7 @@ fn header_of(
     replaced: usize,
     calib_name: &str,
 ) -> (Vec<FitsCard>, Vec<String>) {
-    let ascii = |s: &str| -> String {
-        s.chars()
-            .filter(|c| c.is_ascii_graphic() || *c == ' ')
-            .take(60)
-            .collect()
-    };
+    let ascii = pgrf_raw::fits::card_text;
     let mut cards = vec![FitsCard::new(
         "MBIAS",
         FitsValue::Str(ascii(&masters.bias.name())),
@@ -779,32 +774,9 @@ fn header_of(
         ascii(&masters.bias.name())
     )];
     if let Some((name, scale)) = dark {
-        cards.push(FitsCard::new(
-            "MDARK",
-            FitsValue::Str(ascii(name)),
-            "master dark subtracted",
-        ));
-        cards.push(FitsCard::new(
-            "DARKSCL",
-            FitsValue::Float(*scale),
-            "dark signal scale g(t)/g(t_d)",
-        ));
-        cards.push(FitsCard::new(
-            "DARKLAW",
-            FitsValue::Str(law_name(masters.law).into()),
-            "dark law g: linear t, sqrt sqrt(t)",
-        ));
-        let offset = if masters.offset.is_some() {
-            " (offset c kept unscaled)"
-        } else {
-            ""
-        };
-        history.push(format!(
-            "minus master dark {} minus bias, scaled to {} s by the {} law: x{scale:.6}{offset}",
-            ascii(name),
-            light.exposure_s.unwrap_or(0.0) as f32,
-            law_name(masters.law)
-        ));
+        let (dark_cards, step) = dark_step(masters, light, name, *scale);
+        cards.extend(dark_cards);
+        history.push(step);
     }
     cards.push(FitsCard::new(
         "MFLAT",
@@ -837,6 +809,46 @@ fn header_of(
     ));
     history.push("pixels in DN above black / 65535".into());
     (cards, history)
+}
+
+/// The cards and the HISTORY line of the dark subtraction: master `name`
+/// scaled by `scale` to the light's exposure.
+fn dark_step(
+    masters: &Masters,
+    light: &RawFrame,
+    name: &str,
+    scale: f64,
+) -> ([FitsCard; 3], String) {
+    let ascii = pgrf_raw::fits::card_text;
+    let cards = [
+        FitsCard::new(
+            "MDARK",
+            FitsValue::Str(ascii(name)),
+            "master dark subtracted",
+        ),
+        FitsCard::new(
+            "DARKSCL",
+            FitsValue::Float(scale),
+            "dark signal scale g(t)/g(t_d)",
+        ),
+        FitsCard::new(
+            "DARKLAW",
+            FitsValue::Str(law_name(masters.law).into()),
+            "dark law g: linear t, sqrt sqrt(t)",
+        ),
+    ];
+    let offset = if masters.offset.is_some() {
+        " (offset c kept unscaled)"
+    } else {
+        ""
+    };
+    let step = format!(
+        "minus master dark {} minus bias, scaled to {} s by the {} law: x{scale:.6}{offset}",
+        ascii(name),
+        light.exposure_s.unwrap_or(0.0) as f32,
+        law_name(masters.law)
+    );
+    (cards, step)
 }
 
 #[cfg(test)]

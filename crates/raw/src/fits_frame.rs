@@ -160,11 +160,7 @@ fn instrument(frame: &RawFrame) -> String {
         .filter(|s| !s.is_empty())
         .collect::<Vec<_>>()
         .join(" ");
-    camera
-        .chars()
-        .filter(|c| c.is_ascii_graphic() || *c == ' ')
-        .take(60)
-        .collect()
+    crate::fits::card_text(&camera)
 }
 
 /// `frame` as a FITS file: unsigned 16-bit samples (BITPIX 16, BZERO

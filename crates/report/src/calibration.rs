@@ -727,6 +727,28 @@ where
             .label(s.label.clone())
             .legend(move |(x, y)| Rectangle::new([(x, y - 6), (x + 20, y + 6)], color.filled()));
     }
+    median_lines(chart, spec, base, y_top, overlay)?;
+    chart
+        .configure_series_labels()
+        .position(legend_corner(spec.series))
+        .label_font((FONT_FAMILY, 18))
+        .background_style(WHITE.mix(0.9))
+        .border_style(BLACK)
+        .draw()?;
+    Ok(())
+}
+
+/// Each series' median as a dashed vertical line, named in the legend.
+fn median_lines<'a, Y>(
+    chart: &mut ChartContext<'a, BitMapBackend<'a>, Cartesian2d<RangedCoordf64, Y>>,
+    spec: &HistSpec,
+    base: f64,
+    y_top: f64,
+    overlay: bool,
+) -> PlotResult
+where
+    Y: Ranged<ValueType = f64> + ValueFormatter<f64>,
+{
     for s in spec.series {
         if !s.median.is_finite() {
             continue;
@@ -755,13 +777,6 @@ where
             ))
             .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], style));
     }
-    chart
-        .configure_series_labels()
-        .position(legend_corner(spec.series))
-        .label_font((FONT_FAMILY, 18))
-        .background_style(WHITE.mix(0.9))
-        .border_style(BLACK)
-        .draw()?;
     Ok(())
 }
 

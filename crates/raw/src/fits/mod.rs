@@ -65,7 +65,7 @@ mod write;
 
 pub(crate) use read::stored_phase;
 pub use read::{is_fits, read_fits, read_fits_samples};
-pub use write::{encode_fits_f32, encode_fits_f32_history, encode_fits_u16};
+pub use write::{card_text, encode_fits_f32, encode_fits_f32_history, encode_fits_u16};
 
 use crate::cfa::Cfa;
 use serde::Serialize;

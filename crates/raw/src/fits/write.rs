@@ -278,3 +278,12 @@ pub(super) fn with_point(s: &str) -> String {
         None => format!("{s}.0"),
     }
 }
+
+/// `s` as a card's string value: printable ASCII only, at most 60
+/// characters (what fits in a card beside its keyword and quotes).
+pub fn card_text(s: &str) -> String {
+    s.chars()
+        .filter(|c| c.is_ascii_graphic() || *c == ' ')
+        .take(60)
+        .collect()
+}
