@@ -41,7 +41,9 @@ measure() {
   kill "$smi" 2>/dev/null
   wait "$smi" 2>/dev/null
   peak=$(sort -n "$work/mem" | tail -1)
-  printf '%s\trc %s\twall %s ms\tpeak GPU %s MiB\n' "$name" "$rc" "$(((e - s) / 1000000))" "${peak:-?}" | tee -a "$results"
+  # To stderr (and the results), so that a caller's `| tee -a results` of
+  # the command's own output does not record the line twice.
+  printf '%s\trc %s\twall %s ms\tpeak GPU %s MiB\n' "$name" "$rc" "$(((e - s) / 1000000))" "${peak:-?}" | tee -a "$results" >&2
   return $rc
 }
 late() {
