@@ -223,42 +223,34 @@ impl CameraProfile {
     }
 
     fn validate(&self) -> std::result::Result<(), String> {
+        self.validate_scale()?;
+        self.validate_eld()?;
+        self.validate_per_iso()?;
+        if let Some(d) = &self.dark_current {
+            if !(d.rate.is_finite() && d.rate >= 0.0) {
+                return Err(format!("dark_current.rate must be >= 0, got {}", d.rate));
+            }
+        }
+        Ok(())
+    }
+
+    /// The schema, the DN scale, the gain range and the black level.
+    fn validate_scale(&self) -> std::result::Result<(), String> {
         if self.schema != 1 {
             return Err(format!(
                 "schema {} is not supported (expected 1)",
                 self.schema
             ));
         }
-        let pos = |v: f64, what: &str| -> std::result::Result<(), String> {
-            if v.is_finite() && v > 0.0 {
-                Ok(())
-            } else {
-                Err(format!(
-                    "{what} must be a positive number, got {}",
-                    shown(v)
-                ))
-            }
-        };
-        // A gain is positive and no more than any sensor's.
-        let gain = |v: f64, what: &str| -> std::result::Result<(), String> {
-            pos(v, what)?;
-            if v > MAX_GAIN {
-                return Err(format!(
-                    "{what} {} DN/e- is beyond any sensor (at most {MAX_GAIN})",
-                    shown(v)
-                ));
-            }
-            Ok(())
-        };
-        pos(self.dn_range, "dn_range")?;
+        positive(self.dn_range, "dn_range")?;
         if self.dn_range > 65535.0 {
             return Err(format!(
                 "dn_range must be at most 65535 (a 16-bit scale), got {}",
                 shown(self.dn_range)
             ));
         }
-        pos(self.k_min, "k_min")?;
-        gain(self.k_max, "k_max")?;
+        positive(self.k_min, "k_min")?;
+        sensor_gain(self.k_max, "k_max")?;
         if self.k_max < self.k_min {
             return Err(format!(
                 "k_max {} is below k_min {}",
@@ -266,13 +258,19 @@ impl CameraProfile {
             ));
         }
         if let Some(k) = self.k_per_iso {
-            gain(k, "k_per_iso")?;
+            sensor_gain(k, "k_per_iso")?;
         }
         if let Some(b) = self.black {
             if !(b.is_finite() && b >= 0.0) {
                 return Err(format!("black must be >= 0, got {b}"));
             }
         }
+        Ok(())
+    }
+
+    /// ELD's fits: finite, bounded over the gain range, one colour-bias row
+    /// per Tukey shape.
+    fn validate_eld(&self) -> std::result::Result<(), String> {
         let e = &self.eld;
         if e.tukey_shapes.is_empty() {
             return Err("eld.tukey_shapes is empty".into());
@@ -305,6 +303,12 @@ impl CameraProfile {
                 e.tukey_shapes.len()
             ));
         }
+        Ok(())
+    }
+
+    /// The per-ISO table: increasing ISOs, sensor gains, standard
+    /// deviations within range, finite values.
+    fn validate_per_iso(&self) -> std::result::Result<(), String> {
         let mut last = 0;
         for p in &self.per_iso {
             if p.iso <= last {
@@ -314,7 +318,7 @@ impl CameraProfile {
                 ));
             }
             last = p.iso;
-            gain(p.k, &format!("per_iso[{}].k", p.iso))?;
+            sensor_gain(p.k, &format!("per_iso[{}].k", p.iso))?;
             for (what, v) in [
                 ("sigma_tukey", p.sigma_tukey),
                 ("sigma_gauss", p.sigma_gauss),
@@ -332,13 +336,32 @@ impl CameraProfile {
                 return Err(format!("per_iso[{}] has a non-finite value", p.iso));
             }
         }
-        if let Some(d) = &self.dark_current {
-            if !(d.rate.is_finite() && d.rate >= 0.0) {
-                return Err(format!("dark_current.rate must be >= 0, got {}", d.rate));
-            }
-        }
         Ok(())
     }
+}
+
+/// `v` must be a positive number.
+fn positive(v: f64, what: &str) -> std::result::Result<(), String> {
+    if v.is_finite() && v > 0.0 {
+        Ok(())
+    } else {
+        Err(format!(
+            "{what} must be a positive number, got {}",
+            shown(v)
+        ))
+    }
+}
+
+/// A gain is positive and no more than any sensor's.
+fn sensor_gain(v: f64, what: &str) -> std::result::Result<(), String> {
+    positive(v, what)?;
+    if v > MAX_GAIN {
+        return Err(format!(
+            "{what} {} DN/e- is beyond any sensor (at most {MAX_GAIN})",
+            shown(v)
+        ));
+    }
+    Ok(())
 }
 
 #[cfg(test)]

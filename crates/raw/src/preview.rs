@@ -70,28 +70,7 @@ pub fn render_preview(frame: &RawFrame, opts: &PreviewOptions) -> Result<Preview
         return Ok(render_mono(frame, opts));
     }
     let mut warnings = Vec::new();
-    let wb = match (opts.no_wb, frame.wb) {
-        (true, _) => [1.0; 3],
-        (false, Some(wb)) => wb,
-        (false, None) => {
-            warnings
-                .push("no as-shot white balance in the file: using multipliers of 1".to_string());
-            [1.0; 3]
-        }
-    };
-    let matrix = match frame
-        .color_matrix()
-        .and_then(|cm| srgb_from_camera(&cm.xyz_to_cam))
-    {
-        Some(m) => m,
-        None => {
-            warnings.push(
-                "no usable colour matrix in the file: camera RGB shown as sRGB (identity)"
-                    .to_string(),
-            );
-            IDENTITY
-        }
-    };
+    let (wb, matrix) = colour_of(frame, opts, &mut warnings);
 
     // Normalised, balanced, amplified and clipped mosaic.
     let scale: [f32; 4] = std::array::from_fn(|p| 1.0 / (frame.white as f32 - frame.black[p]));
@@ -109,18 +88,7 @@ pub fn render_preview(frame: &RawFrame, opts: &PreviewOptions) -> Result<Preview
     });
 
     let (width, height, mut rgb) = if opts.half {
-        let (ph, pw) = frame.packed_dims();
-        let off = cfa.offsets();
-        let mut rgb = vec![0.0f32; ph * pw * 3];
-        rgb.par_chunks_mut(pw * 3).enumerate().for_each(|(i, row)| {
-            for j in 0..pw {
-                let at = |p: usize| lin[(2 * i + off[p].0) * w + 2 * j + off[p].1];
-                row[j * 3] = at(0);
-                row[j * 3 + 1] = 0.5 * (at(1) + at(3));
-                row[j * 3 + 2] = at(2);
-            }
-        });
-        (pw, ph, rgb)
+        binned(frame, &lin)
     } else {
         (
             w,
@@ -147,6 +115,56 @@ pub fn render_preview(frame: &RawFrame, opts: &PreviewOptions) -> Result<Preview
         rgb,
         warnings,
     })
+}
+
+/// The white balance and the camera -> sRGB matrix the preview uses, with
+/// a warning for each the file lacks (multipliers of 1, identity).
+fn colour_of(
+    frame: &RawFrame,
+    opts: &PreviewOptions,
+    warnings: &mut Vec<String>,
+) -> ([f32; 3], [[f64; 3]; 3]) {
+    let wb = match (opts.no_wb, frame.wb) {
+        (true, _) => [1.0; 3],
+        (false, Some(wb)) => wb,
+        (false, None) => {
+            warnings
+                .push("no as-shot white balance in the file: using multipliers of 1".to_string());
+            [1.0; 3]
+        }
+    };
+    let matrix = match frame
+        .color_matrix()
+        .and_then(|cm| srgb_from_camera(&cm.xyz_to_cam))
+    {
+        Some(m) => m,
+        None => {
+            warnings.push(
+                "no usable colour matrix in the file: camera RGB shown as sRGB (identity)"
+                    .to_string(),
+            );
+            IDENTITY
+        }
+    };
+    (wb, matrix)
+}
+
+/// The mosaic `lin` binned 2x2 into RGB (the greens averaged): (width,
+/// height, pixels).
+fn binned(frame: &RawFrame, lin: &[f32]) -> (usize, usize, Vec<f32>) {
+    let w = frame.width;
+    let (ph, pw) = frame.packed_dims();
+    let off = frame.cfa.offsets();
+    let mut rgb = vec![0.0f32; ph * pw * 3];
+    rgb.par_chunks_mut(pw * 3).enumerate().for_each(|(i, row)| {
+        for j in 0..pw {
+            let at = |p: usize| lin[(2 * i + off[p].0) * w + 2 * j + off[p].1];
+            row[j * 3] = at(0);
+            row[j * 3 + 1] = 0.5 * (at(1) + at(3));
+            row[j * 3 + 2] = at(2);
+        }
+    });
+    (pw, ph, rgb)
 }
 
 /// A monochrome frame in grey: normalisation, gain, clipping, sRGB curve
