@@ -170,6 +170,12 @@ impl CalibMeta {
     /// saturated or black frames (white 0, black 1e9) or divide by zero
     /// (K 0), so it is refused with the field named.
     pub(crate) fn check(&self) -> std::result::Result<(), String> {
+        self.check_frame()?;
+        self.check_figures()
+    }
+
+    /// The frame's size, CFA and levels.
+    fn check_frame(&self) -> std::result::Result<(), String> {
         const MAX_SIDE: usize = 1 << 16;
         if self.width < 2
             || self.height < 2
@@ -200,6 +206,11 @@ impl CalibMeta {
                 ));
             }
         }
+        Ok(())
+    }
+
+    /// The gain, noise figures, ISO, exposures and dark-signal figures.
+    fn check_figures(&self) -> std::result::Result<(), String> {
         let max_k = pgrf_noise::profile::MAX_GAIN;
         if !(self.k.is_finite() && self.k > 0.0 && self.k <= max_k) {
             return Err(format!(
