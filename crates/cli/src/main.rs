@@ -6,7 +6,6 @@ mod cmd;
 mod input;
 mod io;
 mod progress;
-mod renamed;
 mod shipped;
 
 use clap::{Parser, Subcommand};
@@ -65,6 +64,13 @@ enum Command {
     Profiles(cmd::profiles::ProfilesArgs),
 }
 
+/// The noise model kind's old names (`--model` is a weight file, `--noise` noise values).
+const RENAMED: [pgrf_core::exit::Renamed; 3] = [
+    ("synth", "--model", "--noise-model"),
+    ("train", "--noise", "--noise-model"),
+    ("eval", "--noise", "--noise-model"),
+];
+
 fn main() -> ExitCode {
     pgrf_core::exit::one_line_panics("pgrf");
     let cli = match Cli::try_parse() {
@@ -77,10 +83,7 @@ fn main() -> ExitCode {
         Command::Eval(_) => "eval",
         _ => "",
     };
-    let args: Vec<String> = std::env::args().collect();
-    for note in renamed::notes(command, &args) {
-        eprintln!("pgrf: note: {note}");
-    }
+    pgrf_core::exit::note_renamed("pgrf", &RENAMED, command);
     pgrf_nn::ops::set_kernels(cli.kernels);
     pgrf_noise::darktable::set_profiles_path(cli.darktable_profiles.clone());
     pgrf_core::mem::keep_freed_buffers();

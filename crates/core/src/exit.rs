@@ -103,6 +103,37 @@ fn error_line<E: Display>(program: &str, e: &E) -> String {
     format!("{program}: error: {msg}")
 }
 
+/// A flag renamed so that one name means one thing in every command:
+/// (command, old spelling, new spelling). The old spelling keeps parsing
+/// (a clap alias) for one release; [`renamed_notes`] names the new one.
+pub type Renamed = (&'static str, &'static str, &'static str);
+
+/// One note per old spelling among `args` (the process arguments) of
+/// `command`, `--old` or `--old=VALUE`; printed by [`note_renamed`].
+pub fn renamed_notes(renamed: &[Renamed], command: &str, args: &[String]) -> Vec<String> {
+    renamed
+        .iter()
+        .filter(|(c, old, _)| {
+            *c == command
+                && args
+                    .iter()
+                    .any(|a| a == old || a.starts_with(&format!("{old}=")))
+        })
+        .map(|(c, old, new)| {
+            format!("`{c} {old}` is now `{c} {new}`; the old spelling goes in the next release")
+        })
+        .collect()
+}
+
+/// Print `PROGRAM: note: ...` on stderr for each old spelling this
+/// process was given ([`renamed_notes`]).
+pub fn note_renamed(program: &str, renamed: &[Renamed], command: &str) {
+    let args: Vec<String> = std::env::args().collect();
+    for note in renamed_notes(renamed, command, &args) {
+        eprintln!("{program}: note: {note}");
+    }
+}
+
 #[cfg(test)]
 mod tests {
     #[test]
@@ -130,5 +161,20 @@ mod tests {
         assert!(many.to_string().ends_with(", 9.dng and 2 more"), "{many}");
         assert_eq!(super::exit_code_of(&Context(partial)), 3);
         assert_eq!(super::exit_code_of(&std::io::Error::other("x")), 1);
+    }
+
+    #[test]
+    fn an_old_spelling_is_named_once_for_its_own_command() {
+        let renamed = [("synth", "--model", "--noise-model")];
+        let args = |v: &[&str]| v.iter().map(|s| s.to_string()).collect::<Vec<_>>();
+        let note = "`synth --model` is now `synth --noise-model`; the old spelling goes in the next release";
+        let given = args(&["pgrf", "synth", "--model=eld", "x.dng"]);
+        assert_eq!(super::renamed_notes(&renamed, "synth", &given), [note]);
+        let given = args(&["pgrf", "synth", "--model", "eld"]);
+        assert_eq!(super::renamed_notes(&renamed, "synth", &given), [note]);
+        let new = args(&["pgrf", "synth", "--noise-model", "eld"]);
+        assert!(super::renamed_notes(&renamed, "synth", &new).is_empty());
+        let other = args(&["pgrf", "enhance", "--model", "m.safetensors"]);
+        assert!(super::renamed_notes(&renamed, "enhance", &other).is_empty());
     }
 }

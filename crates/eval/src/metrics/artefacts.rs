@@ -60,6 +60,26 @@ pub struct Seams {
     pub median_step: f64,
 }
 
+impl std::fmt::Display for Speckles {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "{} of {} flat-region pixels beyond {SPECKLE_SIGMAS} robust sd ({:.5} of white)",
+            self.count, self.flat_pixels, self.sigma
+        )
+    }
+}
+
+impl std::fmt::Display for Seams {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "worst {:.2}x the median step, at {} {} (median step {:.5})",
+            self.worst, self.axis, self.at, self.median_step
+        )
+    }
+}
+
 /// Equal shapes, not empty, every value finite ([`super::input::pair`]).
 fn check(output: ArrayView3<f32>, reference: ArrayView3<f32>) -> Result<()> {
     super::input::pair(output, reference).map(|_| ())
