@@ -321,6 +321,14 @@ fn synth_is_byte_reproducible_and_keeps_the_frame_geometry() {
     );
 
     // Every model and the ablations run.
+    let base = [
+        "synth",
+        s(&chart),
+        "--profile",
+        "sony-a7s2",
+        "--ratio",
+        "200",
+    ];
     for extra in [
         vec!["--noise-model", "pg"],
         vec!["--noise-model", "eld"],
@@ -330,18 +338,7 @@ fn synth_is_byte_reproducible_and_keeps_the_frame_geometry() {
         vec!["--dark-rate", "5", "--dark-law", "linear"],
     ] {
         let m = dir.join("m.dng");
-        let mut args = vec![
-            "synth",
-            s(&chart),
-            "--profile",
-            "sony-a7s2",
-            "--ratio",
-            "200",
-            "-o",
-            s(&m),
-        ];
-        args.extend(extra.iter().copied());
-        let r = pgrf(&args);
+        let r = pgrf(&[&base[..], &["-o", s(&m)], &extra].concat());
         assert!(
             r.status.success(),
             "{extra:?}: {}",
@@ -352,14 +349,6 @@ fn synth_is_byte_reproducible_and_keeps_the_frame_geometry() {
     // The old name of --noise-model still works for one release: the same
     // bytes, and a note naming the new one.
     let (new, old) = (dir.join("new.dng"), dir.join("old.dng"));
-    let base = [
-        "synth",
-        s(&chart),
-        "--profile",
-        "sony-a7s2",
-        "--ratio",
-        "200",
-    ];
     let r = pgrf(&[&base[..], &["--noise-model", "eld", "-o", s(&new)]].concat());
     assert!(r.status.success(), "{r:?}");
     assert!(!String::from_utf8_lossy(&r.stderr).contains("note:"));

@@ -637,17 +637,21 @@ fn ctrl_c_checkpoints_and_exits_130_and_the_run_resumes() {
 #[test]
 fn print_config_round_trips_through_a_config_file() {
     let d = scratch("printcfg");
-    let out = pgrf(&[
-        "train",
-        "flow",
-        "--steps",
-        "17",
-        "--channel-mults",
-        "1,2",
-        "--noise-model",
-        "eld",
-        "--print-config",
-    ]);
+    // The noise model under its name, or under `--noise`, its old one.
+    let printed = |noise_flag| {
+        pgrf(&[
+            "train",
+            "flow",
+            "--steps",
+            "17",
+            "--channel-mults",
+            "1,2",
+            noise_flag,
+            "eld",
+            "--print-config",
+        ])
+    };
+    let out = printed("--noise-model");
     assert!(
         out.status.success(),
         "{}",
@@ -663,17 +667,7 @@ fn print_config_round_trips_through_a_config_file() {
     let again = pgrf(&["train", "flow", "--config", s(&cfg), "--print-config"]);
     assert_eq!(String::from_utf8(again.stdout).unwrap(), text);
     // --noise, the old name of --noise-model, still works with a note.
-    let old = pgrf(&[
-        "train",
-        "flow",
-        "--steps",
-        "17",
-        "--channel-mults",
-        "1,2",
-        "--noise",
-        "eld",
-        "--print-config",
-    ]);
+    let old = printed("--noise");
     assert_eq!(String::from_utf8(old.stdout).unwrap(), text);
     let err = String::from_utf8_lossy(&old.stderr);
     assert_eq!(
