@@ -62,7 +62,10 @@ impl DeviceKind {
         }
         #[cfg(feature = "cuda")]
         if self == Self::Cuda {
-            cuda_ready()?;
+            // Asked once per process: commands check before their work and
+            // again where they pick the backend.
+            static READY: std::sync::OnceLock<Result<(), String>> = std::sync::OnceLock::new();
+            READY.get_or_init(cuda_ready).clone()?;
         }
         Ok(())
     }
