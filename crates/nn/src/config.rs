@@ -182,7 +182,7 @@ pub struct TrainConfig {
     #[cfg_attr(feature = "clap", arg(long, value_enum, default_value_t = d().conditioning, hide_default_value = true))]
     #[serde(skip_serializing_if = "is_unconditioned")]
     pub conditioning: Conditioning,
-    /// Start from this weight file's weights (a trained network of exactly this configuration, e.g. models/spc.safetensors) instead of fresh ones: fine-tuning on other data or conditions; the optimiser and the learning-rate schedule start afresh (a resumed run takes its weights from the checkpoint), and the output records the file and its training.
+    /// Start from this weight file's weights (a trained network of this configuration, e.g. models/spc.safetensors; or the same network without noise conditioning, whose noise planes then start at zero weights; or a narrower SID U-Net, whose channels start a wider one computing what it did) instead of fresh ones: fine-tuning on other data or conditions; the optimiser and the learning-rate schedule start afresh (a resumed run takes its weights from the checkpoint), and the output records the file and its training.
     #[cfg_attr(feature = "clap", arg(long))]
     pub init: Option<PathBuf>,
     /// SR3 channels of the first level [default: 64, or --width].

@@ -84,31 +84,32 @@ pub(crate) fn check_fit(
 }
 
 /// The weights of `path` as a network of `arch`, to start a run from
-/// (`--init`): the file's own network when it is `arch`, or its
-/// unconditioned form widened to take the noise planes
-/// ([`crate::arch::Architecture::widen_unconditioned`]). The flag says
-/// whether it was widened.
+/// (`--init`): the file's own network when it is `arch`, else adapted to it
+/// ([`crate::arch::Architecture::adapt_start`]: its unconditioned form
+/// widened to take the noise planes, or a narrower SID U-Net written into
+/// the old channels of `fresh`, the run's seeded network). Says how.
 pub(crate) fn load_init<B: Backend>(
     path: &Path,
     arch: &crate::arch::Architecture,
+    fresh: Net<B>,
     device: &B::Device,
-) -> Result<(Net<B>, WeightMeta, bool)> {
+) -> Result<(Net<B>, WeightMeta, crate::arch::StartAdapted)> {
     let (meta, mut tensors) = weights::read(path)?;
     weights::check_arch(path, &meta, arch)?;
+    let fit = |e: String| {
+        NnError::SizeMismatch(format!(
+            "{}: weights do not fit {}: {e}",
+            path.display(),
+            arch.describe()
+        ))
+    };
     // `arch` is the run's own (already checked against memory), so the
-    // file's tensors are assigned to it whether or not they were widened.
-    let widened = arch.widen_unconditioned(&meta.arch, &mut tensors);
-    let net = arch
-        .init::<B>(device)?
-        .assign(&tensors, device)
-        .map_err(|e| {
-            NnError::SizeMismatch(format!(
-                "{}: weights do not fit {}: {e}",
-                path.display(),
-                arch.describe()
-            ))
-        })?;
-    Ok((net, meta, widened))
+    // file's tensors are assigned to it however they were adapted.
+    let adapted = arch
+        .adapt_start(&meta.arch, &mut tensors, &fresh)
+        .map_err(fit)?;
+    let net = fresh.assign(&tensors, device).map_err(fit)?;
+    Ok((net, meta, adapted))
 }
 
 /// Load a file that must hold the SPC denoiser.

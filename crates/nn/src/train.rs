@@ -7,7 +7,7 @@
 //! validation PSNR, logs and checkpoints, and stops cleanly on request.
 //! Backend-generic: the device setting picks Flex on the CPU or CUDA.
 
-use crate::arch::{Architecture, Net};
+use crate::arch::{Architecture, Net, StartAdapted};
 use crate::backend::{on_train_device, OnTrainBackend};
 use crate::checkpoint::{self, CheckpointState};
 use crate::config::{Method, TrainConfig, TrainOutputs};
@@ -961,12 +961,19 @@ fn initial_net<B: PgrfAutodiff>(
             )),
         )),
         Some(path) => {
-            let (trained, meta, widened) = crate::model::load_init::<B>(path, &j.arch, device)?;
-            if widened {
-                progress.note(&format!(
+            let (trained, meta, adapted) =
+                crate::model::load_init::<B>(path, &j.arch, net, device)?;
+            match adapted {
+                StartAdapted::AsIs => {}
+                StartAdapted::Conditioned => progress.note(&format!(
                     "starting from {}'s unconditioned weights: the noise planes' input weights start at zero",
                     path.display()
-                ));
+                )),
+                StartAdapted::Widened { from, to } => progress.note(&format!(
+                    "starting from {}'s width-{from} weights in the old channels of width {to}: the new channels start from seed {} and are read through weights that start at zero",
+                    path.display(),
+                    j.config.seed
+                )),
             }
             Ok((trained, Some(StartedFrom::of(path, &meta))))
         }

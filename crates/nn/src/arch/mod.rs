@@ -15,6 +15,7 @@
 mod network;
 pub mod sid_unet;
 pub mod sr3;
+mod widen;
 
 pub(crate) use network::MEMORY_TILE_CAP;
 pub use sid_unet::{SidUnet, SidUnetConfig};
@@ -183,10 +184,62 @@ impl Architecture {
     /// without conditioning, which [`Architecture::widen_unconditioned`]
     /// extends.
     pub fn can_start_from(&self, file: &Architecture) -> bool {
+        let narrower = self.narrower_sid(file).is_some();
         let file = same_tensors_json(file);
-        file == same_tensors_json(self)
+        narrower
+            || file == same_tensors_json(self)
             || (self.conditioning().extra_channels() > 0
                 && file == same_tensors_json(&self.unconditioned()))
+    }
+
+    /// The two configurations when `file` is this SID U-Net at a smaller
+    /// width and otherwise the same network (what [`widen`] starts a wider
+    /// run from).
+    fn narrower_sid<'a>(
+        &'a self,
+        file: &'a Architecture,
+    ) -> Option<(&'a SidUnetConfig, &'a SidUnetConfig)> {
+        match (file, self) {
+            (Architecture::SidUnet(narrow), Architecture::SidUnet(wide))
+                if narrow.width < wide.width
+                    && same_tensors_json(&Architecture::SidUnet(
+                        narrow.clone().with_width(wide.width),
+                    )) == same_tensors_json(self) =>
+            {
+                Some((narrow, wide))
+            }
+            _ => None,
+        }
+    }
+
+    /// Make the tensors of `file`'s network (read from an `--init` file) fit
+    /// this one, the run's, whose freshly seeded network is `fresh`: as they
+    /// are, widened to take the noise planes ([`Self::widen_unconditioned`]),
+    /// or written into the old channels of a wider SID U-Net ([`widen`]).
+    pub(crate) fn adapt_start<B: Backend>(
+        &self,
+        file: &Architecture,
+        tensors: &mut BTreeMap<String, NamedTensor>,
+        fresh: &Net<B>,
+    ) -> std::result::Result<StartAdapted, String> {
+        if self.widen_unconditioned(file, tensors) {
+            return Ok(StartAdapted::Conditioned);
+        }
+        if let Some((narrow, wide)) = self.narrower_sid(file) {
+            let mut out = fresh.parameters();
+            widen::widen(
+                &narrow.channel_layout(),
+                &wide.channel_layout(),
+                tensors,
+                &mut out,
+            )?;
+            *tensors = out;
+            return Ok(StartAdapted::Widened {
+                from: narrow.width,
+                to: wide.width,
+            });
+        }
+        Ok(StartAdapted::AsIs)
     }
 
     /// Make the tensors of an unconditioned network (`file`, this network
@@ -247,6 +300,24 @@ impl Architecture {
             self.init(device).map(crate::seeded::materialise)
         })
     }
+}
+
+/// How an `--init` file's weights were made to fit the run's network
+/// ([`Architecture::adapt_start`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum StartAdapted {
+    /// The same network: loaded as it is.
+    AsIs,
+    /// Its unconditioned form: the noise planes' input weights start at zero.
+    Conditioned,
+    /// The same SID U-Net at width `from`, written into the old channels of
+    /// width `to`.
+    Widened {
+        /// The file's width.
+        from: usize,
+        /// The run's width.
+        to: usize,
+    },
 }
 
 /// The noisy input as a network reads it: every caller hands the amplified

@@ -264,6 +264,43 @@ impl SidUnetConfig {
     }
 }
 
+impl SidUnetConfig {
+    /// Every convolution's channels at this configuration's widths, in the
+    /// order `init` builds them: what starting a wider network from this one
+    /// needs ([`super::widen`]).
+    pub(super) fn channel_layout(&self) -> Vec<super::widen::Layout> {
+        let w = self.width;
+        let widths = [w, 2 * w, 4 * w, 8 * w, 16 * w];
+        let conv = |name: String, input: Vec<usize>, out: usize| super::widen::Layout {
+            name,
+            transposed: false,
+            out: vec![out],
+            input,
+        };
+        let mut v = Vec::new();
+        let mut cin = self.in_channels;
+        for (level, &c) in widths.iter().enumerate() {
+            v.push(conv(format!("down.{level}.first"), vec![cin], c));
+            v.push(conv(format!("down.{level}.second"), vec![c], c));
+            cin = c;
+        }
+        for (k, level) in (0..4).rev().enumerate() {
+            let (hi, lo) = (widths[level + 1], widths[level]);
+            v.push(super::widen::Layout {
+                name: format!("up.{k}"),
+                transposed: true,
+                out: vec![lo],
+                input: vec![hi],
+            });
+            // The merge reads the concatenation [upsampled, skip].
+            v.push(conv(format!("merge.{k}.first"), vec![lo, lo], lo));
+            v.push(conv(format!("merge.{k}.second"), vec![lo], lo));
+        }
+        v.push(conv("head".into(), vec![w], self.out_channels));
+        v
+    }
+}
+
 impl NetworkConfig for SidUnetConfig {
     fn method(&self) -> Method {
         Method::Spc
