@@ -49,7 +49,16 @@ pub struct SynthConfig {
     pub seed: u64,
     /// Write the capture brightened by the ratio instead of dark.
     pub brightened: bool,
+    /// Masked (optical-black) columns to simulate left of the frame, as a
+    /// camera's readout has them (0: none; even): dark pixels with the
+    /// capture's offset and read and row noise, which `pgrf enhance` reads
+    /// the black level from ([`pgrf_raw::masked`]).
+    pub masked_columns: usize,
 }
+
+/// Most masked columns `--masked-columns` takes (Canon's readouts have
+/// about 150).
+pub const MAX_MASKED_COLUMNS: usize = 1024;
 
 /// The simulated capture and what it was made with.
 #[derive(Clone, Debug)]
@@ -59,6 +68,50 @@ pub struct Synthesized {
     pub frame: RawFrame,
     /// What it was made with.
     pub info: CaptureInfo,
+}
+
+impl Synthesized {
+    /// What was made, on one line (`pgrf synth` prints it after the
+    /// output's name): the form in parentheses, then the model, conditions, the noise drawn, the
+    /// seed, and the masked columns' level when there are any.
+    pub fn summary(&self, c: &SynthConfig) -> String {
+        let i = &self.info;
+        let components = match c.model {
+            ModelKind::Pgrf => {
+                format!(" [{}{}]", i.components, if c.global { ", noD" } else { "" })
+            }
+            _ => String::new(),
+        };
+        let conditions = i
+            .iso
+            .map(|v| format!("ISO {v}"))
+            .unwrap_or_else(|| "parameters drawn from the ELD distribution".into());
+        let masked = match &self.frame.masked {
+            Some(m) => format!(
+                "; {} masked columns, black {} DN (metadata {})",
+                m.strip.as_ref().map_or(0, |s| s.columns),
+                levels(m.level),
+                levels(self.frame.black)
+            ),
+            None => String::new(),
+        };
+        format!(
+            "({}): model {:?}{components}, ratio {:.1}, exposure {:.4} s, {conditions}, K {:.4} DN/e-, read {:.3} DN, row {:.3} DN, seed {}{masked}",
+            if c.brightened { "brightened by the ratio" } else { "dark capture" },
+            c.model,
+            i.ratio,
+            i.exposure_s,
+            i.k,
+            i.read_dn,
+            i.row_dn,
+            c.seed
+        )
+    }
+}
+
+/// Four per-plane levels as "a/b/c/d" with two decimals.
+fn levels(v: [f32; 4]) -> String {
+    v.map(|x| format!("{x:.2}")).join("/")
 }
 
 /// What a simulated capture was made with.
@@ -130,6 +183,21 @@ pub fn check(c: &SynthConfig) -> Result<(), SynthError> {
     }
     if let Some(r) = c.ratio {
         pgrf_noise::pair::check_ratio("--ratio", r).map_err(|m| bad("--ratio", m))?;
+    }
+    if !c.masked_columns.is_multiple_of(2) || c.masked_columns > MAX_MASKED_COLUMNS {
+        return Err(bad(
+            "--masked-columns",
+            format!(
+                "--masked-columns must be even (the CFA phase holds across the strip) and at most {MAX_MASKED_COLUMNS}, got {}",
+                c.masked_columns
+            ),
+        ));
+    }
+    if c.masked_columns > 0 && c.calib.is_some() {
+        return Err(bad(
+            "--masked-columns",
+            "--masked-columns cannot be used with --calib: a calibration's per-pixel maps cover the visible pixels only".into(),
+        ));
     }
     if let Some(t) = c.exposure_time {
         if !(t.is_finite() && t >= 0.0) {
@@ -324,6 +392,16 @@ pub fn synthesize(
         }
         None => None,
     };
+    // The masked columns are dark pixels of the same readout: synthesised
+    // with the scene (zero signal), so they share its offset and row noise.
+    let m = c.masked_columns / 2;
+    let clean = if m > 0 {
+        let zeros = ndarray::Array3::<f32>::zeros((4, clean.dim().1, m));
+        ndarray::concatenate(ndarray::Axis(2), &[zeros.view(), clean.view()])
+            .expect("same planes and rows")
+    } else {
+        clean
+    };
     let made = synthesize_packed(
         clean.view(),
         &CleanFacts::of(frame),
@@ -337,12 +415,40 @@ pub fn synthesize(
     } else {
         made.dark()
     };
-    let mut out = unpack_normalized(noisy.view(), frame)?;
+    let (strip, visible) = noisy.view().split_at(ndarray::Axis(2), m);
+    let mut out = unpack_normalized(visible, frame)?;
+    if m > 0 {
+        out.masked = masked_strip(strip, frame)?;
+    }
     made.stamp(&mut out, c.brightened);
     Ok(Synthesized {
         frame: out,
         info: made.info,
     })
+}
+
+/// The synthesised masked columns (packed `(4, H/2, columns/2)`) as the
+/// frame's masked strip, in DN of `frame`'s levels, with their level.
+fn masked_strip(
+    strip: ndarray::ArrayView3<f32>,
+    frame: &RawFrame,
+) -> Result<Option<pgrf_raw::masked::Masked>, SynthError> {
+    let columns = 2 * strip.dim().2;
+    let mut template = RawFrame::from_mosaic(
+        columns,
+        frame.height,
+        vec![0; columns * frame.height],
+        frame.cfa,
+        frame.black,
+        frame.white,
+    )?;
+    template.mono = frame.mono;
+    let values = unpack_normalized(strip, &template)?.mosaic;
+    Ok(pgrf_raw::masked::Masked::of_strip(
+        pgrf_raw::masked::MaskedStrip { columns, values },
+        frame.height,
+        frame.cfa,
+    ))
 }
 
 #[cfg(test)]
@@ -378,6 +484,7 @@ mod tests {
             force: false,
             seed: 7,
             brightened: false,
+            masked_columns: 0,
         };
         let made = synthesize(&frame, Path::new("flat.dng"), &c).unwrap();
         let out = &made.frame;

@@ -50,6 +50,7 @@ impl Settings {
             force: false,
             seed,
             brightened: false,
+            masked_columns: 0,
         }
     }
 }

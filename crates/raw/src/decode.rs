@@ -10,6 +10,7 @@
 use crate::cfa::Cfa;
 use crate::error::{RawError, Result};
 use crate::frame::{bits_for, ColorMatrix, LevelOverrides, RawFrame};
+use crate::masked::{Area, Masked, MaskedSource, MaskedStrip};
 use crate::panic_guard::quietly;
 use rawler::decoders::{RawDecodeParams, RawMetadata};
 use rawler::imgop::xyz::Illuminant;
@@ -84,7 +85,8 @@ fn decode_source(
         Stop::Decoder(reason) => RawError::decode(path, tidy_reason(&reason)),
         Stop::Memory(e) => e,
     })?;
-    let mut frame = frame_from_rawler(path, image, exif)?;
+    let masked = crate::container::masked_areas(source.buf());
+    let mut frame = frame_from_rawler(path, image, exif, &masked)?;
     frame.temperature_c = crate::container::exif_temperature(source.buf());
     // A damaged NoiseProfile does not make the photo unreadable: it is left
     // out here, and `--profile dng:FILE` reports it.
@@ -116,10 +118,13 @@ fn tidy_reason(reason: &str) -> String {
         .to_string()
 }
 
+/// The frame of rawler's decode; `dng_masked` are the DNG's MaskedAreas
+/// (rawler keeps only a camera's own masked border, in `blackareas`).
 fn frame_from_rawler(
     path: &Path,
     mut image: RawImage,
     exif: Option<RawMetadata>,
+    dng_masked: &[Area],
 ) -> Result<RawFrame> {
     let config = mosaic_layout(path, &image)?;
     let (x0, y0, w, h) = visible_area(path, &image)?;
@@ -136,6 +141,7 @@ fn frame_from_rawler(
         .0
         .first()
         .ok_or_else(|| RawError::decode(path, "no white level"))?;
+    let masked = masked_of(&image, dng_masked, (y0, x0, h, w), cfa);
     let mosaic = visible_mosaic(&mut image, (x0, y0, w, h));
 
     let wb = {
@@ -175,6 +181,7 @@ fn frame_from_rawler(
         sensor_size: (image.height, image.width),
         temperature_c: None,
         noise_profile: None,
+        masked,
         fits: None,
         exif,
     };
@@ -182,6 +189,59 @@ fn frame_from_rawler(
         RawError::decode(path, format!("file metadata gives unusable levels ({e})"))
     })?;
     Ok(frame)
+}
+
+/// The black level of the readout's masked pixels ([`crate::masked`]):
+/// the DNG's MaskedAreas, else rawler's camera data; the pixels kept too
+/// when they are one strip of even width directly left of the visible
+/// area `(y0, x0, h, w)`, its full height.
+fn masked_of(
+    image: &RawImage,
+    dng: &[Area],
+    visible: (usize, usize, usize, usize),
+    cfa: Cfa,
+) -> Option<Masked> {
+    let RawImageData::Integer(data) = &image.data else {
+        return None;
+    };
+    let camera: Vec<Area> = image
+        .blackareas
+        .iter()
+        .map(|r| Area {
+            top: r.p.y,
+            left: r.p.x,
+            bottom: r.p.y + r.d.h,
+            right: r.p.x + r.d.w,
+        })
+        .collect();
+    let (areas, source) = if dng.is_empty() {
+        (camera.as_slice(), MaskedSource::Camera)
+    } else {
+        (dng, MaskedSource::DngTag)
+    };
+    let size = (image.height, image.width);
+    let (level, pixels) = crate::masked::measure(data, size, areas, visible, cfa.offsets())?;
+    let (y0, x0, h, _) = visible;
+    let strip = match areas {
+        [a] if a.right == x0 && a.top == y0 && a.bottom == y0 + h && (x0 - a.left) % 2 == 0 => {
+            let columns = x0 - a.left;
+            let values = (y0..y0 + h)
+                .flat_map(|r| {
+                    data[r * image.width + a.left..r * image.width + x0]
+                        .iter()
+                        .copied()
+                })
+                .collect();
+            Some(MaskedStrip { columns, values })
+        }
+        _ => None,
+    };
+    Some(Masked {
+        level,
+        pixels,
+        source,
+        strip,
+    })
 }
 
 /// The decoded image's CFA configuration, None for a monochrome mosaic,

@@ -88,9 +88,43 @@ pub fn tile_width(width: usize) -> usize {
     }
 }
 
-/// Encode `frame` as DNG bytes.
+/// Encode `frame` as DNG bytes; a frame with a masked strip
+/// ([`crate::masked::MaskedStrip`]) is written as the readout it came from:
+/// the strip's columns left of the visible pixels, declared in
+/// `MaskedAreas`, the visible ones in `ActiveArea`.
 pub fn encode_dng(frame: &RawFrame, opts: &DngOptions) -> Result<Vec<u8>> {
     frame.check_levels()?;
+    let strip = frame.masked.as_ref().and_then(|m| m.strip.as_ref());
+    if let Some(s) = strip {
+        if s.columns % 2 != 0 || s.values.len() != s.columns * frame.height {
+            return Err(RawError::MosaicInconsistent);
+        }
+        if frame.mosaic.len() != frame.width * frame.height {
+            return Err(RawError::MosaicInconsistent);
+        }
+        let width = frame.width + s.columns;
+        let mut mosaic = Vec::with_capacity(width * frame.height);
+        for (m, v) in s
+            .values
+            .chunks_exact(s.columns)
+            .zip(frame.mosaic.chunks_exact(frame.width))
+        {
+            mosaic.extend_from_slice(m);
+            mosaic.extend_from_slice(v);
+        }
+        let readout = RawFrame {
+            width,
+            mosaic,
+            masked: None,
+            ..frame.clone()
+        };
+        return encode_readout(&readout, s.columns, opts);
+    }
+    encode_readout(frame, 0, opts)
+}
+
+/// [`encode_dng`] of a readout whose first `masked` columns are shielded.
+fn encode_readout(frame: &RawFrame, masked: usize, opts: &DngOptions) -> Result<Vec<u8>> {
     if frame.mosaic.len() != frame.width * frame.height {
         return Err(RawError::MosaicInconsistent);
     }
@@ -109,7 +143,7 @@ pub fn encode_dng(frame: &RawFrame, opts: &DngOptions) -> Result<Vec<u8>> {
         // before the metadata's blobs, as rawler's writer placed them.
         dng.root_ifd_mut()
             .add_tag(TiffCommonTag::NewSubFileType, 0_u32);
-        raw_tags(dng.root_ifd_mut(), frame);
+        raw_tags(dng.root_ifd_mut(), frame, masked);
         match opts.compression {
             Compression::Lossless => put_ljpeg(&mut dng, frame)?,
             Compression::Uncompressed => put_uncompressed(&mut dng, frame)?,
@@ -154,11 +188,17 @@ pub fn write_dng(frame: &RawFrame, path: &Path, opts: &DngOptions) -> Result<()>
 
 /// The raw image's description (size, levels, CFA, photometric
 /// interpretation), with the types rawler's writer gave each tag.
-fn raw_tags(ifd: &mut DirectoryWriter, frame: &RawFrame) {
+fn raw_tags(ifd: &mut DirectoryWriter, frame: &RawFrame, masked: usize) {
     let (w, h) = (frame.width, frame.height);
     ifd.add_tag(TiffCommonTag::ImageWidth, w as u32);
     ifd.add_tag(TiffCommonTag::ImageLength, h as u32);
-    ifd.add_tag(DngTag::ActiveArea, [0_u16, 0, h as u16, w as u16]);
+    ifd.add_tag(
+        DngTag::ActiveArea,
+        [0_u16, masked as u16, h as u16, w as u16],
+    );
+    if masked > 0 {
+        ifd.add_tag(DngTag::MaskedAreas, [0_u16, 0, h as u16, masked as u16]);
+    }
     ifd.add_tag(ExifTag::PlanarConfiguration, 1_u16);
     ifd.add_tag(
         DngTag::DefaultScale,

@@ -79,6 +79,10 @@ pub struct RawFrame {
     /// noise variance S x + O at signal x normalised to [0, 1]. Written
     /// back into DNGs of this frame ([`crate::container::noise_profile`]).
     pub noise_profile: Option<Vec<[f64; 2]>>,
+    /// The black level measured on the readout's masked (optical-black)
+    /// pixels, when the file declares them ([`crate::masked`]); `black`
+    /// stays the metadata's, and `pgrf enhance` chooses.
+    pub masked: Option<crate::masked::Masked>,
     /// What a FITS file's header said beyond the fields above (None for
     /// camera RAW files): the one place for FITS-only data, so the fields
     /// above are those every RAW has.
@@ -140,6 +144,7 @@ impl RawFrame {
             sensor_size: (height, width),
             temperature_c: None,
             noise_profile: None,
+            masked: None,
             fits: None,
             exif: None,
         };
@@ -177,6 +182,14 @@ impl RawFrame {
         } else {
             crate::cfa::PLANE_NAMES
         }
+    }
+
+    /// Per-plane levels named by plane ("R 512 G1 512 B 512 G2 512").
+    pub fn plane_levels(&self, v: [f32; 4]) -> String {
+        let named: Vec<String> = (self.plane_names().iter().zip(v))
+            .map(|(n, b)| format!("{n} {b}"))
+            .collect();
+        named.join(" ")
     }
 
     /// Refuse a monochrome frame where colour is required; `what` says what
@@ -296,6 +309,11 @@ impl RawFrame {
         f.width = width;
         f.height = height;
         f.sensor_origin = (self.sensor_origin.0 + row, self.sensor_origin.1 + col);
+        // The masked pixels' level holds for any part of the sensor; their
+        // strip is no longer beside the cropped pixels.
+        if let Some(m) = &mut f.masked {
+            m.strip = None;
+        }
         Ok(f)
     }
 
@@ -310,6 +328,9 @@ impl RawFrame {
         }
         let mut f = self.clone();
         f.mosaic = mosaic;
+        // New pixels (a restoration, a synthesised capture) are not what the
+        // masked pixels were measured beside.
+        f.masked = None;
         Ok(f)
     }
 }

@@ -23,6 +23,7 @@ mod fits_frame;
 mod frame;
 mod frame_file;
 pub mod headerless;
+pub mod masked;
 pub mod memory;
 mod orientation;
 mod pack;

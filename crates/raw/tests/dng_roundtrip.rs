@@ -192,3 +192,60 @@ fn missing_output_folder_writes_nothing() {
     assert!(err.to_string().contains("does not exist"), "{err}");
     assert!(!dir.join("no").exists());
 }
+
+/// A frame with a masked strip: 32 columns whose per-plane values are
+/// `base[plane]` +- 1 in a checkerboard of 2x2 cells (mean exactly `base`).
+fn with_strip(cfa: Cfa, w: usize, h: usize, base: [u16; 4]) -> RawFrame {
+    let mut f = synthetic(cfa, w, h, 9);
+    let columns = 32;
+    let values = (0..h)
+        .flat_map(|r| (0..columns).map(move |c| (r, c)))
+        .map(|(r, c)| base[cfa.plane_at(r, c)] + 2 * ((r / 2 + c / 2) % 2) as u16 - 1)
+        .collect();
+    let strip = pgrf_raw::masked::MaskedStrip { columns, values };
+    f.masked = pgrf_raw::masked::Masked::of_strip(strip, h, cfa);
+    f
+}
+
+/// The strip is written as the readout's first columns, declared in
+/// MaskedAreas, and reads back bit for bit with its per-plane level (the
+/// exact means, 600 / 602 / 604 / 606 DN) beside the same visible pixels.
+/// LibRaw (0.22.2, rawpy 0.28) reads the same file as a 128-column readout
+/// with `left_margin` 32, `raw_image_visible` summing to 50,358,028 (first
+/// row 8266, 1869, 15597, 12812) and the strip to 1,234,944, and takes its
+/// black from the masked pixels as pgrf does, plane by plane:
+/// `black_level_per_channel` [600, 602, 604, 606] (R, G, B, G2), where the
+/// BlackLevel tag says 512 / 511.5 / 513 / 510.
+#[test]
+fn a_masked_strip_round_trips_beside_the_visible_pixels() {
+    let base = [600, 602, 604, 606];
+    let f = with_strip(Cfa::Grbg, 96, 64, base);
+    let m = f.masked.clone().expect("measured");
+    assert_eq!(m.level, base.map(f32::from));
+    assert_eq!(m.pixels, 32 * 64 / 4);
+    let dir = common::scratch("dngmasked");
+    let path = dir.join("masked.dng");
+    write_dng(&f, &path, &DngOptions::default()).unwrap();
+    if std::env::var_os("PGRF_KEEP_MASKED_DNG").is_some() {
+        std::fs::copy(&path, std::env::temp_dir().join("pgrf-masked.dng")).unwrap();
+    }
+    let g = decode_file(&path, &LevelOverrides::default()).unwrap();
+    assert_eq!(g.mosaic, f.mosaic);
+    let sum = |v: &[u16]| v.iter().map(|&x| x as u64).sum::<u64>();
+    assert_eq!(
+        (sum(&g.mosaic), &g.mosaic[..4]),
+        (50_358_028, &[8266, 1869, 15597, 12812][..])
+    );
+    let strip = m.strip.as_ref().unwrap();
+    assert_eq!(sum(&strip.values), 1_234_944);
+    assert_eq!(g.black, f.black);
+    assert_eq!(g.masked, f.masked);
+    assert_eq!((g.sensor_origin, g.sensor_size), ((0, 32), (64, 128)));
+    // A frame cropped from it keeps the level, not the strip; new pixels
+    // keep neither.
+    let c = g.crop(2, 2, 32, 32).unwrap();
+    assert_eq!(
+        c.masked.as_ref().map(|m| (m.level, m.strip.is_none())),
+        Some((m.level, true))
+    );
+}

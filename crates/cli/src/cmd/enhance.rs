@@ -27,7 +27,10 @@ pub fn run(a: &EnhanceArgs) -> Result<()> {
     let e = &a.enhance;
     let batch = e.batch()?;
     e.device.check_available().map_err(anyhow::Error::msg)?;
-    let cfg = e.config()?;
+    let mut cfg = e.config()?;
+    // A black level the user gives is theirs, whatever the file's masked
+    // pixels say.
+    cfg.masked_black = a.input.black.is_none();
     let restorer = crate::shipped::load_model(&e.model, e.sampler(), e.device)
         .with_context(|| format!("--model {}", e.model.display()))?;
     if let (Some(shard), 0) = (batch.shard, batch.selected_count()) {

@@ -106,10 +106,7 @@ fn print_levels(a: &InfoArgs, f: &RawFrame, info: &FrameInfo) {
     let opt = |v: Option<String>| v.unwrap_or_else(|| "unknown".into());
     let black = match info.black[..] {
         [one] => one.to_string(),
-        _ => (f.plane_names().iter().zip(f.black))
-            .map(|(n, b)| format!("{n} {b}"))
-            .collect::<Vec<_>>()
-            .join(" "),
+        _ => f.plane_levels(f.black),
     };
     println!(
         "black       {black} DN{}",
@@ -119,6 +116,11 @@ fn print_levels(a: &InfoArgs, f: &RawFrame, info: &FrameInfo) {
             ""
         }
     );
+    if let Some(m) = &f.masked {
+        let level = f.plane_levels(m.level.map(|v| (v * 100.0).round() / 100.0));
+        let (on, n) = (m.source.describe(), m.pixels);
+        println!("masked      {level} DN measured on {on} ({n} px per plane; enhance subtracts it uncalibrated)");
+    }
     println!("white       {} DN ({} bits)", f.white, f.bits);
     println!("iso         {}", opt(f.iso.map(|v| v.to_string())));
     println!("exposure    {}", opt(f.exposure_s.map(format_exposure)));

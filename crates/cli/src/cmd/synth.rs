@@ -84,6 +84,13 @@ pub struct SynthArgs {
     /// would record, for `pgrf enhance --ratio R`.
     #[arg(long)]
     pub brightened: bool,
+    /// Also simulate this many masked (optical-black) columns left of the
+    /// frame, written as the DNG's MaskedAreas: dark pixels with the
+    /// capture's offset and noise, as a camera's readout has them, from
+    /// which `pgrf enhance` measures the black level (even; DNG output
+    /// only; not with --calib).
+    #[arg(long, default_value_t = 0)]
+    pub masked_columns: usize,
     #[command(flatten)]
     pub input: InputArgs,
 }
@@ -95,6 +102,9 @@ pub fn run(a: &SynthArgs) -> Result<()> {
         }
     }
     pgrf_calib::synth::check(&config(a))?;
+    if a.masked_columns > 0 && FrameFormat::of_path(&a.output).ok() == Some(FrameFormat::Fits) {
+        bail!("--masked-columns writes the DNG's MaskedAreas; a FITS output has no masked area (name the output .dng)");
+    }
     let frame = a.input.open(&a.clean)?;
     let made = synthesize(&frame, &a.clean, &config(a))?;
     // A FITS name gets FITS (an astronomy camera's frame stays one); any
@@ -103,20 +113,7 @@ pub fn run(a: &SynthArgs) -> Result<()> {
         Ok(FrameFormat::Fits) => write_fits_frame(&made.frame, &a.output)?,
         _ => write_dng(&made.frame, &a.output, &DngOptions::default())?,
     }
-    eprintln!(
-        "wrote {} ({}): model {:?}{}, ratio {:.1}, exposure {:.4} s, {}, K {:.4} DN/e-, read {:.3} DN, row {:.3} DN, seed {}",
-        a.output.display(),
-        if a.brightened { "brightened by the ratio" } else { "dark capture" },
-        a.noise_model,
-        if a.noise_model == ModelKind::Pgrf { format!(" [{}{}]", made.info.components, if a.global { ", noD" } else { "" }) } else { String::new() },
-        made.info.ratio,
-        made.info.exposure_s,
-        made.info.iso.map(|i| format!("ISO {i}")).unwrap_or_else(|| "parameters drawn from the ELD distribution".into()),
-        made.info.k,
-        made.info.read_dn,
-        made.info.row_dn,
-        a.seed
-    );
+    eprintln!("wrote {} {}", a.output.display(), made.summary(&config(a)));
     if let Some(png) = &a.png {
         let prev = render_preview(
             &made.frame,
@@ -150,5 +147,6 @@ fn config(a: &SynthArgs) -> SynthConfig {
         force: a.force,
         seed: a.seed,
         brightened: a.brightened,
+        masked_columns: a.masked_columns,
     }
 }

@@ -110,6 +110,10 @@ pub struct EnhanceConfig {
     pub tiling: Tiling,
     /// The user's noise parameters (`--noise`), for a noise-aware model.
     pub noise: Option<NoiseFlag>,
+    /// Subtract the black level measured on a file's masked pixels instead
+    /// of its metadata's, when it has them and no calibration is given
+    /// ([`masked_black`]); false when the user set the black level.
+    pub masked_black: bool,
 }
 
 /// Where one input's results go.
@@ -159,6 +163,10 @@ pub struct FileReport {
     /// source (None for a model that is not told).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub noise: Option<String>,
+    /// The black level subtracted when it was measured on the file's
+    /// masked pixels, and where (None: the metadata's or the calibration's).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub black: Option<String>,
 }
 
 impl FileReport {
@@ -178,8 +186,11 @@ impl FileReport {
         let auto = (self.ratio_auto.as_ref())
             .map(|a| format!(" ({a})"))
             .unwrap_or_default();
+        let black = (self.black.as_ref())
+            .map(|b| format!("; black {b}"))
+            .unwrap_or_default();
         format!(
-            "wrote {}{png}: {}x{}, ratio {:.1}{auto}, {} tile{plural} of {}, {:.1} s{defects}{noise}",
+            "wrote {}{png}: {}x{}, ratio {:.1}{auto}, {} tile{plural} of {}, {:.1} s{defects}{black}{noise}",
             self.output, self.width, self.height, self.ratio, self.tiles, self.tile, self.seconds,
         )
     }
@@ -255,6 +266,9 @@ pub fn enhance_file<P: Progress>(
         job.png.is_some(),
     )?;
     let (dark, defects_corrected) = calibrate(cfg, &mut frame)?;
+    let black = (cfg.masked_black && cfg.calib.is_none())
+        .then(|| masked_black(&mut frame))
+        .flatten();
     let (ratio, ratio_auto) = ratio_of(&frame, dark.as_ref(), cfg.ratio)?;
     let noise = match restorer.meta().arch.conditioning().needs_level() {
         true => Some(frame_noise(cfg, &frame)?),
@@ -297,7 +311,50 @@ pub fn enhance_file<P: Progress>(
         seconds: t0.elapsed().as_secs_f64(),
         peak_rss_mib: pgrf_core::mem::peak_rss_mib(),
         noise: noise.map(|n| n.to_string()),
+        black,
     })
+}
+
+/// Largest difference between the masked pixels' level and the metadata's
+/// black that is taken as the capture's offset, as a share of the range:
+/// ELD's colour bias is a few DN; a masked area tens of DN off is more
+/// likely not dark (a file's claim) than an offset.
+const MASKED_BLACK_REACH: f32 = 0.02;
+
+/// Take the black level of an uncalibrated `frame` from its masked pixels
+/// ([`pgrf_raw::masked`]) when it has them and they lie within
+/// [`MASKED_BLACK_REACH`] of the metadata's; says what was used, and when
+/// they were not used, why.
+pub fn masked_black(frame: &mut RawFrame) -> Option<String> {
+    let m = frame.masked.as_ref()?;
+    let range = frame.white as f32 - frame.black.iter().copied().fold(0.0, f32::max);
+    let fmt = |v: [f32; 4]| {
+        let v: Vec<String> = v.iter().map(|x| format!("{x:.2}")).collect();
+        v.join("/")
+    };
+    let off = m
+        .level
+        .iter()
+        .zip(frame.black)
+        .map(|(l, b)| (l - b).abs())
+        .fold(0.0, f32::max);
+    if off > MASKED_BLACK_REACH * range {
+        return Some(format!(
+            "{} DN from the metadata: the masked pixels ({}) read {} DN, {off:.0} DN away, not used",
+            fmt(frame.black),
+            m.source.describe(),
+            fmt(m.level)
+        ));
+    }
+    let line = format!(
+        "{} DN measured on {} ({} px per plane; metadata {})",
+        fmt(m.level),
+        m.source.describe(),
+        m.pixels,
+        fmt(frame.black)
+    );
+    frame.black = m.level;
+    Some(line)
 }
 
 /// The frame's noise parameters for a noise-aware model: the calibration's,

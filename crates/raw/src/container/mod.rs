@@ -133,24 +133,16 @@ pub fn exif_temperature(bytes: &[u8]) -> Option<f32> {
     (-273.15..=1000.0).contains(&c).then_some(c as f32)
 }
 
-/// The DNG NoiseProfile tag (51041) of a TIFF-based file: (S, O) pairs,
-/// one for all planes or one per colour plane, such that a pixel's noise
-/// variance is S x + O for x its signal normalised to [0, 1] (black 0,
-/// white 1). Looked up in IFD0 and its SubIFDs (Adobe's converter puts it
-/// in the raw IFD). `Ok(None)` without the tag; `Err` for a tag that is
-/// there but unusable (wrong type, a count that is neither 2 nor 2 x
-/// planes, negative or non-finite values), named for one line.
-pub fn noise_profile(bytes: &[u8], planes: usize) -> Result<Option<Vec<[f64; 2]>>, String> {
-    let Some(order) = (match bytes.get(..2) {
-        Some(b"II") => Some(Order(true)),
-        Some(b"MM") => Some(Order(false)),
-        _ => None,
-    }) else {
-        return Ok(None);
+/// The first entry `tag` of a TIFF-based file's IFD0 or its SubIFDs
+/// (where DNG writers put the raw image's tags: pgrf in IFD0, Adobe's
+/// converter in a SubIFD), with the file's byte order.
+fn raw_ifd_entry(bytes: &[u8], tag: u16) -> Option<(Order, tiff::Entry)> {
+    let order = match bytes.get(..2)? {
+        b"II" => Order(true),
+        b"MM" => Order(false),
+        _ => return None,
     };
-    let Some(ifd0) = order.u32(bytes, 4).map(u64::from) else {
-        return Ok(None);
-    };
+    let ifd0 = order.u32(bytes, 4).map(u64::from)?;
     let mut ifds = vec![ifd0];
     if let Some(sub) = tiff::find_entry(bytes, order, ifd0, 330) {
         if sub.kind == 4 || sub.kind == 13 {
@@ -161,10 +153,49 @@ pub fn noise_profile(bytes: &[u8], planes: usize) -> Result<Option<Vec<[f64; 2]>
             }
         }
     }
-    let Some(e) = ifds
-        .iter()
-        .find_map(|&ifd| tiff::find_entry(bytes, order, ifd, 51041))
-    else {
+    ifds.iter()
+        .find_map(|&ifd| tiff::find_entry(bytes, order, ifd, tag))
+        .map(|e| (order, e))
+}
+
+/// The DNG MaskedAreas tag (50830) of a TIFF-based file: rectangles of the
+/// readout (top, left, bottom, right) whose pixels are shielded from
+/// light ([`crate::masked`]). rawler parses the tag but does not pass it
+/// on. Empty without the tag or for one that is unusable (not SHORT or
+/// LONG, a count that is not a multiple of 4, values past the file):
+/// the metadata's black level is used then, as before.
+pub fn masked_areas(bytes: &[u8]) -> Vec<crate::masked::Area> {
+    let Some((order, e)) = raw_ifd_entry(bytes, 50830) else {
+        return Vec::new();
+    };
+    if !(e.kind == 3 || e.kind == 4) || e.count % 4 != 0 || e.count > 4 * 16 {
+        return Vec::new();
+    }
+    let mut areas = Vec::new();
+    for k in 0..e.count / 4 {
+        let v = |i: u64| e.value(bytes, order, 4 * k + i).map(|x| x as usize);
+        let (Some(top), Some(left), Some(bottom), Some(right)) = (v(0), v(1), v(2), v(3)) else {
+            return Vec::new();
+        };
+        areas.push(crate::masked::Area {
+            top,
+            left,
+            bottom,
+            right,
+        });
+    }
+    areas
+}
+
+/// The DNG NoiseProfile tag (51041) of a TIFF-based file: (S, O) pairs,
+/// one for all planes or one per colour plane, such that a pixel's noise
+/// variance is S x + O for x its signal normalised to [0, 1] (black 0,
+/// white 1). Looked up in IFD0 and its SubIFDs (Adobe's converter puts it
+/// in the raw IFD). `Ok(None)` without the tag; `Err` for a tag that is
+/// there but unusable (wrong type, a count that is neither 2 nor 2 x
+/// planes, negative or non-finite values), named for one line.
+pub fn noise_profile(bytes: &[u8], planes: usize) -> Result<Option<Vec<[f64; 2]>>, String> {
+    let Some((order, e)) = raw_ifd_entry(bytes, 51041) else {
         return Ok(None);
     };
     if e.kind != 12 {

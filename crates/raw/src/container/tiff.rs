@@ -53,7 +53,7 @@ fn type_size(kind: u16) -> u64 {
 
 impl Entry {
     /// Value `i` as an unsigned integer (BYTE, SHORT, LONG or IFD types).
-    fn value(&self, b: &[u8], o: Order, i: u64) -> Option<u64> {
+    pub(super) fn value(&self, b: &[u8], o: Order, i: u64) -> Option<u64> {
         if i >= self.count {
             return None;
         }

@@ -193,6 +193,7 @@ impl EnhanceFlags {
             calib,
             force: self.force,
             noise: self.noise,
+            masked_black: true,
             tiling: Tiling {
                 tile: self.tile,
                 overlap: self.overlap,
