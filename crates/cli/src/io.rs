@@ -131,12 +131,12 @@ fn declare_train(a: &cmd::train::TrainArgs, io: &mut Io) -> Result<()> {
 
 fn declare_enhance(a: &cmd::enhance::EnhanceArgs, io: &mut Io) -> Result<()> {
     let e = &a.enhance;
-    let is_file = pgrf_nn::infer::enhance::jobs::output_is_file(&e.output)?;
+    let is_file = pgrf_app::enhance::jobs::output_is_file(&e.output)?;
     let kind = if is_file { Kind::File } else { Kind::Folder };
     // The files a list names are inputs too (a list that cannot be read
     // is reported by the command itself).
     let listed = (e.from_list.as_deref())
-        .and_then(|l| pgrf_nn::infer::enhance::jobs::read_list(l).ok())
+        .and_then(|l| pgrf_app::enhance::jobs::read_list(l).ok())
         .unwrap_or_default();
     io.inputs("", &e.inputs)
         .inputs("--from-list", &e.from_list)

@@ -183,13 +183,27 @@ fn denoiser_trains_resumes_and_writes_a_described_weight_file() {
         started_from(&chained),
         (Some("t2.safetensors".into()), Some(8))
     );
-    // Another width, or no such file: one line, nothing written.
+    // A wider network starts from the narrower one's weights (issue 51,
+    // lever 4) and says so.
+    let wide = d.join("wide.safetensors");
+    let mut w = vec!["train", "denoiser", "--steps", "1", "--width", "8"];
+    w.extend_from_slice(&["-o", s(&wide), "--init", s(&out)]);
+    // Not --quiet: the note is what is checked.
+    w.extend(SMALL.iter().filter(|a| **a != "--quiet"));
+    let r = pgrf(&w);
+    let err = String::from_utf8_lossy(&r.stderr);
+    assert!(r.status.success(), "{err}");
+    assert!(
+        err.contains("width-4 weights in the old channels of width 8"),
+        "{err}"
+    );
+    // A narrower width, or no such file: one line, nothing written.
     for (init, says) in [
         (s(&out), "holds SPC denoiser (SID U-Net, width 4)"),
         ("nope.safetensors", "nope.safetensors"),
     ] {
         let bad = d.join("bad.safetensors");
-        let mut b = vec!["train", "denoiser", "--steps", "1", "--width", "8"];
+        let mut b = vec!["train", "denoiser", "--steps", "1", "--width", "2"];
         b.extend_from_slice(&["-o", s(&bad), "--init", init]);
         b.extend_from_slice(SMALL);
         let e = one_line_error(&pgrf(&b));

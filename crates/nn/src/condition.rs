@@ -166,9 +166,9 @@ impl Conditioning {
 /// A batch prepared for a conditioned network: its input (in the network's
 /// domain, with the sigma planes when there are any) and the per-item map
 /// into that domain, to bring outputs back and targets in.
-pub(crate) struct Conditioned<B: Backend> {
+pub struct Conditioned<B: Backend> {
     /// The network's condition, `(n, 4 + extra, h, w)`.
-    pub(crate) input: Tensor<B, 4>,
+    pub input: Tensor<B, 4>,
     /// Per item, `(n, 1, 1, 1)`: the domain is x * scale + offset.
     scale: Tensor<B, 4>,
     offset: Tensor<B, 4>,
@@ -178,7 +178,7 @@ pub(crate) struct Conditioned<B: Backend> {
 impl<B: Backend> Conditioned<B> {
     /// `noisy` `(n, 4, h, w)` prepared as `kind` says, item i at `levels[i]`
     /// (ignored, and may be empty, without conditioning).
-    pub(crate) fn new(kind: Conditioning, noisy: Tensor<B, 4>, levels: &[NoiseLevel]) -> Self {
+    pub fn new(kind: Conditioning, noisy: Tensor<B, 4>, levels: &[NoiseLevel]) -> Self {
         let device = noisy.device();
         let n = noisy.dims()[0];
         if kind == Conditioning::None {
@@ -228,7 +228,7 @@ impl<B: Backend> Conditioned<B> {
     }
 
     /// `y` (4 planes, the network's domain) back in input units.
-    pub(crate) fn input_units_of(&self, y: Tensor<B, 4>) -> Tensor<B, 4> {
+    pub fn input_units_of(&self, y: Tensor<B, 4>) -> Tensor<B, 4> {
         if self.identity {
             y
         } else {

@@ -79,9 +79,10 @@ pub enum NnError {
     /// that make it smaller.
     #[error("{0}")]
     TooLarge(String),
-    /// The pairs' noise could not be built (calibration file, profiles).
-    #[error(transparent)]
-    Calibration(pgrf_calib::mix::MixError),
+    /// An error of the caller's, passed through unchanged: the pairs'
+    /// noise it builds for a run (a calibration file), the scores it takes.
+    #[error("{0}")]
+    Caller(Box<dyn std::error::Error + Send + Sync>),
     /// A clean training or validation file that cannot be used (unreadable,
     /// too small for the crops); a caller may leave it out.
     #[error("{}: {reason}", path.display())]
@@ -152,9 +153,6 @@ pub enum NnError {
         /// The first NaN's flat index.
         index: usize,
     },
-    /// From scoring outputs (pgrf-eval).
-    #[error(transparent)]
-    Metric(#[from] pgrf_eval::MetricError),
     /// Any other refused input, on one line: internal failures (encoding a
     /// record, a worker thread gone) whose message is all there is.
     #[error("{0}")]

@@ -19,9 +19,12 @@
 //! dark frame to a restored one ([`infer::load`] gives a [`Restore`], which
 //! [`restore_frame`] runs tile by tile as [`Tiling`] says).
 //!
-//! The recipes commands call, one function each: training from a
-//! [`TrainConfig`] ([`train::run`]) and the flow's sampling search from a
-//! weight file and a validation spec ([`flow::search::run`]).
+//! The recipe this crate owns is training from a [`TrainConfig`]
+//! ([`train::run`], told how to build its pairs' noise). What pgrf does
+//! with the networks (enhancing files and batches, the demo, the flow's
+//! sampling search, models under evaluation) is the application's crate,
+//! `pgrf-app`; this one depends on none of calibration, evaluation or
+//! reports.
 //!
 //! # Adding a network
 //!
@@ -48,7 +51,6 @@ mod checkpoint;
 pub mod condition;
 mod config;
 pub mod data;
-pub mod demo;
 mod ema;
 mod error;
 #[cfg(feature = "clap")]
@@ -69,6 +71,6 @@ pub mod weights;
 
 pub use arch::{Architecture, Net, SidUnet, SidUnetConfig, Sr3Config, Sr3Unet};
 pub use backend::DeviceKind;
-pub use config::{Distance, ItemWeight, LossRule, Method, TrainConfig, TrainOutputs};
+pub use config::{Distance, ItemWeight, LossRule, Method, RatioDraw, TrainConfig, TrainOutputs};
 pub use error::{NnError, Result};
 pub use infer::{restore_frame, Restore, SamplerChoice, Tiling};

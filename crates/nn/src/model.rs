@@ -130,10 +130,7 @@ pub(crate) fn load_denoiser<B: Backend>(
 }
 
 /// Load a file that must hold the PGRF flow model.
-pub(crate) fn load_flow<B: Backend>(
-    path: &Path,
-    device: &B::Device,
-) -> Result<(Sr3Unet<B>, WeightMeta)> {
+pub fn load_flow<B: Backend>(path: &Path, device: &B::Device) -> Result<(Sr3Unet<B>, WeightMeta)> {
     let (net, m) = load::<B>(path, device)?;
     match net.into_flow() {
         Some(n) => Ok((n, m)),

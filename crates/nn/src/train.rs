@@ -24,7 +24,6 @@ use burn::optim::grad_clipping::GradientClippingConfig;
 use burn::optim::{GradientsParams, Optimizer};
 use burn::record::{BinBytesRecorder, FullPrecisionSettings, Recorder};
 use burn::tensor::{ElementConversion, Tensor, TensorData};
-use pgrf_calib::mix::{CalibratedMix, MixError, MixSpec};
 use pgrf_core::Progress;
 use pgrf_noise::mix::PairMix;
 use std::io::Write;
@@ -76,7 +75,7 @@ pub struct Trained {
 /// with `resume`, from the checkpoint. Before any step: the checkpoint a
 /// resumed run needs (first, before any costly work), the device, the
 /// network (and `init`'s weights) and the memory a step needs are checked,
-/// the pairs' noise is built, the clean sources are opened (`warn` hears each
+/// the pairs' noise is built by `noise`, the clean sources are opened (`warn` hears each
 /// file left out), the validation pairs are made, and one line saying what
 /// will be trained goes to `progress` as a note. `progress` hears one unit
 /// per step; setting `stop` ends the run cleanly after the current step
@@ -85,6 +84,7 @@ pub fn run(
     config: &TrainConfig,
     method: Method,
     resume: bool,
+    noise: NoiseBuilder,
     progress: &dyn Progress,
     stop: &AtomicBool,
     warn: &dyn Fn(&str),
@@ -111,7 +111,7 @@ pub fn run(
     check_memory(c, &arch)?;
     let iso_range = c.iso_range()?;
     let (lo, hi) = (c.ratio_min, c.ratio_max);
-    let built = pairs_noise(c, iso_range)?;
+    let built = noise(c, iso_range)?;
     let sources = crate::data::build::sources(c)?;
     for w in &sources.warnings {
         warn(w);
@@ -176,32 +176,45 @@ fn check_before_work(c: &TrainConfig, outputs: &TrainOutputs, resume: bool) -> R
     Ok(())
 }
 
-/// The pairs' noise: the profiles (or mix) and the calibration, with the
-/// errors named by the flags that set them.
-fn pairs_noise(c: &TrainConfig, iso_range: Option<(u32, u32)>) -> Result<CalibratedMix> {
-    pgrf_calib::mix::build(&MixSpec {
-        profile: &c.profile,
-        model: c.noise,
-        iso: c.iso,
-        iso_range,
-        ratio: c.ratio_draw.spec(c.ratio_min, c.ratio_max),
-        calibrated_dark_level: c.calibrated_dark_level,
-        calibrated_share: c.calibrated_share,
-        calibration: c.calib.as_deref(),
-    })
-    .map_err(|e| match e {
-        MixError::Profile(e) => NnError::BadSetting {
-            flag: "--profile",
-            message: format!("--profile: {e}"),
-        },
-        MixError::CalibrationWithMix { path, mix } => NnError::BadSetting {
+/// The noise a run's pairs are drawn with: one profile per capture, and the
+/// identity of the calibration applied, for the weight file's record.
+pub struct PairsNoise {
+    /// The pairs' noise.
+    pub mix: PairMix,
+    /// The calibration's identity, when one was applied.
+    pub calibration: Option<String>,
+}
+
+/// How a run builds its pairs' noise from its configuration and ISO range
+/// ([`run`] calls it after its checks): `pgrf train`'s applies `--calib`
+/// (`pgrf_app::train`); [`profiles_only`] is the noise without one.
+pub type NoiseBuilder<'a> = &'a dyn Fn(&TrainConfig, Option<(u32, u32)>) -> Result<PairsNoise>;
+
+/// The pairs' noise from the configuration's profiles alone; a
+/// configuration naming a calibration is refused (the application applies
+/// it: `pgrf_app::train`).
+pub fn profiles_only(c: &TrainConfig, iso_range: Option<(u32, u32)>) -> Result<PairsNoise> {
+    if let Some(p) = &c.calib {
+        return Err(NnError::BadSetting {
             flag: "--calib",
             message: format!(
-                "--calib {} describes one sensor; it cannot go with a mix of profiles ({mix})",
-                path.display()
+                "--calib {}: this run builds its noise from profiles only",
+                p.display()
             ),
-        },
-        e => NnError::Calibration(e),
+        });
+    }
+    let ratio = c.ratio_draw.spec(c.ratio_min, c.ratio_max);
+    let mut mix = PairMix::build(&c.profile, c.noise, c.iso, iso_range, ratio).map_err(|e| {
+        NnError::BadSetting {
+            flag: "--profile",
+            message: format!("--profile: {e}"),
+        }
+    })?;
+    mix.set_calibrated_dark_level(c.calibrated_dark_level);
+    mix.set_calibrated_share(c.calibrated_share);
+    Ok(PairsNoise {
+        mix,
+        calibration: None,
     })
 }
 

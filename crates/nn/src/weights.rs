@@ -343,7 +343,7 @@ pub(crate) fn read_bytes(path: &Path) -> Result<Vec<u8>> {
 
 /// Rewrite only the record of an existing weight file (e.g. the searched t2),
 /// atomically, keeping the tensors bit for bit.
-pub(crate) fn update_meta(path: &Path, f: impl FnOnce(&mut WeightMeta)) -> Result<WeightMeta> {
+pub fn update_meta(path: &Path, f: impl FnOnce(&mut WeightMeta)) -> Result<WeightMeta> {
     let (mut meta, tensors) = read(path)?;
     f(&mut meta);
     let bytes = encode(&tensors, &meta)?;

@@ -10,13 +10,13 @@ use crate::progress::Bar;
 use crate::shipped;
 use anyhow::{bail, Context, Result};
 use clap::{Args, ValueEnum};
+use pgrf_app::demo::{
+    self, BoxError, Demo, DemoConfig, Models, PhotoSource, Scene as DemoScene, ISO, RATIOS,
+};
 use pgrf_core::paths::require_parent_dir;
 use pgrf_eval::dataset::table::summarise;
 use pgrf_eval::Scores;
 use pgrf_nn::backend::DeviceKind;
-use pgrf_nn::demo::{
-    self, BoxError, Demo, DemoConfig, Models, PhotoSource, Scene as DemoScene, ISO, RATIOS,
-};
 use pgrf_nn::infer::{Restore, SamplerChoice};
 use serde_json::json;
 use std::path::{Path, PathBuf};

@@ -1,16 +1,16 @@
 //! `pgrf enhance`: dark noisy RAW photos in, clean linear DNGs (and sRGB
 //! previews) out, with either network, at full resolution in bounded memory;
 //! many files as one batch, or as one shard of a cluster's batch
-//! (`pgrf_nn::infer::enhance::batch`).
+//! (`pgrf_app::enhance::batch`).
 
 use crate::input::InputArgs;
 use crate::progress::Bar;
 use anyhow::{Context, Result};
 use clap::Args;
 use indicatif::MultiProgress;
-use pgrf_nn::infer::enhance::batch::{run_batch, BatchEvents, BatchFailure, Record, Status};
-use pgrf_nn::infer::enhance::flags::EnhanceFlags;
-use pgrf_nn::infer::enhance::{BoxError, FileReport, Job};
+use pgrf_app::enhance::batch::{run_batch, BatchEvents, BatchFailure, Record, Status};
+use pgrf_app::enhance::flags::EnhanceFlags;
+use pgrf_app::enhance::{BoxError, FileReport, Job};
 use pgrf_nn::infer::Restore;
 use std::cell::Cell;
 use std::path::Path;

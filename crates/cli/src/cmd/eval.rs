@@ -8,13 +8,13 @@
 use crate::progress::Bar;
 use anyhow::{Context, Result};
 use clap::Args;
+use pgrf_app::enhance::describe_method;
+use pgrf_app::method::NetworkMethod;
 use pgrf_eval::dataset::run::NOISY;
 use pgrf_eval::evaluation::BoxError;
 use pgrf_eval::flags::{EvalFlags, PROTOCOLS_HELP};
 use pgrf_eval::MethodUnderTest;
 use pgrf_nn::backend::DeviceKind;
-use pgrf_nn::infer::enhance::describe_method;
-use pgrf_nn::infer::method::NetworkMethod;
 use pgrf_nn::infer::{SamplerChoice, Tiling};
 use std::path::PathBuf;
 

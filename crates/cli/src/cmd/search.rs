@@ -1,14 +1,14 @@
 //! `pgrf search`: the paper's sampling search (Algorithm 2). Its flags
-//! become a `SearchRequest`; `pgrf_nn::flow::search::run` makes validation
+//! become a `SearchRequest`; `pgrf_app::search::run` makes validation
 //! pairs like the model's training pairs, scores the two-stage sampler at
 //! t = s, 2s, .., 1, draws PSNR against t and writes the best t into the
 //! weight file (atomically); this prints the table or JSON.
 
 use crate::progress::Bar;
 use anyhow::Result;
-use pgrf_nn::flow::search;
+use pgrf_app::search;
 
-pub use pgrf_nn::flow::search::flags::SearchArgs;
+pub use pgrf_app::search::flags::SearchArgs;
 
 pub fn run(a: &SearchArgs) -> Result<()> {
     let req = a.request();

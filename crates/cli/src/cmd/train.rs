@@ -2,7 +2,7 @@
 //! (`--config`, flat keys named like the flags with underscores) and any flag
 //! overrides the file. Progress bar, Ctrl-C (checkpoint and exit), and a JSON
 //! summary line for scripts. The flags are `pgrf_nn::TrainConfig`'s own
-//! (`pgrf_nn::flags`), the recipe is `pgrf_nn::train::run`.
+//! (`pgrf_nn::flags`), the recipe is `pgrf_app::train::run`.
 
 use anyhow::Result;
 use clap::Args;
@@ -51,7 +51,7 @@ pub fn run(a: &TrainArgs) -> Result<()> {
         started,
     };
     let warn = |w: &str| eprintln!("pgrf: warning: {w}");
-    let trained = pgrf_nn::train::run(&config, a.method, a.resume, &progress, &stop, &warn)?;
+    let trained = pgrf_app::train::run(&config, a.method, a.resume, &progress, &stop, &warn)?;
     report(a, &trained);
     if trained.outcome.interrupted {
         eprintln!(

@@ -303,7 +303,7 @@ impl Architecture {
 }
 
 /// How an `--init` file's weights were made to fit the run's network
-/// ([`Architecture::adapt_start`]).
+/// (`Architecture::adapt_start`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum StartAdapted {
     /// The same network: loaded as it is.
@@ -325,10 +325,7 @@ pub enum StartAdapted {
 /// below black (`keep_below_black` false: SID's convention, every file
 /// before issue 51) gets them clamped at 0 here, the one place that
 /// convention lives.
-pub(crate) fn input_as_read<B: Backend>(
-    keep_below_black: bool,
-    noisy: Tensor<B, 4>,
-) -> Tensor<B, 4> {
+pub fn input_as_read<B: Backend>(keep_below_black: bool, noisy: Tensor<B, 4>) -> Tensor<B, 4> {
     if keep_below_black {
         noisy
     } else {

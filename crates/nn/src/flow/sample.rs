@@ -15,7 +15,7 @@
 //! - eq. 4.12, the second stage: XM = v(Xt2, T, t2) + X0 is the result.
 //!
 //! [`two_stage`] chains the two; the sampling search (Algorithm 2,
-//! [`super::search`]) runs the first stage once per pair and the second
+//! `pgrf_app::search`) runs the first stage once per pair and the second
 //! once per candidate t, so it evaluates exactly what the sampler does at
 //! t2 = t. Euler integration of dX/dt = v(X, T, t) is kept for comparison
 //! ([`Sampler::Euler`]).
@@ -71,7 +71,7 @@ fn times<B: PgrfOps>(n: usize, t: f32, device: &B::Device) -> Tensor<B, 1> {
 
 /// First stage, eq. 4.10: XZ = v(X0, T, 0) + X0 (`cond` is T, `x0` is X0).
 /// Also the whole one-step sampler.
-pub(crate) fn first_stage<B: PgrfOps>(
+pub fn first_stage<B: PgrfOps>(
     net: &impl Velocity<B>,
     cond: Tensor<B, 4>,
     x0: Tensor<B, 4>,
@@ -83,7 +83,7 @@ pub(crate) fn first_stage<B: PgrfOps>(
 
 /// Second stage, eq. 4.11-4.12: Xt2 = t2 XZ + (1 - t2) X0 (eq. 4.1 at t2),
 /// then XM = v(Xt2, T, t2) + X0. `xz` is the first stage's XZ.
-pub(crate) fn second_stage<B: PgrfOps>(
+pub fn second_stage<B: PgrfOps>(
     net: &impl Velocity<B>,
     cond: Tensor<B, 4>,
     x0: Tensor<B, 4>,
@@ -111,7 +111,7 @@ pub fn two_stage<B: PgrfOps>(
 }
 
 /// One network evaluation: XZ = X0 + v(X0, T, 0) (the first stage alone).
-pub(crate) fn one_step<B: PgrfOps>(
+pub fn one_step<B: PgrfOps>(
     net: &impl Velocity<B>,
     cond: Tensor<B, 4>,
     x0: Tensor<B, 4>,

@@ -10,11 +10,9 @@
 //! tile ([`tiles`], [`memory`]) with the flow's start X0 from
 //! [`start::start_noise`], and the result is unpacked.
 
-pub mod enhance;
 mod frame;
 pub mod image;
 pub mod memory;
-pub mod method;
 pub mod prepare;
 pub mod restorer;
 pub mod start;

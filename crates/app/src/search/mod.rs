@@ -5,7 +5,7 @@
 //! For each pair, the first stage gives XZ = v(X0, T, 0) + X0 once (it does
 //! not depend on t) and the second stage gives
 //! XM = v(t XZ + (1 - t) X0, T, t) + X0 per candidate: the very functions
-//! [`super::sample::two_stage`] chains, so a grid of n times costs n + 1
+//! [`pgrf_nn::flow::sample::two_stage`] chains, so a grid of n times costs n + 1
 //! network evaluations per pair (not 2n) and scores exactly what inference
 //! will run at t2 = t. Scores are pgrf-eval's (ELD protocol by default).
 //!
@@ -18,21 +18,21 @@
 //! ([`flags::SearchArgs`], the `clap` feature), that call and printing
 //! ([`Searched::table`], [`Searched::json`]).
 
-use super::sample::{first_stage, second_stage, two_stage, Velocity};
-use crate::arch::input_as_read;
-use crate::backend::{on_device, DeviceKind, OnBackend};
-use crate::condition::Conditioned;
-use crate::data::build::validation_source;
-use crate::data::source::Source;
-use crate::data::validation::ValSet;
-use crate::error::{NnError, Result};
-use crate::ops::PgrfOps;
-use crate::weights::{self, WeightMeta};
 use burn::tensor::{Tensor, TensorData};
 use ndarray::{Array3, ArrayView3};
 use pgrf_calib::mix::{MixError, MixSpec};
 use pgrf_core::Progress;
 use pgrf_eval::{evaluate, Protocol};
+use pgrf_nn::arch::input_as_read;
+use pgrf_nn::backend::{on_device, DeviceKind, OnBackend};
+use pgrf_nn::condition::Conditioned;
+use pgrf_nn::data::build::validation_source;
+use pgrf_nn::data::source::Source;
+use pgrf_nn::data::validation::ValSet;
+use pgrf_nn::flow::sample::{first_stage, second_stage, two_stage, Velocity};
+use pgrf_nn::ops::PgrfOps;
+use pgrf_nn::weights::{self, WeightMeta};
+use pgrf_nn::{NnError, Result};
 use pgrf_noise::pair::RatioSpec;
 use std::path::{Path, PathBuf};
 
@@ -67,7 +67,7 @@ pub(crate) fn reported_counts(k_max: usize) -> Vec<usize> {
     v
 }
 
-use crate::infer::restorer::MAX_SAMPLES;
+use pgrf_nn::infer::restorer::MAX_SAMPLES;
 
 /// How to search.
 #[derive(Clone, Debug)]
@@ -254,7 +254,7 @@ pub fn run(req: &SearchRequest, progress: &dyn Progress, warn: &dyn Fn(&str)) ->
             },
         )?),
         None => trained
-            .map_or(crate::config::RatioDraw::Uniform, |c| c.ratio_draw)
+            .map_or(pgrf_nn::RatioDraw::Uniform, |c| c.ratio_draw)
             .spec(noise.ratio[0], noise.ratio[1]),
     };
     let (iso, iso_range) = match req.iso {
@@ -285,7 +285,7 @@ pub fn run(req: &SearchRequest, progress: &dyn Progress, warn: &dyn Fn(&str)) ->
                 path.display()
             ),
         },
-        e => NnError::Calibration(e),
+        e => NnError::Caller(Box::new(e)),
     })?;
     let (source, count, what) = match &req.val {
         Some(ValPairs::Files { path, pairs }) => {
@@ -317,7 +317,7 @@ pub fn run(req: &SearchRequest, progress: &dyn Progress, warn: &dyn Fn(&str)) ->
         });
     }
     let p = req.patch;
-    let need = crate::infer::memory::tile_bytes(&meta.arch, p, p) + ValSet::bytes(p, count);
+    let need = pgrf_nn::infer::memory::tile_bytes(&meta.arch, p, p) + ValSet::bytes(p, count);
     pgrf_core::mem::check_fits(&format!("--patch {p} with {count} pairs"), need)
         .map_err(|e| NnError::TooLarge(format!("{e}; give a smaller --patch or fewer pairs")))?;
     let val = ValSet::build(&source, &built.mix, p, count, req.options.seed)?;
@@ -382,7 +382,7 @@ fn run_on<B: PgrfOps>(
     opts: &SearchOptions,
     progress: &dyn Progress,
 ) -> Result<SearchOutcome> {
-    let (net, _) = crate::model::load_flow::<B>(model, device)?;
+    let (net, _) = pgrf_nn::model::load_flow::<B>(model, device)?;
     search_with(&net, device, pairs, opts, progress)
 }
 
@@ -500,7 +500,7 @@ fn average<B: PgrfOps>(
             let x0 = if k == 1 {
                 to_tensor::<B>(&pair.x0, patch, device)?
             } else {
-                let field = crate::infer::start::start_noise(
+                let field = pgrf_nn::infer::start::start_noise(
                     opts.seed ^ ((i as u64) << 20),
                     k as u64,
                     4,
@@ -528,7 +528,7 @@ fn average<B: PgrfOps>(
 }
 
 fn metric(e: pgrf_eval::MetricError) -> NnError {
-    NnError::Metric(e)
+    NnError::Caller(Box::new(e))
 }
 
 fn view(v: &[f32], patch: usize) -> Result<ArrayView3<'_, f32>> {
@@ -560,7 +560,7 @@ fn to_array<B: PgrfOps>(t: Tensor<B, 4>, patch: usize) -> Result<Array3<f32>> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::backend::Cpu;
+    use pgrf_nn::backend::Cpu;
 
     #[test]
     fn averaging_reports_powers_of_two_and_the_maximum() {
@@ -589,13 +589,13 @@ mod tests {
 
     /// A small SR3 field with seeded (random, not trained) weights and two
     /// procedural validation pairs: the second stage depends on t.
-    fn fixture() -> (crate::arch::sr3::Sr3Unet<Cpu>, ValSet) {
-        use crate::arch::sr3::Sr3Config;
-        use crate::data::source::Source;
+    fn fixture() -> (pgrf_nn::arch::sr3::Sr3Unet<Cpu>, ValSet) {
+        use pgrf_nn::arch::sr3::Sr3Config;
+        use pgrf_nn::data::source::Source;
         use pgrf_noise::pair::PairSpec;
         use pgrf_noise::{CameraProfile, ModelKind};
         let dev = Default::default();
-        let net = crate::seeded::seeded::<Cpu, _>(&dev, 5, || {
+        let net = pgrf_nn::seeded::seeded::<Cpu, _>(&dev, 5, || {
             Sr3Config::new()
                 .with_inner_channels(8)
                 .with_channel_mults(vec![1, 2])
@@ -603,7 +603,7 @@ mod tests {
                 .with_attn_levels(vec![])
                 .with_norm_groups(4)
                 .init::<Cpu>(&dev)
-                .map(crate::seeded::materialise)
+                .map(pgrf_nn::seeded::materialise)
         })
         .unwrap();
         let mut spec = PairSpec::new(
@@ -650,7 +650,7 @@ mod tests {
     /// sampler's, and the best t the argmax of the curve.
     #[test]
     fn the_search_scores_the_two_stage_sampler_at_each_t() {
-        use crate::flow::sample::one_step;
+        use pgrf_nn::flow::sample::one_step;
         let (net, val) = fixture();
         let opts = SearchOptions {
             step: 0.25,

@@ -13,16 +13,16 @@
 mod picture;
 mod scene;
 
-use crate::condition::NoiseLevel;
-use crate::infer::enhance::describe_method;
-pub use crate::infer::enhance::BoxError;
-use crate::infer::prepare::network_input;
-use crate::infer::{restore_frame, Restore, Tiling};
-use crate::{DeviceKind, NnError};
+use crate::enhance::describe_method;
+pub use crate::enhance::BoxError;
 use ndarray::Array3;
 use pgrf_core::{NoProgress, Progress};
 use pgrf_eval::dataset::table::Row;
 use pgrf_eval::{evaluate, MetricError, Protocol, Scores};
+use pgrf_nn::condition::NoiseLevel;
+use pgrf_nn::infer::prepare::network_input;
+use pgrf_nn::infer::{restore_frame, Restore, Tiling};
+use pgrf_nn::{DeviceKind, NnError};
 use pgrf_noise::capture::DarkCapture;
 use pgrf_noise::{CameraProfile, ModelKind, NoiseError};
 use pgrf_raw::{pack_normalized, unpack_normalized, write_dng, DngOptions, RawError, RawFrame};

@@ -2,11 +2,11 @@
 //! crate and cannot name the models): the packed, amplified input restored
 //! tile by tile as `pgrf enhance` restores a frame.
 
-use super::{restore_packed, Restore, Tiling};
-use crate::condition::NoiseLevel;
 use ndarray::{Array3, ArrayView3};
 use pgrf_core::NoProgress;
 use pgrf_eval::{CaseInfo, MethodUnderTest};
+use pgrf_nn::condition::NoiseLevel;
+use pgrf_nn::infer::{restore_packed, Restore, Tiling};
 
 /// A loaded restorer under a column name, tiled as `tiling` says.
 pub struct NetworkMethod {

@@ -2,8 +2,8 @@
 //! kept beside the recipe, so a new option is added in one crate.
 
 use super::{SearchOptions, SearchRequest, ValPairs};
-use crate::backend::DeviceKind;
 use pgrf_eval::Protocol;
+use pgrf_nn::backend::DeviceKind;
 use std::path::PathBuf;
 
 /// `pgrf search`'s flags.

@@ -11,10 +11,10 @@
 //! is a failure's error at most.
 
 use super::{enhance_file, BoxError, EnhanceConfig, EnhanceError, FileReport, Job};
-use crate::error::NnError;
-use crate::infer::Restore;
 use pgrf_core::exit::PartialFailure;
 use pgrf_core::Progress;
+use pgrf_nn::infer::Restore;
+use pgrf_nn::NnError;
 use pgrf_raw::{decode_file, png_size, LevelOverrides, RawFrame};
 use serde::Serialize;
 use std::fmt;

@@ -5,12 +5,12 @@
 use super::batch::{check_manifest, Batch, Shard};
 use super::jobs::{plan_jobs, read_list, Previews};
 use super::{CalibrationFile, EnhanceConfig, EnhanceError, RatioChoice};
-use crate::backend::DeviceKind;
-use crate::error::NnError;
-use crate::flow::sample::SamplerKind;
-use crate::infer::restorer::UNSEARCHED_T2;
-use crate::infer::{check_tiling_args, Restore, SamplerChoice, Tiling};
 use pgrf_calib::Calibration;
+use pgrf_nn::backend::DeviceKind;
+use pgrf_nn::flow::sample::SamplerKind;
+use pgrf_nn::infer::restorer::UNSEARCHED_T2;
+use pgrf_nn::infer::{check_tiling_args, Restore, SamplerChoice, Tiling};
+use pgrf_nn::NnError;
 use pgrf_noise::lookup::NoiseFlag;
 use std::path::PathBuf;
 
@@ -219,7 +219,7 @@ impl EnhanceFlags {
         let mut lines = vec![format!(
             "model: {}; device {}",
             super::describe_method(restorer),
-            crate::backend::describe(self.device)
+            pgrf_nn::backend::describe(self.device)
         )];
         if restorer.sampler().is_some() && restorer.meta().t2.is_none() && self.t2.is_none() {
             lines.push(format!(

@@ -3,8 +3,8 @@
 //! typo costs a second and no input is ever written over.
 
 use super::Job;
-use crate::error::NnError;
 use pgrf_core::paths::{require_parent_dir, same_file};
+use pgrf_nn::NnError;
 use std::collections::HashSet;
 use std::path::{Path, PathBuf};
 

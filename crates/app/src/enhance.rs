@@ -15,14 +15,14 @@
 //! files, shards, skipping and the manifest: [`batch::run_batch`]; the
 //! flags: [`flags::EnhanceFlags`] (the `clap` feature).
 
-use super::prepare::{auto_ratio, ratio_from_exposure};
-use super::restorer::describe_sampler;
-use super::{restore_frame, Restore, Tiling};
-use crate::condition::NoiseLevel;
-use crate::error::NnError;
 use pgrf_calib::light::LightError;
 use pgrf_calib::{CalibError, Calibration};
 use pgrf_core::Progress;
+use pgrf_nn::condition::NoiseLevel;
+use pgrf_nn::infer::prepare::{auto_ratio, ratio_from_exposure};
+use pgrf_nn::infer::restorer::describe_sampler;
+use pgrf_nn::infer::{restore_frame, Restore, Tiling};
+use pgrf_nn::NnError;
 use pgrf_noise::lookup::{find_noise, range_of, FrameNoise, KnownNoise, NoiseFlag};
 use pgrf_raw::{render_preview, write_frame, DngOptions, PreviewOptions, RawError, RawFrame};
 use serde::Serialize;
@@ -75,7 +75,7 @@ pub enum EnhanceError {
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum RatioChoice {
     /// Metered from the frame: its mean level brought to a fixed target
-    /// ([`crate::infer::prepare::auto_ratio`]); `--ratio auto`, and the
+    /// ([`pgrf_nn::infer::prepare::auto_ratio`]); `--ratio auto`, and the
     /// default when neither a ratio nor a target exposure is given.
     Auto,
     /// The input is multiplied by this exposure ratio.
@@ -257,7 +257,7 @@ pub fn enhance_file<P: Progress>(
 ) -> Result<FileReport, EnhanceError> {
     let t0 = Instant::now();
     let mut frame = open(&job.input).map_err(EnhanceError::Open)?;
-    crate::infer::memory::check_frame(
+    pgrf_nn::infer::memory::check_frame(
         restorer,
         &job.input,
         (frame.width, frame.height),
@@ -319,7 +319,7 @@ pub fn enhance_file<P: Progress>(
 /// black that is taken as the capture's offset, as a share of the range:
 /// ELD's colour bias is a few DN; a masked area tens of DN off is more
 /// likely not dark (a file's claim) than an offset.
-const MASKED_BLACK_REACH: f32 = 0.02;
+pub const MASKED_BLACK_REACH: f32 = 0.02;
 
 /// Take the black level of an uncalibrated `frame` from its masked pixels
 /// ([`pgrf_raw::masked`]) when it has them and they lie within

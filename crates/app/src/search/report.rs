@@ -3,7 +3,7 @@
 //! it draws before the chosen t2 is stored.
 
 use super::{SearchOutcome, SearchRequest, Searched};
-use crate::error::{NnError, Result};
+use pgrf_nn::{NnError, Result};
 use pgrf_noise::pair::RatioSpec;
 use pgrf_report::{write_search_plot, SearchCurve};
 use serde::Serialize;
