@@ -247,7 +247,7 @@ pub struct TrainConfig {
 }
 
 /// The distance between output and target the loss averages (`pgrf train
-/// --loss`); `step::batch_loss` applies it.
+/// --loss`); `loss::batch_loss` applies it.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 #[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
@@ -260,7 +260,7 @@ pub enum Distance {
 }
 
 /// What a training step minimises: the distance and how the batch's items
-/// count (`step::batch_loss`).
+/// count (`loss::batch_loss`).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct LossRule {
     /// Per-element distance.
@@ -285,7 +285,7 @@ fn is_l1(d: &Distance) -> bool {
 }
 
 /// How each item of a training batch counts in the loss (`pgrf train
-/// --item-weight`); `step::batch_loss` applies it.
+/// --item-weight`); `loss::batch_loss` applies it.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 #[cfg_attr(feature = "clap", derive(clap::ValueEnum))]

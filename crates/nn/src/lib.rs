@@ -40,11 +40,14 @@
 //!    what its training batches carry.
 //! 2. In `arch/mod.rs`: a variant of [`Architecture`] (its record name) and
 //!    of [`Net`], and that variant's arm in the matches there (its
-//!    `NetworkConfig`, `init`, the parameters, the restored tile, the
-//!    training loss). Nothing else in the crate matches on the networks.
+//!    `NetworkConfig`, `init`, the parameters); in `apply.rs`, its arm in
+//!    the restored batch and tile and the training loss (above `arch`,
+//!    `flow` and `loss`, so that the networks depend on none of them).
+//!    Nothing else in the crate matches on the networks.
 
 #![warn(missing_docs)]
 
+mod apply;
 pub mod arch;
 pub mod backend;
 mod checkpoint;
@@ -59,6 +62,7 @@ pub mod flow;
 pub mod infer;
 pub mod interop;
 pub mod layers;
+pub mod loss;
 pub mod model;
 pub mod named;
 pub mod norm;

@@ -1,6 +1,7 @@
 //! The networks, one file each, and the one place that lists them: every
-//! `match` over the networks is here and only dispatches to the network's
-//! file.
+//! `match` over the networks is here (and, for restoring and the training
+//! loss, in `crate::apply`, above the flow and the losses) and only
+//! dispatches to the network's file.
 //!
 //! - [`sid_unet`]: the SID U-Net, the SPC denoiser (one pass);
 //! - [`sr3`]: the SR3 velocity field of the PGRF flow model (sampled).
@@ -13,6 +14,7 @@
 //! Adding a network: see the crate documentation.
 
 mod network;
+pub mod sid_names;
 pub mod sid_unet;
 pub mod sr3;
 mod widen;
@@ -21,15 +23,12 @@ pub(crate) use network::MEMORY_TILE_CAP;
 pub use sid_unet::{SidUnet, SidUnetConfig};
 pub use sr3::{Sr3Config, Sr3Unet};
 
-use crate::condition::{Conditioned, Conditioning, NoiseLevel};
-use crate::config::{LossRule, Method, TrainConfig};
+use crate::condition::Conditioning;
+use crate::config::{Method, TrainConfig};
 use crate::data::Extras;
 use crate::error::{NnError, Result};
-use crate::flow::flow_loss;
-use crate::flow::sample::{two_stage, Sampler};
 use crate::named::{self, NamedTensor};
 use crate::ops::PgrfOps;
-use crate::step::{batch_loss, denoiser_loss};
 use burn::module::Module;
 use burn::tensor::backend::Backend;
 use burn::tensor::Tensor;
@@ -436,102 +435,8 @@ impl<B: PgrfOps> Net<B> {
     }
 
     /// The noisy input as this network reads it ([`input_as_read`]).
-    fn as_read(&self, noisy: Tensor<B, 4>) -> Tensor<B, 4> {
+    pub(crate) fn as_read(&self, noisy: Tensor<B, 4>) -> Tensor<B, 4> {
         input_as_read(self.keeps_below_black(), noisy)
-    }
-
-    /// The denoised batch: one pass for SPC, the two-stage sampler at `t2`
-    /// for the flow model. `noisy` is T, `(n, 4, h, w)`, item i at noise
-    /// level `levels[i]` (unused, and may be empty, by an unconditioned
-    /// network); `x0` is X0, same shape (ignored by SPC).
-    pub(crate) fn restore(
-        &self,
-        noisy: Tensor<B, 4>,
-        levels: &[NoiseLevel],
-        x0: Tensor<B, 4>,
-        t2: f32,
-    ) -> Tensor<B, 4> {
-        let c = Conditioned::new(self.conditioning(), self.as_read(noisy), levels);
-        let y = match self {
-            Net::Spc(n) => n.forward(c.input.clone()),
-            Net::Pgrf(n) => two_stage(n, c.input.clone(), x0, t2),
-        };
-        c.input_units_of(y)
-    }
-
-    /// One restored tile `(1, 4, h, w)` from the condition `cond` at noise
-    /// level `level` (None only for an unconditioned network): the
-    /// denoiser's one pass, or the mean of the flow model's `samples`
-    /// samples with `sampler`, sample k starting from `x0(k)` (made one at a
-    /// time, so only one start field is held).
-    pub(crate) fn restore_tile(
-        &self,
-        cond: Tensor<B, 4>,
-        level: Option<NoiseLevel>,
-        samples: usize,
-        x0: impl Fn(usize) -> Tensor<B, 4>,
-        sampler: Sampler,
-    ) -> Tensor<B, 4> {
-        let levels: Vec<NoiseLevel> = level.into_iter().collect();
-        let c = Conditioned::new(self.conditioning(), self.as_read(cond), &levels);
-        let y = match self {
-            Net::Spc(n) => n.forward(c.input.clone()),
-            Net::Pgrf(n) => {
-                let mut acc: Option<Tensor<B, 4>> = None;
-                for k in 0..samples {
-                    let y = sampler.run(n, c.input.clone(), x0(k));
-                    acc = Some(match acc {
-                        None => y,
-                        Some(a) => a + y,
-                    });
-                }
-                acc.expect("samples >= 1") / samples as f32
-            }
-        };
-        c.input_units_of(y)
-    }
-
-    /// The training loss of a batch: the denoiser's L1 ([`denoiser_loss`]),
-    /// or the flow's ([`flow_loss`]) with the start X0 and times t, made only
-    /// when the network needs them. Item i is at noise level `levels[i]`
-    /// (unused by an unconditioned network). A k-sigma network's denoiser
-    /// loss is taken after its output is mapped back, and its flow loss in
-    /// the k-sigma domain divided by each item's scale: both in input units,
-    /// so that low-noise items (large scales) do not outweigh the rest.
-    /// `rule` says which distance and how the items' errors add up
-    /// ([`crate::step::batch_loss`]; the default rule is the plain L1 mean).
-    pub(crate) fn loss(
-        &self,
-        noisy: Tensor<B, 4>,
-        clean: Tensor<B, 4>,
-        levels: &[NoiseLevel],
-        rule: LossRule,
-        x0: impl FnOnce() -> Tensor<B, 4>,
-        t: impl FnOnce() -> Tensor<B, 1>,
-    ) -> Tensor<B, 1> {
-        let kind = self.conditioning();
-        let noisy = self.as_read(noisy);
-        if kind == Conditioning::None && rule == LossRule::default() {
-            return match self {
-                Net::Spc(n) => denoiser_loss(n, noisy, clean),
-                Net::Pgrf(n) => flow_loss(n, noisy, clean, x0(), t()),
-            };
-        }
-        let c = Conditioned::new(kind, noisy, levels);
-        let err = match self {
-            Net::Spc(n) => c.input_units_of(n.forward(c.input.clone())) - clean.clone(),
-            Net::Pgrf(n) => {
-                let x1 = c.domain_of(clean.clone());
-                let (x0, t) = (x0(), t());
-                let xt = crate::flow::interpolate(x1.clone(), x0.clone(), t.clone());
-                let err = x1 - x0 - n.forward(xt, c.input.clone(), t);
-                match c.inverse_scale() {
-                    Some(s) => err * s,
-                    None => err,
-                }
-            }
-        };
-        batch_loss(err, rule, levels, &clean)
     }
 }
 
@@ -539,6 +444,8 @@ impl<B: PgrfOps> Net<B> {
 mod tests {
     use super::*;
     use crate::backend::Cpu;
+    use crate::condition::NoiseLevel;
+    use crate::config::LossRule;
     use burn::tensor::{Distribution, TensorData};
 
     fn config(conditioning: Conditioning) -> TrainConfig {

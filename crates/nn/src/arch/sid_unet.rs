@@ -397,7 +397,7 @@ pub(crate) fn export_names(
     tensors: &BTreeMap<String, NamedTensor>,
 ) -> NnResult<(Vec<(String, &NamedTensor)>, &'static str)> {
     let mut v = Vec::new();
-    for (t, p) in crate::interop::sid_names::pairs() {
+    for (t, p) in super::sid_names::pairs() {
         let x = tensors.get(&p).ok_or_else(|| NnError::MissingTensor {
             name: p.clone(),
             hint: "not a SID U-Net?",

@@ -12,8 +12,8 @@
 
 use super::path::interpolate;
 use crate::arch::sr3::Sr3Unet;
+use crate::loss::l1;
 use crate::ops::PgrfOps;
-use crate::step::l1;
 use burn::tensor::Tensor;
 
 /// The flow loss |X1 - X0 - v(Xt, T, t)|_1 at Xt = t X1 + (1 - t) X0.

@@ -12,7 +12,7 @@
 
 pub mod pickle_check;
 mod pth_write;
-pub mod sid_names;
+pub use crate::arch::sid_names;
 pub mod torch_file;
 
 use crate::arch::{Architecture, SidUnetConfig};
