@@ -156,6 +156,21 @@ pub struct Demo {
 }
 
 impl Demo {
+    /// The scores by ratio (`{"x100": {"noisy": {"psnr", "ssim"}, "spc":
+    /// .., "pgrf": ..}, .., "seconds": s}`): what `pgrf demo --json` prints.
+    pub fn json(&self) -> serde_json::Value {
+        let s = |x: &Scores| serde_json::json!({"psnr": x.psnr, "ssim": x.ssim});
+        let mut obj = serde_json::Map::new();
+        for c in &self.captures {
+            obj.insert(
+                format!("x{}", c.ratio),
+                serde_json::json!({"noisy": s(&c.scores[0]), "spc": s(&c.scores[1]), "pgrf": s(&c.scores[2])}),
+            );
+        }
+        obj.insert("seconds".into(), serde_json::json!(self.seconds));
+        serde_json::Value::Object(obj)
+    }
+
     /// The scores as table rows (id "demo", one row group per ratio).
     pub fn rows(&self) -> Vec<Row> {
         let mut rows = Vec::new();

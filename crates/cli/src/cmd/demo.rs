@@ -15,10 +15,8 @@ use pgrf_app::demo::{
 };
 use pgrf_core::paths::require_parent_dir;
 use pgrf_eval::dataset::table::summarise;
-use pgrf_eval::Scores;
 use pgrf_nn::backend::DeviceKind;
 use pgrf_nn::infer::{Restore, SamplerChoice};
-use serde_json::json;
 use std::path::{Path, PathBuf};
 
 /// The real photograph built into the binary (MIT, syoyo/tinydng; see
@@ -156,16 +154,7 @@ pub fn run(a: &DemoArgs) -> Result<()> {
     let d = demo::run(&cfg, load, start)?;
     print_report(a, &d);
     if a.json {
-        let mut obj = serde_json::Map::new();
-        for c in &d.captures {
-            let s = |x: &Scores| json!({"psnr": x.psnr, "ssim": x.ssim});
-            obj.insert(
-                format!("x{}", c.ratio),
-                json!({"noisy": s(&c.scores[0]), "spc": s(&c.scores[1]), "pgrf": s(&c.scores[2])}),
-            );
-        }
-        obj.insert("seconds".into(), json!(d.seconds));
-        println!("{}", serde_json::Value::Object(obj));
+        println!("{}", d.json());
     }
     Ok(())
 }
