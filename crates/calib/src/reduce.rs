@@ -348,44 +348,12 @@ pub fn load_masters(
     calib: &Calibration,
     calib_path: &Path,
 ) -> Result<Masters, ReduceError> {
-    let list = |source| ReduceError::ListMasters {
-        dir: dir.to_path_buf(),
-        source,
-    };
-    let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
-        .map_err(list)?
-        .map(|e| e.map(|e| e.path()))
-        .collect::<Result<_, _>>()
-        .map_err(list)?;
-    files.sort();
-    let is_frame = |p: &Path| {
-        p.extension().and_then(|e| e.to_str()).is_some_and(|e| {
-            matches!(
-                e.to_ascii_lowercase().as_str(),
-                "fits" | "fit" | "fts" | "dng"
-            )
-        })
-    };
-    let stem = |p: &Path| {
-        p.file_stem()
-            .map(|s| s.to_string_lossy().into_owned())
-            .unwrap_or_default()
-    };
-    let of_kind = |prefix: &str| -> Vec<PathBuf> {
-        files
-            .iter()
-            .filter(|p| is_frame(p) && stem(p).starts_with(prefix))
-            .cloned()
-            .collect()
-    };
-    let missing = |what| ReduceError::MissingMaster {
-        dir: dir.to_path_buf(),
-        what,
-    };
+    let files = MasterFiles::list(dir)?;
     let bias_path = files
+        .all
         .iter()
         .find(|p| is_frame(p) && stem(p) == "master_bias")
-        .ok_or_else(|| missing("master_bias.fits or master_bias.dng"))?;
+        .ok_or_else(|| files.missing("master_bias.fits or master_bias.dng"))?;
     let (bias, bias_frame) = read_master(bias_path)?;
     check_frame(calib, &bias_frame, bias_path)?;
     let read_timed = |p: &PathBuf| -> Result<MasterFrame, ReduceError> {
@@ -396,7 +364,8 @@ pub fn load_masters(
         }
         Ok(m)
     };
-    let mut darks = of_kind("master_dark_")
+    let mut darks = files
+        .of_kind("master_dark_")
         .iter()
         .map(read_timed)
         .collect::<Result<Vec<_>, _>>()?;
@@ -408,7 +377,8 @@ pub fn load_masters(
             calib: calib_path.to_path_buf(),
         })?)
     };
-    let flats = of_kind("master_flat_")
+    let flats = files
+        .of_kind("master_flat_")
         .iter()
         .map(read_timed)
         .collect::<Result<Vec<_>, _>>()?;
@@ -422,7 +392,76 @@ pub fn load_masters(
     let flat = flats
         .into_iter()
         .max_by(|a, b| above_bias(a).total_cmp(&above_bias(b)))
-        .ok_or_else(|| missing("master_flat_<t>s.fits or .dng"))?;
+        .ok_or_else(|| files.missing("master_flat_<t>s.fits or .dng"))?;
+    let mut masters = assemble(calib, bias, &bias_frame, darks, flat, law);
+    normalise_flat(&mut masters)?;
+    Ok(masters)
+}
+
+/// The files of a masters folder, sorted.
+struct MasterFiles<'a> {
+    dir: &'a Path,
+    all: Vec<PathBuf>,
+}
+
+impl<'a> MasterFiles<'a> {
+    fn list(dir: &'a Path) -> Result<Self, ReduceError> {
+        let list = |source| ReduceError::ListMasters {
+            dir: dir.to_path_buf(),
+            source,
+        };
+        let mut all: Vec<PathBuf> = std::fs::read_dir(dir)
+            .map_err(list)?
+            .map(|e| e.map(|e| e.path()))
+            .collect::<Result<_, _>>()
+            .map_err(list)?;
+        all.sort();
+        Ok(MasterFiles { dir, all })
+    }
+
+    /// The frames whose name starts with `prefix`.
+    fn of_kind(&self, prefix: &str) -> Vec<PathBuf> {
+        (self.all.iter())
+            .filter(|p| is_frame(p) && stem(p).starts_with(prefix))
+            .cloned()
+            .collect()
+    }
+
+    fn missing(&self, what: &'static str) -> ReduceError {
+        ReduceError::MissingMaster {
+            dir: self.dir.to_path_buf(),
+            what,
+        }
+    }
+}
+
+/// A FITS or DNG file, by its extension.
+fn is_frame(p: &Path) -> bool {
+    p.extension().and_then(|e| e.to_str()).is_some_and(|e| {
+        matches!(
+            e.to_ascii_lowercase().as_str(),
+            "fits" | "fit" | "fts" | "dng"
+        )
+    })
+}
+
+/// The file name without its extension.
+fn stem(p: &Path) -> String {
+    p.file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_default()
+}
+
+/// The masters with the calibration's dark offset (when its law has one)
+/// and defects in the frames' layout; the flat not yet normalised.
+fn assemble(
+    calib: &Calibration,
+    bias: MasterFrame,
+    bias_frame: &RawFrame,
+    darks: Vec<MasterFrame>,
+    flat: MasterFrame,
+    law: Option<DarkLaw>,
+) -> Masters {
     let maps = &calib.maps;
     let cfa = bias_frame.cfa;
     let offset = match (&maps.dark_offset, calib.meta.dark_offset, law) {
@@ -433,7 +472,7 @@ pub fn load_masters(
         .into_iter()
         .map(|d| d != 0.0)
         .collect();
-    let mut masters = Masters {
+    Masters {
         bias,
         darks,
         flat,
@@ -446,9 +485,7 @@ pub fn load_masters(
         mono: bias_frame.mono,
         cfa,
         binning: bias_frame.fits.as_ref().and_then(|h| h.binning),
-    };
-    normalise_flat(&mut masters)?;
-    Ok(masters)
+    }
 }
 
 /// The flat with bias and dark off, divided by its mean per plane.

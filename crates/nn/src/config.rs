@@ -629,6 +629,12 @@ impl TrainConfig {
                 ),
             ));
         }
+        self.validate_data()?;
+        self.validate_schedule()
+    }
+
+    /// [`TrainConfig::validate`]'s checks of the photos' settings.
+    fn validate_data(&self) -> Result<()> {
         if self.photo_downscale == 0 {
             return Err(bad(
                 "--photo-downscale",
@@ -642,6 +648,12 @@ impl TrainConfig {
                 format!("--photo-wb-spread must be between 1 (no variation) and 4, got {w}"),
             ));
         }
+        Ok(())
+    }
+
+    /// [`TrainConfig::validate`]'s checks of the averaging, the flow's
+    /// times, the calibrated share and the ISO range.
+    fn validate_schedule(&self) -> Result<()> {
         if let Some(d) = self.ema {
             if !(d.is_finite() && d > 0.0 && d < 1.0) {
                 return Err(bad(

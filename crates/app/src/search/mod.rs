@@ -208,7 +208,36 @@ pub struct Searched {
 /// pairs that would not fit in memory, measures ([`measure`]), draws the
 /// plot and, unless `dry_run`, stores the best t2 ([`store_t2`]).
 pub fn run(req: &SearchRequest, progress: &dyn Progress, warn: &dyn Fn(&str)) -> Result<Searched> {
-    // Bad --step, --samples or --plot are refused before any costly work.
+    let meta = check_request(req)?;
+    let noise = pairs_noise(req, &meta)?;
+    let (source, count, what) = validation_data(req, &meta, warn)?;
+    let p = req.patch;
+    let need = pgrf_nn::infer::memory::tile_bytes(&meta.arch, p, p) + ValSet::bytes(p, count);
+    pgrf_core::mem::check_fits(&format!("--patch {p} with {count} pairs"), need)
+        .map_err(|e| NnError::TooLarge(format!("{e}; give a smaller --patch or fewer pairs")))?;
+    let val = ValSet::build(&source, &noise.built.mix, p, count, req.options.seed)?;
+    let outcome = measure(&req.model, &val, &req.options, progress)?;
+    report::write_plot(req, &outcome)?;
+    if !req.dry_run {
+        store_t2(&req.model, outcome.best_t2)?;
+    }
+    Ok(Searched {
+        outcome,
+        meta,
+        pairs: count,
+        what,
+        ratio: noise.ratio,
+        iso: noise.iso,
+        iso_range: noise.iso_range,
+        profiles: noise.built.mix.describe(),
+        written: !req.dry_run,
+    })
+}
+
+/// The request's settings and its model checked before any costly work
+/// (bad --step, --samples or --plot first; then the model must be a flow
+/// model, the patch at least 16, the device there): the model's record.
+fn check_request(req: &SearchRequest) -> Result<WeightMeta> {
     req.options.times()?;
     pgrf_core::paths::require_parent_dir(&req.plot).map_err(|e| NnError::BadSetting {
         flag: "--plot",
@@ -242,9 +271,22 @@ pub fn run(req: &SearchRequest, progress: &dyn Progress, warn: &dyn Fn(&str)) ->
         .device
         .check_available()
         .map_err(NnError::Device)?;
+    Ok(meta)
+}
+
+/// The validation pairs' noise and the conditions it was drawn at.
+struct PairsNoise {
+    built: pgrf_calib::mix::CalibratedMix,
+    ratio: RatioSpec,
+    iso: Option<u32>,
+    iso_range: Option<(u32, u32)>,
+}
+
+/// The pairs' noise as the model's training drew it (its record's profile
+/// or mix, ISO or ISO range, ratio draw and calibrated share; the
+/// request's `iso` and `ratio` override; `calib` applied).
+fn pairs_noise(req: &SearchRequest, meta: &WeightMeta) -> Result<PairsNoise> {
     let noise = &meta.noise;
-    // The pairs are drawn as the file's training drew them (ratio draw and
-    // calibrated share from its recorded configuration, when it has one).
     let trained = meta.training.as_ref().and_then(|t| t.config.as_ref());
     let ratio = match req.ratio {
         Some(r) => RatioSpec::Fixed(pgrf_noise::pair::check_ratio("--ratio", r).map_err(
@@ -287,9 +329,24 @@ pub fn run(req: &SearchRequest, progress: &dyn Progress, warn: &dyn Fn(&str)) ->
         },
         e => NnError::Caller(Box::new(e)),
     })?;
+    Ok(PairsNoise {
+        built,
+        ratio,
+        iso,
+        iso_range,
+    })
+}
+
+/// Where the validation crops come from, how many, and that in words
+/// (photos unprocessed as the model's training run did it; `warn` hears
+/// each file skipped).
+fn validation_data(
+    req: &SearchRequest,
+    meta: &WeightMeta,
+    warn: &dyn Fn(&str),
+) -> Result<(Source, usize, String)> {
     let (source, count, what) = match &req.val {
         Some(ValPairs::Files { path, pairs }) => {
-            // Photos are unprocessed as the model's training run did it.
             let config = (meta.training.as_ref())
                 .and_then(|t| t.config.clone())
                 .unwrap_or_default();
@@ -316,27 +373,7 @@ pub fn run(req: &SearchRequest, progress: &dyn Progress, warn: &dyn Fn(&str)) ->
             message: "no validation pairs: --pairs/--procedural must be at least 1".into(),
         });
     }
-    let p = req.patch;
-    let need = pgrf_nn::infer::memory::tile_bytes(&meta.arch, p, p) + ValSet::bytes(p, count);
-    pgrf_core::mem::check_fits(&format!("--patch {p} with {count} pairs"), need)
-        .map_err(|e| NnError::TooLarge(format!("{e}; give a smaller --patch or fewer pairs")))?;
-    let val = ValSet::build(&source, &built.mix, p, count, req.options.seed)?;
-    let outcome = measure(&req.model, &val, &req.options, progress)?;
-    report::write_plot(req, &outcome)?;
-    if !req.dry_run {
-        store_t2(&req.model, outcome.best_t2)?;
-    }
-    Ok(Searched {
-        outcome,
-        meta,
-        pairs: count,
-        what,
-        ratio,
-        iso,
-        iso_range,
-        profiles: built.mix.describe(),
-        written: !req.dry_run,
-    })
+    Ok((source, count, what))
 }
 
 /// Algorithm 2 with the flow model in the weight file `model`: scores the

@@ -196,8 +196,6 @@ pub(crate) fn run_cases(
     opts: &RunOptions,
     progress: &dyn Progress,
 ) -> Result<Outcome> {
-    let protocol = Protocol::eld(opts.correct);
-    let plain = Protocol::eld(false);
     let mut rows = Vec::new();
     let mut worst: Vec<Worst> = Vec::new();
     progress.start(n as u64, units);
@@ -207,80 +205,16 @@ pub(crate) fn run_cases(
         // ELD crops input and reference before the network runs.
         let input = centre_crop(pair.input.view(), opts.crop).to_owned();
         let reference = centre_crop(pair.reference.view(), opts.crop);
-        let colour = opts.cast.then(|| CameraColour::of(&pair.reference_frame));
         if let Some(dir) = &opts.dump {
             dump_case(dir, &case, input.view(), reference, opts.crop)?;
         }
-        let mut outputs: Vec<(&str, Array3<f32>)> = Vec::new();
-        if opts.baseline {
-            outputs.push((NOISY, input.clone()));
-        }
-        let info = CaseInfo {
-            key: &case.key,
-            ratio: pair.ratio,
-            noise: pair.noise.as_ref(),
-        };
-        for m in methods {
-            let name = m.name();
-            let out = m
-                .restore(input.view(), &info)
-                .map_err(|e| DatasetError(format!("{}: model {name}: {e}", case.source)))?;
-            outputs.push((name, out));
-        }
-        // The worst-images ranking follows the first method (the noisy
-        // input when there is none).
-        let rank = outputs.iter().position(|(n, _)| *n != NOISY).unwrap_or(0);
-        let mut first = None;
-        let mut line = format!("[{}/{n}] {}", i + 1, case.line);
-        for (k, (name, out)) in outputs.iter().enumerate() {
-            let p = if *name == NOISY { &plain } else { &protocol };
-            let at = |e: MetricError| DatasetError(format!("{}: {e}", case.title));
-            let sc = evaluate(out.view(), reference, p).map_err(at)?;
-            let cast = match &colour {
-                Some(c) => colour_cast(out.view(), reference, c).map_err(at)?,
-                None => None,
-            };
-            let black = colour
-                .is_some()
-                .then(|| black_level(out.view(), reference))
-                .flatten();
-            if k == rank {
-                first = Some(sc.psnr);
-            }
-            line.push_str(&format!("  {name} {:.2}/{:.4}", sc.psnr, sc.ssim));
-            if let Some(c) = &cast {
-                line.push_str(&format!("/{:.2}", c.dab));
-            }
-            rows.push(Row {
-                method: name.to_string(),
-                psnr: sc.psnr,
-                ssim: sc.ssim,
-                gain: sc.gain,
-                cast,
-                black,
-                ..case.row.clone()
-            });
-        }
+        let outputs = restore_case(&case, &input, methods, opts)?;
+        let line = format!("[{}/{n}] {}", i + 1, case.line);
+        let (line, first) = measure_case(&case, &outputs, reference, opts, line, &mut rows)?;
         progress.note(&line);
         progress.advance(1);
         if opts.worst_count > 0 {
-            let mut tiles: Vec<Array3<f32>> =
-                outputs.iter().map(|(_, o)| thumb(o.view())).collect();
-            if !opts.baseline {
-                tiles.insert(0, thumb(input.view()));
-            }
-            tiles.push(thumb(reference));
-            let (_, th, tw) = tiles[0].dim();
-            let mut template = pair.reference_frame.clone();
-            template.width = 2 * tw;
-            template.height = 2 * th;
-            template.mosaic = vec![0; 4 * tw * th];
-            worst.push(Worst {
-                score: first.unwrap_or(f64::INFINITY),
-                id: case.title.clone(),
-                template,
-                tiles,
-            });
+            worst.push(worst_of(&case, &input, &outputs, reference, opts, first));
             worst.sort_by(|x, y| x.score.total_cmp(&y.score));
             worst.truncate(opts.worst_count);
         }
@@ -291,4 +225,110 @@ pub(crate) fn run_cases(
         worst,
         notes: Vec::new(),
     })
+}
+
+/// Every method's output on the case's (cropped) `input`, after the noisy
+/// input itself when the baseline is asked for.
+fn restore_case<'m>(
+    case: &Case,
+    input: &Array3<f32>,
+    methods: &[&'m dyn MethodUnderTest],
+    opts: &RunOptions,
+) -> Result<Vec<(&'m str, Array3<f32>)>> {
+    let mut outputs: Vec<(&str, Array3<f32>)> = Vec::new();
+    if opts.baseline {
+        outputs.push((NOISY, input.clone()));
+    }
+    let info = CaseInfo {
+        key: &case.key,
+        ratio: case.pair.ratio,
+        noise: case.pair.noise.as_ref(),
+    };
+    for m in methods {
+        let name = m.name();
+        let out = m
+            .restore(input.view(), &info)
+            .map_err(|e| DatasetError(format!("{}: model {name}: {e}", case.source)))?;
+        outputs.push((name, out));
+    }
+    Ok(outputs)
+}
+
+/// Every output measured against `reference`: one row each appended to
+/// `rows`, and each method's scores appended to the progress `line`.
+/// Also the score the worst-images ranking follows: the first method's
+/// PSNR (the noisy input's when there is none).
+fn measure_case(
+    case: &Case,
+    outputs: &[(&str, Array3<f32>)],
+    reference: ArrayView3<f32>,
+    opts: &RunOptions,
+    mut line: String,
+    rows: &mut Vec<Row>,
+) -> Result<(String, Option<f64>)> {
+    let protocol = Protocol::eld(opts.correct);
+    let plain = Protocol::eld(false);
+    let colour = opts
+        .cast
+        .then(|| CameraColour::of(&case.pair.reference_frame));
+    let rank = outputs.iter().position(|(n, _)| *n != NOISY).unwrap_or(0);
+    let mut first = None;
+    for (k, (name, out)) in outputs.iter().enumerate() {
+        let p = if *name == NOISY { &plain } else { &protocol };
+        let at = |e: MetricError| DatasetError(format!("{}: {e}", case.title));
+        let sc = evaluate(out.view(), reference, p).map_err(at)?;
+        let cast = match &colour {
+            Some(c) => colour_cast(out.view(), reference, c).map_err(at)?,
+            None => None,
+        };
+        let black = colour
+            .is_some()
+            .then(|| black_level(out.view(), reference))
+            .flatten();
+        if k == rank {
+            first = Some(sc.psnr);
+        }
+        line.push_str(&format!("  {name} {:.2}/{:.4}", sc.psnr, sc.ssim));
+        if let Some(c) = &cast {
+            line.push_str(&format!("/{:.2}", c.dab));
+        }
+        rows.push(Row {
+            method: name.to_string(),
+            psnr: sc.psnr,
+            ssim: sc.ssim,
+            gain: sc.gain,
+            cast,
+            black,
+            ..case.row.clone()
+        });
+    }
+    Ok((line, first))
+}
+
+/// The case as a row of the worst-images picture: thumbnails of the input,
+/// every output and the reference, ranked by `first`.
+fn worst_of(
+    case: &Case,
+    input: &Array3<f32>,
+    outputs: &[(&str, Array3<f32>)],
+    reference: ArrayView3<f32>,
+    opts: &RunOptions,
+    first: Option<f64>,
+) -> Worst {
+    let mut tiles: Vec<Array3<f32>> = outputs.iter().map(|(_, o)| thumb(o.view())).collect();
+    if !opts.baseline {
+        tiles.insert(0, thumb(input.view()));
+    }
+    tiles.push(thumb(reference));
+    let (_, th, tw) = tiles[0].dim();
+    let mut template = case.pair.reference_frame.clone();
+    template.width = 2 * tw;
+    template.height = 2 * th;
+    template.mosaic = vec![0; 4 * tw * th];
+    Worst {
+        score: first.unwrap_or(f64::INFINITY),
+        id: case.title.clone(),
+        template,
+        tiles,
+    }
 }

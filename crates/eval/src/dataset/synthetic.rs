@@ -479,6 +479,86 @@ fn dedup(items: impl Iterator<Item = String>) -> Vec<String> {
     v
 }
 
+/// The case of image `img` (decoded as `frame`, packed `clean`) at
+/// condition number `ci`: its capture synthesised and handed over as the
+/// methods get it, the noise they are told, the row's identity, and (with
+/// `dump`) what the `--dump` sidecar records.
+fn synthetic_case(
+    synth: &Synthetic,
+    img: &Image,
+    frame: &RawFrame,
+    clean: &Array3<f32>,
+    ci: usize,
+    dump: bool,
+) -> Result<Case> {
+    let c = synth.conditions[ci];
+    let plane_rows = frame.cfa.offsets().map(|(r, _)| r);
+    let (pair, seed) = synth.synthesize(clean.view(), plane_rows, &img.id, ci)?;
+    let input = synth.input(&pair);
+    let (noise, record) = synth.case_noise(&pair)?;
+    let synthesis = dump.then(|| Synthesis {
+        noise: synth.noise_record(&pair.params, c.ratio),
+        capture: pair.noisy,
+    });
+    Ok(Case {
+        pair: LoadedPair {
+            reference_frame: frame.clone(),
+            input,
+            reference: clean.clone(),
+            ratio: c.ratio,
+            noise: Some(noise),
+        },
+        row: Row {
+            protocol: DatasetKind::Synthetic.name().into(),
+            id: img.id.clone(),
+            group: c.ratio.round() as u32,
+            ratio: c.ratio,
+            noisy: String::new(),
+            reference: img.path.display().to_string(),
+            method: String::new(),
+            psnr: f64::NAN,
+            ssim: f64::NAN,
+            gain: None,
+            iso: Some(c.iso),
+            seed: Some(seed),
+            cast: None,
+            black: None,
+            noise: Some(record),
+        },
+        source: format!("{} ({})", img.path.display(), c.label()),
+        title: format!("{} {}", img.id, c.label()),
+        line: format!("{} {}", img.id, c.label()),
+        key: case_key(&format!("{}_iso{}_x{}", img.id, c.iso, c.ratio)),
+        synthesis,
+    })
+}
+
+/// A note for each image whose colour cast was measured without a white
+/// balance or a usable colour matrix (the first row of the image says).
+fn cast_notes(images: &[Image], rows: &[Row]) -> Vec<String> {
+    let mut notes = Vec::new();
+    for img in images {
+        let Some(c) = rows.iter().find(|r| r.id == img.id).and_then(|r| r.cast) else {
+            continue;
+        };
+        let mut missing = Vec::new();
+        if !c.white_balance {
+            missing.push("no white balance (multipliers 1)");
+        }
+        if !c.matrix {
+            missing.push("no usable colour matrix (camera RGB taken as linear sRGB)");
+        }
+        if !missing.is_empty() {
+            notes.push(format!(
+                "{}: cast measured with {}",
+                img.id,
+                missing.join(", ")
+            ));
+        }
+    }
+    notes
+}
+
 /// Run `methods` over every image of `images` at every condition of
 /// `synth` (image-major; each file is decoded once). `progress` hears one
 /// `advance` per capture. The colour cast is measured whatever
@@ -512,46 +592,7 @@ pub fn run(
                 cache.insert((i, frame, clean))
             }
         };
-        let c = synth.conditions[ci];
-        let plane_rows = frame.cfa.offsets().map(|(r, _)| r);
-        let (pair, seed) = synth.synthesize(clean.view(), plane_rows, &img.id, ci)?;
-        let input = synth.input(&pair);
-        let (noise, record) = synth.case_noise(&pair)?;
-        let synthesis = opts.dump.is_some().then(|| Synthesis {
-            noise: synth.noise_record(&pair.params, c.ratio),
-            capture: pair.noisy,
-        });
-        Ok(Case {
-            pair: LoadedPair {
-                reference_frame: frame.clone(),
-                input,
-                reference: clean.clone(),
-                ratio: c.ratio,
-                noise: Some(noise),
-            },
-            row: Row {
-                protocol: DatasetKind::Synthetic.name().into(),
-                id: img.id.clone(),
-                group: c.ratio.round() as u32,
-                ratio: c.ratio,
-                noisy: String::new(),
-                reference: img.path.display().to_string(),
-                method: String::new(),
-                psnr: f64::NAN,
-                ssim: f64::NAN,
-                gain: None,
-                iso: Some(c.iso),
-                seed: Some(seed),
-                cast: None,
-                black: None,
-                noise: Some(record),
-            },
-            source: format!("{} ({})", img.path.display(), c.label()),
-            title: format!("{} {}", img.id, c.label()),
-            line: format!("{} {}", img.id, c.label()),
-            key: case_key(&format!("{}_iso{}_x{}", img.id, c.iso, c.ratio)),
-            synthesis,
-        })
+        synthetic_case(synth, img, frame, clean, ci, opts.dump.is_some())
     };
     let mut out = run_cases(
         images.len() * nc,
@@ -561,30 +602,7 @@ pub fn run(
         &opts,
         progress,
     )?;
-    for img in images {
-        let Some(c) = out
-            .rows
-            .iter()
-            .find(|r| r.id == img.id)
-            .and_then(|r| r.cast)
-        else {
-            continue;
-        };
-        let mut missing = Vec::new();
-        if !c.white_balance {
-            missing.push("no white balance (multipliers 1)");
-        }
-        if !c.matrix {
-            missing.push("no usable colour matrix (camera RGB taken as linear sRGB)");
-        }
-        if !missing.is_empty() {
-            out.notes.push(format!(
-                "{}: cast measured with {}",
-                img.id,
-                missing.join(", ")
-            ));
-        }
-    }
+    out.notes.extend(cast_notes(images, &out.rows));
     Ok(out)
 }
 

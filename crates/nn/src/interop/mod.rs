@@ -123,111 +123,14 @@ impl Imported {
 /// `key`: the nesting to take when the file holds the network more than
 /// once (LED's `params` and `params_ema`); by default the shortest.
 pub fn import_sid(path: &Path, from: Option<Source>, key: Option<&str>) -> Result<Imported> {
-    let bad = |reason: String| NnError::BadFile {
-        path: path.to_path_buf(),
-        reason,
-    };
     let file = torch_file::read(path)?;
-    // The nesting: whatever comes before the first convolution's weight.
-    let anchor = "conv1_1.weight";
-    let mut prefixes: Vec<&str> = file
-        .tensors
-        .keys()
-        .filter_map(|k| k.strip_suffix(anchor))
-        .filter(|p| p.is_empty() || p.ends_with('.'))
-        .collect();
-    prefixes.sort_by_key(|p| (p.len(), p.to_string()));
-    if let Some(k) = key {
-        let want = if k.is_empty() || k.ends_with('.') {
-            k.to_string()
-        } else {
-            format!("{k}.")
-        };
-        if !prefixes.contains(&want.as_str()) {
-            return Err(bad(format!(
-                "no UNetSeeInDark under '{k}' (found under: {})",
-                prefixes
-                    .iter()
-                    .map(|p| format!("'{}'", p.trim_end_matches('.')))
-                    .collect::<Vec<_>>()
-                    .join(", ")
-            )));
-        }
-        prefixes.retain(|p| *p == want);
-    }
-    let Some(&prefix) = prefixes.first() else {
-        let some: Vec<&str> = file.tensors.keys().take(3).map(|k| k.as_str()).collect();
-        return Err(bad(format!(
-            "no {anchor}: not a UNetSeeInDark checkpoint (its tensors start {})",
-            if some.is_empty() {
-                "with none at all".to_string()
-            } else {
-                some.join(", ")
-            }
-        )));
-    };
-    let prefix = prefix.to_string();
-    let others: Vec<String> = prefixes
-        .iter()
-        .skip(1)
-        .map(|p| p.trim_end_matches('.').to_string())
-        .collect();
+    let (prefix, others) = nesting(path, &file.tensors, key)?;
     let torch: BTreeMap<String, &NamedTensor> = file
         .tensors
         .iter()
         .filter_map(|(k, v)| k.strip_prefix(&prefix).map(|n| (n.to_string(), v)))
         .collect();
-    let first = &torch[anchor];
-    let last = torch
-        .get("conv10_1.weight")
-        .ok_or_else(|| bad("conv10_1.weight is missing".into()))?;
-    if first.shape.len() != 4 || last.shape.len() != 4 {
-        return Err(bad(format!(
-            "{anchor} has shape {:?}: not a 2-D convolution",
-            first.shape
-        )));
-    }
-    let (width, cin, cout) = (first.shape[0], first.shape[1], last.shape[0]);
-    if cin != 4 || cout != 4 {
-        return Err(bad(format!(
-            "the network takes {cin} channels and gives {cout}; pgrf's SID U-Net is raw to raw, 4 packed channels in and out{}",
-            if cout == 12 {
-                " (12 outputs: SID's sRGB model, which ends in depth-to-space)"
-            } else {
-                ""
-            }
-        )));
-    }
-    let expected = sid_names::torch_shapes(width, cin, cout);
-    for (name, shape) in &expected {
-        match torch.get(name) {
-            None => {
-                return Err(bad(format!(
-                    "{prefix}{name} is missing or not a tensor (a UNetSeeInDark of width {width} has {} tensors)",
-                    expected.len()
-                )))
-            }
-            Some(t) if &t.shape != shape => {
-                return Err(bad(format!(
-                    "{prefix}{name} has shape {:?}, UNetSeeInDark of width {width} has {shape:?}",
-                    t.shape
-                )))
-            }
-            Some(t) => {
-                if let Some(i) = t.values.iter().position(|v| !v.is_finite()) {
-                    return Err(bad(format!(
-                        "{prefix}{name} holds a non-finite value at index {i}"
-                    )));
-                }
-            }
-        }
-    }
-    let known: Vec<&String> = expected.iter().map(|(n, _)| n).collect();
-    if let Some(extra) = torch.keys().find(|k| !known.contains(k)) {
-        return Err(bad(format!(
-            "{prefix}{extra} is not part of UNetSeeInDark (another architecture?)"
-        )));
-    }
+    let (width, cin, cout) = check_unet(path, &torch, &prefix)?;
     let tensors: BTreeMap<String, NamedTensor> = sid_names::pairs()
         .into_iter()
         .map(|(t, p)| (p, torch[&t].clone()))
@@ -254,6 +157,140 @@ pub fn import_sid(path: &Path, from: Option<Source>, key: Option<&str>) -> Resul
         convention: from.map(|s| s.convention().to_string()),
     });
     Ok(Imported { meta, tensors })
+}
+
+/// The first convolution's weight, whose prefix is the network's nesting.
+const ANCHOR: &str = "conv1_1.weight";
+
+/// The nesting of the network in a checkpoint's tensors (whatever comes
+/// before [`ANCHOR`]): `key`'s when given, else the shortest; and the other
+/// nestings that hold one, for the record.
+fn nesting(
+    path: &Path,
+    tensors: &BTreeMap<String, NamedTensor>,
+    key: Option<&str>,
+) -> Result<(String, Vec<String>)> {
+    let mut prefixes: Vec<&str> = tensors
+        .keys()
+        .filter_map(|k| k.strip_suffix(ANCHOR))
+        .filter(|p| p.is_empty() || p.ends_with('.'))
+        .collect();
+    prefixes.sort_by_key(|p| (p.len(), p.to_string()));
+    if let Some(k) = key {
+        let want = if k.is_empty() || k.ends_with('.') {
+            k.to_string()
+        } else {
+            format!("{k}.")
+        };
+        if !prefixes.contains(&want.as_str()) {
+            return Err(bad_file(
+                path,
+                format!(
+                    "no UNetSeeInDark under '{k}' (found under: {})",
+                    prefixes
+                        .iter()
+                        .map(|p| format!("'{}'", p.trim_end_matches('.')))
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                ),
+            ));
+        }
+        prefixes.retain(|p| *p == want);
+    }
+    let Some(&prefix) = prefixes.first() else {
+        let some: Vec<&str> = tensors.keys().take(3).map(|k| k.as_str()).collect();
+        return Err(bad_file(
+            path,
+            format!(
+                "no {ANCHOR}: not a UNetSeeInDark checkpoint (its tensors start {})",
+                if some.is_empty() {
+                    "with none at all".to_string()
+                } else {
+                    some.join(", ")
+                }
+            ),
+        ));
+    };
+    let others = prefixes
+        .iter()
+        .skip(1)
+        .map(|p| p.trim_end_matches('.').to_string())
+        .collect();
+    Ok((prefix.to_string(), others))
+}
+
+/// Check the checkpoint's tensors (PyTorch names, nesting `prefix` removed)
+/// are `UNetSeeInDark` raw to raw, every one by name, shape and finite
+/// values, none left over: its (width, inputs, outputs).
+fn check_unet(
+    path: &Path,
+    torch: &BTreeMap<String, &NamedTensor>,
+    prefix: &str,
+) -> Result<(usize, usize, usize)> {
+    let first = &torch[ANCHOR];
+    let last = torch
+        .get("conv10_1.weight")
+        .ok_or_else(|| bad_file(path, "conv10_1.weight is missing".into()))?;
+    if first.shape.len() != 4 || last.shape.len() != 4 {
+        return Err(bad_file(
+            path,
+            format!(
+                "{ANCHOR} has shape {:?}: not a 2-D convolution",
+                first.shape
+            ),
+        ));
+    }
+    let (width, cin, cout) = (first.shape[0], first.shape[1], last.shape[0]);
+    if cin != 4 || cout != 4 {
+        return Err(bad_file(path, format!(
+            "the network takes {cin} channels and gives {cout}; pgrf's SID U-Net is raw to raw, 4 packed channels in and out{}",
+            if cout == 12 {
+                " (12 outputs: SID's sRGB model, which ends in depth-to-space)"
+            } else {
+                ""
+            }
+        )));
+    }
+    let expected = sid_names::torch_shapes(width, cin, cout);
+    for (name, shape) in &expected {
+        match torch.get(name) {
+            None => {
+                return Err(bad_file(path, format!(
+                    "{prefix}{name} is missing or not a tensor (a UNetSeeInDark of width {width} has {} tensors)",
+                    expected.len()
+                )))
+            }
+            Some(t) if &t.shape != shape => {
+                return Err(bad_file(path, format!(
+                    "{prefix}{name} has shape {:?}, UNetSeeInDark of width {width} has {shape:?}",
+                    t.shape
+                )))
+            }
+            Some(t) => {
+                if let Some(i) = t.values.iter().position(|v| !v.is_finite()) {
+                    return Err(bad_file(path, format!(
+                        "{prefix}{name} holds a non-finite value at index {i}"
+                    )));
+                }
+            }
+        }
+    }
+    let known: Vec<&String> = expected.iter().map(|(n, _)| n).collect();
+    if let Some(extra) = torch.keys().find(|k| !known.contains(k)) {
+        return Err(bad_file(
+            path,
+            format!("{prefix}{extra} is not part of UNetSeeInDark (another architecture?)"),
+        ));
+    }
+    Ok((width, cin, cout))
+}
+
+/// The checkpoint at `path` refused for `reason`.
+fn bad_file(path: &Path, reason: String) -> NnError {
+    NnError::BadFile {
+        path: path.to_path_buf(),
+        reason,
+    }
 }
 
 /// How [`export`] wrote a network.
