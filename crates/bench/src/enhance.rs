@@ -279,64 +279,190 @@ pub fn run(a: &EnhanceArgs) -> Result<()> {
     }
     let (r, params, weights) = pgrf_nn::backend::on_device(a.device, Build(a))?;
     let r = r.as_ref();
-    let (ph, pw) = (a.frame.h, a.frame.w);
     let t0 = Instant::now();
-    let input = frame(ph, pw);
+    let input = frame(a.frame.h, a.frame.w);
     let input_seconds = t0.elapsed().as_secs_f64();
-    let tile = a.tile.unwrap_or_else(|| auto_tile(a.device, r, ph, pw));
-    let opts = ImageOptions {
-        tile,
-        overlap: a.overlap,
-        seed: 0,
-        noise: None,
-    };
-    let plan = frame_plan(r, ph, pw, &opts)?;
-    let tiles = plan.count();
-    let (th, tw) = (plan.rows.len, plan.cols.len);
-    let sampler = match r.sampler() {
-        None => "one pass".to_string(),
-        Some(s) => s.to_string(),
-    };
-    let nfe = r.nfe();
-    let mib = |b: f64| b / (1 << 20) as f64;
-    let attention_tokens = attention_tokens(&r.meta().arch, th, tw);
-    let estimated_peak_mib = mib(
-        windowed_tile_bytes(&r.meta().arch, th, tw, r.window()) + fixed_bytes(r, ph, pw) as f64
-    );
-    let attention_scores_mib = mib(4.0 * (attention_tokens as f64).powi(2));
+    let plan = Plan::of(a, r)?;
     if a.dry_run {
-        let plan = serde_json::json!({
-            "model": r.meta().arch.describe(),
-            "params": params,
-            "frame": [4, ph, pw],
-            "tile": tile,
-            "auto_tile": a.tile.is_none(),
-            "tile_hw": [th, tw],
-            "tiles": tiles,
-            "nfe": nfe,
-            "estimated_peak_mib": estimated_peak_mib,
-            "available_mib": pgrf_core::mem::available_memory().map(|b| mib(b as f64)),
-            "attention_tokens": attention_tokens,
-            "attention_scores_mib": attention_scores_mib,
-        });
-        println!("{plan}");
+        println!("{}", plan.json(r, params));
         return Ok(());
     }
     if !a.json {
         eprintln!(
-            "{} ({} parameters, {weights} weights); frame 4 x {ph} x {pw}; {tiles} tile{} of {th} x {tw}; {sampler}, {nfe} evaluation{}; {} threads",
+            "{} ({} parameters, {weights} weights); frame 4 x {} x {}; {} tile{} of {} x {}; {}, {} evaluation{}; {} threads",
             r.meta().arch.describe(),
             params,
-            if tiles == 1 { "" } else { "s" },
-            if nfe == 1 { "" } else { "s" },
+            plan.ph,
+            plan.pw,
+            plan.tiles,
+            if plan.tiles == 1 { "" } else { "s" },
+            plan.th,
+            plan.tw,
+            plan.sampler,
+            plan.nfe,
+            if plan.nfe == 1 { "" } else { "s" },
             rayon::current_num_threads(),
         );
     }
+    let (mut times, output_mean) = time_runs(a, r, &input, &plan.opts)?;
+    let seconds_min = times.iter().copied().fold(f64::MAX, f64::min);
+    let seconds = median(&mut times);
+    let report = plan.report(
+        a,
+        r,
+        (params, weights),
+        (seconds, seconds_min),
+        input_seconds,
+        output_mean,
+    );
+    if a.json {
+        println!("{}", serde_json::to_string(&report)?);
+    } else {
+        print_summary(&report);
+    }
+    Ok(())
+}
+
+/// The frame's tiling and what it costs, before anything runs.
+struct Plan {
+    auto_tile: bool,
+    ph: usize,
+    pw: usize,
+    opts: ImageOptions,
+    tiles: usize,
+    th: usize,
+    tw: usize,
+    sampler: String,
+    nfe: usize,
+    estimated_peak_mib: f64,
+    attention_tokens: usize,
+    attention_scores_mib: f64,
+}
+
+/// Bytes in MiB.
+fn mib(b: f64) -> f64 {
+    b / (1 << 20) as f64
+}
+
+impl Plan {
+    /// `a`'s frame tiled for `r` (`--tile`, else the automatic tile).
+    fn of(a: &EnhanceArgs, r: &dyn Restore) -> Result<Plan> {
+        let (ph, pw) = (a.frame.h, a.frame.w);
+        let tile = a.tile.unwrap_or_else(|| auto_tile(a.device, r, ph, pw));
+        let opts = ImageOptions {
+            tile,
+            overlap: a.overlap,
+            seed: 0,
+            noise: None,
+        };
+        let plan = frame_plan(r, ph, pw, &opts)?;
+        let (th, tw) = (plan.rows.len, plan.cols.len);
+        let attention_tokens = attention_tokens(&r.meta().arch, th, tw);
+        Ok(Plan {
+            auto_tile: a.tile.is_none(),
+            ph,
+            pw,
+            tiles: plan.count(),
+            th,
+            tw,
+            sampler: match r.sampler() {
+                None => "one pass".to_string(),
+                Some(s) => s.to_string(),
+            },
+            nfe: r.nfe(),
+            estimated_peak_mib: mib(windowed_tile_bytes(&r.meta().arch, th, tw, r.window())
+                + fixed_bytes(r, ph, pw) as f64),
+            attention_tokens,
+            attention_scores_mib: mib(4.0 * (attention_tokens as f64).powi(2)),
+            opts,
+        })
+    }
+
+    /// What `--dry-run` prints.
+    fn json(&self, r: &dyn Restore, params: usize) -> serde_json::Value {
+        serde_json::json!({
+            "model": r.meta().arch.describe(),
+            "params": params,
+            "frame": [4, self.ph, self.pw],
+            "tile": self.opts.tile,
+            "auto_tile": self.auto_tile,
+            "tile_hw": [self.th, self.tw],
+            "tiles": self.tiles,
+            "nfe": self.nfe,
+            "estimated_peak_mib": self.estimated_peak_mib,
+            "available_mib": pgrf_core::mem::available_memory().map(|b| mib(b as f64)),
+            "attention_tokens": self.attention_tokens,
+            "attention_scores_mib": self.attention_scores_mib,
+        })
+    }
+
+    /// The timed run's record: `model` (parameters, weights' origin),
+    /// `timing` (median and fastest seconds).
+    fn report(
+        &self,
+        a: &EnhanceArgs,
+        r: &dyn Restore,
+        (params, weights): (usize, String),
+        (seconds, seconds_min): (f64, f64),
+        input_seconds: f64,
+        output_mean: f64,
+    ) -> Report {
+        let (th, tw, ph, pw, nfe, tiles) =
+            (self.th, self.tw, self.ph, self.pw, self.nfe, self.tiles);
+        Report {
+            burn: "0.21.0",
+            // backend::describe counts the machine's cores, not rayon's pool.
+            device: match a.device {
+                DeviceKind::Cpu => "Flex (CPU)".to_string(),
+                DeviceKind::Cuda => pgrf_nn::backend::describe(a.device),
+            },
+            threads: rayon::current_num_threads(),
+            net: match r.meta().arch {
+                Architecture::SidUnet(_) => "unet",
+                Architecture::Sr3(_) => "sr3",
+            },
+            model: r.meta().arch.describe(),
+            params,
+            weights,
+            frame: [4, ph, pw],
+            megapixels: (4 * ph * pw) as f64 / 1e6,
+            tile: self.opts.tile,
+            tile_hw: [th, tw],
+            tiles,
+            overlap: a.overlap,
+            auto_tile: self.auto_tile,
+            sampler: self.sampler.clone(),
+            nfe,
+            iters: a.iters,
+            warmup: a.warmup,
+            seconds,
+            seconds_min,
+            seconds_per_eval: seconds / nfe as f64,
+            seconds_per_tile_eval: seconds / (nfe * tiles) as f64,
+            tiled_pixel_factor: (tiles * th * tw) as f64 / (ph * pw) as f64,
+            input_seconds,
+            estimated_peak_mib: self.estimated_peak_mib,
+            attention_tokens: self.attention_tokens,
+            attention_scores_mib: self.attention_scores_mib,
+            peak_rss_mib: pgrf_core::mem::peak_rss_mib(),
+            output_mean,
+        }
+    }
+}
+
+/// `--warmup` untimed and `--iters` timed restorations of `input`: the
+/// timed seconds, and the last output's mean (a check that work was done).
+fn time_runs(
+    a: &EnhanceArgs,
+    r: &dyn Restore,
+    input: &Array3<f32>,
+    opts: &ImageOptions,
+) -> Result<(Vec<f64>, f64)> {
     let mut times = Vec::with_capacity(a.iters);
     let mut output_mean = f64::NAN;
     for i in 0..a.warmup + a.iters {
         let t = Instant::now();
-        let out = restore_image(r, input.view(), &opts, &pgrf_core::NoProgress)?;
+        let out = restore_image(r, input.view(), opts, &pgrf_core::NoProgress)?;
         let s = t.elapsed().as_secs_f64();
         output_mean = out.iter().map(|&v| v as f64).sum::<f64>() / out.len() as f64;
         let timed = i >= a.warmup;
@@ -352,67 +478,28 @@ pub fn run(a: &EnhanceArgs) -> Result<()> {
             );
         }
     }
-    let seconds_min = times.iter().copied().fold(f64::MAX, f64::min);
-    let seconds = median(&mut times);
-    let report = Report {
-        burn: "0.21.0",
-        // backend::describe counts the machine's cores, not rayon's pool.
-        device: match a.device {
-            DeviceKind::Cpu => "Flex (CPU)".to_string(),
-            DeviceKind::Cuda => pgrf_nn::backend::describe(a.device),
-        },
-        threads: rayon::current_num_threads(),
-        net: match r.meta().arch {
-            Architecture::SidUnet(_) => "unet",
-            Architecture::Sr3(_) => "sr3",
-        },
-        model: r.meta().arch.describe(),
-        params,
-        weights,
-        frame: [4, ph, pw],
-        megapixels: (4 * ph * pw) as f64 / 1e6,
-        tile,
-        tile_hw: [th, tw],
-        tiles,
-        overlap: a.overlap,
-        auto_tile: a.tile.is_none(),
-        sampler,
-        nfe,
-        iters: a.iters,
-        warmup: a.warmup,
-        seconds,
-        seconds_min,
-        seconds_per_eval: seconds / nfe as f64,
-        seconds_per_tile_eval: seconds / (nfe * tiles) as f64,
-        tiled_pixel_factor: (tiles * th * tw) as f64 / (ph * pw) as f64,
-        input_seconds,
-        estimated_peak_mib,
-        attention_tokens,
-        attention_scores_mib,
-        peak_rss_mib: pgrf_core::mem::peak_rss_mib(),
-        output_mean,
-    };
-    if a.json {
-        println!("{}", serde_json::to_string(&report)?);
-    } else {
-        println!(
-            "{:.2} s/image (median of {}, min {:.2} s), {} NFE: {:.2} s per evaluation of the frame, {:.3} s per tile evaluation; {} tiles of {}x{} ({:.2}x the frame's pixels); peak {} MiB",
-            report.seconds,
-            report.iters,
-            report.seconds_min,
-            report.nfe,
-            report.seconds_per_eval,
-            report.seconds_per_tile_eval,
-            report.tiles,
-            th,
-            tw,
-            report.tiled_pixel_factor,
-            report
-                .peak_rss_mib
-                .map_or("?".to_string(), |m| format!("{m:.0}")),
-        );
-    }
-    Ok(())
+    Ok((times, output_mean))
+}
+
+/// The timed run on one line (without `--json`).
+fn print_summary(report: &Report) {
+    let [th, tw] = report.tile_hw;
+    println!(
+        "{:.2} s/image (median of {}, min {:.2} s), {} NFE: {:.2} s per evaluation of the frame, {:.3} s per tile evaluation; {} tiles of {}x{} ({:.2}x the frame's pixels); peak {} MiB",
+        report.seconds,
+        report.iters,
+        report.seconds_min,
+        report.nfe,
+        report.seconds_per_eval,
+        report.seconds_per_tile_eval,
+        report.tiles,
+        th,
+        tw,
+        report.tiled_pixel_factor,
+        report
+            .peak_rss_mib
+            .map_or("?".to_string(), |m| format!("{m:.0}")),
+    );
 }
 
 #[cfg(test)]
