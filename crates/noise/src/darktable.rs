@@ -503,29 +503,7 @@ impl NoiseProfiles {
             })
             .collect();
         let isos: Vec<String> = measured.iter().map(|m| m.iso.to_string()).collect();
-        let mut notes = Vec::new();
-        let no_read: Vec<String> = measured
-            .iter()
-            .filter(|m| m.b < 0.0)
-            .map(|m| m.iso.to_string())
-            .collect();
-        if !no_read.is_empty() {
-            notes.push(format!(
-                "b < 0 at ISO {}: the fit resolved no read noise there, pgrf uses 0",
-                no_read.join(", ")
-            ));
-        }
-        let repeated: Vec<String> = measured
-            .iter()
-            .filter(|m| m.entries > 1)
-            .map(|m| format!("{} ({}x)", m.iso, m.entries))
-            .collect();
-        if !repeated.is_empty() {
-            notes.push(format!(
-                "entries at one ISO averaged: ISO {}",
-                repeated.join(", ")
-            ));
-        }
+        let notes = fit_notes(&measured);
         let comment = cam
             .comment
             .as_deref()
@@ -549,6 +527,35 @@ impl NoiseProfiles {
             source,
         )
     }
+}
+
+/// What a profile's source says of its fits: ISOs whose read noise came out
+/// negative (used as 0) and ISOs whose entries were averaged.
+fn fit_notes(measured: &[Measured]) -> Vec<String> {
+    let mut notes = Vec::new();
+    let no_read: Vec<String> = measured
+        .iter()
+        .filter(|m| m.b < 0.0)
+        .map(|m| m.iso.to_string())
+        .collect();
+    if !no_read.is_empty() {
+        notes.push(format!(
+            "b < 0 at ISO {}: the fit resolved no read noise there, pgrf uses 0",
+            no_read.join(", ")
+        ));
+    }
+    let repeated: Vec<String> = measured
+        .iter()
+        .filter(|m| m.entries > 1)
+        .map(|m| format!("{} ({}x)", m.iso, m.entries))
+        .collect();
+    if !repeated.is_empty() {
+        notes.push(format!(
+            "entries at one ISO averaged: ISO {}",
+            repeated.join(", ")
+        ));
+    }
+    notes
 }
 
 /// `--profile darktable:SPEC`: the camera SPEC names in the file [`locate`]

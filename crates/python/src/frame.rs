@@ -156,6 +156,13 @@ pub fn frame_of_meta(d: &Bound<'_, PyDict>) -> PyResult<RawFrame> {
             f
         }
     };
+    describe_from(&mut frame, d)?;
+    Ok(frame)
+}
+
+/// Set `frame`'s descriptive fields (white balance, matrices, ISO,
+/// exposure, camera, orientation, temperature, NoiseProfile) from `d`.
+fn describe_from(frame: &mut RawFrame, d: &Bound<'_, PyDict>) -> PyResult<()> {
     frame.wb = item::<Option<[f32; 3]>>(d, "wb")?;
     let matrices: Vec<(String, [[f32; 3]; 3])> = item(d, "color_matrices")?;
     frame.color_matrices = matrices
@@ -173,7 +180,7 @@ pub fn frame_of_meta(d: &Bound<'_, PyDict>) -> PyResult<RawFrame> {
     frame.temperature_c = item(d, "temperature_c")?;
     frame.noise_profile = item::<Option<Vec<(f64, f64)>>>(d, "noise_profile")?
         .map(|v| v.into_iter().map(|(s, o)| [s, o]).collect());
-    Ok(frame)
+    Ok(())
 }
 
 /// Refuse an array `packed` that is not `frame`'s packed shape `(4, H/2, W/2)`.

@@ -156,75 +156,84 @@ pub fn write(root: &Path, m: &Miniature) -> Result<Written> {
     }
     check_room(root, m)?;
     create_dir(root)?;
+    match m.layout {
+        Layout::Eld => write_eld(root, m),
+        Layout::Sid => write_sid(root, m),
+    }
+}
+
+/// The ELD layout: per scene, 16 frames of the ELD table (the references
+/// clean, the others dark captures of them).
+fn write_eld(root: &Path, m: &Miniature) -> Result<Written> {
     let (w, h) = (m.width, m.height);
     let mut files = 0usize;
-    match m.layout {
-        Layout::Eld => {
-            for k in 1..=m.scenes {
-                let dir = root.join(eld::CAMERA).join(format!("scene-{k}"));
-                create_dir(&dir)?;
-                let (ri, rt) = eld::FRAME_TABLE[0];
-                let clean = clean_scene(w, h, m.seed.wrapping_mul(1000) + k as u64, ri, rt)?;
-                for f in 1..=16u32 {
-                    let path = dir.join(format!("IMG_{f:04}.dng"));
-                    let (iso, t) = eld::FRAME_TABLE[f as usize - 1];
-                    if eld::REFERENCES.contains(&f) {
-                        write_dng(&clean, &path, &DngOptions::default()).map_err(err)?;
-                    } else {
-                        let (gi, gt) = eld::FRAME_TABLE[eld::reference_for(f) as usize - 1];
-                        let ratio = (gi as f64 * gt / (iso as f64 * t)) as f32;
-                        let seed = m.seed.wrapping_mul(1_000_003) + (k * 100 + f) as u64;
-                        dark_capture(&clean, iso, t, ratio, seed, &path)?;
-                    }
-                    files += 1;
-                }
+    for k in 1..=m.scenes {
+        let dir = root.join(eld::CAMERA).join(format!("scene-{k}"));
+        create_dir(&dir)?;
+        let (ri, rt) = eld::FRAME_TABLE[0];
+        let clean = clean_scene(w, h, m.seed.wrapping_mul(1000) + k as u64, ri, rt)?;
+        for f in 1..=16u32 {
+            let path = dir.join(format!("IMG_{f:04}.dng"));
+            let (iso, t) = eld::FRAME_TABLE[f as usize - 1];
+            if eld::REFERENCES.contains(&f) {
+                write_dng(&clean, &path, &DngOptions::default()).map_err(err)?;
+            } else {
+                let (gi, gt) = eld::FRAME_TABLE[eld::reference_for(f) as usize - 1];
+                let ratio = (gi as f64 * gt / (iso as f64 * t)) as f32;
+                let seed = m.seed.wrapping_mul(1_000_003) + (k * 100 + f) as u64;
+                dark_capture(&clean, iso, t, ratio, seed, &path)?;
             }
-            Ok(Written {
-                files,
-                frames: root.join(eld::CAMERA),
-                list: None,
-            })
-        }
-        Layout::Sid => {
-            let short_dir = root.join("Sony").join("short");
-            let long_dir = root.join("Sony").join("long");
-            create_dir(&short_dir)?;
-            create_dir(&long_dir)?;
-            let iso = 800;
-            let mut list = String::new();
-            let mut id = 10000u32;
-            for k in 1..=m.scenes {
-                id += 1;
-                while sid::MISALIGNED.contains(&id.to_string().as_str()) {
-                    id += 1;
-                }
-                let long_name = format!("{id}_00_10s.dng");
-                let clean = clean_scene(w, h, m.seed.wrapping_mul(1000) + k as u64, iso, 10.0)?;
-                write_dng(&clean, &long_dir.join(&long_name), &DngOptions::default())
-                    .map_err(err)?;
-                files += 1;
-                for (n, (label, t)) in [("0.1", 0.1), ("0.04", 0.04), ("0.033", 0.033)]
-                    .into_iter()
-                    .enumerate()
-                {
-                    let short_name = format!("{id}_00_{label}s.dng");
-                    let path = short_dir.join(&short_name);
-                    let ratio = (10.0 / t) as f32;
-                    let seed = m.seed.wrapping_mul(1_000_003) + (k as u64) * 10 + n as u64;
-                    dark_capture(&clean, iso, t, ratio, seed, &path)?;
-                    files += 1;
-                    list.push_str(&format!(
-                        "./Sony/short/{short_name} ./Sony/long/{long_name} ISO{iso} F8\n"
-                    ));
-                }
-            }
-            let list_path = root.join(sid::DEFAULT_LIST);
-            pgrf_core::write_atomic(&list_path, list.as_bytes()).map_err(err)?;
-            Ok(Written {
-                files,
-                frames: root.join("Sony"),
-                list: Some(list_path),
-            })
+            files += 1;
         }
     }
+    Ok(Written {
+        files,
+        frames: root.join(eld::CAMERA),
+        list: None,
+    })
+}
+
+/// The SID layout: per scene, a 10 s long exposure and three short ones,
+/// and the list file that pairs them.
+fn write_sid(root: &Path, m: &Miniature) -> Result<Written> {
+    let (w, h) = (m.width, m.height);
+    let mut files = 0usize;
+    let short_dir = root.join("Sony").join("short");
+    let long_dir = root.join("Sony").join("long");
+    create_dir(&short_dir)?;
+    create_dir(&long_dir)?;
+    let iso = 800;
+    let mut list = String::new();
+    let mut id = 10000u32;
+    for k in 1..=m.scenes {
+        id += 1;
+        while sid::MISALIGNED.contains(&id.to_string().as_str()) {
+            id += 1;
+        }
+        let long_name = format!("{id}_00_10s.dng");
+        let clean = clean_scene(w, h, m.seed.wrapping_mul(1000) + k as u64, iso, 10.0)?;
+        write_dng(&clean, &long_dir.join(&long_name), &DngOptions::default()).map_err(err)?;
+        files += 1;
+        for (n, (label, t)) in [("0.1", 0.1), ("0.04", 0.04), ("0.033", 0.033)]
+            .into_iter()
+            .enumerate()
+        {
+            let short_name = format!("{id}_00_{label}s.dng");
+            let path = short_dir.join(&short_name);
+            let ratio = (10.0 / t) as f32;
+            let seed = m.seed.wrapping_mul(1_000_003) + (k as u64) * 10 + n as u64;
+            dark_capture(&clean, iso, t, ratio, seed, &path)?;
+            files += 1;
+            list.push_str(&format!(
+                "./Sony/short/{short_name} ./Sony/long/{long_name} ISO{iso} F8\n"
+            ));
+        }
+    }
+    let list_path = root.join(sid::DEFAULT_LIST);
+    pgrf_core::write_atomic(&list_path, list.as_bytes()).map_err(err)?;
+    Ok(Written {
+        files,
+        frames: root.join("Sony"),
+        list: Some(list_path),
+    })
 }

@@ -50,12 +50,11 @@ fn base_dir(root: &Path) -> Result<PathBuf> {
     Ok(root.to_path_buf())
 }
 
-/// The pairs of `list` (default ROOT/Sony_test_list.txt), misaligned scenes
-/// dropped unless `keep_misaligned`, each file checked to exist.
-pub fn walk(root: &Path, list: Option<&Path>, keep_misaligned: bool) -> Result<Vec<Sample>> {
-    let base = base_dir(root)?;
-    let list_path = match list {
-        Some(l) => l.to_path_buf(),
+/// The list to read: `list`, else `base`/Sony_test_list.txt, which must
+/// exist.
+fn list_file(base: &Path, list: Option<&Path>) -> Result<PathBuf> {
+    match list {
+        Some(l) => Ok(l.to_path_buf()),
         None => {
             let p = base.join(DEFAULT_LIST);
             if !p.is_file() {
@@ -64,9 +63,41 @@ pub fn walk(root: &Path, list: Option<&Path>, keep_misaligned: bool) -> Result<V
                     p.display()
                 ));
             }
-            p
+            Ok(p)
         }
-    };
+    }
+}
+
+/// A list line's short and long files: relative to `base` when the line
+/// names paths (ELD's paired lists), else in SID's Sony/short and
+/// Sony/long.
+fn pair_paths(base: &Path, short: &str, long: &str) -> (PathBuf, PathBuf) {
+    if short.contains('/') {
+        (
+            base.join(short.trim_start_matches("./")),
+            base.join(long.trim_start_matches("./")),
+        )
+    } else {
+        (
+            base.join("Sony").join("short").join(short),
+            base.join("Sony").join("long").join(long),
+        )
+    }
+}
+
+/// The path's last component, lossily as text.
+fn file_name(p: &Path) -> String {
+    p.file_name()
+        .unwrap_or_default()
+        .to_string_lossy()
+        .into_owned()
+}
+
+/// The pairs of `list` (default ROOT/Sony_test_list.txt), misaligned scenes
+/// dropped unless `keep_misaligned`, each file checked to exist.
+pub fn walk(root: &Path, list: Option<&Path>, keep_misaligned: bool) -> Result<Vec<Sample>> {
+    let base = base_dir(root)?;
+    let list_path = list_file(&base, list)?;
     let text = std::fs::read_to_string(&list_path)
         .map_err(|e| super::DatasetError(format!("{}: {e}", list_path.display())))?;
     let mut out = Vec::new();
@@ -86,24 +117,8 @@ pub fn walk(root: &Path, list: Option<&Path>, keep_misaligned: bool) -> Result<V
         if f.len() < 2 {
             bad("expected a short and a long file")?;
         }
-        let (short, long) = if f[0].contains('/') {
-            (
-                base.join(f[0].trim_start_matches("./")),
-                base.join(f[1].trim_start_matches("./")),
-            )
-        } else {
-            (
-                base.join("Sony").join("short").join(f[0]),
-                base.join("Sony").join("long").join(f[1]),
-            )
-        };
-        let name = |p: &Path| {
-            p.file_name()
-                .unwrap_or_default()
-                .to_string_lossy()
-                .into_owned()
-        };
-        let (sn, ln) = (name(&short), name(&long));
+        let (short, long) = pair_paths(&base, f[0], f[1]);
+        let (sn, ln) = (file_name(&short), file_name(&long));
         let (Some(ts), Some(tl)) = (exposure_from_name(&sn), exposure_from_name(&ln)) else {
             bad("no exposure time in the file names (expected e.g. 10003_00_0.1s.ARW)")?;
             unreachable!()
