@@ -59,6 +59,77 @@ impl Out {
     }
 }
 
+/// One tile of [`conv2d_forward`]: its block of the output, `co` rows of
+/// `len` values `per` apart from `d`, and its matrix `m` (k rows of `len`,
+/// `m_rs` apart).
+struct Tile<'a> {
+    d: *mut f32,
+    per: usize,
+    len: usize,
+    m: &'a [f32],
+    m_rs: usize,
+}
+
+/// The tile's block = bias (when given) + weight x matrix, then the
+/// LeakyReLU of slope `leaky` (when given) while the block is in cache.
+///
+/// # Safety
+/// `t.d` must point at a block of `co` rows of `t.len` writable values
+/// `t.per` apart that no other thread touches, and `t.m` hold `k` rows of
+/// `t.len` values `t.m_rs` apart; `weight` is `co x k`.
+#[inline]
+unsafe fn tile_product(
+    t: &Tile,
+    weight: &[f32],
+    co: usize,
+    k: usize,
+    bias: Option<&[f32]>,
+    leaky: Option<f32>,
+    inner: gemm::Parallelism,
+) {
+    let (d, per, len) = (t.d, t.per, t.len);
+    // SAFETY: the caller's contract: every row touched below lies in the
+    // tile's block, and gemm reads `weight` and `t.m` in bounds.
+    unsafe {
+        if let Some(b) = bias {
+            for (ch, &v) in b.iter().enumerate() {
+                std::slice::from_raw_parts_mut(d.add(ch * per), len).fill(v);
+            }
+        }
+        gemm::gemm(
+            co,
+            len,
+            k,
+            d,
+            1,
+            per as isize,
+            bias.is_some(),
+            weight.as_ptr(),
+            1,
+            k as isize,
+            t.m.as_ptr(),
+            1,
+            t.m_rs as isize,
+            1.0,
+            1.0,
+            false,
+            false,
+            false,
+            inner,
+        );
+        if let Some(slope) = leaky {
+            for ch in 0..co {
+                let block = std::slice::from_raw_parts_mut(d.add(ch * per), len);
+                for v in block {
+                    if *v < 0.0 {
+                        *v *= slope;
+                    }
+                }
+            }
+        }
+    }
+}
+
 /// `out = conv(x, weight) + bias`, then LeakyReLU with `leaky` as its slope
 /// when given: `x` is `(n, ci, h, w)`, `weight` is `(co, ci, kh, kw)` (so
 /// `[co, ci * kh * kw]` row-major), `bias` has `co` values, `out` is `(n,
@@ -117,43 +188,14 @@ pub fn conv2d_forward(
             // bounds as computed above; no other task writes that block, and
             // gemm reads its inputs only.
             unsafe {
-                let d = dst.at(base);
-                if let Some(b) = bias {
-                    for (ch, &v) in b.iter().enumerate() {
-                        std::slice::from_raw_parts_mut(d.add(ch * per), len).fill(v);
-                    }
-                }
-                gemm::gemm(
-                    co,
+                let tile = Tile {
+                    d: dst.at(base),
+                    per,
                     len,
-                    k,
-                    d,
-                    1,
-                    per as isize,
-                    bias.is_some(),
-                    weight.as_ptr(),
-                    1,
-                    k as isize,
-                    m.as_ptr(),
-                    1,
-                    m_rs as isize,
-                    1.0,
-                    1.0,
-                    false,
-                    false,
-                    false,
-                    inner,
-                );
-                if let Some(slope) = leaky {
-                    for ch in 0..co {
-                        let block = std::slice::from_raw_parts_mut(d.add(ch * per), len);
-                        for v in block {
-                            if *v < 0.0 {
-                                *v *= slope;
-                            }
-                        }
-                    }
-                }
+                    m,
+                    m_rs,
+                };
+                tile_product(&tile, weight, co, k, bias, leaky, inner);
             }
         });
 }

@@ -370,68 +370,26 @@ impl NoiseModel {
             vec![0.0; 2 * ph]
         };
 
-        let to_dn = self.dn_range / capture.ratio;
-        let from_dn = capture.ratio / self.dn_range;
-        let k = self.k;
-        let inv_k = 1.0 / k as f64;
-        let dark_time = self.maps.dark_law.electrons(1.0, capture.exposure_s as f64) as f32;
-        let lo = self.black.map(|b| -b).unwrap_or(f32::NEG_INFINITY);
-        let hi = self.dn_range;
-        let m = &self.maps;
-        let q = self.quant_step;
-
+        let draw = RowDraw {
+            model: self,
+            to_dn: self.dn_range / capture.ratio,
+            from_dn: capture.ratio / self.dn_range,
+            inv_k: 1.0 / self.k as f64,
+            dark_time: self.maps.dark_law.electrons(1.0, capture.exposure_s as f64) as f32,
+            lo: self.black.map(|b| -b).unwrap_or(f32::NEG_INFINITY),
+            pw,
+        };
         // Non-finite inputs (clean pixels, per-pixel map values) are caught
         // in the loop instead of by extra passes over ~290 MB (a separate scan
         // of the clean image cost 12% of the frame time).
         let bad = AtomicBool::new(false);
         let mut out = vec![0.0f32; src.len()];
         out.par_chunks_mut(pw).enumerate().for_each(|(block, dst)| {
-            let mut row_ok = true;
-            let plane = block / ph;
-            let i = block % ph;
+            let (plane, i) = (block / ph, block % ph);
             let mut rng = stream(capture.seed, Domain::Pixel, plane as u64, i as u64);
             let row_off = rows[2 * i + capture.plane_rows[plane]];
-            let base = i * pw;
             let srow = &src[block * pw..(block + 1) * pw];
-            let sig_row = m.sigma_read.row(plane, i, pw);
-            let bias_row = m.bias.row(plane, i, pw);
-            let dark_row = m.dark_rate.row(plane, i, pw);
-            let fp_row = m.n_fp.row(plane, i, pw);
-            for j in 0..pw {
-                let s = srow[j] * to_dn;
-                row_ok &= s.is_finite();
-                let mut v = if c.photon {
-                    photon_shot(&mut rng, k, s as f64 * inv_k)
-                } else {
-                    s
-                };
-                if c.dark {
-                    let rate = dark_row.map_or_else(|| m.dark_rate.at(plane, base + j), |r| r[j]);
-                    let e = rate * dark_time;
-                    if e > 0.0 {
-                        let fp = c
-                            .fixed_pattern
-                            .then(|| fp_row.map_or_else(|| m.n_fp.at(plane, base + j), |r| r[j]));
-                        v += dark_shot(&mut rng, k, e as f64, fp);
-                    }
-                }
-                if c.fixed_pattern {
-                    v += bias_row.map_or_else(|| m.bias.at(plane, base + j), |r| r[j]);
-                }
-                if c.read {
-                    let sigma = sig_row.map_or_else(|| m.sigma_read.at(plane, base + j), |r| r[j]);
-                    v += read_noise(&mut rng, sigma, self.read);
-                }
-                if c.row {
-                    v += row_off;
-                }
-                if c.quant {
-                    v += quantisation(&mut rng, q);
-                }
-                row_ok &= v.is_finite();
-                dst[j] = v.clamp(lo, hi) * from_dn;
-            }
-            if !row_ok {
+            if !draw.row(&mut rng, (plane, i), row_off, srow, dst) {
                 bad.store(true, Ordering::Relaxed);
             }
         });
@@ -439,5 +397,77 @@ impl NoiseModel {
             return Err(NoiseError::NonFinite);
         }
         Ok(Array3::from_shape_vec((4, ph, pw), out).expect("shape"))
+    }
+}
+
+/// What [`NoiseModel::sample`] draws each packed row with: the model and
+/// the capture's constants.
+struct RowDraw<'a> {
+    model: &'a NoiseModel,
+    to_dn: f32,
+    from_dn: f32,
+    inv_k: f64,
+    dark_time: f32,
+    lo: f32,
+    pw: usize,
+}
+
+impl RowDraw<'_> {
+    /// Row `i` of `plane` (clean `srow`, normalised) drawn into `dst` with
+    /// `rng`, the row noise `row_off` added, in the order of the model's
+    /// draws; false when a value came out non-finite.
+    #[inline]
+    fn row<R: Rng>(
+        &self,
+        rng: &mut R,
+        (plane, i): (usize, usize),
+        row_off: f32,
+        srow: &[f32],
+        dst: &mut [f32],
+    ) -> bool {
+        let (model, pw) = (self.model, self.pw);
+        let (c, m, k) = (model.components, &model.maps, model.k);
+        let (hi, q) = (model.dn_range, model.quant_step);
+        let mut row_ok = true;
+        let base = i * pw;
+        let sig_row = m.sigma_read.row(plane, i, pw);
+        let bias_row = m.bias.row(plane, i, pw);
+        let dark_row = m.dark_rate.row(plane, i, pw);
+        let fp_row = m.n_fp.row(plane, i, pw);
+        for j in 0..pw {
+            let s = srow[j] * self.to_dn;
+            row_ok &= s.is_finite();
+            let mut v = if c.photon {
+                photon_shot(rng, k, s as f64 * self.inv_k)
+            } else {
+                s
+            };
+            if c.dark {
+                let rate = dark_row.map_or_else(|| m.dark_rate.at(plane, base + j), |r| r[j]);
+                let e = rate * self.dark_time;
+                if e > 0.0 {
+                    let fp = c
+                        .fixed_pattern
+                        .then(|| fp_row.map_or_else(|| m.n_fp.at(plane, base + j), |r| r[j]));
+                    v += dark_shot(rng, k, e as f64, fp);
+                }
+            }
+            if c.fixed_pattern {
+                v += bias_row.map_or_else(|| m.bias.at(plane, base + j), |r| r[j]);
+            }
+            if c.read {
+                let sigma = sig_row.map_or_else(|| m.sigma_read.at(plane, base + j), |r| r[j]);
+                v += read_noise(rng, sigma, model.read);
+            }
+            if c.row {
+                v += row_off;
+            }
+            if c.quant {
+                v += quantisation(rng, q);
+            }
+            row_ok &= v.is_finite();
+            dst[j] = v.clamp(self.lo, hi) * self.from_dn;
+        }
+        row_ok
     }
 }
