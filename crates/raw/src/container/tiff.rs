@@ -260,6 +260,64 @@ impl<'a> Walk<'a> {
     /// to the file header, read as an IFD, so it is walked (and refused: the
     /// header is no IFD).
     pub(super) fn ifd(&mut self, off: u64, chain: bool) -> Result<(), String> {
+        let (n, end) = self.enter(off)?;
+        if chain {
+            self.chain.push(off);
+        }
+        let mut img = Image::default();
+        let mut children = Vec::new();
+        for k in 0..n {
+            let (tag, e) = self.entry(off, k)?;
+            self.count_listed(tag, e.count)?;
+            if self.sub_tags.contains(&tag) {
+                let (bytes, order) = (self.bytes, self.order);
+                children.extend(e.values(bytes, order).into_iter().map(|c| (c, false)));
+                continue;
+            }
+            if !self.note {
+                self.take(tag, e, chain, &mut img);
+            }
+        }
+        // What rawler allocates for this IFD's entries (each lies inside the
+        // file, but together they may not fit), and the structures
+        // it reads as IFDs from its sub-IFD tags whatever their type (an
+        // ICC profile, an UNDEFINED SubIFDs entry): read its way.
+        let blob = Blob {
+            bytes: self.bytes,
+            order: self.order,
+            base: 0,
+            corr: 0,
+        };
+        let rawler_subs: &[u16] = if self.note {
+            self.sub_tags
+        } else {
+            &RAWLER_SUB_TAGS
+        };
+        lenient::check_ifd(&blob, off as u32, rawler_subs, &mut self.values)?;
+        if self.follow_next {
+            // "Some TIFF writers skip the next ifd pointer": rawler reads a
+            // missing one as 0 (formats/tiff/ifd.rs, line 192), and Canon's
+            // CR3 metadata does skip it.
+            let next = self.order.u32(self.bytes, end as usize).unwrap_or(0) as u64;
+            if next != 0 {
+                children.push((next, chain));
+            }
+        }
+        if !self.note {
+            self.images.push(img);
+        }
+        self.path.push(off);
+        for (c, chain) in children {
+            self.ifd(c, chain)?;
+        }
+        self.path.pop();
+        Ok(())
+    }
+
+    /// The IFD at `off` checked before its entries are read (not reached
+    /// twice, within the walk's bounds, its entry count and entries inside
+    /// the file): its entry count and where its entries end.
+    fn enter(&mut self, off: u64) -> Result<(usize, u64), String> {
         if self.path.contains(&off) {
             return Err(format!(
                 "malformed TIFF structure: the IFD at byte {off} is reached twice (a loop in the IFD chain)"
@@ -290,122 +348,92 @@ impl<'a> Walk<'a> {
                 "malformed TIFF structure: the IFD at byte {off} ({n} entries) runs past the end of the file"
             ));
         }
-        if chain {
-            self.chain.push(off);
-        }
-        let mut img = Image::default();
-        let mut children = Vec::new();
-        for k in 0..n {
-            let e_at = off as usize + 2 + 12 * k;
-            let tag = order.u16(bytes, e_at).expect("inside");
-            let kind = order.u16(bytes, e_at + 2).expect("inside");
-            let count = order.u32(bytes, e_at + 4).expect("inside") as u64;
-            let size = type_size(kind).saturating_mul(count);
-            let at = if size <= 4 {
-                e_at + 8
-            } else {
-                let v = order.u32(bytes, e_at + 8).expect("inside") as u64;
-                if v.saturating_add(size) > len {
-                    return Err(format!(
-                        "malformed TIFF structure: tag {tag}'s {count} values at byte {v} run past the end of the file"
-                    ));
-                }
-                v as usize
-            };
-            let e = Entry { kind, count, at };
-            let listed = !self.note
-                && matches!(
-                    tag,
-                    TAG_STRIP_OFFSETS | TAG_STRIP_COUNTS | TAG_TILE_OFFSETS | TAG_TILE_COUNTS
-                )
-                || self.sub_tags.contains(&tag);
-            if listed {
-                // Each list is read in full: bound the sum, or one IFD
-                // repeating a long list's tag thousands of times would be
-                // billions of reads.
-                self.listed = self.listed.saturating_add(count);
-                if self.listed > MAX_LISTED {
-                    return Err(format!(
-                        "malformed TIFF structure: more than {MAX_LISTED} strip, tile and IFD offsets"
-                    ));
-                }
-            }
-            if self.sub_tags.contains(&tag) {
-                children.extend(e.values(bytes, order).into_iter().map(|c| (c, false)));
-                continue;
-            }
-            if self.note {
-                continue;
-            }
-            match tag {
-                TAG_MAKE if chain && self.make.is_none() => self.make = Some(e.ascii(bytes)),
-                TAG_MODEL if chain && self.model.is_none() => self.model = Some(e.ascii(bytes)),
-                TAG_DNG_VERSION => {
-                    self.dng = true;
-                    self.dng_chain |= chain;
-                }
-                TAG_MAKERNOTE => {
-                    self.notes.push(e);
-                    continue;
-                }
-                _ => {}
-            }
-            let one = || e.value(bytes, order, 0);
-            match tag {
-                TAG_WIDTH => img.width = one(),
-                TAG_LENGTH => img.length = one(),
-                TAG_BITS => img.bits = one(),
-                TAG_SAMPLES => img.samples = one(),
-                TAG_COMPRESSION => img.compression = one(),
-                TAG_STRIP_OFFSETS => img.strips = e.values(bytes, order),
-                TAG_STRIP_COUNTS => img.strip_counts = e.values(bytes, order),
-                TAG_TILE_WIDTH => {
-                    img.tiled = true;
-                    img.tile_width = one();
-                }
-                TAG_TILE_LENGTH => {
-                    img.tiled = true;
-                    img.tile_length = one();
-                }
-                TAG_TILE_OFFSETS => img.tiles = e.values(bytes, order),
-                TAG_TILE_COUNTS => img.tile_counts = e.values(bytes, order),
-                _ => {}
-            }
-        }
-        // What rawler allocates for this IFD's entries (each lies inside the
-        // file, but together they may not fit), and the structures
-        // it reads as IFDs from its sub-IFD tags whatever their type (an
-        // ICC profile, an UNDEFINED SubIFDs entry): read its way.
-        let blob = Blob {
-            bytes,
-            order,
-            base: 0,
-            corr: 0,
-        };
-        let rawler_subs: &[u16] = if self.note {
-            self.sub_tags
+        Ok((n, end))
+    }
+
+    /// Entry `k` of the IFD at `off` (inside the file: [`Walk::enter`]),
+    /// its values checked to lie inside the file.
+    fn entry(&self, off: u64, k: usize) -> Result<(u16, Entry), String> {
+        let (bytes, order) = (self.bytes, self.order);
+        let len = bytes.len() as u64;
+        let e_at = off as usize + 2 + 12 * k;
+        let tag = order.u16(bytes, e_at).expect("inside");
+        let kind = order.u16(bytes, e_at + 2).expect("inside");
+        let count = order.u32(bytes, e_at + 4).expect("inside") as u64;
+        let size = type_size(kind).saturating_mul(count);
+        let at = if size <= 4 {
+            e_at + 8
         } else {
-            &RAWLER_SUB_TAGS
+            let v = order.u32(bytes, e_at + 8).expect("inside") as u64;
+            if v.saturating_add(size) > len {
+                return Err(format!(
+                    "malformed TIFF structure: tag {tag}'s {count} values at byte {v} run past the end of the file"
+                ));
+            }
+            v as usize
         };
-        lenient::check_ifd(&blob, off as u32, rawler_subs, &mut self.values)?;
-        if self.follow_next {
-            // "Some TIFF writers skip the next ifd pointer": rawler reads a
-            // missing one as 0 (formats/tiff/ifd.rs, line 192), and Canon's
-            // CR3 metadata does skip it.
-            let next = order.u32(bytes, end as usize).unwrap_or(0) as u64;
-            if next != 0 {
-                children.push((next, chain));
+        Ok((tag, Entry { kind, count, at }))
+    }
+
+    /// Count a list the walk reads in full (strip and tile offsets and
+    /// counts, sub-IFD pointers): bound the sum, or one IFD repeating a
+    /// long list's tag thousands of times would be billions of reads.
+    fn count_listed(&mut self, tag: u16, count: u64) -> Result<(), String> {
+        let listed = !self.note
+            && matches!(
+                tag,
+                TAG_STRIP_OFFSETS | TAG_STRIP_COUNTS | TAG_TILE_OFFSETS | TAG_TILE_COUNTS
+            )
+            || self.sub_tags.contains(&tag);
+        if listed {
+            self.listed = self.listed.saturating_add(count);
+            if self.listed > MAX_LISTED {
+                return Err(format!(
+                    "malformed TIFF structure: more than {MAX_LISTED} strip, tile and IFD offsets"
+                ));
             }
         }
-        if !self.note {
-            self.images.push(img);
-        }
-        self.path.push(off);
-        for (c, chain) in children {
-            self.ifd(c, chain)?;
-        }
-        self.path.pop();
         Ok(())
+    }
+
+    /// What an entry of a (non-MakerNote) IFD tells: the camera, DNG, a
+    /// MakerNote to walk, or a field of the IFD's image.
+    fn take(&mut self, tag: u16, e: Entry, chain: bool, img: &mut Image) {
+        let (bytes, order) = (self.bytes, self.order);
+        match tag {
+            TAG_MAKE if chain && self.make.is_none() => self.make = Some(e.ascii(bytes)),
+            TAG_MODEL if chain && self.model.is_none() => self.model = Some(e.ascii(bytes)),
+            TAG_DNG_VERSION => {
+                self.dng = true;
+                self.dng_chain |= chain;
+            }
+            TAG_MAKERNOTE => {
+                self.notes.push(e);
+                return;
+            }
+            _ => {}
+        }
+        let one = || e.value(bytes, order, 0);
+        match tag {
+            TAG_WIDTH => img.width = one(),
+            TAG_LENGTH => img.length = one(),
+            TAG_BITS => img.bits = one(),
+            TAG_SAMPLES => img.samples = one(),
+            TAG_COMPRESSION => img.compression = one(),
+            TAG_STRIP_OFFSETS => img.strips = e.values(bytes, order),
+            TAG_STRIP_COUNTS => img.strip_counts = e.values(bytes, order),
+            TAG_TILE_WIDTH => {
+                img.tiled = true;
+                img.tile_width = one();
+            }
+            TAG_TILE_LENGTH => {
+                img.tiled = true;
+                img.tile_length = one();
+            }
+            TAG_TILE_OFFSETS => img.tiles = e.values(bytes, order),
+            TAG_TILE_COUNTS => img.tile_counts = e.values(bytes, order),
+            _ => {}
+        }
     }
 }
 
@@ -466,57 +494,76 @@ fn check_image(img: &Image, bytes: &[u8], dng: bool) -> Result<(), String> {
         // Uncompressed: the strips (or each tile) must hold the samples
         // BitsPerSample claims, to within a few bytes of padding: 12 bits
         // claimed over 14-bit data (1/6 more bytes) would decode to noise.
-        Some(1) => {
-            let slack = |need: u64| need / 64 + 16;
-            let row = |width: u64| width.saturating_mul(spp).saturating_mul(bits).div_ceil(8);
-            let held =
-                |have: u64, pixels: u64| have as f64 * 8.0 / (pixels as f64 * spp as f64).max(1.0);
-            if img.tiled {
-                let (tw, th) = (img.tile_width.unwrap_or(0), img.tile_length.unwrap_or(0));
-                let need = row(tw).saturating_mul(th);
-                if let Some((i, &have)) = counts
-                    .iter()
-                    .enumerate()
-                    .find(|(_, &c)| c < need || c > need.saturating_add(slack(need)))
-                {
-                    return Err(format!(
-                        "inconsistent DNG: BitsPerSample says {bits} for tiles of {tw} x {th}, but tile {i} holds {:.1} bits per sample",
-                        held(have, tw * th)
-                    ));
-                }
-            } else if !counts.is_empty() {
-                let need = row(w).saturating_mul(h);
-                let have: u64 = counts.iter().fold(0u64, |a, &c| a.saturating_add(c));
-                if have < need || have > need.saturating_add(slack(need)) {
-                    return Err(format!(
-                        "inconsistent DNG: BitsPerSample says {bits} for a {w} x {h} image, but its uncompressed strips hold {:.1} bits per sample",
-                        held(have, w * h)
-                    ));
-                }
-            }
-        }
+        Some(1) => check_uncompressed(img, counts, (w, h), (spp, bits)),
         // Lossless JPEG: each strip or tile must be a whole stream (rawler
         // decodes a cut one as zeros) and a tile's frame must be the tile.
-        Some(7) => {
-            for (i, (&o, &c)) in offsets.iter().zip(counts.iter()).enumerate() {
-                let data = &bytes[o as usize..(o + c) as usize];
-                let frame = lossless_jpeg(data).map_err(|why| {
-                    format!("damaged DNG: {what} {i}'s LJPEG data ({c} bytes at byte {o}) {why}")
-                })?;
-                if let (Some((wide, high, clrs)), true) = (frame, img.tiled) {
-                    let (tw, th) = (img.tile_width.unwrap_or(0), img.tile_length.unwrap_or(0));
-                    if wide.saturating_mul(clrs).saturating_mul(high)
-                        != tw.saturating_mul(th).saturating_mul(spp)
-                    {
-                        return Err(format!(
-                            "inconsistent DNG: tile {i}'s LJPEG frame is {} x {high} samples, TileWidth x TileLength say {tw} x {th}",
-                            wide * clrs
-                        ));
-                    }
-                }
+        Some(7) => check_ljpeg(img, bytes, what, (offsets, counts), spp),
+        _ => Ok(()),
+    }
+}
+
+/// [`check_image`]'s check of an uncompressed DNG image: its strips (or
+/// each tile) hold the samples BitsPerSample claims.
+fn check_uncompressed(
+    img: &Image,
+    counts: &[u64],
+    (w, h): (u64, u64),
+    (spp, bits): (u64, u64),
+) -> Result<(), String> {
+    let slack = |need: u64| need / 64 + 16;
+    let row = |width: u64| width.saturating_mul(spp).saturating_mul(bits).div_ceil(8);
+    let held = |have: u64, pixels: u64| have as f64 * 8.0 / (pixels as f64 * spp as f64).max(1.0);
+    if img.tiled {
+        let (tw, th) = (img.tile_width.unwrap_or(0), img.tile_length.unwrap_or(0));
+        let need = row(tw).saturating_mul(th);
+        if let Some((i, &have)) = counts
+            .iter()
+            .enumerate()
+            .find(|(_, &c)| c < need || c > need.saturating_add(slack(need)))
+        {
+            return Err(format!(
+                    "inconsistent DNG: BitsPerSample says {bits} for tiles of {tw} x {th}, but tile {i} holds {:.1} bits per sample",
+                    held(have, tw * th)
+                ));
+        }
+    } else if !counts.is_empty() {
+        let need = row(w).saturating_mul(h);
+        let have: u64 = counts.iter().fold(0u64, |a, &c| a.saturating_add(c));
+        if have < need || have > need.saturating_add(slack(need)) {
+            return Err(format!(
+                    "inconsistent DNG: BitsPerSample says {bits} for a {w} x {h} image, but its uncompressed strips hold {:.1} bits per sample",
+                    held(have, w * h)
+                ));
+        }
+    }
+    Ok(())
+}
+
+/// [`check_image`]'s check of a lossless-JPEG DNG image: every strip or
+/// tile a whole stream, a tile's frame the tile.
+fn check_ljpeg(
+    img: &Image,
+    bytes: &[u8],
+    what: &str,
+    (offsets, counts): (&[u64], &[u64]),
+    spp: u64,
+) -> Result<(), String> {
+    for (i, (&o, &c)) in offsets.iter().zip(counts.iter()).enumerate() {
+        let data = &bytes[o as usize..(o + c) as usize];
+        let frame = lossless_jpeg(data).map_err(|why| {
+            format!("damaged DNG: {what} {i}'s LJPEG data ({c} bytes at byte {o}) {why}")
+        })?;
+        if let (Some((wide, high, clrs)), true) = (frame, img.tiled) {
+            let (tw, th) = (img.tile_width.unwrap_or(0), img.tile_length.unwrap_or(0));
+            if wide.saturating_mul(clrs).saturating_mul(high)
+                != tw.saturating_mul(th).saturating_mul(spp)
+            {
+                return Err(format!(
+                        "inconsistent DNG: tile {i}'s LJPEG frame is {} x {high} samples, TileWidth x TileLength say {tw} x {th}",
+                        wide * clrs
+                    ));
             }
         }
-        _ => {}
     }
     Ok(())
 }
