@@ -59,25 +59,9 @@ pub(super) fn check_makernote(
     spent: &mut (usize, u64, Values),
 ) -> Result<(), String> {
     let at = note.at;
-    // The IFD at `ifd` of the structure whose offsets count from `base`.
-    let mut walk = |base: usize, o: Order, ifd: u64, sub_tags: &'static [u16]| {
-        let Some(b) = bytes.get(base..) else {
-            return Ok(());
-        };
-        let mut walk = Walk::new(b, o, sub_tags, true);
-        (walk.visits, walk.listed, walk.values) = *spent;
-        let walked = walk.ifd(ifd, false);
-        *spent = (walk.visits, walk.listed, walk.values);
-        walked.map_err(|e| {
-            if base == 0 {
-                format!("{e} (in the MakerNote at byte {at})")
-            } else {
-                format!("{e} (in the MakerNote at byte {at}, whose offsets count from byte {base})")
-            }
-        })
-    };
+    let mut w = NoteWalk { bytes, at, spent };
     let relative = match layout {
-        NoteLayout::Plain => return walk(0, order, at as u64, &[]),
+        NoteLayout::Plain => return w.walk(0, order, at as u64, &[]),
         NoteLayout::Olympus => None,
         NoteLayout::Prefixed { relative } => Some(relative),
     };
@@ -96,74 +80,130 @@ pub(super) fn check_makernote(
             off += 4;
         }
     }
-    let Some(relative) = relative else {
-        // Olympus
-        if is(b"OM SYSTEM") {
+    match relative {
+        None => w.olympus(data, order, off),
+        Some(relative) => w.prefixed(data, order, off, relative),
+    }
+}
+
+/// A MakerNote's IFDs walked as rawler reads them, the walk's budget
+/// carried from one to the next ([`check_makernote`]).
+struct NoteWalk<'a, 's> {
+    bytes: &'a [u8],
+    /// The MakerNote's byte offset.
+    at: usize,
+    spent: &'s mut (usize, u64, Values),
+}
+
+impl NoteWalk<'_, '_> {
+    /// The IFD at `ifd` of the structure whose offsets count from `base`.
+    fn walk(
+        &mut self,
+        base: usize,
+        o: Order,
+        ifd: u64,
+        sub_tags: &'static [u16],
+    ) -> Result<(), String> {
+        let Some(b) = self.bytes.get(base..) else {
+            return Ok(());
+        };
+        let mut walk = Walk::new(b, o, sub_tags, true);
+        (walk.visits, walk.listed, walk.values) = *self.spent;
+        let walked = walk.ifd(ifd, false);
+        *self.spent = (walk.visits, walk.listed, walk.values);
+        let at = self.at;
+        walked.map_err(|e| {
+            if base == 0 {
+                format!("{e} (in the MakerNote at byte {at})")
+            } else {
+                format!("{e} (in the MakerNote at byte {at}, whose offsets count from byte {base})")
+            }
+        })
+    }
+
+    /// Olympus's MakerNote (and OM System's): the main IFD `off` bytes in,
+    /// and the camera-settings and image-processing sub-IFDs it points to.
+    fn olympus(&mut self, data: &[u8], order: Order, mut off: usize) -> Result<(), String> {
+        if data.starts_with(b"OM SYSTEM") {
             off += 16;
             // asserted by rawler
             if data.get(12..14) != Some(&b"II"[..]) {
                 return Ok(());
             }
         }
-        let main = (at + off) as u64;
-        walk(0, order, main, &[0x3000])?;
+        let main = (self.at + off) as u64;
+        self.walk(0, order, main, &[0x3000])?;
         // rawler reads 4 bytes at the entry's value for the offset
         for (tag, wanted) in [(0x2010, true), (0x2040, off == 12 || off == 16)] {
-            let Some(e) = find_entry(bytes, order, main, tag).filter(|_| wanted) else {
+            let Some(e) = find_entry(self.bytes, order, main, tag).filter(|_| wanted) else {
                 continue;
             };
-            match order.u32(bytes, e.at) {
+            match order.u32(self.bytes, e.at) {
                 Some(0) if tag == 0x2040 => {}
-                Some(ifd) => walk(at, order, ifd as u64, &[])?,
+                Some(ifd) => self.walk(self.at, order, ifd as u64, &[])?,
                 None => {}
             }
         }
-        return Ok(());
-    };
-    if is(b"EPSON") {
-        off += 8;
+        Ok(())
     }
-    if is(b"FUJIFILM") {
-        off += 12;
-    }
-    if is(b"SONY DSC ") {
-        off += 12;
-    }
-    if is(b"AOC\0") {
-        off += 4;
-    }
-    let marker = |off: usize| data.get(off..off + 2);
-    if is(b"PENTAX") {
-        // Offsets count from the MakerNote; its IFD is 10 bytes in.
-        off += 8;
-        let Some(m) = marker(off) else {
-            return Ok(());
-        };
-        return walk(at, Order(m == b"II"), 10, &[]);
-    }
-    if is(b"Nikon\0\x02") {
-        // An embedded TIFF header 10 bytes in: offsets count from it, and
-        // its IFD is read at 8 whatever the header says.
-        off += 10;
-        let Some(m) = marker(off) else {
-            return Ok(());
-        };
-        return walk(at + 10, Order(m == b"II"), 8, &[]);
-    }
-    let mut o = order;
-    for (m, little) in [(b"II", true), (b"MM", false)] {
-        let Some(here) = marker(off) else {
-            return Ok(());
-        };
-        if here == m {
-            off += 2;
-            o = Order(little);
+
+    /// The MakerNotes whose IFD follows a maker's prefix (Epson, Fujifilm,
+    /// Sony, AOC, Pentax, Nikon) and perhaps a byte-order marker; offsets
+    /// count from the MakerNote when `relative`.
+    fn prefixed(
+        &mut self,
+        data: &[u8],
+        order: Order,
+        mut off: usize,
+        relative: bool,
+    ) -> Result<(), String> {
+        let at = self.at;
+        let is = |prefix: &[u8]| data.starts_with(prefix);
+        if is(b"EPSON") {
+            off += 8;
         }
-    }
-    if relative {
-        walk(at + off, o, 0, &[])
-    } else {
-        walk(0, o, (at + off) as u64, &[])
+        if is(b"FUJIFILM") {
+            off += 12;
+        }
+        if is(b"SONY DSC ") {
+            off += 12;
+        }
+        if is(b"AOC\0") {
+            off += 4;
+        }
+        let marker = |off: usize| data.get(off..off + 2);
+        if is(b"PENTAX") {
+            // Offsets count from the MakerNote; its IFD is 10 bytes in.
+            off += 8;
+            let Some(m) = marker(off) else {
+                return Ok(());
+            };
+            return self.walk(at, Order(m == b"II"), 10, &[]);
+        }
+        if is(b"Nikon\0\x02") {
+            // An embedded TIFF header 10 bytes in: offsets count from it, and
+            // its IFD is read at 8 whatever the header says.
+            off += 10;
+            let Some(m) = marker(off) else {
+                return Ok(());
+            };
+            return self.walk(at + 10, Order(m == b"II"), 8, &[]);
+        }
+        let mut o = order;
+        for (m, little) in [(b"II", true), (b"MM", false)] {
+            let Some(here) = marker(off) else {
+                return Ok(());
+            };
+            if here == m {
+                off += 2;
+                o = Order(little);
+            }
+        }
+        if relative {
+            self.walk(at + off, o, 0, &[])
+        } else {
+            self.walk(0, o, (at + off) as u64, &[])
+        }
     }
 }
 
