@@ -82,12 +82,6 @@ fn check_one(bytes: &[u8]) -> Result<usize, (usize, String)> {
     let mut top: [Option<String>; 2] = [None, None];
     let mut memo: std::collections::HashMap<u64, String> = std::collections::HashMap::new();
     let mut memo_next: u64 = 0;
-    let truncated = |at: usize| {
-        (
-            at,
-            "the pickle ends before its STOP opcode (truncated?)".to_string(),
-        )
-    };
     loop {
         let start = at;
         let &op = bytes.get(at).ok_or_else(|| truncated(at))?;
@@ -95,41 +89,8 @@ fn check_one(bytes: &[u8]) -> Result<usize, (usize, String)> {
         let Some(kind) = arg_of(op) else {
             return Err((start, format!("unknown pickle opcode 0x{op:02x}")));
         };
-        let arg: &[u8] = match kind {
-            Arg::None => &[],
-            Arg::Fixed(n) => {
-                let a = bytes.get(at..at + n).ok_or_else(|| truncated(at))?;
-                at += n;
-                a
-            }
-            Arg::Counted(n) => {
-                let len = bytes.get(at..at + n).ok_or_else(|| truncated(at))?;
-                let mut v = [0u8; 8];
-                v[..n].copy_from_slice(len);
-                let len = u64::from_le_bytes(v);
-                at += n;
-                let end = (at as u64)
-                    .checked_add(len)
-                    .filter(|&e| e <= bytes.len() as u64)
-                    .ok_or_else(|| truncated(at))? as usize;
-                let a = &bytes[at..end];
-                at = end;
-                a
-            }
-            Arg::Line => {
-                let n = line_end(bytes, at).ok_or_else(|| truncated(at))?;
-                let a = &bytes[at..n];
-                at = n + 1;
-                a
-            }
-            Arg::TwoLines => {
-                let m = line_end(bytes, at).ok_or_else(|| truncated(at))?;
-                let n = line_end(bytes, m + 1).ok_or_else(|| truncated(m + 1))?;
-                let a = &bytes[at..n];
-                at = n + 1;
-                a
-            }
-        };
+        let (arg, next) = read_arg(bytes, at, kind)?;
+        at = next;
         let text = |a: &[u8]| String::from_utf8_lossy(a).into_owned();
         let mut pushed: Option<Option<String>> = Some(None);
         match op {
@@ -180,6 +141,57 @@ fn check_one(bytes: &[u8]) -> Result<usize, (usize, String)> {
             top = [top[1].take(), p];
         }
     }
+}
+
+/// The refusal of a pickle that ends at `at` before its STOP.
+fn truncated(at: usize) -> (usize, String) {
+    (
+        at,
+        "the pickle ends before its STOP opcode (truncated?)".to_string(),
+    )
+}
+
+/// The argument of an opcode of argument kind `kind` starting at `at`, and
+/// where the next opcode starts; (offset, reason) when the pickle ends
+/// first.
+fn read_arg(bytes: &[u8], at: usize, kind: Arg) -> Result<(&[u8], usize), (usize, String)> {
+    let mut at = at;
+    let arg: &[u8] = match kind {
+        Arg::None => &[],
+        Arg::Fixed(n) => {
+            let a = bytes.get(at..at + n).ok_or_else(|| truncated(at))?;
+            at += n;
+            a
+        }
+        Arg::Counted(n) => {
+            let len = bytes.get(at..at + n).ok_or_else(|| truncated(at))?;
+            let mut v = [0u8; 8];
+            v[..n].copy_from_slice(len);
+            let len = u64::from_le_bytes(v);
+            at += n;
+            let end = (at as u64)
+                .checked_add(len)
+                .filter(|&e| e <= bytes.len() as u64)
+                .ok_or_else(|| truncated(at))? as usize;
+            let a = &bytes[at..end];
+            at = end;
+            a
+        }
+        Arg::Line => {
+            let n = line_end(bytes, at).ok_or_else(|| truncated(at))?;
+            let a = &bytes[at..n];
+            at = n + 1;
+            a
+        }
+        Arg::TwoLines => {
+            let m = line_end(bytes, at).ok_or_else(|| truncated(at))?;
+            let n = line_end(bytes, m + 1).ok_or_else(|| truncated(m + 1))?;
+            let a = &bytes[at..n];
+            at = n + 1;
+            a
+        }
+    };
+    Ok((arg, at))
 }
 
 /// The memo index in the argument of a PUT/GET family opcode `op`: one
