@@ -414,7 +414,7 @@ impl Plan {
             // backend::describe counts the machine's cores, not rayon's pool.
             device: match a.device {
                 DeviceKind::Cpu => "Flex (CPU)".to_string(),
-                DeviceKind::Cuda => pgrf_nn::backend::describe(a.device),
+                DeviceKind::Cuda => pgrf_nn::backend::describe(a.device, Default::default()),
             },
             threads: rayon::current_num_threads(),
             net: match r.meta().arch {

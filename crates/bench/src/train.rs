@@ -135,14 +135,15 @@ pub fn run(a: &TrainArgs) -> Result<()> {
         !(a.breakdown && a.device == DeviceKind::Cuda),
         "--breakdown times the CPU's layers; leave it out with --device cuda"
     );
-    pgrf_nn::ops::set_kernels(a.kernels);
-    let (unet, sr3) = pgrf_nn::backend::on_train_device(a.device, Bench(a))
-        .map_err(|e| anyhow::anyhow!("{e}"))?;
+    let (unet, sr3) = pgrf_nn::ops::with_kernels(a.kernels, || {
+        pgrf_nn::backend::on_train_device(a.device, Bench(a))
+    })
+    .map_err(|e| anyhow::anyhow!("{e}"))?;
     let r = Report {
         burn: BURN_VERSION,
         backend: match a.device {
             DeviceKind::Cpu => "flex".into(),
-            DeviceKind::Cuda => pgrf_nn::backend::describe(a.device),
+            DeviceKind::Cuda => pgrf_nn::backend::describe(a.device, a.kernels),
         },
         kernels: a.kernels.to_string(),
         malloc: if a.default_malloc {

@@ -77,7 +77,7 @@ fn declare(command: &Command, io: &mut Io) -> Result<()> {
         Command::Train(a) => declare_train(a, io)?,
         Command::Enhance(a) => declare_enhance(a, io)?,
         Command::Search(a) => {
-            let r = a.request();
+            let r = a.request(Default::default());
             io.input("--model", &r.model)
                 .inputs("--val", &a.val)
                 .inputs("--calib", &a.calib)

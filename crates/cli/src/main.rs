@@ -84,14 +84,13 @@ fn main() -> ExitCode {
         _ => "",
     };
     pgrf_core::exit::note_renamed("pgrf", &RENAMED, command);
-    pgrf_nn::ops::set_kernels(cli.kernels);
     pgrf_noise::darktable::set_profiles_path(cli.darktable_profiles.clone());
     pgrf_core::mem::keep_freed_buffers();
     if let Err(e) = io::check(&cli.command, cli.darktable_profiles.as_deref()) {
         return pgrf_core::exit::finish("pgrf", Err(e));
     }
     let result = match &cli.command {
-        Command::Demo(a) => cmd::demo::run(a),
+        Command::Demo(a) => cmd::demo::run(a, cli.kernels),
         Command::Info(a) => cmd::info::run(a),
         Command::Preview(a) => cmd::preview::run(a),
         Command::Convert(a) => cmd::convert::run(a),
@@ -100,11 +99,11 @@ fn main() -> ExitCode {
         Command::SimulateSensor(a) => cmd::simulate::run(a),
         Command::Calibrate(a) => cmd::calibrate::run(a),
         Command::Reduce(a) => cmd::reduce::run(a),
-        Command::Train(a) => cmd::train::run(a),
-        Command::Enhance(a) => cmd::enhance::run(a),
-        Command::Search(a) => cmd::search::run(a),
+        Command::Train(a) => cmd::train::run(a, cli.kernels),
+        Command::Enhance(a) => cmd::enhance::run(a, cli.kernels),
+        Command::Search(a) => cmd::search::run(a, cli.kernels),
         Command::Metrics(a) => cmd::metrics::run(a),
-        Command::Eval(a) => cmd::eval::run(a),
+        Command::Eval(a) => cmd::eval::run(a, cli.kernels),
         Command::MakeDataset(a) => cmd::make_dataset::run(a),
         Command::ImportWeights(a) => cmd::weights::run_import(a),
         Command::ExportWeights(a) => cmd::weights::run_export(a),

@@ -884,3 +884,45 @@ fn a_monochrome_photo_is_restored_and_stays_monochrome() {
     );
     std::fs::remove_dir_all(&d).unwrap();
 }
+
+/// `--kernels` is handed to the run as configuration (no process-wide
+/// switch): the model line names the operations chosen, and burn's and
+/// pgrf's give the same DNG to within a DN or two of rounding.
+#[test]
+fn the_kernels_flag_reaches_the_run() {
+    let d = scratch("kernels");
+    let noisy = d.join("noisy.dng");
+    dark_dng(&noisy, 96, 64, Cfa::Rggb, 5);
+    let m = model(&d, false, None);
+    let mut outs = Vec::new();
+    for k in ["pgrf", "burn"] {
+        let out = d.join(format!("{k}.dng"));
+        let r = pgrf(&[
+            "--kernels",
+            k,
+            "enhance",
+            s(&noisy),
+            "--model",
+            s(&m),
+            "--ratio",
+            "20",
+            "-o",
+            s(&out),
+        ]);
+        let err = String::from_utf8_lossy(&r.stderr).to_string();
+        assert!(r.status.success(), "{err}");
+        assert!(err.contains(&format!("{k} operations")), "{err}");
+        outs.push(
+            decode_file(&out, &LevelOverrides::default())
+                .unwrap()
+                .mosaic,
+        );
+    }
+    let worst = outs[0]
+        .iter()
+        .zip(&outs[1])
+        .map(|(a, b)| (*a as i32 - *b as i32).abs())
+        .max()
+        .unwrap();
+    assert!(worst <= 2, "burn and pgrf differ by {worst} DN");
+}

@@ -144,13 +144,13 @@ pub fn on_train_device<J: OnTrainBackend>(kind: DeviceKind, job: J) -> crate::Re
     }
 }
 
-/// One line about the compute device, for headers and summaries.
-pub fn describe(kind: DeviceKind) -> String {
+/// One line about the compute device and, on the CPU, whose operations
+/// run there, for headers and summaries.
+pub fn describe(kind: DeviceKind, kernels: crate::ops::Kernels) -> String {
     match kind {
         DeviceKind::Cpu => format!(
-            "Flex, {} threads, {} operations",
+            "Flex, {} threads, {kernels} operations",
             rayon::current_num_threads(),
-            crate::ops::kernels()
         ),
         DeviceKind::Cuda => "CUDA device 0".into(),
     }

@@ -244,6 +244,12 @@ pub struct TrainConfig {
     /// cpu or cuda [default: cpu].
     #[cfg_attr(feature = "clap", arg(long, default_value_t = d().device, hide_default_value = true))]
     pub device: crate::backend::DeviceKind,
+    /// Whose CPU operations the run uses ([`crate::ops::Kernels`]): set by
+    /// the caller (the command line's global `--kernels`), not a setting of
+    /// the run, so neither configuration files nor weight records hold it.
+    #[cfg_attr(feature = "clap", arg(skip))]
+    #[serde(skip)]
+    pub kernels: crate::ops::Kernels,
 }
 
 /// The distance between output and target the loss averages (`pgrf train
@@ -420,6 +426,7 @@ impl Default for TrainConfig {
             log_every: 10,
             output: None,
             device: crate::backend::DeviceKind::Cpu,
+            kernels: crate::ops::Kernels::Pgrf,
         }
     }
 }

@@ -89,6 +89,21 @@ pub fn run(
     stop: &AtomicBool,
     warn: &dyn Fn(&str),
 ) -> Result<Trained> {
+    crate::ops::with_kernels(config.kernels, || {
+        run_with(config, method, resume, noise, progress, stop, warn)
+    })
+}
+
+/// [`run`] on the calling thread, its operations chosen.
+fn run_with(
+    config: &TrainConfig,
+    method: Method,
+    resume: bool,
+    noise: NoiseBuilder,
+    progress: &dyn Progress,
+    stop: &AtomicBool,
+    warn: &dyn Fn(&str),
+) -> Result<Trained> {
     let c = config;
     let outputs = c.outputs()?;
     check_before_work(c, &outputs, resume)?;
@@ -351,7 +366,7 @@ fn header(
         if c.time_max < 1.0 { format!(", times t ~ U(0, {})", c.time_max) } else { String::new() },
         loss_words(c),
         c.device,
-        crate::backend::describe(c.device),
+        crate::backend::describe(c.device, c.kernels),
     )
 }
 

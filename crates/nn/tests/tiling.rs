@@ -241,3 +241,42 @@ fn a_windowed_flow_model_does_not_depend_on_the_tiling() {
         worst.1
     );
 }
+
+/// The tiling's `kernels` is the operations the restoration runs (the
+/// configuration, not a process-wide switch): the same seeded SR3 on the
+/// same input through burn's operations and through pgrf's gives the same
+/// image to float rounding (1e-4) but not bit for bit (they sum in
+/// different orders), so the choice did reach the network; and the run
+/// leaves this thread's operations as they were.
+#[test]
+fn the_tilings_kernels_choose_the_operations() {
+    use pgrf_nn::infer::{restore_packed, Tiling};
+    use pgrf_nn::ops::{kernels, Kernels};
+    let r = restorer(small_sr3(), 1.0);
+    let input = scene(64, 96);
+    let run = |k: Kernels| {
+        let tiling = Tiling {
+            tile: None,
+            overlap: None,
+            seed: 3,
+            device: pgrf_nn::DeviceKind::Cpu,
+            kernels: k,
+        };
+        restore_packed(&r, input.view(), None, &tiling, &pgrf_core::NoProgress)
+            .unwrap()
+            .output
+    };
+    let (p, b) = (run(Kernels::Pgrf), run(Kernels::Burn));
+    assert_eq!(kernels(), Kernels::Pgrf);
+    let worst = p
+        .iter()
+        .zip(&b)
+        .map(|(x, y)| (x - y).abs())
+        .fold(0.0f32, f32::max);
+    println!("burn against pgrf: largest difference {worst:e}");
+    assert!(
+        worst > 0.0,
+        "the two runs are bit for bit equal: the choice did not reach them"
+    );
+    assert!(worst < 1e-4, "burn and pgrf differ by {worst}");
+}

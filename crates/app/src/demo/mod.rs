@@ -128,6 +128,8 @@ pub struct DemoConfig<'a> {
     pub seed: u64,
     /// Tile side in packed pixels (None: as `pgrf enhance` chooses).
     pub tile: Option<usize>,
+    /// Whose CPU operations the networks run.
+    pub kernels: pgrf_nn::ops::Kernels,
 }
 
 /// One capture's scores, in table order: noisy input, SPC, PGRF.
@@ -343,6 +345,7 @@ pub fn run<P: Progress>(
             overlap: None,
             seed: cfg.seed,
             device: DeviceKind::Cpu,
+            kernels: cfg.kernels,
         },
     };
     progress.advance(1);

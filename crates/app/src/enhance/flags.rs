@@ -10,6 +10,7 @@ use pgrf_nn::backend::DeviceKind;
 use pgrf_nn::flow::sample::SamplerKind;
 use pgrf_nn::infer::restorer::UNSEARCHED_T2;
 use pgrf_nn::infer::{check_tiling_args, Restore, SamplerChoice, Tiling};
+use pgrf_nn::ops::Kernels;
 use pgrf_nn::NnError;
 use pgrf_noise::lookup::NoiseFlag;
 use std::path::PathBuf;
@@ -170,7 +171,8 @@ impl EnhanceFlags {
         })
     }
 
-    /// How every file is enhanced (the calibration loaded).
+    /// How every file is enhanced (the calibration loaded), on pgrf's
+    /// operations (the caller sets `tiling.kernels` to choose).
     pub fn config(&self) -> Result<EnhanceConfig, EnhanceError> {
         let calib = match &self.calib {
             Some(p) => Some(CalibrationFile {
@@ -199,6 +201,7 @@ impl EnhanceFlags {
                 overlap: self.overlap,
                 seed: self.seed,
                 device: self.device,
+                kernels: Kernels::default(),
             },
         })
     }
@@ -215,11 +218,11 @@ impl EnhanceFlags {
     /// What the user should know about the model and device, printed
     /// before the first image is processed (so that an input that fails at
     /// once still gives a single line).
-    pub fn notes(&self, restorer: &dyn Restore) -> Vec<String> {
+    pub fn notes(&self, restorer: &dyn Restore, kernels: Kernels) -> Vec<String> {
         let mut lines = vec![format!(
             "model: {}; device {}",
             super::describe_method(restorer),
-            pgrf_nn::backend::describe(self.device)
+            pgrf_nn::backend::describe(self.device, kernels)
         )];
         if restorer.sampler().is_some() && restorer.meta().t2.is_none() && self.t2.is_none() {
             lines.push(format!(

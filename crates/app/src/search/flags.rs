@@ -59,9 +59,9 @@ pub struct SearchArgs {
 }
 
 impl SearchArgs {
-    /// The flags as a search request (the ELD protocol's scores; the plot
-    /// next to the model unless named).
-    pub fn request(&self) -> SearchRequest {
+    /// The flags as a search request run on `kernels`' operations (the ELD
+    /// protocol's scores; the plot next to the model unless named).
+    pub fn request(&self, kernels: pgrf_nn::ops::Kernels) -> SearchRequest {
         let val = match (&self.val, self.procedural) {
             (Some(path), _) => Some(ValPairs::Files {
                 path: path.clone(),
@@ -84,6 +84,7 @@ impl SearchArgs {
                 samples: self.samples,
                 seed: self.seed,
                 device: self.device,
+                kernels,
                 protocol: Protocol::eld(false),
             },
         }

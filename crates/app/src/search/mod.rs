@@ -83,19 +83,22 @@ pub struct SearchOptions {
     pub seed: u64,
     /// Where the network runs.
     pub device: DeviceKind,
+    /// Whose CPU operations the network runs.
+    pub kernels: pgrf_nn::ops::Kernels,
     /// How outputs are scored against the clean images.
     pub protocol: Protocol,
 }
 
 impl Default for SearchOptions {
-    /// Step 0.1, no averaging, seed 0, CPU, ELD protocol without
-    /// illuminance correction.
+    /// Step 0.1, no averaging, seed 0, CPU with pgrf's operations, ELD
+    /// protocol without illuminance correction.
     fn default() -> Self {
         SearchOptions {
             step: 0.1,
             samples: 1,
             seed: 0,
             device: DeviceKind::Cpu,
+            kernels: pgrf_nn::ops::Kernels::Pgrf,
             protocol: Protocol::eld(false),
         }
     }
@@ -401,15 +404,18 @@ pub fn measure(
             run_on::<B>(self.model, &device, self.pairs, self.opts, self.progress)
         }
     }
-    on_device(
-        opts.device,
-        Job {
-            model,
-            pairs,
-            opts,
-            progress,
-        },
-    )
+    let kernels = opts.kernels;
+    pgrf_nn::ops::with_kernels(kernels, || {
+        on_device(
+            opts.device,
+            Job {
+                model,
+                pairs,
+                opts,
+                progress,
+            },
+        )
+    })
 }
 
 fn run_on<B: PgrfOps>(

@@ -131,7 +131,7 @@ fn scene(a: &DemoArgs) -> Result<DemoScene<'static>> {
     })
 }
 
-pub fn run(a: &DemoArgs) -> Result<()> {
+pub fn run(a: &DemoArgs, kernels: pgrf_nn::ops::Kernels) -> Result<()> {
     pgrf_nn::infer::check_tiling_args(a.tile, None)?;
     if !a.output.is_dir() {
         require_parent_dir(&a.output)?;
@@ -141,6 +141,7 @@ pub fn run(a: &DemoArgs) -> Result<()> {
         scene: scene(a)?,
         seed: a.seed,
         tile: a.tile,
+        kernels,
     };
     let load = || models(a).map_err(BoxError::from);
     let start = || {

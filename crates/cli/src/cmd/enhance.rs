@@ -23,7 +23,7 @@ pub struct EnhanceArgs {
     pub input: InputArgs,
 }
 
-pub fn run(a: &EnhanceArgs) -> Result<()> {
+pub fn run(a: &EnhanceArgs, kernels: pgrf_nn::ops::Kernels) -> Result<()> {
     let e = &a.enhance;
     let batch = e.batch()?;
     e.device.check_available().map_err(anyhow::Error::msg)?;
@@ -31,6 +31,7 @@ pub fn run(a: &EnhanceArgs) -> Result<()> {
     // A black level the user gives is theirs, whatever the file's masked
     // pixels say.
     cfg.masked_black = a.input.black.is_none();
+    cfg.tiling.kernels = kernels;
     let restorer = crate::shipped::load_model(&e.model, e.sampler(), e.device)
         .with_context(|| format!("--model {}", e.model.display()))?;
     if let (Some(shard), 0) = (batch.shard, batch.selected_count()) {
@@ -43,7 +44,12 @@ pub fn run(a: &EnhanceArgs) -> Result<()> {
         return Ok(());
     }
     let single = batch.jobs.len() == 1;
-    let view = View::new(e, restorer.as_ref(), batch.selected_count(), single);
+    let view = View::new(
+        e,
+        restorer.as_ref(),
+        kernels,
+        (batch.selected_count(), single),
+    );
     let open = |p: &Path| a.input.open(p).map_err(BoxError::from);
     let outcome = run_batch(&cfg, restorer.as_ref(), &batch, &open, &view)?;
     match outcome.failure(batch.jobs.len()) {
@@ -59,6 +65,7 @@ pub fn run(a: &EnhanceArgs) -> Result<()> {
 struct View<'a> {
     flags: &'a EnhanceFlags,
     restorer: &'a dyn Restore,
+    kernels: pgrf_nn::ops::Kernels,
     multi: MultiProgress,
     files: Bar,
     noted: Cell<bool>,
@@ -70,14 +77,15 @@ impl<'a> View<'a> {
     fn new(
         flags: &'a EnhanceFlags,
         restorer: &'a dyn Restore,
-        count: usize,
-        single: bool,
+        kernels: pgrf_nn::ops::Kernels,
+        (count, single): (usize, bool),
     ) -> View<'a> {
         let multi = MultiProgress::new();
         let files = Bar::within(&multi, "batch", count as u64, "files", flags.quiet);
         View {
             flags,
             restorer,
+            kernels,
             multi,
             files,
             noted: Cell::new(flags.quiet),
@@ -95,7 +103,7 @@ impl BatchEvents for View<'_> {
 
     fn tiles(&self, index: usize, count: usize, job: &Job) -> Bar {
         if !self.noted.replace(true) {
-            for line in self.flags.notes(self.restorer) {
+            for line in self.flags.notes(self.restorer, self.kernels) {
                 self.files.println(&line);
             }
         }

@@ -36,13 +36,17 @@ pub struct EvalArgs {
 
 /// Every --model, named by its file stem (primed when taken), announced on
 /// stderr.
-fn load_models(a: &EvalArgs) -> Result<Vec<Box<dyn MethodUnderTest>>> {
+fn load_models(
+    a: &EvalArgs,
+    kernels: pgrf_nn::ops::Kernels,
+) -> Result<Vec<Box<dyn MethodUnderTest>>> {
     a.device.check_available().map_err(anyhow::Error::msg)?;
     let tiling = Tiling {
         tile: a.tile,
         overlap: None,
         seed: a.eval.seed,
         device: a.device,
+        kernels,
     };
     let mut names: Vec<String> = Vec::new();
     let mut models: Vec<Box<dyn MethodUnderTest>> = Vec::new();
@@ -65,10 +69,10 @@ fn load_models(a: &EvalArgs) -> Result<Vec<Box<dyn MethodUnderTest>>> {
     Ok(models)
 }
 
-pub fn run(a: &EvalArgs) -> Result<()> {
+pub fn run(a: &EvalArgs, kernels: pgrf_nn::ops::Kernels) -> Result<()> {
     pgrf_nn::infer::check_tiling_args(a.tile, None)?;
     let cfg = a.eval.config(!a.model.is_empty())?;
-    let load = || load_models(a).map_err(BoxError::from);
+    let load = || load_models(a, kernels).map_err(BoxError::from);
     let bar = || Bar::new("eval", 0, "images", a.eval.quiet);
     let evaluation = pgrf_eval::run_protocol(&cfg, load, bar)?;
     println!("{}", evaluation.header);

@@ -7,11 +7,12 @@
 use crate::progress::Bar;
 use anyhow::Result;
 use pgrf_app::search;
+use pgrf_nn::ops::Kernels;
 
 pub use pgrf_app::search::flags::SearchArgs;
 
-pub fn run(a: &SearchArgs) -> Result<()> {
-    let req = a.request();
+pub fn run(a: &SearchArgs, kernels: Kernels) -> Result<()> {
+    let req = a.request(kernels);
     let bar = Bar::new("search", 0, "network evaluations", a.json);
     let warn = |w: &str| {
         if !a.json {

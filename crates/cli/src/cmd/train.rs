@@ -38,8 +38,9 @@ pub struct TrainArgs {
     pub print_config: bool,
 }
 
-pub fn run(a: &TrainArgs) -> Result<()> {
-    let config = a.settings.merge(a.config.as_deref(), a.method)?;
+pub fn run(a: &TrainArgs, kernels: pgrf_nn::ops::Kernels) -> Result<()> {
+    let mut config = a.settings.merge(a.config.as_deref(), a.method)?;
+    config.kernels = kernels;
     if a.print_config {
         print!("{}", config.to_toml());
         return Ok(());

@@ -29,6 +29,8 @@ pub struct Tiling {
     pub seed: u64,
     /// Where the network runs (the automatic tile depends on it).
     pub device: DeviceKind,
+    /// Whose CPU operations the network runs ([`crate::ops::Kernels`]).
+    pub kernels: crate::ops::Kernels,
 }
 
 impl Tiling {
@@ -101,7 +103,8 @@ pub fn restore_packed(
         })?;
     }
     progress.start(plan.count() as u64, "tiles");
-    let output = restore_image(r, input, &opts, progress)?;
+    let output =
+        crate::ops::with_kernels(tiling.kernels, || restore_image(r, input, &opts, progress))?;
     progress.finish();
     Ok(RestoredPacked { output, plan })
 }

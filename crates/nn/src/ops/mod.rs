@@ -24,10 +24,12 @@
 //! The networks call the layer functions here ([`conv2d`], [`conv2d_leaky`],
 //! [`conv_transpose2d`], [`leaky_relu`], [`silu`], [`group_norm`]) instead of the modules'
 //! `forward`; parameters, records and weight files are burn's modules
-//! unchanged. [`set_kernels`] chooses, for the whole process, between these
-//! operations ([`Kernels::Pgrf`], the default) and burn's ([`Kernels::Burn`],
-//! for comparison): with `Burn` the layer functions build exactly the graph
-//! `forward` built before.
+//! unchanged. The configuration of a call that runs a network (training's
+//! `TrainConfig::kernels`, inference's `Tiling::kernels`, the search's
+//! options) chooses between these operations ([`Kernels::Pgrf`], the
+//! default) and burn's ([`Kernels::Burn`], for comparison), and the call
+//! runs inside [`with_kernels`]: with `Burn` the layer functions build
+//! exactly the graph `forward` built before.
 
 pub mod adam;
 mod autodiff;
@@ -40,14 +42,15 @@ use burn::nn::{GroupNorm, PaddingConfig2d};
 use burn::tensor::backend::{AutodiffBackend, Backend};
 use burn::tensor::ops::{ConvOptions, ConvTransposeOptions, FloatTensor};
 use burn::tensor::{Tensor, TensorPrimitive};
-use std::sync::atomic::{AtomicBool, Ordering};
 
 pub use pgrf_kernels::adam::AdamStep;
 
-/// Whose operations the CPU backend runs: pgrf's kernels or burn's.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+/// Whose operations the CPU backend runs: pgrf's kernels (the default) or
+/// burn's.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum Kernels {
     /// pgrf's operations (the default).
+    #[default]
     Pgrf,
     /// burn 0.21's own operations, as before pgrf had its own.
     Burn,
@@ -73,25 +76,16 @@ impl std::fmt::Display for Kernels {
     }
 }
 
-/// Whether burn's operations were chosen (pgrf's are the default).
-static BURN_KERNELS: AtomicBool = AtomicBool::new(false);
-
-/// Choose the operations for the rest of the process. Read when a layer
-/// builds its part of the graph (the backward follows what the forward
-/// chose); set it before work starts (the command line does, from
-/// `--kernels`).
-pub fn set_kernels(k: Kernels) {
-    BURN_KERNELS.store(k == Kernels::Burn, Ordering::Relaxed);
-}
-
 thread_local! {
     /// A choice for the current thread only ([`with_kernels`]).
     static THREAD_KERNELS: std::cell::Cell<Option<Kernels>> = const { std::cell::Cell::new(None) };
 }
 
-/// Run `f` with `k` chosen on the current thread (graphs built and
-/// optimiser steps taken by `f` on this thread), whatever the process-wide
-/// choice: lets one process compare the two (tests, benchmarks).
+/// Run `f` with `k` chosen on the current thread: the graphs `f` builds and
+/// the optimiser steps it takes on this thread (where every network runs:
+/// the training loop, the tiles of a restoration) use `k`'s operations.
+/// Read when a layer builds its part of the graph; the backward follows
+/// what the forward chose.
 pub fn with_kernels<R>(k: Kernels, f: impl FnOnce() -> R) -> R {
     struct Restore(Option<Kernels>);
     impl Drop for Restore {
@@ -104,16 +98,9 @@ pub fn with_kernels<R>(k: Kernels, f: impl FnOnce() -> R) -> R {
 }
 
 /// The operations in force on this thread: [`with_kernels`]'s choice
-/// inside it, else [`set_kernels`]'s.
+/// inside it, else pgrf's.
 pub fn kernels() -> Kernels {
-    if let Some(k) = THREAD_KERNELS.with(|c| c.get()) {
-        return k;
-    }
-    if BURN_KERNELS.load(Ordering::Relaxed) {
-        Kernels::Burn
-    } else {
-        Kernels::Pgrf
-    }
+    THREAD_KERNELS.with(|c| c.get()).unwrap_or_default()
 }
 
 /// Which gradients a backward pass has to produce (the parents that need
