@@ -114,6 +114,9 @@ pub struct EnhanceConfig {
     /// of its metadata's, when it has them and no calibration is given
     /// ([`masked_black`]); false when the user set the black level.
     pub masked_black: bool,
+    /// darktable's noiseprofiles.json for the noise lookup (None:
+    /// darktable's install is searched).
+    pub darktable: Option<PathBuf>,
 }
 
 /// Where one input's results go.
@@ -367,6 +370,7 @@ fn frame_noise(cfg: &EnhanceConfig, frame: &RawFrame) -> Result<FrameNoise, Enha
     let known = KnownNoise {
         calibration,
         flag: cfg.noise,
+        darktable: cfg.darktable.clone(),
     };
     find_noise(frame, &known).map_err(EnhanceError::Noise)
 }

@@ -54,7 +54,10 @@ pub fn run(a: &LoaderArgs) -> Result<()> {
     let t = Instant::now();
     let built = sources(&config)?;
     let open_s = t.elapsed().as_secs_f64();
-    let mut spec = PairSpec::new(CameraProfile::load(&config.profile)?, config.noise);
+    let mut spec = PairSpec::new(
+        CameraProfile::load(&config.profile, config.darktable_profiles.as_deref())?,
+        config.noise,
+    );
     spec.ratio = config.ratio_draw.spec(config.ratio_min, config.ratio_max);
     let what = built.train.describe();
     let rate = loader_rate(

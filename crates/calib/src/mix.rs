@@ -32,6 +32,9 @@ pub struct MixSpec<'a> {
     pub calibrated_share: f64,
     /// A per-pixel calibration file for the (single) sensor.
     pub calibration: Option<&'a Path>,
+    /// darktable's noiseprofiles.json for `darktable:` profiles (None:
+    /// darktable's install is searched).
+    pub darktable: Option<&'a Path>,
 }
 
 /// The mix, and the identity of the calibration applied (camera, ISO, file
@@ -98,6 +101,7 @@ pub fn build(spec: &MixSpec) -> Result<CalibratedMix, MixError> {
         spec.iso,
         spec.iso_range,
         spec.ratio,
+        spec.darktable,
     )
     .map_err(MixError::Profile)?;
     mix.set_calibrated_dark_level(spec.calibrated_dark_level);

@@ -49,6 +49,9 @@ pub struct SynthConfig {
     pub seed: u64,
     /// Write the capture brightened by the ratio instead of dark.
     pub brightened: bool,
+    /// darktable's noiseprofiles.json for a `darktable:` profile (None:
+    /// darktable's install is searched).
+    pub darktable: Option<PathBuf>,
     /// Masked (optical-black) columns to simulate left of the frame, as a
     /// camera's readout has them (0: none; even): dark pixels with the
     /// capture's offset and read and row noise, which `pgrf enhance` reads
@@ -214,7 +217,7 @@ pub fn check(c: &SynthConfig) -> Result<(), SynthError> {
 /// after checking the numeric settings ([`check`]).
 pub fn load_profile(c: &SynthConfig) -> Result<CameraProfile, SynthError> {
     check(c)?;
-    let mut profile = CameraProfile::load(&c.profile)?;
+    let mut profile = CameraProfile::load(&c.profile, c.darktable.as_deref())?;
     with_dark_rate(&mut profile, c);
     Ok(profile)
 }
@@ -485,6 +488,7 @@ mod tests {
             seed: 7,
             brightened: false,
             masked_columns: 0,
+            darktable: None,
         };
         let made = synthesize(&frame, Path::new("flat.dng"), &c).unwrap();
         let out = &made.frame;

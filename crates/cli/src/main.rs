@@ -24,6 +24,15 @@ struct Cli {
     darktable_profiles: Option<std::path::PathBuf>,
 }
 
+/// The global flags, handed to the commands that use them: configuration
+/// of their calls, not process state.
+pub struct Globals<'a> {
+    /// `--kernels`.
+    pub kernels: pgrf_nn::ops::Kernels,
+    /// `--darktable-profiles`.
+    pub darktable: Option<&'a std::path::Path>,
+}
+
 #[derive(Subcommand, Debug)]
 enum Command {
     /// Show the whole product on built-in data: a Canon EOS 550D photo of a colour chart captured x100 and x200 too dark, restored by the built-in SPC and PGRF models, scored and pictured.
@@ -84,30 +93,33 @@ fn main() -> ExitCode {
         _ => "",
     };
     pgrf_core::exit::note_renamed("pgrf", &RENAMED, command);
-    pgrf_noise::darktable::set_profiles_path(cli.darktable_profiles.clone());
     pgrf_core::mem::keep_freed_buffers();
     if let Err(e) = io::check(&cli.command, cli.darktable_profiles.as_deref()) {
         return pgrf_core::exit::finish("pgrf", Err(e));
     }
+    let g = Globals {
+        kernels: cli.kernels,
+        darktable: cli.darktable_profiles.as_deref(),
+    };
     let result = match &cli.command {
-        Command::Demo(a) => cmd::demo::run(a, cli.kernels),
-        Command::Info(a) => cmd::info::run(a),
+        Command::Demo(a) => cmd::demo::run(a, &g),
+        Command::Info(a) => cmd::info::run(a, &g),
         Command::Preview(a) => cmd::preview::run(a),
         Command::Convert(a) => cmd::convert::run(a),
         Command::Chart(a) => cmd::chart::run(a),
-        Command::Synth(a) => cmd::synth::run(a),
+        Command::Synth(a) => cmd::synth::run(a, &g),
         Command::SimulateSensor(a) => cmd::simulate::run(a),
         Command::Calibrate(a) => cmd::calibrate::run(a),
         Command::Reduce(a) => cmd::reduce::run(a),
-        Command::Train(a) => cmd::train::run(a, cli.kernels),
-        Command::Enhance(a) => cmd::enhance::run(a, cli.kernels),
-        Command::Search(a) => cmd::search::run(a, cli.kernels),
+        Command::Train(a) => cmd::train::run(a, &g),
+        Command::Enhance(a) => cmd::enhance::run(a, &g),
+        Command::Search(a) => cmd::search::run(a, &g),
         Command::Metrics(a) => cmd::metrics::run(a),
-        Command::Eval(a) => cmd::eval::run(a, cli.kernels),
+        Command::Eval(a) => cmd::eval::run(a, &g),
         Command::MakeDataset(a) => cmd::make_dataset::run(a),
         Command::ImportWeights(a) => cmd::weights::run_import(a),
         Command::ExportWeights(a) => cmd::weights::run_export(a),
-        Command::Profiles(a) => cmd::profiles::run(a),
+        Command::Profiles(a) => cmd::profiles::run(a, &g),
     };
     pgrf_core::exit::finish("pgrf", result)
 }

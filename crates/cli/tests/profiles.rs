@@ -286,3 +286,86 @@ fn bad_darktable_inputs_are_one_line_errors() {
     assert!(e.contains("green a = -0.00008 at ISO 1600"), "{e}");
     assert!(!out_path.exists());
 }
+
+/// `--darktable-profiles` is handed to every command that loads a profile
+/// (configuration, not process state): `train` and `eval --protocol
+/// synthetic` take the fixture's camera with it, and without it (darktable's
+/// install has no "Testmaker", or there is none) they are refused in one
+/// line.
+#[test]
+fn train_and_eval_take_the_darktable_file_given() {
+    let dir = scratch("profiles", "train");
+    let f = fixture(&dir, FIXTURE);
+    let demo = pgrf(&["demo", "-o", s(&dir), "--size", "128x96", "--quiet"]);
+    assert!(demo.status.success());
+    let out = dir.join("t.safetensors");
+    let train = |with: bool| {
+        let mut a = vec![];
+        if with {
+            a.extend(["--darktable-profiles", s(&f)]);
+        }
+        a.extend([
+            "train",
+            "denoiser",
+            "--profile",
+            "darktable:Testmaker TM-1",
+            "--iso",
+            "1000",
+            "--steps",
+            "1",
+            "--width",
+            "4",
+            "--patch",
+            "32",
+            "--batch",
+            "1",
+            "--val-pairs",
+            "0",
+            "--data",
+            "procedural",
+            "--quiet",
+            "-o",
+            s(&out),
+        ]);
+        pgrf(&a)
+    };
+    let eval = |with: bool| {
+        let mut a = vec![];
+        if with {
+            a.extend(["--darktable-profiles", s(&f)]);
+        }
+        let clean = dir.join("clean.dng");
+        a.extend([
+            "eval",
+            "--protocol",
+            "synthetic",
+            "--root",
+            s(&clean),
+            "--profile",
+            "darktable:Testmaker TM-1",
+            "--iso",
+            "1000",
+            "--ratio",
+            "100",
+            "--crop",
+            "32",
+            "--quiet",
+        ]);
+        pgrf(&a)
+    };
+    for (name, run) in [("train", &train as &dyn Fn(bool) -> _), ("eval", &eval)] {
+        let r = run(true);
+        assert!(
+            r.status.success(),
+            "{name}: {}",
+            String::from_utf8_lossy(&r.stderr)
+        );
+        // Without it: darktable's install has no such camera, or there is
+        // no install (CI).
+        let e = one_line_error(&run(false));
+        assert!(
+            e.contains("Testmaker TM-1") || e.contains("noiseprofiles.json was not found"),
+            "{name}: {e}"
+        );
+    }
+}

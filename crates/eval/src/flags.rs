@@ -241,6 +241,8 @@ impl EvalFlags {
             seed: self.seed,
             uncalibrated: self.uncalibrated,
             blind_noise: self.blind_noise,
+            // The caller's (the command line's global --darktable-profiles).
+            darktable: None,
         })
     }
 

@@ -250,6 +250,12 @@ pub struct TrainConfig {
     #[cfg_attr(feature = "clap", arg(skip))]
     #[serde(skip)]
     pub kernels: crate::ops::Kernels,
+    /// darktable's noiseprofiles.json for `darktable:` profiles, set by the
+    /// caller like `kernels` (the command line's global
+    /// `--darktable-profiles`; None: darktable's install is searched).
+    #[cfg_attr(feature = "clap", arg(skip))]
+    #[serde(skip)]
+    pub darktable_profiles: Option<PathBuf>,
 }
 
 /// The distance between output and target the loss averages (`pgrf train
@@ -427,6 +433,7 @@ impl Default for TrainConfig {
             output: None,
             device: crate::backend::DeviceKind::Cpu,
             kernels: crate::ops::Kernels::Pgrf,
+            darktable_profiles: None,
         }
     }
 }

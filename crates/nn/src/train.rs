@@ -219,12 +219,14 @@ pub fn profiles_only(c: &TrainConfig, iso_range: Option<(u32, u32)>) -> Result<P
         });
     }
     let ratio = c.ratio_draw.spec(c.ratio_min, c.ratio_max);
-    let mut mix = PairMix::build(&c.profile, c.noise, c.iso, iso_range, ratio).map_err(|e| {
-        NnError::BadSetting {
-            flag: "--profile",
-            message: format!("--profile: {e}"),
-        }
-    })?;
+    let darktable = c.darktable_profiles.as_deref();
+    let mut mix =
+        PairMix::build(&c.profile, c.noise, c.iso, iso_range, ratio, darktable).map_err(|e| {
+            NnError::BadSetting {
+                flag: "--profile",
+                message: format!("--profile: {e}"),
+            }
+        })?;
     mix.set_calibrated_dark_level(c.calibrated_dark_level);
     mix.set_calibrated_share(c.calibrated_share);
     Ok(PairsNoise {

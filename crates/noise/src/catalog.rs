@@ -17,8 +17,9 @@ impl CameraProfile {
     /// A built-in name, `dng:FILE.dng` (the file's NoiseProfile tag at its
     /// ISO, [`crate::pg_profile`]), `darktable:MAKER MODEL` (a camera of
     /// darktable's noiseprofiles.json, [`crate::darktable`]) or a path to a
-    /// JSON file, validated.
-    pub fn load(name_or_path: &str) -> Result<CameraProfile> {
+    /// JSON file, validated. `darktable` names darktable's file (else its
+    /// install is searched: [`darktable::locate`]).
+    pub fn load(name_or_path: &str, darktable: Option<&Path>) -> Result<CameraProfile> {
         if let Some(p) = Self::built_in(name_or_path) {
             return Ok(p);
         }
@@ -26,7 +27,7 @@ impl CameraProfile {
             return pg_profile::from_dng(file);
         }
         if let Some(camera) = name_or_path.strip_prefix("darktable:") {
-            return darktable::load(camera);
+            return darktable::load(camera, darktable);
         }
         let path = Path::new(name_or_path);
         if !path.exists() {

@@ -102,7 +102,6 @@ use crate::pg_profile::{poisson_gaussian_table, PgRow};
 use crate::profile::CameraProfile;
 use serde_json::Value;
 use std::path::{Path, PathBuf};
-use std::sync::RwLock;
 
 /// Photosite variance over darktable's green a (and b): the factor by which
 /// darktable's profiling chain (Haar HH of a PPG-demosaiced image) lowers
@@ -119,24 +118,6 @@ pub const FORMAT_VERSION: i64 = 0;
 
 /// Neighbouring ISOs of the interpolation table are at most this ratio apart.
 const GRID_STEP: f64 = 1.005;
-
-/// The file `--darktable-profiles` named, when it did.
-static PROFILES_PATH: RwLock<Option<PathBuf>> = RwLock::new(None);
-
-/// Use `path` as darktable's `noiseprofiles.json` from now on, in this
-/// process (None: search the standard locations again). The CLI's global
-/// `--darktable-profiles PATH` sets it.
-pub fn set_profiles_path(path: Option<PathBuf>) {
-    *PROFILES_PATH.write().unwrap_or_else(|e| e.into_inner()) = path;
-}
-
-/// The file set with [`set_profiles_path`], if any.
-pub fn profiles_path() -> Option<PathBuf> {
-    PROFILES_PATH
-        .read()
-        .unwrap_or_else(|e| e.into_inner())
-        .clone()
-}
 
 /// Where darktable installs `noiseprofiles.json` (its data directory),
 /// in the order searched: `$XDG_DATA_DIRS`, the Linux prefixes /usr and
@@ -180,11 +161,12 @@ pub fn standard_locations() -> Vec<PathBuf> {
     out
 }
 
-/// The file to read: the one set with [`set_profiles_path`], else the first
-/// of [`standard_locations`] that exists.
-pub fn locate() -> Result<PathBuf> {
-    match profiles_path() {
-        Some(p) => Ok(p),
+/// The file to read: `file` when the caller names one (the CLI's
+/// `--darktable-profiles`), else the first of [`standard_locations`] that
+/// exists.
+pub fn locate(file: Option<&Path>) -> Result<PathBuf> {
+    match file {
+        Some(p) => Ok(p.to_path_buf()),
         None => locate_in(&standard_locations()),
     }
 }
@@ -331,8 +313,8 @@ pub struct NoiseProfiles {
 
 impl NoiseProfiles {
     /// Read and check the file darktable reads: [`locate`].
-    pub fn open() -> Result<NoiseProfiles> {
-        Self::read(&locate()?)
+    pub fn open(file: Option<&Path>) -> Result<NoiseProfiles> {
+        Self::read(&locate(file)?)
     }
 
     /// Read and check `path`.
@@ -559,9 +541,9 @@ fn fit_notes(measured: &[Measured]) -> Vec<String> {
 }
 
 /// `--profile darktable:SPEC`: the camera SPEC names in the file [`locate`]
-/// finds.
-pub fn load(spec: &str) -> Result<CameraProfile> {
-    NoiseProfiles::open()?.profile(spec)
+/// finds (`file`, else darktable's install).
+pub fn load(spec: &str, file: Option<&Path>) -> Result<CameraProfile> {
+    NoiseProfiles::open(file)?.profile(spec)
 }
 
 /// A camera pgrf measured (`pgrf calibrate`), as one entry of darktable's

@@ -62,8 +62,10 @@ pub struct FrameInfo<'a> {
 }
 
 impl<'a> FrameInfo<'a> {
-    /// The record of frame `f`, read from `file`.
-    pub fn of(file: &Path, f: &'a RawFrame) -> Result<FrameInfo<'a>> {
+    /// The record of frame `f`, read from `file`; `darktable` names
+    /// darktable's noiseprofiles.json for the noise lookup (else its
+    /// install is searched).
+    pub fn of(file: &Path, f: &'a RawFrame, darktable: Option<&Path>) -> Result<FrameInfo<'a>> {
         Ok(FrameInfo {
             file: file.display().to_string(),
             make: &f.make,
@@ -80,7 +82,14 @@ impl<'a> FrameInfo<'a> {
             exposure_s: f.exposure_s,
             temperature_c: f.temperature_c,
             noise_profile: f.noise_profile.as_deref(),
-            noise: find_noise(f, &KnownNoise::default()).map_err(|e| e.to_string()),
+            noise: find_noise(
+                f,
+                &KnownNoise {
+                    darktable: darktable.map(Path::to_path_buf),
+                    ..KnownNoise::default()
+                },
+            )
+            .map_err(|e| e.to_string()),
             fits: f.fits.as_ref(),
             orientation: f.orientation,
             visible_origin: [f.sensor_origin.0, f.sensor_origin.1],

@@ -20,7 +20,7 @@ use crate::error::{NoiseError, Result};
 use crate::profile::CameraProfile;
 use pgrf_raw::RawFrame;
 use std::fmt;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 /// A frame's noise: gain, read and row noise in DN on its own scale.
 #[derive(Clone, Debug, PartialEq)]
@@ -147,6 +147,9 @@ pub struct KnownNoise {
     pub calibration: Option<(PathBuf, f64, f64, f64)>,
     /// The user's `--noise`.
     pub flag: Option<NoiseFlag>,
+    /// darktable's noiseprofiles.json when the caller names it (else its
+    /// install is searched).
+    pub darktable: Option<PathBuf>,
 }
 
 /// white - black of `frame`, DN (mean black of its planes): the scale
@@ -177,8 +180,13 @@ fn at_iso(profile: &CameraProfile, iso: u32, range: f64) -> Option<(f64, f64, f6
 
 /// darktable's profile of the frame's camera at its ISO, if darktable's
 /// file is found and names the camera.
-fn from_darktable(frame: &RawFrame, iso: u32, range: f64) -> Option<(FrameNoise, String)> {
-    let profiles = crate::darktable::NoiseProfiles::open().ok()?;
+fn from_darktable(
+    frame: &RawFrame,
+    iso: u32,
+    range: f64,
+    file: Option<&Path>,
+) -> Option<(FrameNoise, String)> {
+    let profiles = crate::darktable::NoiseProfiles::open(file).ok()?;
     let query = format!("{} {}", frame.make.trim(), frame.model.trim());
     let camera = profiles.find(&query).ok()?.name();
     let profile = profiles.profile(&query).ok()?;
@@ -271,7 +279,7 @@ pub fn find_noise(frame: &RawFrame, known: &KnownNoise) -> Result<FrameNoise> {
         });
     }
     if let Some(iso) = frame.iso {
-        if let Some((noise, _)) = from_darktable(frame, iso, range) {
+        if let Some((noise, _)) = from_darktable(frame, iso, range, known.darktable.as_deref()) {
             return Ok(noise);
         }
         if let Some(noise) = from_built_in(frame, iso, range) {
@@ -356,6 +364,7 @@ mod tests {
         let both = KnownNoise {
             calibration: calibration.clone(),
             flag: Some(flag),
+            darktable: None,
         };
         let n = find_noise(&f, &both).unwrap();
         assert_eq!(n.source, NoiseSource::Calibration("cam.safetensors".into()));
@@ -365,6 +374,7 @@ mod tests {
             &KnownNoise {
                 calibration: None,
                 flag: Some(flag),
+                darktable: None,
             },
         )
         .unwrap();

@@ -87,19 +87,21 @@ impl From<PairSpec> for PairMix {
 impl PairMix {
     /// The mix of `profiles` (see the module documentation) for noise model
     /// `kind`, ISO settings of the first profile, and `ratio` for all.
-    /// Loads and checks every profile and the ISO settings before returning.
+    /// Loads and checks every profile and the ISO settings before returning;
+    /// `darktable` names darktable's file for `darktable:` profiles.
     pub fn build(
         profiles: &str,
         kind: ModelKind,
         iso: Option<u32>,
         iso_range: Option<(u32, u32)>,
         ratio: RatioSpec,
+        darktable: Option<&std::path::Path>,
     ) -> Result<PairMix> {
         let entries = parse_profiles(profiles)?;
         let mut specs = Vec::with_capacity(entries.len());
         let mut gains = None;
         for (i, e) in entries.iter().enumerate() {
-            let mut spec = PairSpec::new(CameraProfile::load(&e.name)?, kind);
+            let mut spec = PairSpec::new(CameraProfile::load(&e.name, darktable)?, kind);
             spec.ratio = ratio;
             if i == 0 {
                 spec.iso = iso;
@@ -210,6 +212,7 @@ mod tests {
                 lo: 50.0,
                 hi: 100.0,
             },
+            None,
         )
     }
 

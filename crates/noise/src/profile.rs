@@ -463,7 +463,7 @@ mod tests {
         assert!((p.params_at_iso(1600).unwrap().k - 16.0).abs() < 1e-9);
         let e = p.params_at_iso(u32::MAX).unwrap_err().to_string();
         assert!(e.contains("beyond any sensor"), "{e}");
-        let e = CameraProfile::load("no-such-camera")
+        let e = CameraProfile::load("no-such-camera", None)
             .unwrap_err()
             .to_string();
         assert!(e.contains("sony-a7s2"), "{e}");

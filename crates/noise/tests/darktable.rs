@@ -59,7 +59,7 @@ const FIXTURE: &str = r#"{
 "#;
 
 /// The fixture, written once per test process; every test that loads
-/// through `CameraProfile::load` points the process-wide path at it.
+/// through `CameraProfile::load` names it.
 fn fixture() -> &'static Path {
     static PATH: OnceLock<PathBuf> = OnceLock::new();
     let p = PATH.get_or_init(|| {
@@ -69,13 +69,11 @@ fn fixture() -> &'static Path {
         std::fs::write(&p, FIXTURE).unwrap();
         p
     });
-    darktable::set_profiles_path(Some(p.clone()));
     p
 }
 
 fn load(camera: &str) -> CameraProfile {
-    fixture();
-    CameraProfile::load(&format!("darktable:{camera}")).unwrap()
+    CameraProfile::load(&format!("darktable:{camera}"), Some(fixture())).unwrap()
 }
 
 fn close(got: f64, want: f64, rel: f64) -> bool {
@@ -229,8 +227,7 @@ fn bad_files_and_names_are_refused_in_one_line() {
         }
     };
     // An unknown camera: the three closest names.
-    fixture();
-    let e = CameraProfile::load("darktable:Testmaker TM-3")
+    let e = CameraProfile::load("darktable:Testmaker TM-3", Some(fixture()))
         .unwrap_err()
         .to_string();
     one_line(

@@ -33,7 +33,7 @@ fn the_tag_gives_gain_and_read_noise_on_the_files_scale() {
     let path = dng_with("one.dng", Some(vec![[S, O]]));
     let back = pgrf_raw::decode_file(&path, &Default::default()).unwrap();
     assert_eq!(back.noise_profile, Some(vec![[S, O]]));
-    let p = CameraProfile::load(&format!("dng:{}", path.display())).unwrap();
+    let p = CameraProfile::load(&format!("dng:{}", path.display()), None).unwrap();
     let c = p.params_at_iso(3200).unwrap();
     let range = 16383.0 - 512.0;
     assert!((c.k - S * range).abs() < 1e-9 * c.k, "K {}", c.k);
@@ -50,7 +50,7 @@ fn the_tag_gives_gain_and_read_noise_on_the_files_scale() {
 fn synthesised_frames_have_the_tags_variance() {
     let planes = vec![[S * 0.9, O], [S, O], [S * 1.1, O]];
     let path = dng_with("planes.dng", Some(planes));
-    let p = CameraProfile::load(&format!("dng:{}", path.display())).unwrap();
+    let p = CameraProfile::load(&format!("dng:{}", path.display()), None).unwrap();
     let mut spec = PairSpec::new(p, ModelKind::PoissonGaussian);
     spec.iso = Some(3200);
     spec.ratio = RatioSpec::Fixed(1.0);
@@ -82,7 +82,7 @@ fn bad_tags_are_refused() {
         ("none.dng", None, "no NoiseProfile tag"),
     ] {
         let path = dng_with(name, profile);
-        let e = CameraProfile::load(&format!("dng:{}", path.display()))
+        let e = CameraProfile::load(&format!("dng:{}", path.display()), None)
             .unwrap_err()
             .to_string();
         assert!(e.contains(says) && !e.contains('\n'), "{name}: {e}");

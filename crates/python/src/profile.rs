@@ -22,8 +22,10 @@ pub struct Profile {
     pub(crate) calibration: Option<Arc<CalibrationFile>>,
 }
 
-fn load(spec: String) -> PyResult<Profile> {
-    let profile = CameraProfile::load(&spec).map_err(to_py)?;
+/// The profile `spec` names; `darktable` names darktable's file for a
+/// `darktable:` spec (None: darktable's install is searched).
+fn load(spec: String, darktable: Option<&std::path::Path>) -> PyResult<Profile> {
+    let profile = CameraProfile::load(&spec, darktable).map_err(to_py)?;
     Ok(Profile {
         spec,
         profile,
@@ -57,7 +59,7 @@ impl Profile {
     /// "darktable:MAKER MODEL", "dng:FILE.dng" or a profile JSON file.
     #[staticmethod]
     fn load(spec: &str) -> PyResult<Profile> {
-        load(spec.to_string())
+        load(spec.to_string(), None)
     }
 
     /// Profile.names() -> list[str]
@@ -71,16 +73,12 @@ impl Profile {
     /// Profile.darktable(maker_model, path=None) -> Profile
     ///
     /// A camera of darktable's noiseprofiles.json, e.g. "Canon EOS 550D";
-    /// `path` names the file (else darktable's install is searched, and a
-    /// path given once is used from then on, as the CLI's
-    /// --darktable-profiles).
+    /// `path` names the file (as the CLI's --darktable-profiles; else
+    /// darktable's install is searched).
     #[staticmethod]
     #[pyo3(signature = (maker_model, path=None))]
     fn darktable(maker_model: &str, path: Option<PathBuf>) -> PyResult<Profile> {
-        if let Some(p) = path {
-            pgrf_noise::darktable::set_profiles_path(Some(p));
-        }
-        load(format!("darktable:{maker_model}"))
+        load(format!("darktable:{maker_model}"), path.as_deref())
     }
 
     /// Profile.dng(path) -> Profile
@@ -88,7 +86,7 @@ impl Profile {
     /// The NoiseProfile tag of a DNG, at its ISO.
     #[staticmethod]
     fn dng(path: PathBuf) -> PyResult<Profile> {
-        load(format!("dng:{}", path.display()))
+        load(format!("dng:{}", path.display()), None)
     }
 
     /// Profile.json(path) -> Profile
@@ -102,7 +100,7 @@ impl Profile {
                 "{spec:?} is a built-in profile's name; use Profile.builtin"
             )));
         }
-        load(spec)
+        load(spec, None)
     }
 
     /// Profile.calibration(path, base="sony-a7s2") -> Profile
@@ -115,7 +113,7 @@ impl Profile {
     #[staticmethod]
     #[pyo3(signature = (path, base="sony-a7s2"))]
     fn calibration(py: Python<'_>, path: PathBuf, base: &str) -> PyResult<Profile> {
-        let mut p = load(base.to_string())?;
+        let mut p = load(base.to_string(), None)?;
         let file = crate::threads::run(py, || CalibrationFile::load(&path, None, None))?;
         p.spec = format!("{base} + calibration {}", path.display());
         p.calibration = Some(Arc::new(file));

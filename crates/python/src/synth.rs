@@ -51,6 +51,7 @@ impl Settings {
             seed,
             brightened: false,
             masked_columns: 0,
+            darktable: None,
         }
     }
 }

@@ -196,6 +196,7 @@ impl EnhanceFlags {
             force: self.force,
             noise: self.noise,
             masked_black: true,
+            darktable: None,
             tiling: Tiling {
                 tile: self.tile,
                 overlap: self.overlap,

@@ -87,6 +87,8 @@ impl SearchArgs {
                 kernels,
                 protocol: Protocol::eld(false),
             },
+            // The caller's (the command line's global --darktable-profiles).
+            darktable: None,
         }
     }
 }

@@ -178,6 +178,9 @@ pub struct SearchRequest {
     pub plot: PathBuf,
     /// Grid, averaging study, seed (of the pairs too), device, protocol.
     pub options: SearchOptions,
+    /// darktable's noiseprofiles.json for a model trained on a `darktable:`
+    /// profile (None: darktable's install is searched).
+    pub darktable: Option<PathBuf>,
 }
 
 /// What [`run`] measured and on what, for printing.
@@ -316,6 +319,7 @@ fn pairs_noise(req: &SearchRequest, meta: &WeightMeta) -> Result<PairsNoise> {
         calibrated_dark_level: noise.calibrated_dark_level,
         calibrated_share: trained.map_or(0.0, |c| c.calibrated_share),
         calibration: req.calib.as_deref(),
+        darktable: req.darktable.as_deref(),
     })
     .map_err(|e| match e {
         MixError::Profile(e) => NnError::Input {

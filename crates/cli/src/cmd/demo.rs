@@ -131,7 +131,8 @@ fn scene(a: &DemoArgs) -> Result<DemoScene<'static>> {
     })
 }
 
-pub fn run(a: &DemoArgs, kernels: pgrf_nn::ops::Kernels) -> Result<()> {
+pub fn run(a: &DemoArgs, g: &crate::Globals) -> Result<()> {
+    let kernels = g.kernels;
     pgrf_nn::infer::check_tiling_args(a.tile, None)?;
     if !a.output.is_dir() {
         require_parent_dir(&a.output)?;

@@ -23,7 +23,8 @@ pub struct EnhanceArgs {
     pub input: InputArgs,
 }
 
-pub fn run(a: &EnhanceArgs, kernels: pgrf_nn::ops::Kernels) -> Result<()> {
+pub fn run(a: &EnhanceArgs, g: &crate::Globals) -> Result<()> {
+    let kernels = g.kernels;
     let e = &a.enhance;
     let batch = e.batch()?;
     e.device.check_available().map_err(anyhow::Error::msg)?;
@@ -32,6 +33,7 @@ pub fn run(a: &EnhanceArgs, kernels: pgrf_nn::ops::Kernels) -> Result<()> {
     // pixels say.
     cfg.masked_black = a.input.black.is_none();
     cfg.tiling.kernels = kernels;
+    cfg.darktable = g.darktable.map(Into::into);
     let restorer = crate::shipped::load_model(&e.model, e.sampler(), e.device)
         .with_context(|| format!("--model {}", e.model.display()))?;
     if let (Some(shard), 0) = (batch.shard, batch.selected_count()) {

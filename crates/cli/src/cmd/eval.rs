@@ -69,9 +69,11 @@ fn load_models(
     Ok(models)
 }
 
-pub fn run(a: &EvalArgs, kernels: pgrf_nn::ops::Kernels) -> Result<()> {
+pub fn run(a: &EvalArgs, g: &crate::Globals) -> Result<()> {
+    let kernels = g.kernels;
     pgrf_nn::infer::check_tiling_args(a.tile, None)?;
-    let cfg = a.eval.config(!a.model.is_empty())?;
+    let mut cfg = a.eval.config(!a.model.is_empty())?;
+    cfg.synthetic.darktable = g.darktable.map(Into::into);
     let load = || load_models(a, kernels).map_err(BoxError::from);
     let bar = || Bar::new("eval", 0, "images", a.eval.quiet);
     let evaluation = pgrf_eval::run_protocol(&cfg, load, bar)?;

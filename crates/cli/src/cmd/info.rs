@@ -18,9 +18,9 @@ pub struct InfoArgs {
     pub input: InputArgs,
 }
 
-pub fn run(a: &InfoArgs) -> Result<()> {
+pub fn run(a: &InfoArgs, g: &crate::Globals) -> Result<()> {
     let f = a.input.open(&a.file)?;
-    let info = FrameInfo::of(&a.file, &f)?;
+    let info = FrameInfo::of(&a.file, &f, g.darktable)?;
     if a.json {
         println!("{}", serde_json::to_string(&info)?);
         return Ok(());

@@ -6,6 +6,7 @@ use clap::{Args, Subcommand};
 use pgrf_noise::darktable::{NoiseProfiles, DN_RANGE, VARIANCE_FACTOR};
 use pgrf_noise::pg_profile::{self, ProfileView};
 use pgrf_noise::CameraProfile;
+use std::path::Path;
 
 #[derive(Args, Debug)]
 pub struct ProfilesArgs {
@@ -37,17 +38,17 @@ pub struct ShowArgs {
     pub iso: Option<u32>,
 }
 
-pub fn run(a: &ProfilesArgs) -> Result<()> {
+pub fn run(a: &ProfilesArgs, g: &crate::Globals) -> Result<()> {
     match &a.action {
-        Action::List(l) => list(l),
-        Action::Show(s) => show(s),
+        Action::List(l) => list(l, g.darktable),
+        Action::Show(s) => show(s, g.darktable),
     }
 }
 
-fn list(a: &ListArgs) -> Result<()> {
+fn list(a: &ListArgs, darktable: Option<&Path>) -> Result<()> {
     // Read darktable's file first: a missing one is the only error, before any output.
     let db = if a.darktable {
-        Some(NoiseProfiles::open()?)
+        Some(NoiseProfiles::open(darktable)?)
     } else {
         None
     };
@@ -108,8 +109,8 @@ fn list(a: &ListArgs) -> Result<()> {
     Ok(())
 }
 
-fn show(a: &ShowArgs) -> Result<()> {
-    let profile = CameraProfile::load(&a.name)?;
+fn show(a: &ShowArgs, darktable: Option<&Path>) -> Result<()> {
+    let profile = CameraProfile::load(&a.name, darktable)?;
     // What synthesis uses at --iso, before any output: a refusal is the only output.
     let at_iso = a.iso.map(|iso| profile.params_at_iso(iso)).transpose()?;
     let v = pg_profile::view(&profile);
@@ -124,7 +125,7 @@ fn show(a: &ShowArgs) -> Result<()> {
             .unwrap_or_else(|| "not known (nothing clipped below it)".into())
     );
     if let Some(camera) = a.name.strip_prefix("darktable:") {
-        show_darktable(camera)?;
+        show_darktable(camera, darktable)?;
     } else if v.rows.is_empty() {
         show_fits(&v);
     } else {
@@ -152,8 +153,8 @@ fn show(a: &ShowArgs) -> Result<()> {
 }
 
 /// The measured ISOs of a darktable camera: darktable's numbers and pgrf's.
-fn show_darktable(camera: &str) -> Result<()> {
-    let db = NoiseProfiles::open()?;
+fn show_darktable(camera: &str, darktable: Option<&Path>) -> Result<()> {
+    let db = NoiseProfiles::open(darktable)?;
     let cam = db.find(camera)?;
     let rows = cam.measured();
     if rows.is_empty() {

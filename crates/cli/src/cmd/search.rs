@@ -7,12 +7,13 @@
 use crate::progress::Bar;
 use anyhow::Result;
 use pgrf_app::search;
-use pgrf_nn::ops::Kernels;
 
 pub use pgrf_app::search::flags::SearchArgs;
 
-pub fn run(a: &SearchArgs, kernels: Kernels) -> Result<()> {
-    let req = a.request(kernels);
+pub fn run(a: &SearchArgs, g: &crate::Globals) -> Result<()> {
+    let kernels = g.kernels;
+    let mut req = a.request(kernels);
+    req.darktable = g.darktable.map(Into::into);
     let bar = Bar::new("search", 0, "network evaluations", a.json);
     let warn = |w: &str| {
         if !a.json {

@@ -95,25 +95,29 @@ pub struct SynthArgs {
     pub input: InputArgs,
 }
 
-pub fn run(a: &SynthArgs) -> Result<()> {
+pub fn run(a: &SynthArgs, g: &crate::Globals) -> Result<()> {
     if let Some(g) = a.png_gain {
         if !(g.is_finite() && g > 0.0) {
             bail!("--png-gain must be a positive number, got {g}");
         }
     }
-    pgrf_calib::synth::check(&config(a))?;
+    pgrf_calib::synth::check(&config(a, g))?;
     if a.masked_columns > 0 && FrameFormat::of_path(&a.output).ok() == Some(FrameFormat::Fits) {
         bail!("--masked-columns writes the DNG's MaskedAreas; a FITS output has no masked area (name the output .dng)");
     }
     let frame = a.input.open(&a.clean)?;
-    let made = synthesize(&frame, &a.clean, &config(a))?;
+    let made = synthesize(&frame, &a.clean, &config(a, g))?;
     // A FITS name gets FITS (an astronomy camera's frame stays one); any
     // other name the DNG synth has always written.
     match FrameFormat::of_path(&a.output) {
         Ok(FrameFormat::Fits) => write_fits_frame(&made.frame, &a.output)?,
         _ => write_dng(&made.frame, &a.output, &DngOptions::default())?,
     }
-    eprintln!("wrote {} {}", a.output.display(), made.summary(&config(a)));
+    eprintln!(
+        "wrote {} {}",
+        a.output.display(),
+        made.summary(&config(a, g))
+    );
     if let Some(png) = &a.png {
         let prev = render_preview(
             &made.frame,
@@ -131,7 +135,7 @@ pub fn run(a: &SynthArgs) -> Result<()> {
 }
 
 /// The flags as the recipe's settings.
-fn config(a: &SynthArgs) -> SynthConfig {
+fn config(a: &SynthArgs, g: &crate::Globals) -> SynthConfig {
     SynthConfig {
         profile: a.profile.clone(),
         ratio: a.ratio,
@@ -148,5 +152,6 @@ fn config(a: &SynthArgs) -> SynthConfig {
         seed: a.seed,
         brightened: a.brightened,
         masked_columns: a.masked_columns,
+        darktable: g.darktable.map(Into::into),
     }
 }

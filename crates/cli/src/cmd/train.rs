@@ -38,9 +38,11 @@ pub struct TrainArgs {
     pub print_config: bool,
 }
 
-pub fn run(a: &TrainArgs, kernels: pgrf_nn::ops::Kernels) -> Result<()> {
+pub fn run(a: &TrainArgs, g: &crate::Globals) -> Result<()> {
+    let kernels = g.kernels;
     let mut config = a.settings.merge(a.config.as_deref(), a.method)?;
     config.kernels = kernels;
+    config.darktable_profiles = g.darktable.map(Into::into);
     if a.print_config {
         print!("{}", config.to_toml());
         return Ok(());

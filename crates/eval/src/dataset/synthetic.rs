@@ -242,19 +242,22 @@ pub struct Synthetic {
 }
 
 impl Synthetic {
-    /// `kind` noise on camera profile `profile` (a built-in name or a JSON
-    /// file) at `conditions`; every ISO must be one the profile has
+    /// `kind` noise on camera profile `profile` (a built-in name, a JSON
+    /// file, `darktable:` a camera of `darktable`'s file or darktable's
+    /// install) at `conditions`; every ISO must be one the profile has
     /// parameters for, every ratio >= 1, and the list not empty.
     pub fn new(
         profile: &str,
         kind: ModelKind,
         conditions: Vec<Condition>,
         seed: u64,
+        darktable: Option<&Path>,
     ) -> Result<Synthetic> {
         if conditions.is_empty() {
             return err("no conditions: give at least one --iso and one --ratio");
         }
-        let camera = CameraProfile::load(profile).map_err(|e| DatasetError(e.to_string()))?;
+        let camera =
+            CameraProfile::load(profile, darktable).map_err(|e| DatasetError(e.to_string()))?;
         let mut specs = Vec::new();
         for c in &conditions {
             pgrf_noise::pair::check_ratio("ratio", c.ratio).map_err(DatasetError)?;
@@ -660,13 +663,13 @@ mod tests {
     #[test]
     fn isos_outside_the_profile_are_refused() {
         let c = |iso| vec![Condition { iso, ratio: 100.0 }];
-        assert!(Synthetic::new("sony-a7s2", ModelKind::Pgrf, c(1600), 0).is_ok());
-        let e = Synthetic::new("sony-a7s2", ModelKind::Pgrf, c(102400), 0)
+        assert!(Synthetic::new("sony-a7s2", ModelKind::Pgrf, c(1600), 0, None).is_ok());
+        let e = Synthetic::new("sony-a7s2", ModelKind::Pgrf, c(102400), 0, None)
             .unwrap_err()
             .to_string();
         assert!(e.contains("102400") && e.contains("outside"), "{e}");
-        assert!(Synthetic::new("sony-a7s2", ModelKind::Pgrf, vec![], 0).is_err());
-        assert!(Synthetic::new("no-such-camera", ModelKind::Pgrf, c(1600), 0).is_err());
+        assert!(Synthetic::new("sony-a7s2", ModelKind::Pgrf, vec![], 0, None).is_err());
+        assert!(Synthetic::new("no-such-camera", ModelKind::Pgrf, c(1600), 0, None).is_err());
     }
 
     #[test]
@@ -700,7 +703,7 @@ mod tests {
         // mean's standard error is ~0.00035, the tolerance 0.002 (~6 SE).
         let clean = Array3::from_elem((4, 64, 64), 0.3f32);
         let conds = grid(&[1600], &[100.0]);
-        let s = Synthetic::new("sony-a7s2", ModelKind::Pgrf, conds, 3).unwrap();
+        let s = Synthetic::new("sony-a7s2", ModelKind::Pgrf, conds, 3, None).unwrap();
         let (pair, _) = s
             .synthesize(clean.view(), [0, 0, 1, 1], "flat.dng", 0)
             .unwrap();
@@ -736,7 +739,7 @@ mod tests {
             0.05 + 0.1 * p as f32 + 0.01 * ((x + 2 * y) % 17) as f32
         });
         let conds = grid(&[1600, 6400], &[100.0, 200.0]);
-        let s = Synthetic::new("sony-a7s2", ModelKind::Pgrf, conds, 7).unwrap();
+        let s = Synthetic::new("sony-a7s2", ModelKind::Pgrf, conds, 7, None).unwrap();
         let rows = [0, 0, 1, 1];
         let (a, sa) = s.capture(clean.view(), rows, "a.dng", 0).unwrap();
         let (b, sb) = s.capture(clean.view(), rows, "a.dng", 0).unwrap();
@@ -767,7 +770,8 @@ mod tests {
         let (hi, _) = s.capture(clean.view(), rows, "a.dng", 2).unwrap();
         assert!(err(&hi) > err(&a), "{} vs {}", err(&hi), err(&a));
         // The same capture from a recipe with another seed base differs.
-        let s2 = Synthetic::new("sony-a7s2", ModelKind::Pgrf, s.conditions.clone(), 8).unwrap();
+        let s2 =
+            Synthetic::new("sony-a7s2", ModelKind::Pgrf, s.conditions.clone(), 8, None).unwrap();
         assert_ne!(s2.capture(clean.view(), rows, "a.dng", 0).unwrap().0, a);
     }
 
@@ -831,6 +835,7 @@ mod tests {
             ModelKind::Pgrf,
             grid(&[1600], &[100.0, 200.0]),
             0,
+            None,
         )
         .unwrap();
         // A 3x3 box blur per plane: a "denoiser" that must beat the input.

@@ -85,6 +85,9 @@ pub struct SyntheticSpec {
     pub uncalibrated: bool,
     /// Tell noise-aware methods the blind estimate, not the truth.
     pub blind_noise: bool,
+    /// darktable's noiseprofiles.json for a `darktable:` profile (None:
+    /// darktable's install is searched).
+    pub darktable: Option<std::path::PathBuf>,
 }
 
 impl Default for SyntheticSpec {
@@ -97,6 +100,7 @@ impl Default for SyntheticSpec {
             seed: 0,
             uncalibrated: false,
             blind_noise: false,
+            darktable: None,
         }
     }
 }
@@ -184,6 +188,7 @@ fn find_cases(cfg: &EvalConfig) -> Result<Cases, DatasetError> {
             s.noise,
             synthetic::grid(&s.isos, &s.ratios),
             s.seed,
+            s.darktable.as_deref(),
         )?;
         recipe.uncalibrated = s.uncalibrated;
         recipe.blind_noise = s.blind_noise;
