@@ -511,6 +511,47 @@ impl NoiseProfiles {
     }
 }
 
+impl Camera {
+    /// The measured ISOs, darktable's numbers and pgrf's, as `pgrf profiles
+    /// show darktable:CAMERA` prints them: a heading, column names, a row
+    /// per ISO.
+    pub fn measured_lines(&self) -> Vec<String> {
+        let mut lines = vec![
+            format!(
+                "table     measured ISOs (between them a and b are linear in ISO, as darktable interpolates); S = {VARIANCE_FACTOR} a, O = {VARIANCE_FACTOR} max(b, 0), K = S x {DN_RANGE}, sigma = sqrt(O) x {DN_RANGE}"
+            ),
+            format!(
+                "  {:>7}  {:>12}  {:>12}  {:>11}  {:>14}",
+                "ISO", "a (green)", "b (green)", "K (DN/e-)", "read sigma (DN)"
+            ),
+        ];
+        for m in &self.measured() {
+            let (k, sigma) = m.gain_and_read();
+            let mut notes = Vec::new();
+            if m.b < 0.0 {
+                notes.push("b < 0: no read noise resolved".to_string());
+            }
+            if m.entries > 1 {
+                notes.push(format!("{} entries averaged", m.entries));
+            }
+            lines.push(format!(
+                "  {:>7}  {:>12.5e}  {:>12.5e}  {:>11.5}  {:>14.4}{}",
+                m.iso,
+                m.a,
+                m.b,
+                k,
+                sigma,
+                if notes.is_empty() {
+                    String::new()
+                } else {
+                    format!("  ({})", notes.join("; "))
+                }
+            ));
+        }
+        lines
+    }
+}
+
 /// What a profile's source says of its fits: ISOs whose read noise came out
 /// negative (used as 0) and ISOs whose entries were averaged.
 fn fit_notes(measured: &[Measured]) -> Vec<String> {

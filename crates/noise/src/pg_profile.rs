@@ -305,6 +305,83 @@ pub struct ViewRow {
     pub black_level_error: f64,
 }
 
+impl ProfileView {
+    /// The profile's parameters as `pgrf profiles show` prints them: its
+    /// ISO table (and gain law), or, without one, its gain range, fits and
+    /// Tukey shapes.
+    pub fn parameter_lines(&self) -> Vec<String> {
+        if self.rows.is_empty() {
+            self.fit_lines()
+        } else {
+            self.table_lines()
+        }
+    }
+
+    fn table_lines(&self) -> Vec<String> {
+        let mut lines = vec![
+            format!("table     {} ISOs", self.rows.len()),
+            format!(
+                "  {:>7}  {:>11}  {:>15}  {:>12}  {:>16}  {:>14}  {:>12}",
+                "ISO",
+                "K (DN/e-)",
+                "read sigma (DN)",
+                "Tukey lambda",
+                "Tukey scale (DN)",
+                "row sigma (DN)",
+                "black error"
+            ),
+        ];
+        for r in &self.rows {
+            lines.push(format!(
+                "  {:>7}  {:>11.5}  {:>15.4}  {:>12.4}  {:>16.4}  {:>14.4}  {:>12.4}",
+                r.iso,
+                r.k,
+                r.sigma_gauss,
+                r.tukey_lambda,
+                r.sigma_tukey,
+                r.sigma_row,
+                r.black_level_error
+            ));
+        }
+        if let Some(k) = self.k_per_iso {
+            lines.push(format!("gain      K = {k} x ISO DN/e-"));
+        }
+        lines
+    }
+
+    fn fit_lines(&self) -> Vec<String> {
+        let mut lines = vec![format!(
+            "gain      no ISO table: K {:.5}..{:.5} DN/e-, drawn with ln K uniform (omit --iso){}",
+            self.k_range.0,
+            self.k_range.1,
+            self.k_per_iso
+                .map(|k| format!("; K = {k} x ISO at a given --iso"))
+                .unwrap_or_default()
+        )];
+        for (what, (slope, bias, sd)) in ["read (Gaussian)", "read (Tukey)", "row"]
+            .iter()
+            .zip(self.fits)
+        {
+            lines.push(format!(
+                "fit       {what:<16} ln sigma = {slope:.4} ln K {bias:+.4}, residual sd {sd:.4}"
+            ));
+        }
+        lines.push(format!(
+            "shapes    {} Tukey lambdas, {:.3}..{:.3}",
+            self.tukey_shapes.len(),
+            self.tukey_shapes
+                .iter()
+                .cloned()
+                .fold(f64::INFINITY, f64::min),
+            self.tukey_shapes
+                .iter()
+                .cloned()
+                .fold(f64::NEG_INFINITY, f64::max)
+        ));
+        lines
+    }
+}
+
 /// What `p` holds.
 pub fn view(p: &CameraProfile) -> ProfileView {
     let fit = |f: &LogFit| (f.slope, f.bias, f.sigma);

@@ -3,8 +3,8 @@
 
 use anyhow::{bail, Result};
 use clap::{Args, Subcommand};
-use pgrf_noise::darktable::{NoiseProfiles, DN_RANGE, VARIANCE_FACTOR};
-use pgrf_noise::pg_profile::{self, ProfileView};
+use pgrf_noise::darktable::NoiseProfiles;
+use pgrf_noise::pg_profile;
 use pgrf_noise::CameraProfile;
 use std::path::Path;
 
@@ -126,10 +126,10 @@ fn show(a: &ShowArgs, darktable: Option<&Path>) -> Result<()> {
     );
     if let Some(camera) = a.name.strip_prefix("darktable:") {
         show_darktable(camera, darktable)?;
-    } else if v.rows.is_empty() {
-        show_fits(&v);
     } else {
-        show_table(&v);
+        for line in v.parameter_lines() {
+            println!("{line}");
+        }
     }
     match &profile.dark_current {
         Some(d) => println!(
@@ -156,94 +156,11 @@ fn show(a: &ShowArgs, darktable: Option<&Path>) -> Result<()> {
 fn show_darktable(camera: &str, darktable: Option<&Path>) -> Result<()> {
     let db = NoiseProfiles::open(darktable)?;
     let cam = db.find(camera)?;
-    let rows = cam.measured();
-    if rows.is_empty() {
+    if cam.measured().is_empty() {
         bail!("darktable:{camera}: every entry is marked skip");
     }
-    println!(
-        "table     measured ISOs (between them a and b are linear in ISO, as darktable interpolates); S = {VARIANCE_FACTOR} a, O = {VARIANCE_FACTOR} max(b, 0), K = S x {DN_RANGE}, sigma = sqrt(O) x {DN_RANGE}"
-    );
-    println!(
-        "  {:>7}  {:>12}  {:>12}  {:>11}  {:>14}",
-        "ISO", "a (green)", "b (green)", "K (DN/e-)", "read sigma (DN)"
-    );
-    for m in &rows {
-        let (k, sigma) = m.gain_and_read();
-        let mut notes = Vec::new();
-        if m.b < 0.0 {
-            notes.push("b < 0: no read noise resolved".to_string());
-        }
-        if m.entries > 1 {
-            notes.push(format!("{} entries averaged", m.entries));
-        }
-        println!(
-            "  {:>7}  {:>12.5e}  {:>12.5e}  {:>11.5}  {:>14.4}{}",
-            m.iso,
-            m.a,
-            m.b,
-            k,
-            sigma,
-            if notes.is_empty() {
-                String::new()
-            } else {
-                format!("  ({})", notes.join("; "))
-            }
-        );
+    for line in cam.measured_lines() {
+        println!("{line}");
     }
     Ok(())
-}
-
-fn show_table(v: &ProfileView) {
-    println!("table     {} ISOs", v.rows.len());
-    println!(
-        "  {:>7}  {:>11}  {:>15}  {:>12}  {:>16}  {:>14}  {:>12}",
-        "ISO",
-        "K (DN/e-)",
-        "read sigma (DN)",
-        "Tukey lambda",
-        "Tukey scale (DN)",
-        "row sigma (DN)",
-        "black error"
-    );
-    for r in &v.rows {
-        println!(
-            "  {:>7}  {:>11.5}  {:>15.4}  {:>12.4}  {:>16.4}  {:>14.4}  {:>12.4}",
-            r.iso,
-            r.k,
-            r.sigma_gauss,
-            r.tukey_lambda,
-            r.sigma_tukey,
-            r.sigma_row,
-            r.black_level_error
-        );
-    }
-    if let Some(k) = v.k_per_iso {
-        println!("gain      K = {k} x ISO DN/e-");
-    }
-}
-
-fn show_fits(v: &ProfileView) {
-    println!(
-        "gain      no ISO table: K {:.5}..{:.5} DN/e-, drawn with ln K uniform (omit --iso){}",
-        v.k_range.0,
-        v.k_range.1,
-        v.k_per_iso
-            .map(|k| format!("; K = {k} x ISO at a given --iso"))
-            .unwrap_or_default()
-    );
-    for (what, (slope, bias, sd)) in ["read (Gaussian)", "read (Tukey)", "row"]
-        .iter()
-        .zip(v.fits)
-    {
-        println!("fit       {what:<16} ln sigma = {slope:.4} ln K {bias:+.4}, residual sd {sd:.4}");
-    }
-    println!(
-        "shapes    {} Tukey lambdas, {:.3}..{:.3}",
-        v.tukey_shapes.len(),
-        v.tukey_shapes.iter().cloned().fold(f64::INFINITY, f64::min),
-        v.tukey_shapes
-            .iter()
-            .cloned()
-            .fold(f64::NEG_INFINITY, f64::max)
-    );
 }
