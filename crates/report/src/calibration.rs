@@ -12,8 +12,12 @@
 //! embedded DejaVu Sans and the bitmaps are encoded by the `image` crate rather
 //! than by plotters.
 
+use crate::chart::{
+    bars, curve, dashed, line_key, marker, note_style, quiet_note_style, swatch_key,
+    swatch_line_key, thin_curve, Area, BARS, FIRST_OF_TWO, FIT, REFERENCE, REPORT, SECOND_OF_TWO,
+};
 use crate::error::ReportError;
-use crate::png::{encode_png, ensure_font, render_png, PlotResult, FONT_FAMILY};
+use crate::png::{encode_png, ensure_font, render_png, PlotResult};
 use ndarray::{s, ArrayView3};
 use plotters::coord::ranged1d::{Ranged, ValueFormatter};
 use plotters::coord::types::RangedCoordf64;
@@ -310,43 +314,35 @@ fn log_span(lo: f64, hi: f64, decades: f64) -> (f64, f64) {
 
 // ---------------------------------------------------------------------- PTC
 
-/// Log-log axes, because flat levels are normally spaced geometrically
-/// (exposure doubled per level): on linear axes the low-signal points, where
-/// read noise and the fit intercept matter, collapse into one corner. The
-/// straight shot-noise line still reads as slope one and K is annotated.
 /// A log-log chart on a report bitmap.
 type LogLogChart<'a, 'b> =
     ChartContext<'a, BitMapBackend<'b>, Cartesian2d<LogCoord<f64>, LogCoord<f64>>>;
 
 /// The chart of the plots against mean signal (photon transfer, SNR):
-/// log-log over `x` and `y`, the mesh drawn with the report's fonts and
+/// log-log over `x` and `y`, the mesh drawn in the report's style with
 /// `y_desc` on the vertical axis.
 fn log_log_chart<'a, 'b>(
-    root: &'a DrawingArea<BitMapBackend<'b>, plotters::coord::Shift>,
+    root: &'a Area<'b>,
     caption: &str,
     (x_lo, x_hi): (f64, f64),
     (y_lo, y_hi): (f64, f64),
     y_desc: &str,
 ) -> Result<LogLogChart<'a, 'b>, Box<dyn std::error::Error>> {
-    let mut chart = ChartBuilder::on(root)
-        .caption(caption, (FONT_FAMILY, 28))
-        .margin(20)
-        .x_label_area_size(60)
-        .y_label_area_size(90)
+    let mut chart = REPORT
+        .frame(root, caption)
         .build_cartesian_2d((x_lo..x_hi).log_scale(), (y_lo..y_hi).log_scale())?;
-    chart
-        .configure_mesh()
-        .x_desc("mean signal [DN]")
-        .y_desc(y_desc)
+    REPORT
+        .mesh(&mut chart, "mean signal [DN]", y_desc)
         .x_label_formatter(&fmt_tick)
         .y_label_formatter(&fmt_tick)
-        .axis_desc_style((FONT_FAMILY, 20))
-        .label_style((FONT_FAMILY, 16))
-        .light_line_style(RGBColor(235, 235, 235))
         .draw()?;
     Ok(chart)
 }
 
+/// Log-log axes, because flat levels are normally spaced geometrically
+/// (exposure doubled per level): on linear axes the low-signal points, where
+/// read noise and the fit intercept matter, collapse into one corner. The
+/// straight shot-noise line still reads as slope one and K is annotated.
 fn ptc_section(dir: &Path, data: &ReportData, title: &str) -> Result<Section, ReportError> {
     const HEADING: &str = "Photon transfer curve";
     let all = &data.ptc_points;
@@ -375,7 +371,21 @@ fn ptc_section(dir: &Path, data: &ReportData, title: &str) -> Result<Section, Re
         ));
     }
     let fit = data.ptc_fit.filter(|(k, b)| k.is_finite() && b.is_finite());
+    let (x, y) = ptc_axes(&pts, fit);
+    let path = dir.join(PTC_PNG);
+    let caption = format!("Photon transfer: {title}");
+    render_png(&path, (PLOT_W, PLOT_H), |root| {
+        draw_ptc(root, &caption, &pts, fit, x, y)
+    })?;
+    let text = ptc_text(fit, dropped);
+    Ok(Section::written(HEADING, PTC_PNG, path, text))
+}
 
+/// The photon-transfer axes, (x_lo, x_hi) and (y_lo, y_hi): the points and
+/// the fit line at both ends, a fifth of a decade of margin on each side to
+/// keep end points off the frame, and at least one decade each way to keep
+/// the axes labelled.
+fn ptc_axes(pts: &[(f64, f64)], fit: Option<(f64, f64)>) -> ((f64, f64), (f64, f64)) {
     let (mut x_lo, mut x_hi) = min_max(pts.iter().map(|p| p.0));
     let (mut y_lo, mut y_hi) = min_max(pts.iter().map(|p| p.1));
     if let Some((k, b)) = fit {
@@ -387,78 +397,77 @@ fn ptc_section(dir: &Path, data: &ReportData, title: &str) -> Result<Section, Re
             }
         }
     }
-    // A fifth of a decade of margin on each side keeps end points off the
-    // frame; at least one decade each way keeps the axes labelled.
     x_lo /= 1.6;
     x_hi *= 1.6;
     y_lo /= 1.6;
     y_hi *= 1.6;
-    let (x_lo, x_hi) = log_span(x_lo, x_hi, 1.0);
-    let (y_lo, y_hi) = log_span(y_lo, y_hi, 1.0);
+    (log_span(x_lo, x_hi, 1.0), log_span(y_lo, y_hi, 1.0))
+}
 
-    let path = dir.join(PTC_PNG);
-    let caption = format!("Photon transfer: {title}");
-    render_png(&path, (PLOT_W, PLOT_H), |root| {
-        let mut chart = log_log_chart(
-            root,
-            &caption,
-            (x_lo, x_hi),
-            (y_lo, y_hi),
-            "temporal variance [DN^2]",
-        )?;
+/// The photon-transfer chart: the fit line (if any) under the flat levels'
+/// points, the legend, and a note where no fit was given.
+fn draw_ptc(
+    root: &Area,
+    caption: &str,
+    pts: &[(f64, f64)],
+    fit: Option<(f64, f64)>,
+    (x_lo, x_hi): (f64, f64),
+    (y_lo, y_hi): (f64, f64),
+) -> PlotResult {
+    let mut chart = log_log_chart(
+        root,
+        caption,
+        (x_lo, x_hi),
+        (y_lo, y_hi),
+        "temporal variance [DN^2]",
+    )?;
+    if let Some((k, b)) = fit {
+        // Sampled densely because a line with an intercept is curved on
+        // log axes; samples where the model variance is not positive have
+        // no place on a log axis and are left out.
+        let n = 200;
+        let line: Vec<(f64, f64)> = (0..=n)
+            .map(|i| {
+                let t = i as f64 / n as f64;
+                x_lo * (x_hi / x_lo).powf(t)
+            })
+            .map(|x| (x, k * x + b))
+            .filter(|&(_, y)| y >= y_lo && y <= y_hi)
+            .collect();
+        let label = format!(
+            "fit var = K·mean + b:  K = {} DN/e⁻ ({} e⁻/DN),  b = {} DN²",
+            fmt_sig(k, 4),
+            electrons_per_dn(k),
+            fmt_sig(b, 4)
+        );
+        let anno = chart.draw_series(LineSeries::new(line, curve(FIT)))?;
+        line_key(anno, label, curve(FIT));
+    }
+    let anno = chart.draw_series(pts.iter().map(|&p| REPORT.point(p)))?;
+    REPORT.point_key(anno, format!("flat levels ({})", pts.len()));
+    REPORT.legend(&mut chart, SeriesLabelPosition::UpperLeft)?;
+    if fit.is_none() {
+        root.draw(&Text::new(
+            "no fit given",
+            (PLOT_W as i32 - 220, PLOT_H as i32 - 120),
+            note_style(18, FIT),
+        ))?;
+    }
+    Ok(())
+}
 
-        if let Some((k, b)) = fit {
-            // Sampled densely because a line with an intercept is curved on
-            // log axes; samples where the model variance is not positive have
-            // no place on a log axis and are left out.
-            let n = 200;
-            let line: Vec<(f64, f64)> = (0..=n)
-                .map(|i| {
-                    let t = i as f64 / n as f64;
-                    x_lo * (x_hi / x_lo).powf(t)
-                })
-                .map(|x| (x, k * x + b))
-                .filter(|&(_, y)| y >= y_lo && y <= y_hi)
-                .collect();
-            let label = format!(
-                "fit var = K·mean + b:  K = {} DN/e⁻ ({} e⁻/DN),  b = {} DN²",
-                fmt_sig(k, 4),
-                if k != 0.0 {
-                    fmt_sig(1.0 / k, 4)
-                } else {
-                    "inf".to_string()
-                },
-                fmt_sig(b, 4)
-            );
-            chart
-                .draw_series(LineSeries::new(line, RED.stroke_width(2)))?
-                .label(label)
-                .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], RED.stroke_width(2)));
-        }
-        chart
-            .draw_series(
-                pts.iter()
-                    .map(|&(x, y)| Circle::new((x, y), 5, BLUE.filled())),
-            )?
-            .label(format!("flat levels ({})", pts.len()))
-            .legend(|(x, y)| Circle::new((x + 12, y), 5, BLUE.filled()));
-        chart
-            .configure_series_labels()
-            .position(SeriesLabelPosition::UpperLeft)
-            .label_font((FONT_FAMILY, 18))
-            .background_style(WHITE.mix(0.9))
-            .border_style(BLACK)
-            .draw()?;
-        if fit.is_none() {
-            root.draw(&Text::new(
-                "no fit given",
-                (PLOT_W as i32 - 220, PLOT_H as i32 - 120),
-                (FONT_FAMILY, 18).into_font().color(&RED),
-            ))?;
-        }
-        Ok(())
-    })?;
+/// The conversion factor 1/K in e⁻/DN, "inf" for a gain of zero.
+fn electrons_per_dn(k: f64) -> String {
+    if k != 0.0 {
+        fmt_sig(1.0 / k, 4)
+    } else {
+        "inf".to_string()
+    }
+}
 
+/// summary.md's caption of the photon-transfer curve: how to read it, the
+/// fit, and how many points were left out.
+fn ptc_text(fit: Option<(f64, f64)>, dropped: usize) -> String {
     let mut text = String::from(
         "Temporal variance against mean signal per flat level, log-log. In the \
          shot-noise regime the points follow var = K·mean + b; the slope K is the \
@@ -470,11 +479,7 @@ fn ptc_section(dir: &Path, data: &ReportData, title: &str) -> Result<Section, Re
                 text,
                 " Fit: K = {} DN/e⁻ ({} e⁻/DN), intercept b = {} DN².",
                 fmt_sig(k, 4),
-                if k != 0.0 {
-                    fmt_sig(1.0 / k, 4)
-                } else {
-                    "inf".to_string()
-                },
+                electrons_per_dn(k),
                 fmt_sig(b, 4)
             );
         }
@@ -488,7 +493,28 @@ fn ptc_section(dir: &Path, data: &ReportData, title: &str) -> Result<Section, Re
             " {dropped} point(s) with non-positive or non-finite values are not shown."
         );
     }
-    Ok(Section::written(HEADING, PTC_PNG, path, text))
+    text
+}
+
+/// The SNR curves that follow from a photon-transfer fit (K, b) and the
+/// temporal noise variance without light, `dark` (DN²).
+struct SnrModel {
+    fit: Option<(f64, f64)>,
+    dark: f64,
+}
+
+impl SnrModel {
+    /// The model SNR(mu) = mu / sqrt(K mu + b + dark) at mean signal `x`.
+    fn model(&self, x: f64) -> Option<f64> {
+        let dark = self.dark;
+        self.fit
+            .map(|(k, b)| x / (k * x + b + dark).max(f64::MIN_POSITIVE).sqrt())
+    }
+
+    /// The ideal sensor's SNR sqrt(mu / K), shot noise alone, at `x`.
+    fn ideal(&self, x: f64) -> Option<f64> {
+        self.fit.map(|(k, _)| (x / k).sqrt())
+    }
 }
 
 /// EMVA 1288's SNR curve: each flat level's SNR, its mean over the square
@@ -512,82 +538,85 @@ fn snr_section(dir: &Path, data: &ReportData, title: &str) -> Result<Section, Re
             "Skipped: no flat level with a positive signal.".to_string(),
         ));
     }
-    let fit = data
-        .ptc_fit
-        .filter(|(k, b)| k.is_finite() && *k > 0.0 && b.is_finite());
+    let snr = SnrModel {
+        fit: data
+            .ptc_fit
+            .filter(|(k, b)| k.is_finite() && *k > 0.0 && b.is_finite()),
+        dark,
+    };
     let (x_lo, x_hi) = min_max(pts.iter().map(|p| p.0));
     let (x_lo, x_hi) = log_span(x_lo / 4.0, x_hi * 2.0, 1.0);
-    let model = |x: f64| fit.map(|(k, b)| x / (k * x + b + dark).max(f64::MIN_POSITIVE).sqrt());
-    let ideal = |x: f64| fit.map(|(k, _)| (x / k).sqrt());
     let mut ys: Vec<f64> = pts.iter().map(|p| p.1).collect();
     for x in [x_lo, x_hi] {
-        ys.extend(model(x));
-        ys.extend(ideal(x));
+        ys.extend(snr.model(x));
+        ys.extend(snr.ideal(x));
     }
     let (y_lo, y_hi) = min_max(ys.into_iter().filter(|y| *y > 0.0));
     let (y_lo, y_hi) = log_span(y_lo / 1.6, y_hi * 1.6, 1.0);
     let path = dir.join(SNR_PNG);
     let caption = format!("SNR: {title}");
     render_png(&path, (PLOT_W, PLOT_H), |root| {
-        let mut chart = log_log_chart(root, &caption, (x_lo, x_hi), (y_lo, y_hi), "SNR")?;
-        let xs: Vec<f64> = (0..=200)
-            .map(|i| x_lo * (x_hi / x_lo).powf(i as f64 / 200.0))
-            .collect();
-        if let Some((k, _)) = fit {
-            let curve = |f: &dyn Fn(f64) -> Option<f64>| -> Vec<(f64, f64)> {
-                xs.iter()
-                    .filter_map(|&x| f(x).map(|y| (x, y)))
-                    .filter(|&(_, y)| y >= y_lo && y <= y_hi)
-                    .collect()
-            };
-            chart
-                .draw_series(LineSeries::new(curve(&model), RED.stroke_width(2)))?
-                .label("model: mean / sqrt(K·mean + b + dark variance)")
-                .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], RED.stroke_width(2)));
-            let grey = RGBColor(120, 120, 120);
-            chart
-                .draw_series(LineSeries::new(curve(&ideal), grey.stroke_width(1)))?
-                .label(format!(
-                    "shot noise alone: sqrt(mean / K), K = {}",
-                    fmt_sig(k, 4)
-                ))
-                .legend(move |(x, y)| {
-                    PathElement::new(vec![(x, y), (x + 24, y)], grey.stroke_width(1))
-                });
-        }
-        chart
-            .draw_series(
-                pts.iter()
-                    .map(|&(x, y)| Circle::new((x, y), 5, BLUE.filled())),
-            )?
-            .label(format!("flat levels ({})", pts.len()))
-            .legend(|(x, y)| Circle::new((x + 12, y), 5, BLUE.filled()));
-        chart
-            .configure_series_labels()
-            .position(SeriesLabelPosition::UpperLeft)
-            .label_font((FONT_FAMILY, 18))
-            .background_style(WHITE.mix(0.9))
-            .border_style(BLACK)
-            .draw()?;
-        Ok(())
+        draw_snr(root, &caption, &pts, &snr, (x_lo, x_hi), (y_lo, y_hi))
     })?;
-    // The caption names only the lines drawn: without a photon-transfer
-    // fit (one flat level) there is no model and no shot-noise line.
-    let text = match fit {
+    Ok(Section::written(HEADING, SNR_PNG, path, snr_text(&snr)))
+}
+
+/// The SNR chart: the model and the shot-noise limit (with a fit) under
+/// the flat levels' points, and the legend.
+fn draw_snr(
+    root: &Area,
+    caption: &str,
+    pts: &[(f64, f64)],
+    snr: &SnrModel,
+    (x_lo, x_hi): (f64, f64),
+    (y_lo, y_hi): (f64, f64),
+) -> PlotResult {
+    let mut chart = log_log_chart(root, caption, (x_lo, x_hi), (y_lo, y_hi), "SNR")?;
+    let xs: Vec<f64> = (0..=200)
+        .map(|i| x_lo * (x_hi / x_lo).powf(i as f64 / 200.0))
+        .collect();
+    if let Some((k, _)) = snr.fit {
+        let sampled = |f: &dyn Fn(f64) -> Option<f64>| -> Vec<(f64, f64)> {
+            xs.iter()
+                .filter_map(|&x| f(x).map(|y| (x, y)))
+                .filter(|&(_, y)| y >= y_lo && y <= y_hi)
+                .collect()
+        };
+        let model = sampled(&|x| snr.model(x));
+        let anno = chart.draw_series(LineSeries::new(model, curve(FIT)))?;
+        line_key(
+            anno,
+            "model: mean / sqrt(K·mean + b + dark variance)",
+            curve(FIT),
+        );
+        let ideal = sampled(&|x| snr.ideal(x));
+        let anno = chart.draw_series(LineSeries::new(ideal, thin_curve(REFERENCE)))?;
+        let label = format!("shot noise alone: sqrt(mean / K), K = {}", fmt_sig(k, 4));
+        line_key(anno, label, thin_curve(REFERENCE));
+    }
+    let anno = chart.draw_series(pts.iter().map(|&p| REPORT.point(p)))?;
+    REPORT.point_key(anno, format!("flat levels ({})", pts.len()));
+    REPORT.legend(&mut chart, SeriesLabelPosition::UpperLeft)
+}
+
+/// summary.md's caption of the SNR plot. It names only the lines drawn:
+/// without a photon-transfer fit (one flat level) there is no model and no
+/// shot-noise line.
+fn snr_text(snr: &SnrModel) -> String {
+    match snr.fit {
         Some(_) => format!(
             "SNR of each flat level (mean over the temporal noise, {} DN² of it without light), \
              log-log, with the model from the photon-transfer fit and the shot-noise limit; at \
              low signal the dark noise pulls the levels below the shot-noise line.",
-            fmt_sig(dark, 4)
+            fmt_sig(snr.dark, 4)
         ),
         None => format!(
             "SNR of each flat level (mean over the temporal noise, {} DN² of it without light), \
              log-log. No model or shot-noise line: they need a photon-transfer fit, which takes \
              flats at two or more levels.",
-            fmt_sig(dark, 4)
+            fmt_sig(snr.dark, 4)
         ),
-    };
-    Ok(Section::written(HEADING, SNR_PNG, path, text))
+    }
 }
 
 fn min_max(it: impl Iterator<Item = f64>) -> (f64, f64) {
@@ -645,10 +674,10 @@ struct HistSpec<'s> {
     note: Option<String>,
 }
 
-fn draw_histogram(
-    root: &DrawingArea<BitMapBackend, plotters::coord::Shift>,
-    spec: &HistSpec,
-) -> PlotResult {
+/// The histogram chart: count axis (log or linear) to fit the tallest bar,
+/// the bars and medians, and the note about values not shown under the
+/// x-axis title.
+fn draw_histogram(root: &Area, spec: &HistSpec) -> PlotResult {
     let max_count = spec
         .series
         .iter()
@@ -656,14 +685,9 @@ fn draw_histogram(
         .max()
         .unwrap_or(1)
         .max(1) as f64;
-    let mut builder = ChartBuilder::on(root);
-    builder
-        .caption(&spec.caption, (FONT_FAMILY, 28))
-        .margin(20)
-        // Room under the x-axis title for the note about values not shown.
-        .margin_bottom(if spec.note.is_some() { 40 } else { 20 })
-        .x_label_area_size(60)
-        .y_label_area_size(90);
+    let mut builder = REPORT.frame(root, &spec.caption);
+    // Room under the x-axis title for the note about values not shown.
+    builder.margin_bottom(if spec.note.is_some() { 40 } else { 20 });
     if spec.log_y {
         // Bars start just below one so a single-pixel bin is still visible.
         let mut chart =
@@ -677,12 +701,14 @@ fn draw_histogram(
         root.draw(&Text::new(
             note.clone(),
             (110, PLOT_H as i32 - 30),
-            (FONT_FAMILY, 15).into_font().color(&RGBColor(90, 90, 90)),
+            quiet_note_style(15),
         ))?;
     }
     Ok(())
 }
 
+/// The mesh, the bars and the medians of a histogram whose bars start at
+/// `base` (where the count axis starts), and the legend.
 fn histogram_body<'a, Y>(
     chart: &mut ChartContext<'a, BitMapBackend<'a>, Cartesian2d<RangedCoordf64, Y>>,
     spec: &HistSpec,
@@ -692,50 +718,30 @@ where
     Y: Ranged<ValueType = f64> + ValueFormatter<f64>,
 {
     let y_top = chart.y_range().end;
-    chart
-        .configure_mesh()
-        .x_desc(spec.x_desc)
-        .y_desc("pixels")
+    REPORT
+        .mesh(chart, spec.x_desc, "pixels")
         .x_label_formatter(&fmt_tick)
         .y_label_formatter(&fmt_count)
-        .axis_desc_style((FONT_FAMILY, 20))
-        .label_style((FONT_FAMILY, 16))
-        .light_line_style(RGBColor(235, 235, 235))
         .draw()?;
     let overlay = spec.series.len() > 1;
     for s in spec.series {
         let n_bins = s.counts.len();
         let width = (spec.hi - spec.lo) / n_bins as f64;
-        // Overlaid histograms are translucent so neither hides the other.
-        let fill = if overlay {
-            s.color.mix(0.45).filled()
-        } else {
-            s.color.mix(0.8).filled()
-        };
-        let color = s.color;
-        chart
-            .draw_series(
-                s.counts
-                    .iter()
-                    .enumerate()
-                    .filter(|(_, &c)| c > 0)
-                    .map(|(i, &c)| {
-                        let x0 = spec.lo + i as f64 * width;
-                        Rectangle::new([(x0, base), (x0 + width, c as f64)], fill)
-                    }),
-            )?
-            .label(s.label.clone())
-            .legend(move |(x, y)| Rectangle::new([(x, y - 6), (x + 20, y + 6)], color.filled()));
+        let fill = bars(s.color, overlay);
+        let rects = s
+            .counts
+            .iter()
+            .enumerate()
+            .filter(|(_, &c)| c > 0)
+            .map(|(i, &c)| {
+                let x0 = spec.lo + i as f64 * width;
+                Rectangle::new([(x0, base), (x0 + width, c as f64)], fill)
+            });
+        let anno = chart.draw_series(rects)?;
+        swatch_key(anno, s.label.clone(), s.color);
     }
     median_lines(chart, spec, base, y_top, overlay)?;
-    chart
-        .configure_series_labels()
-        .position(legend_corner(spec.series))
-        .label_font((FONT_FAMILY, 18))
-        .background_style(WHITE.mix(0.9))
-        .border_style(BLACK)
-        .draw()?;
-    Ok(())
+    REPORT.legend(chart, legend_corner(spec.series))
 }
 
 /// Each series' median as a dashed vertical line, named in the legend.
@@ -753,29 +759,20 @@ where
         if !s.median.is_finite() {
             continue;
         }
-        let style = if overlay {
-            s.color.stroke_width(3)
-        } else {
-            RED.stroke_width(3)
-        };
-        chart
-            .draw_series(DashedLineSeries::new(
-                vec![(s.median, base), (s.median, y_top)],
-                10,
-                6,
-                style,
-            ))?
-            .label(format!(
-                "median {}{} {}",
-                if overlay {
-                    format!("({}) ", short_label(&s.label))
-                } else {
-                    String::new()
-                },
-                fmt_sig(s.median, 4),
-                spec.unit
-            ))
-            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], style));
+        let style = marker(if overlay { s.color } else { FIT });
+        let line = vec![(s.median, base), (s.median, y_top)];
+        let anno = chart.draw_series(dashed(line, style))?;
+        let label = format!(
+            "median {}{} {}",
+            if overlay {
+                format!("({}) ", short_label(&s.label))
+            } else {
+                String::new()
+            },
+            fmt_sig(s.median, 4),
+            spec.unit
+        );
+        swatch_line_key(anno, label, style);
     }
     Ok(())
 }
@@ -834,7 +831,7 @@ fn sigma_hist_section(dir: &Path, data: &ReportData, title: &str) -> Result<Sect
         } else {
             "R, G1, B, G2 pixels".to_string()
         },
-        color: RGBColor(40, 90, 170),
+        color: BARS,
         counts,
         median: p[1],
     }];
@@ -881,18 +878,7 @@ fn sigma_hist_section(dir: &Path, data: &ReportData, title: &str) -> Result<Sect
 /// law explains the dark signal of more pixels, which needs a shared axis.
 fn dark_r2_section(dir: &Path, data: &ReportData, title: &str) -> Result<Section, ReportError> {
     const HEADING: &str = "Dark-current fit quality";
-    let (sqrt, linear) = if data.dark_offset {
-        ("sqrt-law: y = a·√t + c", "linear: y = a·t + c")
-    } else {
-        ("sqrt-law: y = a·√t", "linear: y = a·t")
-    };
-    let laws: Vec<(&str, RGBColor, &ArrayView3<f32>)> = [
-        (sqrt, RGBColor(30, 110, 200), &data.r2_sqrt),
-        (linear, RGBColor(230, 120, 20), &data.r2_linear),
-    ]
-    .into_iter()
-    .filter_map(|(l, c, a)| a.as_ref().map(|a| (l, c, a)))
-    .collect();
+    let laws = dark_laws(data);
     if laws.is_empty() {
         return Ok(Section::skipped(
             HEADING,
@@ -946,17 +932,42 @@ fn dark_r2_section(dir: &Path, data: &ReportData, title: &str) -> Result<Section
     };
     let path = dir.join(DARK_R2_HIST_PNG);
     render_png(&path, (PLOT_W, PLOT_H), |root| draw_histogram(root, &spec))?;
+    let text = dark_r2_text(&series, note);
+    Ok(Section::written(HEADING, DARK_R2_HIST_PNG, path, text))
+}
+
+/// The dark-current laws that were fitted, each with its legend label
+/// (naming the offset term when the fits carry one), its colour and its
+/// R² map, the square-root law first.
+fn dark_laws<'d>(data: &'d ReportData) -> Vec<(&'static str, RGBColor, &'d ArrayView3<'d, f32>)> {
+    let (sqrt, linear) = if data.dark_offset {
+        ("sqrt-law: y = a·√t + c", "linear: y = a·t + c")
+    } else {
+        ("sqrt-law: y = a·√t", "linear: y = a·t")
+    };
+    [
+        (sqrt, FIRST_OF_TWO, &data.r2_sqrt),
+        (linear, SECOND_OF_TWO, &data.r2_linear),
+    ]
+    .into_iter()
+    .filter_map(|(l, c, a)| a.as_ref().map(|a| (l, c, a)))
+    .collect()
+}
+
+/// summary.md's caption of the R² histogram: how to read it, each law's
+/// median R², and the note about values not shown.
+fn dark_r2_text(series: &[HistSeries], note: Option<String>) -> String {
     let mut text = String::from(
         "Per-pixel R² of the dark-signal fits against exposure time; the law whose \
          histogram sits closer to 1 describes this sensor better.",
     );
-    for s in &series {
+    for s in series {
         let _ = write!(text, " Median R² {} ({}).", fmt_sig(s.median, 4), s.label);
     }
     if let Some(note) = note {
         let _ = write!(text, " Note: {note}.");
     }
-    Ok(Section::written(HEADING, DARK_R2_HIST_PNG, path, text))
+    text
 }
 
 // --------------------------------------------------------------------- maps
@@ -999,48 +1010,10 @@ fn map_section(
     let p = percentiles(&mut values, &[0.005, 0.995]);
     drop(values);
     let (lo, hi) = (p[0], p[1]);
-
-    let stride = (2 * h.max(w)).div_ceil(MAP_MAX_SIDE).max(1);
-    let (th, tw) = (h.div_ceil(stride), w.div_ceil(stride));
-    let (out_w, out_h) = (2 * tw, 2 * th);
-    let mut gray = vec![0u8; out_w * out_h];
-    for (t, &plane) in TILE_PLANES.iter().enumerate() {
-        let (oy, ox) = ((t / 2) * th, (t % 2) * tw);
-        let view = map.slice(s![plane, ..;stride, ..;stride]);
-        for ((y, x), &v) in view.indexed_iter() {
-            let (gy, gx) = if mono {
-                (2 * y + t / 2, 2 * x + t % 2)
-            } else {
-                (oy + y, ox + x)
-            };
-            gray[gy * out_w + gx] = to_gray(v, lo, hi);
-        }
-    }
+    let mosaic = Mosaic::new(map, lo, hi, mono);
     let path = dir.join(file);
-    let png = encode_png(
-        &gray,
-        out_w as u32,
-        out_h as u32,
-        image::ExtendedColorType::L8,
-    )
-    .map_err(|reason| ReportError::Encode {
-        file: path.display().to_string(),
-        reason,
-    })?;
-    pgrf_core::write_atomic(&path, &png)?;
-
-    let mut text = if mono {
-        format!(
-            "{} ({unit}) as grayscale, one pixel per photosite (monochrome sensor).",
-            capitalize(what)
-        )
-    } else {
-        format!(
-            "{} ({unit}) as grayscale, the four CFA planes tiled 2x2: R top-left, G1 top-right, \
-             G2 bottom-left, B bottom-right.",
-            capitalize(what),
-        )
-    };
+    mosaic.write(&path)?;
+    let mut text = map_layout_text(what, unit, mono);
     if hi > lo {
         let _ = write!(
             text,
@@ -1055,17 +1028,92 @@ fn map_section(
             fmt_sig(lo, 4)
         );
     }
-    if stride > 1 {
+    if mosaic.stride > 1 {
+        let (th, tw) = mosaic.tile;
         let _ = write!(
             text,
-            " Downsampled by striding, one pixel in {stride} along each axis \
-             ({h}x{w} per plane shown as {th}x{tw})."
+            " Downsampled by striding, one pixel in {} along each axis \
+             ({h}x{w} per plane shown as {th}x{tw}).",
+            mosaic.stride
         );
     }
     if non_finite > 0 {
         let _ = write!(text, " {non_finite} non-finite pixel(s) are shown black.");
     }
     Ok(Section::written(heading, file, path, text))
+}
+
+/// A map of four planes as one grayscale picture, strided down so that it
+/// is at most [`MAP_MAX_SIDE`] on a side.
+struct Mosaic {
+    /// 8-bit gray, row by row.
+    gray: Vec<u8>,
+    /// Width and height of the picture, pixels.
+    size: (usize, usize),
+    /// One pixel in `stride` along each axis is drawn.
+    stride: usize,
+    /// Height and width of one plane as drawn.
+    tile: (usize, usize),
+}
+
+impl Mosaic {
+    /// The planes of `map` (R, G1, B, G2) as 2x2 tiles in CFA position,
+    /// or, for a `mono` sensor, interleaved back into the sensor's pixel
+    /// grid; `lo` is drawn black and `hi` white (see [`to_gray`]).
+    fn new(map: &ArrayView3<f32>, lo: f64, hi: f64, mono: bool) -> Self {
+        let (h, w) = (map.shape()[1], map.shape()[2]);
+        let stride = (2 * h.max(w)).div_ceil(MAP_MAX_SIDE).max(1);
+        let (th, tw) = (h.div_ceil(stride), w.div_ceil(stride));
+        let (out_w, out_h) = (2 * tw, 2 * th);
+        let mut gray = vec![0u8; out_w * out_h];
+        for (t, &plane) in TILE_PLANES.iter().enumerate() {
+            let (oy, ox) = ((t / 2) * th, (t % 2) * tw);
+            let view = map.slice(s![plane, ..;stride, ..;stride]);
+            for ((y, x), &v) in view.indexed_iter() {
+                let (gy, gx) = if mono {
+                    (2 * y + t / 2, 2 * x + t % 2)
+                } else {
+                    (oy + y, ox + x)
+                };
+                gray[gy * out_w + gx] = to_gray(v, lo, hi);
+            }
+        }
+        Mosaic {
+            gray,
+            size: (out_w, out_h),
+            stride,
+            tile: (th, tw),
+        }
+    }
+
+    /// Encode as a grayscale PNG and write it atomically at `path`.
+    fn write(&self, path: &Path) -> Result<(), ReportError> {
+        let (w, h) = self.size;
+        let png = encode_png(&self.gray, w as u32, h as u32, image::ExtendedColorType::L8)
+            .map_err(|reason| ReportError::Encode {
+                file: path.display().to_string(),
+                reason,
+            })?;
+        pgrf_core::write_atomic(path, &png)?;
+        Ok(())
+    }
+}
+
+/// The first sentence of a map's caption: what is shown, in which unit,
+/// and where each plane is in the picture.
+fn map_layout_text(what: &str, unit: &str, mono: bool) -> String {
+    if mono {
+        format!(
+            "{} ({unit}) as grayscale, one pixel per photosite (monochrome sensor).",
+            capitalize(what)
+        )
+    } else {
+        format!(
+            "{} ({unit}) as grayscale, the four CFA planes tiled 2x2: R top-left, G1 top-right, \
+             G2 bottom-left, B bottom-right.",
+            capitalize(what),
+        )
+    }
 }
 
 fn to_gray(v: f32, lo: f64, hi: f64) -> u8 {

@@ -9,6 +9,7 @@
 #![warn(missing_docs)]
 
 mod calibration;
+mod chart;
 mod error;
 mod montage;
 mod png;

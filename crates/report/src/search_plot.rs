@@ -3,8 +3,12 @@
 //! reference lines and the chosen t2 marked, so a user sees how sharp the
 //! optimum is before trusting it.
 
-use crate::png::{ensure_font, render_png, FONT_FAMILY};
+use crate::chart::{
+    curve, dashed, dot_key, line_key, Area, ALTERNATIVE, BASELINE, FIT, MEASURED, SEARCH,
+};
+use crate::png::{ensure_font, render_png, PlotResult};
 use plotters::prelude::*;
+use std::ops::Range;
 use std::path::Path;
 
 /// One search's numbers.
@@ -29,7 +33,19 @@ pub fn write_search_plot(path: &Path, c: &SearchCurve) -> Result<(), String> {
         return Err("search plot needs one PSNR per t".into());
     }
     ensure_font().map_err(|e| e.to_string())?;
-    let finite = |v: f64| v.is_finite().then_some(v);
+    let (y0, y1) = psnr_range(c)?;
+    render_png(path, (900, 600), |root| draw_search(root, c, y0..y1)).map_err(|e| e.to_string())
+}
+
+/// A finite PSNR, or none: a diverged run's infinite or NaN PSNR would
+/// stretch the axis to nothing.
+fn finite(v: f64) -> Option<f64> {
+    v.is_finite().then_some(v)
+}
+
+/// The PSNR axis: every finite value drawn (curve and reference lines)
+/// with 8 % of their spread, at least 0.2 dB, as margin on either side.
+fn psnr_range(c: &SearchCurve) -> Result<(f64, f64), String> {
     let all: Vec<f64> = c
         .psnr
         .iter()
@@ -44,67 +60,47 @@ pub fn write_search_plot(path: &Path, c: &SearchCurve) -> Result<(), String> {
         return Err("search plot: no finite PSNR to draw".into());
     }
     let pad = ((hi - lo) * 0.08).max(0.2);
-    let (y0, y1) = (lo - pad, hi + pad);
-    render_png(path, (900, 600), |root| {
-        let mut chart = ChartBuilder::on(root)
-            .caption(c.title, (FONT_FAMILY, 24))
-            .margin(20)
-            .x_label_area_size(50)
-            .y_label_area_size(70)
-            .build_cartesian_2d(0.0f64..1.0f64, y0..y1)?;
-        chart
-            .configure_mesh()
-            .x_desc("second time t of the two-stage sampler")
-            .y_desc("PSNR [dB]")
-            .axis_desc_style((FONT_FAMILY, 18))
-            .label_style((FONT_FAMILY, 15))
-            .light_line_style(RGBColor(235, 235, 235))
-            .draw()?;
-        let pts: Vec<(f64, f64)> =
-            c.t.iter()
-                .zip(c.psnr)
-                .filter(|(_, p)| p.is_finite())
-                .map(|(&t, &p)| (t, p))
-                .collect();
-        chart
-            .draw_series(LineSeries::new(pts.clone(), BLUE.stroke_width(2)))?
-            .label("two-stage sampler")
-            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], BLUE.stroke_width(2)));
-        chart.draw_series(pts.iter().map(|&p| Circle::new(p, 4, BLUE.filled())))?;
-        if let Some(best) = pts.iter().find(|(t, _)| (*t - c.best_t).abs() < 1e-9) {
-            chart
-                .draw_series(std::iter::once(Circle::new(*best, 8, RED.filled())))?
-                .label(format!("t2 = {:.3} ({:.2} dB)", best.0, best.1))
-                .legend(|(x, y)| Circle::new((x + 12, y), 6, RED.filled()));
+    Ok((lo - pad, hi + pad))
+}
+
+/// The chart: the searched curve with its points, the chosen t2 marked,
+/// the reference levels dashed across, and the legend low on the right,
+/// under the curve's optimum.
+fn draw_search(root: &Area, c: &SearchCurve, psnr: Range<f64>) -> PlotResult {
+    let mut chart = SEARCH
+        .frame(root, c.title)
+        .build_cartesian_2d(0.0f64..1.0f64, psnr)?;
+    SEARCH
+        .mesh(
+            &mut chart,
+            "second time t of the two-stage sampler",
+            "PSNR [dB]",
+        )
+        .draw()?;
+    let pts: Vec<(f64, f64)> =
+        c.t.iter()
+            .zip(c.psnr)
+            .filter(|(_, p)| p.is_finite())
+            .map(|(&t, &p)| (t, p))
+            .collect();
+    let anno = chart.draw_series(LineSeries::new(pts.clone(), curve(MEASURED)))?;
+    line_key(anno, "two-stage sampler", curve(MEASURED));
+    chart.draw_series(pts.iter().map(|&p| SEARCH.point(p)))?;
+    if let Some(best) = pts.iter().find(|(t, _)| (*t - c.best_t).abs() < 1e-9) {
+        let anno = chart.draw_series(std::iter::once(Circle::new(*best, 8, FIT.filled())))?;
+        let label = format!("t2 = {:.3} ({:.2} dB)", best.0, best.1);
+        dot_key(anno, label, 6, FIT.filled());
+    }
+    for (v, label, colour) in [
+        (c.one_step, "one step (first stage only)", ALTERNATIVE),
+        (c.input, "noisy input", BASELINE),
+    ] {
+        if let Some(v) = v.and_then(finite) {
+            let anno = chart.draw_series(dashed(vec![(0.0, v), (1.0, v)], curve(colour)))?;
+            line_key(anno, format!("{label}: {v:.2} dB"), curve(colour));
         }
-        for (v, label, colour) in [
-            (c.one_step, "one step (first stage only)", GREEN),
-            (c.input, "noisy input", BLACK),
-        ] {
-            if let Some(v) = v.and_then(finite) {
-                chart
-                    .draw_series(DashedLineSeries::new(
-                        vec![(0.0, v), (1.0, v)],
-                        10,
-                        6,
-                        colour.stroke_width(2),
-                    ))?
-                    .label(format!("{label}: {v:.2} dB"))
-                    .legend(move |(x, y)| {
-                        PathElement::new(vec![(x, y), (x + 24, y)], colour.stroke_width(2))
-                    });
-            }
-        }
-        chart
-            .configure_series_labels()
-            .position(SeriesLabelPosition::LowerRight)
-            .label_font((FONT_FAMILY, 15))
-            .background_style(WHITE.mix(0.85))
-            .border_style(BLACK)
-            .draw()?;
-        Ok(())
-    })
-    .map_err(|e| e.to_string())
+    }
+    SEARCH.legend(&mut chart, SeriesLabelPosition::LowerRight)
 }
 
 #[cfg(test)]
