@@ -56,11 +56,29 @@ fn statvfs(p: &Path) -> Option<Room> {
     }
 }
 
+/// Writes the file system cannot take: what they are, their size and
+/// count, and the room there is, so that a caller can size what would fit.
+/// The message starts with `what` and gives both figures.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+#[error("{what} would write {files} files, about {}; the file system of {} has {}{} free", size(*bytes), at.display(), size(*room_bytes as f64), room_files.map(|f| format!(" and room for {f} files")).unwrap_or_default())]
+pub struct NoRoom {
+    /// The writes, in the caller's words ("--scenes 1000").
+    pub what: String,
+    /// Bytes they take in all.
+    pub bytes: f64,
+    /// Files they make.
+    pub files: u64,
+    /// Where they go.
+    pub at: std::path::PathBuf,
+    /// Free bytes there.
+    pub room_bytes: u64,
+    /// Free file slots there, when the file system counts them.
+    pub room_files: Option<u64>,
+}
+
 /// Refuse to write `files` files of about `bytes` in all under `at` when its
-/// file system has less room (no limit where the room cannot be read). The
-/// message starts with `what` and gives both figures, so the caller can add
-/// what would fit.
-pub fn check_room(what: &str, bytes: f64, files: u64, at: &Path) -> Result<(), String> {
+/// file system has less room (no limit where the room cannot be read).
+pub fn check_room(what: &str, bytes: f64, files: u64, at: &Path) -> Result<(), NoRoom> {
     let Some(room) = room(at) else {
         return Ok(());
     };
@@ -69,16 +87,14 @@ pub fn check_room(what: &str, bytes: f64, files: u64, at: &Path) -> Result<(), S
     if bytes_fit && files_fit {
         return Ok(());
     }
-    let free_files = room
-        .files
-        .map(|f| format!(" and room for {f} files"))
-        .unwrap_or_default();
-    Err(format!(
-        "{what} would write {files} files, about {}; the file system of {} has {}{free_files} free",
-        size(bytes),
-        at.display(),
-        size(room.bytes as f64)
-    ))
+    Err(NoRoom {
+        what: what.to_string(),
+        bytes,
+        files,
+        at: at.to_path_buf(),
+        room_bytes: room.bytes,
+        room_files: room.files,
+    })
 }
 
 /// `b` bytes in words: "3.2 GB", "2.1 PB".
@@ -115,6 +131,11 @@ mod tests {
         let dir = std::env::temp_dir();
         assert_eq!(check_room("a small write", 1000.0, 1, &dir), Ok(()));
         let e = check_room("--scenes 1000000000", 2.1e15, 16_000_000_000, &dir).unwrap_err();
+        assert_eq!(
+            (e.files, e.bytes, e.at.as_path()),
+            (16_000_000_000, 2.1e15, dir.as_path())
+        );
+        let e = e.to_string();
         assert!(
             e.starts_with("--scenes 1000000000 would write 16000000000 files, about 2.1 PB; the file system of"),
             "{e}"

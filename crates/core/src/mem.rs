@@ -41,21 +41,36 @@ fn address_space_left() -> Option<u64> {
     Some(soft.saturating_sub(mapped))
 }
 
+/// Bytes in a GiB.
+const GIB: f64 = 1024.0 * 1024.0 * 1024.0;
+
+/// Work whose memory cannot be had: what it is, the bytes it needs and
+/// those available, so that a caller can size what would fit (a smaller
+/// tile, fewer pairs). The message starts with `what` and gives both
+/// figures in GiB.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+#[error("{what} needs about {:.1} GiB of memory, {:.1} GiB is available", need / GIB, available / GIB)]
+pub struct NoMemory {
+    /// The work, in the caller's words ("--tile 512").
+    pub what: String,
+    /// Bytes it needs (may be infinite: a size that overflows).
+    pub need: f64,
+    /// Bytes the OS says are available.
+    pub available: f64,
+}
+
 /// Refuse work whose memory cannot be had: `need` bytes against what the
-/// OS says is available (no limit where that cannot be read). The message
-/// starts with `what` and gives both figures, so the caller can add what
-/// would fit.
-pub fn check_fits(what: &str, need: f64) -> Result<(), String> {
-    let avail = available_memory().map_or(f64::INFINITY, |b| b as f64);
-    if need.is_finite() && need <= avail {
+/// OS says is available (no limit where that cannot be read).
+pub fn check_fits(what: &str, need: f64) -> Result<(), NoMemory> {
+    let available = available_memory().map_or(f64::INFINITY, |b| b as f64);
+    if need.is_finite() && need <= available {
         return Ok(());
     }
-    const GIB: f64 = 1024.0 * 1024.0 * 1024.0;
-    Err(format!(
-        "{what} needs about {:.1} GiB of memory, {:.1} GiB is available",
-        need / GIB,
-        avail / GIB
-    ))
+    Err(NoMemory {
+        what: what.to_string(),
+        need,
+        available,
+    })
 }
 
 /// Peak resident memory of this process so far, in bytes (Linux's `VmHWM`);

@@ -53,18 +53,43 @@ impl std::fmt::Display for DeviceKind {
     }
 }
 
+/// Why the GPU cannot be used, each with its fix in the message: what a
+/// caller may act on (fall back to the CPU, or tell the user what to
+/// install).
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum DeviceError {
+    /// This build has no CUDA backend.
+    #[error(
+        "this pgrf was built without CUDA; rebuild with `cargo build --release --features cuda`"
+    )]
+    NotBuilt,
+    /// The NVIDIA driver (libcuda) cannot be loaded.
+    #[error("no NVIDIA driver found (libcuda.so.1 could not be loaded): install the driver, or add the folder that holds libcuda.so.1 to LD_LIBRARY_PATH")]
+    NoDriver,
+    /// CUDA's runtime compiler (libnvrtc) cannot be loaded.
+    #[error("CUDA's runtime compiler was not found (libnvrtc.so could not be loaded): install the CUDA toolkit, or add its lib64 folder to LD_LIBRARY_PATH")]
+    NoCompiler,
+    /// The driver loaded but did not start or count its devices (its
+    /// error, in words).
+    #[error("the NVIDIA driver {0}")]
+    DriverFailed(String),
+    /// The driver reports no device.
+    #[error("the NVIDIA driver reports no CUDA device")]
+    NoDevice,
+}
+
 impl DeviceKind {
     /// Refuses `cuda` in a build without the feature, or where the driver,
     /// NVRTC or a device is missing, with the fix in the message.
-    pub fn check_available(self) -> Result<(), String> {
+    pub fn check_available(self) -> Result<(), DeviceError> {
         if self == Self::Cuda && !cfg!(feature = "cuda") {
-            return Err("this pgrf was built without CUDA; rebuild with `cargo build --release --features cuda`".into());
+            return Err(DeviceError::NotBuilt);
         }
         #[cfg(feature = "cuda")]
         if self == Self::Cuda {
             // Asked once per process: commands check before their work and
             // again where they pick the backend.
-            static READY: std::sync::OnceLock<Result<(), String>> = std::sync::OnceLock::new();
+            static READY: std::sync::OnceLock<Result<(), DeviceError>> = std::sync::OnceLock::new();
             READY.get_or_init(cuda_ready).clone()?;
         }
         Ok(())
@@ -76,7 +101,7 @@ impl DeviceKind {
 /// either is missing or no device answers, so pgrf asks first.
 #[cfg(feature = "cuda")]
 #[allow(unsafe_code)]
-fn cuda_ready() -> Result<(), String> {
+fn cuda_ready() -> Result<(), DeviceError> {
     // SAFETY: these only try to open the libraries by name (dlopen).
     let (driver, nvrtc) = unsafe {
         (
@@ -85,19 +110,19 @@ fn cuda_ready() -> Result<(), String> {
         )
     };
     if !driver {
-        return Err("no NVIDIA driver found (libcuda.so.1 could not be loaded): install the driver, or add the folder that holds libcuda.so.1 to LD_LIBRARY_PATH".into());
+        return Err(DeviceError::NoDriver);
     }
     if !nvrtc {
-        return Err("CUDA's runtime compiler was not found (libnvrtc.so could not be loaded): install the CUDA toolkit, or add its lib64 folder to LD_LIBRARY_PATH".into());
+        return Err(DeviceError::NoCompiler);
     }
     cudarc::driver::result::init()
-        .map_err(|e| format!("the NVIDIA driver did not start: {e:?}"))?;
+        .map_err(|e| DeviceError::DriverFailed(format!("did not start: {e:?}")))?;
     match cudarc::driver::result::device::get_count() {
         Ok(n) if n > 0 => Ok(()),
-        Ok(_) => Err("the NVIDIA driver reports no CUDA device".into()),
-        Err(e) => Err(format!(
-            "the NVIDIA driver could not count its devices: {e:?}"
-        )),
+        Ok(_) => Err(DeviceError::NoDevice),
+        Err(e) => Err(DeviceError::DriverFailed(format!(
+            "could not count its devices: {e:?}"
+        ))),
     }
 }
 

@@ -72,9 +72,9 @@ pub enum NnError {
         /// What it holds and what was needed, in words (the whole message).
         message: String,
     },
-    /// A device this build cannot use (`cuda` without the feature).
-    #[error("{0}")]
-    Device(String),
+    /// A device this build or machine cannot use ([`crate::backend::DeviceError`]).
+    #[error(transparent)]
+    Device(#[from] crate::backend::DeviceError),
     /// Work that would not fit in the machine's memory, with the settings
     /// that make it smaller.
     #[error("{0}")]
@@ -122,9 +122,6 @@ pub enum NnError {
     /// twice).
     #[error(transparent)]
     Path(#[from] pgrf_core::paths::PathError),
-    /// A plot that could not be drawn or written (one line from pgrf-report).
-    #[error("{0}")]
-    Plot(String),
     /// Training diverged: the loss is no longer a finite number.
     #[error("loss became {loss} at step {step}; lower the learning rate or set clip_grad")]
     Diverged {

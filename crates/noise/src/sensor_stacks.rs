@@ -140,11 +140,8 @@ pub enum StacksError {
         exposures: Vec<f32>,
     },
     /// Frames of this size would not fit in memory.
-    #[error("{reason}; give a smaller size")]
-    Memory {
-        /// How much is needed and how much is available.
-        reason: String,
-    },
+    #[error("{0}; give a smaller size")]
+    Memory(pgrf_core::mem::NoMemory),
     /// The output names a file, not a folder.
     #[error("-o {} is a file; give a folder", output.display())]
     OutputIsFile {
@@ -247,7 +244,7 @@ impl StacksConfig {
             &format!("--width {} --height {}", self.width, self.height),
             self.width as f64 * self.height as f64 * 128.0,
         )
-        .map_err(|reason| StacksError::Memory { reason })
+        .map_err(StacksError::Memory)
     }
 
     /// Before any work: the output folder's parent exists, the output is

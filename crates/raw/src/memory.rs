@@ -35,9 +35,9 @@ pub fn check_frame(
         "{stage} its {width} x {height} frame ({:.0} MP)",
         width as f64 * height as f64 / 1e6
     );
-    pgrf_core::mem::check_fits(&what, need).map_err(|reason| RawError::Memory {
+    pgrf_core::mem::check_fits(&what, need).map_err(|e| RawError::Memory {
         path: file.to_path_buf(),
-        reason,
+        reason: e.to_string(),
     })
 }
 

@@ -16,6 +16,10 @@ pub enum ReportError {
     /// Data the report cannot show (wrong plane count, mismatched lengths).
     #[error("invalid report input: {0}")]
     Invalid(String),
+    /// Nothing a picture could show: no panels, or no finite value to plot
+    /// (a diverged model's PSNR); the sentence says which.
+    #[error("{0}")]
+    Empty(&'static str),
     /// The embedded font did not load.
     #[error("cannot load the embedded plot font: {0}")]
     Font(String),

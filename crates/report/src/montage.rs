@@ -3,6 +3,7 @@
 //! judged by eye as much as by PSNR, and only side by side at the same scale.
 
 use crate::png::{ensure_font, render_png, FONT_FAMILY};
+use crate::ReportError;
 use pgrf_raw::Preview;
 use plotters::prelude::*;
 use std::path::Path;
@@ -30,16 +31,16 @@ fn caption_size(text: &str, cell_width: usize) -> f64 {
 
 /// Write `rows` of panels as a grid (cells as large as the largest panel,
 /// white between them), atomically.
-pub fn write_montage(path: &Path, rows: &[Vec<Panel>]) -> Result<(), String> {
+pub fn write_montage(path: &Path, rows: &[Vec<Panel>]) -> Result<(), ReportError> {
     let panels = || rows.iter().flatten();
     let cw = panels().map(|p| p.image.width).max().unwrap_or(0);
     let ch = panels().map(|p| p.image.height).max().unwrap_or(0);
     let ncols = rows.iter().map(|r| r.len()).max().unwrap_or(0);
     if cw == 0 || ch == 0 || ncols == 0 {
-        return Err("nothing to put side by side".into());
+        return Err(ReportError::Empty("nothing to put side by side"));
     }
     let band = if panels().any(|p| !p.caption.is_empty()) {
-        ensure_font().map_err(|e| e.to_string())?;
+        ensure_font()?;
         CAPTION
     } else {
         0
@@ -74,7 +75,6 @@ pub fn write_montage(path: &Path, rows: &[Vec<Panel>]) -> Result<(), String> {
         }
         Ok(())
     })
-    .map_err(|e| e.to_string())
 }
 
 #[cfg(test)]

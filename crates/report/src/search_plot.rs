@@ -7,6 +7,7 @@ use crate::chart::{
     curve, dashed, dot_key, line_key, Area, ALTERNATIVE, BASELINE, FIT, MEASURED, SEARCH,
 };
 use crate::png::{ensure_font, render_png, PlotResult};
+use crate::ReportError;
 use plotters::prelude::*;
 use std::ops::Range;
 use std::path::Path;
@@ -28,13 +29,13 @@ pub struct SearchCurve<'a> {
 }
 
 /// Draw `c` as a PNG at `path` (written atomically); errors are one line.
-pub fn write_search_plot(path: &Path, c: &SearchCurve) -> Result<(), String> {
+pub fn write_search_plot(path: &Path, c: &SearchCurve) -> Result<(), ReportError> {
     if c.t.is_empty() || c.t.len() != c.psnr.len() {
-        return Err("search plot needs one PSNR per t".into());
+        return Err(ReportError::Empty("search plot needs one PSNR per t"));
     }
-    ensure_font().map_err(|e| e.to_string())?;
+    ensure_font()?;
     let (y0, y1) = psnr_range(c)?;
-    render_png(path, (900, 600), |root| draw_search(root, c, y0..y1)).map_err(|e| e.to_string())
+    render_png(path, (900, 600), |root| draw_search(root, c, y0..y1))
 }
 
 /// A finite PSNR, or none: a diverged run's infinite or NaN PSNR would
@@ -45,7 +46,7 @@ fn finite(v: f64) -> Option<f64> {
 
 /// The PSNR axis: every finite value drawn (curve and reference lines)
 /// with 8 % of their spread, at least 0.2 dB, as margin on either side.
-fn psnr_range(c: &SearchCurve) -> Result<(f64, f64), String> {
+fn psnr_range(c: &SearchCurve) -> Result<(f64, f64), ReportError> {
     let all: Vec<f64> = c
         .psnr
         .iter()
@@ -57,7 +58,7 @@ fn psnr_range(c: &SearchCurve) -> Result<(f64, f64), String> {
     let lo = all.iter().copied().fold(f64::INFINITY, f64::min);
     let hi = all.iter().copied().fold(f64::NEG_INFINITY, f64::max);
     if !lo.is_finite() {
-        return Err("search plot: no finite PSNR to draw".into());
+        return Err(ReportError::Empty("search plot: no finite PSNR to draw"));
     }
     let pad = ((hi - lo) * 0.08).max(0.2);
     Ok((lo - pad, hi + pad))

@@ -91,7 +91,7 @@ pub enum DemoError {
         /// The file.
         path: PathBuf,
         /// Why not.
-        reason: String,
+        reason: pgrf_report::ReportError,
     },
     /// Decoding, packing or previewing a frame.
     #[error(transparent)]

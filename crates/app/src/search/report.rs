@@ -50,7 +50,7 @@ pub(super) fn write_plot(req: &SearchRequest, out: &SearchOutcome) -> Result<()>
             best_t: out.best_t2,
         },
     )
-    .map_err(NnError::Plot)
+    .map_err(|e| NnError::Caller(Box::new(e)))
 }
 
 impl Searched {

@@ -63,7 +63,7 @@ pub enum EvalError {
         /// The picture.
         path: PathBuf,
         /// Why not.
-        reason: String,
+        reason: pgrf_report::ReportError,
     },
 }
 
