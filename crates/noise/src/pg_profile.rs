@@ -216,7 +216,7 @@ pub fn from_dng(spec: &str) -> Result<CameraProfile> {
         .map_err(|e| bad(e.to_string()))?;
     let planes = if frame.mono { 1 } else { 3 };
     let pairs = pgrf_raw::container::noise_profile(&bytes, planes)
-        .map_err(bad)?
+        .map_err(|e| bad(e.to_string()))?
         .ok_or_else(|| bad("the file has no NoiseProfile tag (51041)".into()))?;
     let iso = frame.iso.ok_or_else(|| {
         bad("the file records no ISO, and its NoiseProfile holds at one ISO only".into())

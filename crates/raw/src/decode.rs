@@ -61,7 +61,10 @@ fn decode_source(
     if crate::fits::is_fits(source.buf()) {
         return crate::fits_frame::frame_from_fits(path, source.buf(), overrides);
     }
-    crate::container::check(source.buf()).map_err(|reason| RawError::decode(path, reason))?;
+    crate::container::check(source.buf()).map_err(|source| RawError::Container {
+        path: path.to_path_buf(),
+        source,
+    })?;
     let (image, exif) = quietly(|| -> std::result::Result<_, Stop> {
         let decoder = rawler::get_decoder(&source).map_err(|e| Stop::Decoder(e.to_string()))?;
         let params = RawDecodeParams::default();

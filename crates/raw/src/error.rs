@@ -28,6 +28,16 @@ pub enum RawError {
         /// The decoder's complaint, on one line.
         reason: String,
     },
+    /// The file's structure is refused before decoding: cut short,
+    /// malformed or contradicting itself ([`crate::container::Cause`] says
+    /// which, for callers that act on it).
+    #[error("{path}: cannot decode: {source}")]
+    Container {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong with its structure.
+        source: crate::container::ContainerError,
+    },
     /// A readable file of a kind pgrf does not handle: linear (demosaiced) or
     /// monochrome data, X-Trans, floating-point samples.
     #[error("{path}: unsupported: {reason}")]

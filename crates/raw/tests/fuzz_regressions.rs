@@ -90,7 +90,8 @@ fn every_fuzz_regression_is_refused_by_the_container_check() {
         assert!(bytes.len() <= 64 * 1024, "{name}: keep regressions small");
         let reason = container::check(&bytes)
             .err()
-            .unwrap_or_else(|| panic!("{name}: the container check accepted it"));
+            .unwrap_or_else(|| panic!("{name}: the container check accepted it"))
+            .to_string();
         assert!(reason.contains(want), "{name}: {reason}");
         let err = decode_bytes(Path::new(name), &bytes, &LevelOverrides::default())
             .err()

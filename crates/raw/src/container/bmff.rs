@@ -8,6 +8,7 @@ use super::limits::{too_many_pixels, MAX_BOXES};
 use super::makernote::Notes;
 use super::order::Order;
 use super::tiff::{check_tiff, SUB_IFD_TAGS};
+use super::ContainerError;
 
 /// More CMT boxes than a CR3 has (4): rawler parses the TIFF structure of
 /// each it meets, and so does this walk.
@@ -157,7 +158,7 @@ struct Trak {
 /// only for what would make rawler loop or allocate.
 ///
 /// [`MAX_PIXELS`]: super::MAX_PIXELS
-pub(super) fn check_bmff(bytes: &[u8]) -> Result<(), String> {
+pub(super) fn check_bmff(bytes: &[u8]) -> Result<(), ContainerError> {
     let len = bytes.len() as u64;
     let bmff = bytes.get(4..8) == Some(&b"ftyp"[..]);
     let mut walk = Boxes {
@@ -170,9 +171,9 @@ pub(super) fn check_bmff(bytes: &[u8]) -> Result<(), String> {
     while at < len {
         let Some(h) = BoxHead::read(bytes, at) else {
             if bmff {
-                return Err(format!(
+                return Err(ContainerError::malformed(format!(
                     "malformed BMFF structure: the box header at byte {at} runs past the end of the file's {len} bytes"
-                ));
+                )));
             }
             break;
         };
@@ -183,11 +184,11 @@ pub(super) fn check_bmff(bytes: &[u8]) -> Result<(), String> {
             break;
         }
         let Some(end) = at.checked_add(h.size) else {
-            return Err(format!(
+            return Err(ContainerError::malformed(format!(
                 "malformed BMFF structure: the {} box at byte {at} claims {} bytes, beyond any file (rawler would wrap around to an earlier box and loop)",
                 h.name(),
                 h.size
-            ));
+            )));
         };
         if bmff {
             walk.inside(&h, None)?;
@@ -216,49 +217,49 @@ struct Boxes<'a> {
 }
 
 impl Boxes<'_> {
-    fn count(&mut self) -> Result<(), String> {
+    fn count(&mut self) -> Result<(), ContainerError> {
         self.count += 1;
         if self.count > MAX_BOXES {
-            return Err(format!(
+            return Err(ContainerError::malformed(format!(
                 "malformed BMFF structure: more than {MAX_BOXES} boxes"
-            ));
+            )));
         }
         Ok(())
     }
 
     /// `h` is no smaller than its header and lies inside `parent` (if any)
     /// and the file.
-    fn inside(&self, h: &BoxHead, parent: Option<&BoxHead>) -> Result<(), String> {
+    fn inside(&self, h: &BoxHead, parent: Option<&BoxHead>) -> Result<(), ContainerError> {
         let len = self.bytes.len() as u64;
         let name = h.name();
         if h.size < h.len {
-            return Err(format!(
+            return Err(ContainerError::malformed(format!(
                 "malformed BMFF structure: the {name} box at byte {} claims {} bytes, less than its {}-byte header",
                 h.at, h.size, h.len
-            ));
+            )));
         }
         let end = h.at.saturating_add(h.size);
         if let Some(p) = parent.filter(|p| end > p.at.saturating_add(p.size)) {
-            return Err(format!(
+            return Err(ContainerError::malformed(format!(
                 "malformed BMFF structure: the {name} box at byte {} ({} bytes) runs past the end of the {} box at byte {}",
                 h.at,
                 h.size,
                 p.name(),
                 p.at
-            ));
+            )));
         }
         if end > len {
-            return Err(format!(
+            return Err(ContainerError::malformed(format!(
                 "malformed BMFF structure: the {name} box at byte {} ({} bytes) runs past the end of the file's {len} bytes",
                 h.at, h.size
-            ));
+            )));
         }
         Ok(())
     }
 
     /// Walk the children of `parent`, a box of kind `kind`, the way rawler
     /// reads them.
-    fn children(&mut self, kind: BoxKind, parent: &BoxHead) -> Result<(), String> {
+    fn children(&mut self, kind: BoxKind, parent: &BoxHead) -> Result<(), ContainerError> {
         let len = self.bytes.len() as u64;
         let end = parent.at.saturating_add(parent.size);
         let mut at = parent.at + parent.len + kind.fields();
@@ -269,9 +270,9 @@ impl Boxes<'_> {
                     None => format!("the file's {len} bytes"),
                     Some(_) => format!("the {} box at byte {}", parent.name(), parent.at),
                 };
-                return Err(format!(
+                return Err(ContainerError::malformed(format!(
                     "malformed BMFF structure: the box header at byte {at} runs past the end of {what}"
-                ));
+                )));
             };
             self.count()?;
             self.inside(h, Some(parent))?;
@@ -306,7 +307,7 @@ impl Boxes<'_> {
 
     /// Check a box rawler reads more of than its header, `h`, inside a box
     /// of kind `parent`; it lies inside the file.
-    fn leaf(&mut self, parent: BoxKind, h: &BoxHead) -> Result<(), String> {
+    fn leaf(&mut self, parent: BoxKind, h: &BoxHead) -> Result<(), ContainerError> {
         let bytes = self.bytes;
         let from = (h.at + h.len) as usize;
         let data = &bytes[from..(h.at + h.size) as usize];
@@ -338,10 +339,10 @@ impl Boxes<'_> {
                     _ => table(h, data, 12, 0)?,
                 };
                 if n as u64 > len {
-                    return Err(format!(
+                    return Err(ContainerError::malformed(format!(
                         "malformed BMFF structure: the stsz box at byte {} claims {n} samples, more than the file's {len} bytes could hold",
                         h.at
-                    ));
+                    )));
                 }
                 if let (Some(t), Some(size)) = (trak, size) {
                     t.stsz = Some((size, n, from + 12));
@@ -355,27 +356,28 @@ impl Boxes<'_> {
             }
             (BoxKind::Craw, b"CMP1") => {
                 let (Some(w), Some(ht)) = (be.u32(data, 8), be.u32(data, 12)) else {
-                    return Err(format!(
+                    return Err(ContainerError::malformed(format!(
                         "malformed BMFF structure: the CMP1 box at byte {} is too short to hold the image's dimensions",
                         h.at
-                    ));
+                    )));
                 };
                 if let Some(what) = too_many_pixels(w as u64, ht as u64) {
-                    return Err(format!(
+                    return Err(ContainerError::damaged_header(format!(
                         "the CR3's CMP1 box at byte {} claims {what}: its header is damaged",
                         h.at
-                    ));
+                    )));
                 }
             }
             (BoxKind::Cr3Desc, b"CMT1" | b"CMT2" | b"CMT3" | b"CMT4") => {
                 self.cmt += 1;
                 if self.cmt > MAX_CMT_BOXES {
-                    return Err(format!(
+                    return Err(ContainerError::malformed(format!(
                         "malformed CR3 structure: more than {MAX_CMT_BOXES} CMT boxes"
-                    ));
+                    )));
                 }
-                check_tiff(data, &SUB_IFD_TAGS, Notes::Skip, true)
-                    .map_err(|e| format!("{e} (in the CR3's {} box at byte {})", h.name(), h.at))?;
+                check_tiff(data, &SUB_IFD_TAGS, Notes::Skip, true).map_err(|e| {
+                    e.within(format!("in the CR3's {} box at byte {}", h.name(), h.at))
+                })?;
             }
             _ => {}
         }
@@ -387,7 +389,7 @@ impl Boxes<'_> {
     /// found the way `StblBox::get_sample_offset(1)` finds it (stbl.rs and
     /// stsc.rs, with the wrapping arithmetic of a release build; where
     /// rawler would panic, it reads nothing).
-    fn check_ctmd(&self, trak: &Trak) -> Result<(), String> {
+    fn check_ctmd(&self, trak: &Trak) -> Result<(), ContainerError> {
         let (true, Some((sc_at, sc_n)), Some((size, n, sizes_at)), Some((co_at, co_n))) =
             (trak.ctmd, trak.stsc, trak.stsz, trak.co64)
         else {
@@ -451,21 +453,21 @@ impl Boxes<'_> {
 /// A box's table: a 32-bit big-endian entry count ending at byte `fixed` of
 /// its contents `data`, then entries of `per` bytes; rawler reserves room
 /// for them all before reading any. The count.
-fn table(h: &BoxHead, data: &[u8], fixed: usize, per: u64) -> Result<u32, String> {
+fn table(h: &BoxHead, data: &[u8], fixed: usize, per: u64) -> Result<u32, ContainerError> {
     let Some(n) = Order(false).u32(data, fixed - 4) else {
-        return Err(format!(
+        return Err(ContainerError::malformed(format!(
             "malformed BMFF structure: the {} box at byte {} is too short to hold its entry count",
             h.name(),
             h.at
-        ));
+        )));
     };
     if fixed as u64 + per * n as u64 > data.len() as u64 {
-        return Err(format!(
+        return Err(ContainerError::malformed(format!(
             "malformed BMFF structure: the {} box at byte {} lists {n} entries, more than its {} bytes hold",
             h.name(),
             h.at,
             h.size
-        ));
+        )));
     }
     Ok(n)
 }
@@ -477,7 +479,7 @@ fn table(h: &BoxHead, data: &[u8], fixed: usize, per: u64) -> Result<u32, String
 /// the MakerNote (0x927C) blocks of records 7, 8 and 9 as TIFF (decoders/
 /// cr3.rs, `Ctmd::new` and `read_cr3_metadata`; a second block with the
 /// same tag in a record is a panic before any is parsed).
-fn check_ctmd_records(sample: &[u8], at: usize) -> Result<(), String> {
+fn check_ctmd_records(sample: &[u8], at: usize) -> Result<(), ContainerError> {
     let le = Order(true);
     let mut last = [None; 3];
     let mut p = 0;
@@ -487,10 +489,10 @@ fn check_ctmd_records(sample: &[u8], at: usize) -> Result<(), String> {
         };
         let left = sample.len() - p;
         if size < 12 || size as usize > left {
-            return Err(format!(
+            return Err(ContainerError::malformed(format!(
                 "malformed CR3 metadata: the CTMD record at byte {} claims {size} bytes, but its sample has {left} left",
                 at + p
-            ));
+            )));
         }
         if let 7..=9 = kind {
             last[kind as usize - 7] = Some((p, size as usize));
@@ -514,7 +516,12 @@ fn check_ctmd_records(sample: &[u8], at: usize) -> Result<(), String> {
             if tiff && !seen.contains(&tag) {
                 seen.push(tag);
                 check_tiff(&payload[q + 8..q + sz], &SUB_IFD_TAGS, Notes::Skip, false).map_err(
-                    |e| format!("{e} (in the CR3's CTMD record {kind} at byte {})", at + p),
+                    |e| {
+                        e.within(format!(
+                            "in the CR3's CTMD record {kind} at byte {}",
+                            at + p
+                        ))
+                    },
                 )?;
             }
             q += sz;
@@ -607,12 +614,16 @@ mod tests {
         let good = || cr3(&good_tiff, 6000, 4000, 1, &ctmd(&good_tiff));
         assert_eq!(check(&good()), Ok(()));
         // The CMT and CTMD TIFF structures are walked.
-        let e = check(&cr3(&bad_tiff, 6000, 4000, 1, &ctmd(&good_tiff))).unwrap_err();
+        let e = check(&cr3(&bad_tiff, 6000, 4000, 1, &ctmd(&good_tiff)))
+            .unwrap_err()
+            .to_string();
         assert!(
             e.contains("past the end") && e.contains("in the CR3's CMT1 box at byte"),
             "{e}"
         );
-        let e = check(&cr3(&good_tiff, 6000, 4000, 1, &ctmd(&bad_tiff))).unwrap_err();
+        let e = check(&cr3(&good_tiff, 6000, 4000, 1, &ctmd(&bad_tiff)))
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("in the CR3's CTMD record 8 at byte"), "{e}");
         // Only the first IFD of a CTMD block is read (Canon's next-IFD
         // offsets there are not offsets).
@@ -627,18 +638,24 @@ mod tests {
         // A CTMD record of 2 GB in a sample of 40 bytes.
         let mut huge = ctmd(&good_tiff);
         huge[16..20].copy_from_slice(&(1u32 << 31).to_le_bytes());
-        let e = check(&cr3(&good_tiff, 1, 1, 1, &huge)).unwrap_err();
+        let e = check(&cr3(&good_tiff, 1, 1, 1, &huge))
+            .unwrap_err()
+            .to_string();
         assert!(
             e.contains("CTMD record at byte") && e.contains("claims 2147483648 bytes"),
             "{e}"
         );
         // A 100,000 x 100,000 image, and an stts of 2^32 - 1 entries.
-        let e = check(&cr3(&good_tiff, 100_000, 100_000, 1, &ctmd(&good_tiff))).unwrap_err();
+        let e = check(&cr3(&good_tiff, 100_000, 100_000, 1, &ctmd(&good_tiff)))
+            .unwrap_err()
+            .to_string();
         assert!(
             e.contains("CMP1 box") && e.contains("10000 megapixels"),
             "{e}"
         );
-        let e = check(&cr3(&good_tiff, 1, 1, u32::MAX, &ctmd(&good_tiff))).unwrap_err();
+        let e = check(&cr3(&good_tiff, 1, 1, u32::MAX, &ctmd(&good_tiff)))
+            .unwrap_err()
+            .to_string();
         assert!(
             e.contains("the stts box at byte") && e.contains("lists 4294967295 entries"),
             "{e}"
@@ -648,6 +665,7 @@ mod tests {
         cut.truncate(cut.len() - 1);
         assert!(check(&cut)
             .unwrap_err()
+            .to_string()
             .contains("runs past the end of the file's"));
     }
 
@@ -664,13 +682,13 @@ mod tests {
         let mut b = good.clone();
         let at = find(&b, b"stsz");
         b[at + 16..at + 20].copy_from_slice(&u32::MAX.to_be_bytes());
-        let e = check(&b).unwrap_err();
+        let e = check(&b).unwrap_err().to_string();
         assert!(e.contains("claims 4294967295 samples"), "{e}");
         // A box of size 0 inside a container: rawler reads it forever.
         let mut b = good.clone();
         let at = find(&b, b"mdia");
         b[at..at + 4].copy_from_slice(&0u32.to_be_bytes());
-        let e = check(&b).unwrap_err();
+        let e = check(&b).unwrap_err().to_string();
         assert!(
             e.contains(&format!("the mdia box at byte {at} claims 0 bytes")),
             "{e}"
@@ -680,7 +698,7 @@ mod tests {
         let at = find(&b, b"stbl");
         let n = u32::from_be_bytes(b[at..at + 4].try_into().unwrap());
         b[at..at + 4].copy_from_slice(&(n + 1).to_be_bytes());
-        let e = check(&b).unwrap_err();
+        let e = check(&b).unwrap_err().to_string();
         assert!(e.contains("runs past the end of the minf box"), "{e}");
         // Another uuid box in moov is not skipped by rawler: what it holds
         // is read as moov's boxes, here one of size 0.
@@ -689,7 +707,7 @@ mod tests {
         inner.extend_from_slice(b"\0\0\0\0free");
         let mut b = bx(b"ftyp", b"crx \0\0\0\x01");
         b.extend_from_slice(&bx(b"moov", &inner));
-        let e = check(&b).unwrap_err();
+        let e = check(&b).unwrap_err().to_string();
         assert!(e.contains("the free box at byte 48 claims 0 bytes"), "{e}");
         // rawler parses every CMT box it meets.
         let t = tiff(&[(256, 3, 1, 4)], 0, &[]);
@@ -704,14 +722,17 @@ mod tests {
             [bx(b"ftyp", b"crx \0\0\0\x01"), bx(b"moov", &desc)].concat()
         };
         assert_eq!(check(&cmts(MAX_CMT_BOXES)), Ok(()));
-        let e = check(&cmts(MAX_CMT_BOXES + 1)).unwrap_err();
+        let e = check(&cmts(MAX_CMT_BOXES + 1)).unwrap_err().to_string();
         assert!(e.contains("more than 64 CMT boxes"), "{e}");
         // Too many boxes.
         let mut b = bx(b"ftyp", b"crx \0\0\0\x01");
         for _ in 0..MAX_BOXES {
             b.extend_from_slice(&bx(b"free", &[]));
         }
-        assert!(check(&b).unwrap_err().contains("more than 65536 boxes"));
+        assert!(check(&b)
+            .unwrap_err()
+            .to_string()
+            .contains("more than 65536 boxes"));
     }
 
     #[test]
@@ -722,13 +743,15 @@ mod tests {
         assert_eq!(check(b"\0\0\0\x10junk and more junk"), Ok(()));
         // A moov that runs past the end, holding a box of size 0 (the
         // fuzzer's 19 bytes).
-        let e = check(b"\0\0\x2a\xe4moov\0\0\0\0\0\0\x01\0\x05\0\0").unwrap_err();
+        let e = check(b"\0\0\x2a\xe4moov\0\0\0\0\0\0\x01\0\x05\0\0")
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("box at byte 8 claims 0 bytes"), "{e}");
         // A 64-bit size whose end wraps around 2^64 sends rawler back.
         let mut b = bx(b"abcd", &[0; 8]);
         b.extend_from_slice(b"\0\0\0\x01abcd");
         b.extend_from_slice(&(u64::MAX - 8).to_be_bytes());
-        let e = check(&b).unwrap_err();
+        let e = check(&b).unwrap_err().to_string();
         assert!(
             e.contains("the abcd box at byte 16 claims") && e.contains("loop"),
             "{e}"

@@ -15,6 +15,7 @@
 //! entries that each claim the whole file would make it hold 4,096 copies.
 
 use super::order::Order;
+use super::ContainerError;
 
 /// rawler stops reading an IFD's entries after this many (formats/tiff/ifd.rs).
 const RAWLER_MAX_ENTRIES: usize = 4096;
@@ -52,21 +53,21 @@ impl Values {
         count: u64,
         bytes: u64,
         kept: bool,
-    ) -> Result<(), String> {
+    ) -> Result<(), ContainerError> {
         let mib = |b: u64| b as f64 / (1u64 << 20) as f64;
         if bytes > self.limit {
-            return Err(format!(
+            return Err(ContainerError::malformed(format!(
                 "malformed TIFF structure: tag {tag} claims {count} values ({:.0} MiB), more than the file could hold",
                 mib(bytes)
-            ));
+            )));
         }
         if kept {
             self.held = self.held.saturating_add(bytes);
             if self.held > self.limit {
-                return Err(format!(
+                return Err(ContainerError::malformed(format!(
                     "malformed TIFF structure: its entries' values add up to more than {:.0} MiB (tag {tag} among them)",
                     mib(self.limit)
-                ));
+                )));
             }
         }
         Ok(())
@@ -174,7 +175,7 @@ pub(super) fn check_ifd(
     off: u32,
     sub_tags: &[u16],
     values: &mut Values,
-) -> Result<Option<RawlerIfd>, String> {
+) -> Result<Option<RawlerIfd>, ContainerError> {
     let (b, o) = (blob.bytes, blob.order);
     let len = b.len() as u64;
     let start = blob.base + off as u64;
@@ -263,7 +264,7 @@ pub(super) fn check_root(
     max_chain: usize,
     sub_tags: &[u16],
     values: &mut Values,
-) -> Result<(), String> {
+) -> Result<(), ContainerError> {
     let (b, base) = (blob.bytes, blob.base as usize);
     let order = match b.get(base..base + 2) {
         Some(b"II") => Order(true),
@@ -344,14 +345,14 @@ pub(super) fn check_decoder_ifds(
     order: Order,
     chain: &[u64],
     values: &mut Values,
-) -> Result<(), String> {
+) -> Result<(), ContainerError> {
     let file = Blob {
         bytes,
         order,
         base: 0,
         corr: 0,
     };
-    let first = |tag: u16, values: &mut Values| -> Result<Option<RawlerEntry>, String> {
+    let first = |tag: u16, values: &mut Values| -> Result<Option<RawlerEntry>, ContainerError> {
         for &ifd in chain {
             // Already charged by the strict walk: count them in a copy.
             let mut scratch = *values;
@@ -372,7 +373,7 @@ pub(super) fn check_decoder_ifds(
                 corr: 0,
             };
             check_root(&inner, 10, &[330, 34665], values)
-                .map_err(|e| format!("{e} (in Panasonic's CameraIFD at byte {})", cam.at))?;
+                .map_err(|e| e.within(format!("in Panasonic's CameraIFD at byte {}", cam.at)))?;
         }
     }
     let Some(private) = first(TAG_DNG_PRIVATE_AREA, values)? else {
@@ -412,7 +413,7 @@ pub(super) fn check_decoder_ifds(
     };
     check_ifd(&inner, 0, &[], values)
         .map(|_| ())
-        .map_err(|e| format!("{e} (in Sony's encrypted SR2 block at byte {s_off})"))
+        .map_err(|e| e.within(format!("in Sony's encrypted SR2 block at byte {s_off}")))
 }
 
 #[cfg(test)]
@@ -449,7 +450,9 @@ mod tests {
         assert_eq!(ifd.entries.len(), 2);
         // One entry of 2^32 - 16 doubles: 32 GB asked of the allocator.
         let b = le_ifd(&[(1, 12, 0xFFFF_FFF0, 8)], 0);
-        let e = check_ifd(&blob(&b), 0, &[], &mut Values::new(b.len())).unwrap_err();
+        let e = check_ifd(&blob(&b), 0, &[], &mut Values::new(b.len()))
+            .unwrap_err()
+            .to_string();
         assert!(
             e.contains("tag 1 claims 4294967280 values (32768 MiB)"),
             "{e}"
@@ -461,7 +464,9 @@ mod tests {
         entries.push((9, 1, 1, 0));
         let mut b = le_ifd(&entries, 0);
         b.resize(1 << 20, 0);
-        let e = check_ifd(&blob(&b), 0, &[], &mut Values::new(b.len())).unwrap_err();
+        let e = check_ifd(&blob(&b), 0, &[], &mut Values::new(b.len()))
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("add up to more than 512 MiB"), "{e}");
     }
 
@@ -502,7 +507,9 @@ mod tests {
         b.extend_from_slice(&26u32.to_be_bytes());
         b.extend_from_slice(&1u16.to_be_bytes());
         b.extend_from_slice(&[0, 1, 0, 12, 0xFF, 0xFF, 0xFF, 0xF0, 0, 0, 0, 8, 0, 0, 0, 0]);
-        let e = check_root(&blob(&b), 10, &[], &mut Values::new(b.len())).unwrap_err();
+        let e = check_root(&blob(&b), 10, &[], &mut Values::new(b.len()))
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("claims 4294967280 values"), "{e}");
     }
 
@@ -554,7 +561,7 @@ mod tests {
         assert_eq!(check(&build(&plain)), Ok(()));
         // One whose entry claims 2^32 - 16 doubles.
         let bad = le_ifd(&[(0x7303, 12, 0xFFFF_FFF0, 0)], 0);
-        let e = check(&build(&bad)).unwrap_err();
+        let e = check(&build(&bad)).unwrap_err().to_string();
         assert!(
             e.contains("claims 4294967280 values")
                 && e.contains("Sony's encrypted SR2 block at byte 74"),

@@ -8,6 +8,7 @@
 use super::lenient::Values;
 use super::order::Order;
 use super::tiff::{find_entry, Entry, Walk};
+use super::ContainerError;
 
 /// Which MakerNotes of a TIFF structure rawler parses.
 #[derive(Clone, Copy)]
@@ -57,7 +58,7 @@ pub(super) fn check_makernote(
     note: &Entry,
     layout: NoteLayout,
     spent: &mut (usize, u64, Values),
-) -> Result<(), String> {
+) -> Result<(), ContainerError> {
     let at = note.at;
     let mut w = NoteWalk { bytes, at, spent };
     let relative = match layout {
@@ -103,7 +104,7 @@ impl NoteWalk<'_, '_> {
         o: Order,
         ifd: u64,
         sub_tags: &'static [u16],
-    ) -> Result<(), String> {
+    ) -> Result<(), ContainerError> {
         let Some(b) = self.bytes.get(base..) else {
             return Ok(());
         };
@@ -114,16 +115,18 @@ impl NoteWalk<'_, '_> {
         let at = self.at;
         walked.map_err(|e| {
             if base == 0 {
-                format!("{e} (in the MakerNote at byte {at})")
+                e.within(format!("in the MakerNote at byte {at}"))
             } else {
-                format!("{e} (in the MakerNote at byte {at}, whose offsets count from byte {base})")
+                e.within(format!(
+                    "in the MakerNote at byte {at}, whose offsets count from byte {base}"
+                ))
             }
         })
     }
 
     /// Olympus's MakerNote (and OM System's): the main IFD `off` bytes in,
     /// and the camera-settings and image-processing sub-IFDs it points to.
-    fn olympus(&mut self, data: &[u8], order: Order, mut off: usize) -> Result<(), String> {
+    fn olympus(&mut self, data: &[u8], order: Order, mut off: usize) -> Result<(), ContainerError> {
         if data.starts_with(b"OM SYSTEM") {
             off += 16;
             // asserted by rawler
@@ -156,7 +159,7 @@ impl NoteWalk<'_, '_> {
         order: Order,
         mut off: usize,
         relative: bool,
-    ) -> Result<(), String> {
+    ) -> Result<(), ContainerError> {
         let at = self.at;
         let is = |prefix: &[u8]| data.starts_with(prefix);
         if is(b"EPSON") {
@@ -295,7 +298,7 @@ mod tests {
         };
         assert_eq!(check(&with_note("NIKON CORPORATION", &nikon(8)).0), Ok(()));
         let (bad, at) = with_note("NIKON CORPORATION", &nikon(u32::MAX - 15));
-        let e = check(&bad).unwrap_err();
+        let e = check(&bad).unwrap_err().to_string();
         assert!(
             e.contains("tag 1's 4294967280 values at byte 26 run past the end")
                 && e.contains(&format!(
@@ -332,7 +335,7 @@ mod tests {
         let (ok, at) = with_note("SONY", &sony(0));
         assert_eq!(check(&ok), Ok(()));
         let (bad, _) = with_note("SONY", &sony(at + 12 + 18 + 4));
-        let e = check(&bad).unwrap_err();
+        let e = check(&bad).unwrap_err().to_string();
         assert!(
             e.contains(&format!("(in the MakerNote at byte {at})")),
             "{e}"
@@ -340,7 +343,7 @@ mod tests {
         // 18: the 8 bytes after the IFD, counted from the IFD.
         assert_eq!(check(&with_note("SAMSUNG", &ifd1(false, 8, 18)).0), Ok(()));
         let (bad, at) = with_note("SAMSUNG", &ifd1(false, 8, 22));
-        let e = check(&bad).unwrap_err();
+        let e = check(&bad).unwrap_err().to_string();
         assert!(e.contains(&format!("count from byte {at}")), "{e}");
         // The same value from the file's header is fine for Sony.
         assert_eq!(check(&with_note("SONY", &ifd1(false, 8, 22)).0), Ok(()));
@@ -354,12 +357,16 @@ mod tests {
         assert_eq!(check(&with_note("PENTAX", &pentax(8)).0), Ok(()));
         assert!(check(&with_note("PENTAX", &pentax(9)).0)
             .unwrap_err()
+            .to_string()
             .contains("run past the end"));
         // Canon: the IFD right at the MakerNote.
         let (ok, at) = with_note("Canon", &ifd1(false, 4, 0));
         assert_eq!(check(&ok), Ok(()));
         let (bad, _) = with_note("Canon", &ifd1(false, 5, at + 18 + 4));
-        assert!(check(&bad).unwrap_err().contains("in the MakerNote"));
+        assert!(check(&bad)
+            .unwrap_err()
+            .to_string()
+            .contains("in the MakerNote"));
         // rawler parses one MakerNote; 1100 of them are walked within the
         // budget of one walk (here an empty IFD each).
         let notes = |n: u32| {
@@ -369,7 +376,7 @@ mod tests {
             tiff(&e, 0, b"Canon\0\0\0\0\0\0\0")
         };
         assert_eq!(check(&notes(1000)), Ok(()));
-        let e = check(&notes(1100)).unwrap_err();
+        let e = check(&notes(1100)).unwrap_err().to_string();
         assert!(
             e.contains("more than 1024 IFDs") && e.contains("MakerNote"),
             "{e}"
@@ -396,7 +403,7 @@ mod tests {
         let make = "OLYMPUS IMAGING CORP.";
         assert_eq!(check(&with_note(make, &olympus(8)).0), Ok(()));
         let (bad, at) = with_note(make, &olympus(9));
-        let e = check(&bad).unwrap_err();
+        let e = check(&bad).unwrap_err().to_string();
         assert!(e.contains(&format!("count from byte {at}")), "{e}");
     }
 }

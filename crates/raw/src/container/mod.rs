@@ -64,6 +64,7 @@
 //! after it.
 
 mod bmff;
+mod error;
 mod lenient;
 pub(crate) mod limits;
 mod makernote;
@@ -74,6 +75,7 @@ mod raf;
 mod tiff;
 
 use bmff::check_bmff;
+pub use error::{Cause, ContainerError};
 use makernote::Notes;
 use mrw::check_mrw;
 use order::Order;
@@ -86,7 +88,7 @@ pub use limits::{MAX_BOXES, MAX_ENTRIES, MAX_IFDS, MAX_LISTED, MAX_PIXELS};
 /// Check the container of `bytes` (see the module documentation); `Ok` for
 /// files of no format checked here. The message names the problem, for one
 /// line.
-pub fn check(bytes: &[u8]) -> Result<(), String> {
+pub fn check(bytes: &[u8]) -> Result<(), ContainerError> {
     if bytes.starts_with(b"FUJIFILM") {
         return check_raf(bytes);
     }
@@ -194,22 +196,22 @@ pub fn masked_areas(bytes: &[u8]) -> Vec<crate::masked::Area> {
 /// in the raw IFD). `Ok(None)` without the tag; `Err` for a tag that is
 /// there but unusable (wrong type, a count that is neither 2 nor 2 x
 /// planes, negative or non-finite values), named for one line.
-pub fn noise_profile(bytes: &[u8], planes: usize) -> Result<Option<Vec<[f64; 2]>>, String> {
+pub fn noise_profile(bytes: &[u8], planes: usize) -> Result<Option<Vec<[f64; 2]>>, ContainerError> {
     let Some((order, e)) = raw_ifd_entry(bytes, 51041) else {
         return Ok(None);
     };
     if e.kind != 12 {
-        return Err(format!(
+        return Err(ContainerError::bad_tag(format!(
             "NoiseProfile (tag 51041) has TIFF type {}, not DOUBLE (12)",
             e.kind
-        ));
+        )));
     }
     if e.count != 2 && e.count != 2 * planes as u64 {
-        return Err(format!(
+        return Err(ContainerError::bad_tag(format!(
             "NoiseProfile (tag 51041) holds {} values; it needs 2 (one pair for all planes) or {} (a pair per plane)",
             e.count,
             2 * planes
-        ));
+        )));
     }
     let mut pairs = Vec::new();
     for k in 0..e.count as usize / 2 {
@@ -224,13 +226,15 @@ pub fn noise_profile(bytes: &[u8], planes: usize) -> Result<Option<Vec<[f64; 2]>
             }))
         };
         let (Some(s), Some(o)) = (f(2 * k), f(2 * k + 1)) else {
-            return Err("NoiseProfile (tag 51041) points past the end of the file".into());
+            return Err(ContainerError::bad_tag(
+                "NoiseProfile (tag 51041) points past the end of the file".into(),
+            ));
         };
         if !(s.is_finite() && o.is_finite() && s >= 0.0 && o >= 0.0) {
-            return Err(format!(
+            return Err(ContainerError::bad_tag(format!(
                 "NoiseProfile (tag 51041) pair {} is ({s}, {o}); both must be finite and >= 0",
                 k + 1
-            ));
+            )));
         }
         pairs.push([s, o]);
     }

@@ -4,13 +4,14 @@
 
 use super::order::Order;
 use super::tiff::walk_ifds;
+use super::ContainerError;
 
 /// A Minolta MRW is a chain of blocks (4-byte name, big-endian length) up to
 /// the pixel data, whose offset minus 8 is at byte 4. rawler parses the IFD
 /// at byte 8 of the last TTW block's contents, big-endian, without a TIFF
 /// header (with no TTW block, at byte 8 of the file): that IFD is walked
 /// as rawler finds it, and the block chain must not make rawler loop.
-pub(super) fn check_mrw(bytes: &[u8]) -> Result<(), String> {
+pub(super) fn check_mrw(bytes: &[u8]) -> Result<(), ContainerError> {
     let be = Order(false);
     let Some(data) = be.u32(bytes, 4).map(|v| v as u64 + 8) else {
         return Ok(());
@@ -25,9 +26,9 @@ pub(super) fn check_mrw(bytes: &[u8]) -> Result<(), String> {
         // rawler steps by `len + 8` in 32 bits: these lengths wrap to a
         // step of 0 and it would read the same block forever.
         if len > u32::MAX - 8 {
-            return Err(format!(
+            return Err(ContainerError::malformed(format!(
                 "malformed MRW structure: the block at byte {at} claims {len} bytes"
-            ));
+            )));
         }
         if tag == 0x0054_5457 {
             tiff = at + 8;
@@ -39,7 +40,7 @@ pub(super) fn check_mrw(bytes: &[u8]) -> Result<(), String> {
     };
     walk_ifds(block, be, 8, &[], true)
         .map(drop)
-        .map_err(|e| format!("{e} (in the MRW's TIFF block at byte {tiff})"))
+        .map_err(|e| e.within(format!("in the MRW's TIFF block at byte {tiff}")))
 }
 
 #[cfg(test)]
@@ -77,13 +78,13 @@ mod tests {
         assert_eq!(check(&mrw(1, 7, 64)), Ok(()));
         assert_eq!(check(&mrw(8, 24, 64)), Ok(()));
         // A count whose values run past the file.
-        let e = check(&mrw(0x4000_0000, 24, 64)).unwrap_err();
+        let e = check(&mrw(0x4000_0000, 24, 64)).unwrap_err().to_string();
         assert!(
             e.contains("past the end") && e.contains("MRW's TIFF block"),
             "{e}"
         );
         // A block length rawler's 32-bit step would wrap to 0.
-        let e = check(&mrw(1, 7, u32::MAX - 4)).unwrap_err();
+        let e = check(&mrw(1, 7, u32::MAX - 4)).unwrap_err().to_string();
         assert!(e.contains("claims 4294967291 bytes"), "{e}");
     }
 }

@@ -4,6 +4,7 @@
 
 use super::limits::too_many_pixels;
 use super::order::Order;
+use super::ContainerError;
 
 /// The most pixels one byte of QuickTake pixel data can describe: the
 /// QuickTake 100's codes take 3 bits per pixel, and the densest of RADC's
@@ -18,7 +19,7 @@ const QTK_PIXELS_PER_BYTE: u64 = 64;
 /// data, from byte 736 (738 when the 16-bit value at 552 is 30) to the end
 /// of the file. Both the size and the data that could describe it bound the
 /// dimensions.
-pub(super) fn check_qtk(bytes: &[u8]) -> Result<(), String> {
+pub(super) fn check_qtk(bytes: &[u8]) -> Result<(), ContainerError> {
     let be = Order(false);
     // rawler reads those 16 bytes first, and stops if they are not there.
     let (Some(h), Some(w), Some(hint)) =
@@ -31,13 +32,15 @@ pub(super) fn check_qtk(bytes: &[u8]) -> Result<(), String> {
     }
     let (w, h) = (w.max(h) as u64, w.min(h) as u64);
     if let Some(what) = too_many_pixels(w, h) {
-        return Err(format!("the QuickTake header claims {what}: it is damaged"));
+        return Err(ContainerError::damaged_header(format!(
+            "the QuickTake header claims {what}: it is damaged"
+        )));
     }
     let data = (bytes.len() as u64).saturating_sub(if hint == 30 { 738 } else { 736 });
     if w * h > data * QTK_PIXELS_PER_BYTE {
-        return Err(format!(
+        return Err(ContainerError::damaged_header(format!(
             "the QuickTake header claims a {w} x {h} image, but the file holds only {data} bytes of pixel data (at least 1 per {QTK_PIXELS_PER_BYTE} pixels): it is truncated or damaged"
-        ));
+        )));
     }
     Ok(())
 }
@@ -64,14 +67,14 @@ mod tests {
         // 640 x 480 needs 4800 bytes at 64 pixels a byte.
         assert_eq!(check(&qtk(480, 640, 0, 4800)), Ok(()));
         assert_eq!(check(&qtk(640, 480, 0, 4800)), Ok(()));
-        let e = check(&qtk(480, 640, 0, 4799)).unwrap_err();
+        let e = check(&qtk(480, 640, 0, 4799)).unwrap_err().to_string();
         assert!(
             e.contains("640 x 480 image") && e.contains("only 4799 bytes"),
             "{e}"
         );
         // With hint 30 the data starts 2 bytes later.
         assert!(check(&qtk(480, 640, 30, 4800)).is_err());
-        let e = check(&qtk(43064, 60726, 0, 1)).unwrap_err();
+        let e = check(&qtk(43064, 60726, 0, 1)).unwrap_err().to_string();
         assert!(e.contains("60726 x 43064 image (2615 megapixels)"), "{e}");
         // Too short for the header rawler reads: it refuses it itself.
         assert_eq!(check(&qtk(480, 640, 0, 0)[..550]), Ok(()));

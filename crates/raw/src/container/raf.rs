@@ -6,6 +6,7 @@
 use super::makernote::Notes;
 use super::order::Order;
 use super::tiff::check_tiff;
+use super::ContainerError;
 
 /// A RAF's TIFF structures also reach IFDs through Fujifilm's tag 0xF000.
 const RAF_SUB_IFD_TAGS: [u16; 5] = [330, 34665, 34853, 40965, 0xF000];
@@ -18,7 +19,7 @@ const RAF_SUB_IFD_TAGS: [u16; 5] = [330, 34665, 34853, 40965, 0xF000];
 /// the first and does not parse the second. The RAF decoder parses the
 /// MakerNote it finds with `IFD::parse_makernote` (decoders/raf.rs, line
 /// 243), offsets counting from the TIFF structure's header.
-pub(super) fn check_raf(bytes: &[u8]) -> Result<(), String> {
+pub(super) fn check_raf(bytes: &[u8]) -> Result<(), ContainerError> {
     let be = Order(false);
     for (pointer, skip) in [(84, 12), (100, 0)] {
         let Some(offset) = be.u32(bytes, pointer) else {
@@ -29,7 +30,7 @@ pub(super) fn check_raf(bytes: &[u8]) -> Result<(), String> {
             continue;
         };
         check_tiff(tiff, &RAF_SUB_IFD_TAGS, Notes::Raf, true)
-            .map_err(|e| format!("{e} (in the RAF's TIFF structure at byte {start})"))?;
+            .map_err(|e| e.within(format!("in the RAF's TIFF structure at byte {start}")))?;
     }
     Ok(())
 }
@@ -54,7 +55,7 @@ mod tests {
         let bad = tiff(&[(256, 3, 1, 4), (700, 4, 1000, 8)], 0, &[]);
         let good = tiff(&[(256, 3, 1, 4)], 0, &[]);
         for (pointer, skip) in [(84, 12), (100, 0)] {
-            let e = check(&raf(&bad, pointer, skip)).unwrap_err();
+            let e = check(&raf(&bad, pointer, skip)).unwrap_err().to_string();
             assert!(
                 e.contains("past the end") && e.contains("RAF's TIFF structure at byte 112"),
                 "{e}"

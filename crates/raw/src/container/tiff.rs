@@ -8,6 +8,7 @@ use super::lenient::{self, Blob, Values};
 use super::limits::{too_many_pixels, MAX_ENTRIES, MAX_IFDS, MAX_LISTED};
 use super::makernote::{check_makernote, NoteLayout, Notes};
 use super::order::Order;
+use super::ContainerError;
 
 pub(super) const SUB_IFD_TAGS: [u16; 4] = [330, 34665, 34853, 40965];
 /// The tags rawler's TIFF reader parses as sub-IFDs of the root chain's
@@ -115,7 +116,7 @@ pub(super) fn check_tiff(
     sub_tags: &'static [u16],
     notes: Notes,
     chain: bool,
-) -> Result<(), String> {
+) -> Result<(), ContainerError> {
     let order = match bytes.get(..2) {
         Some(b"II") => Order(true),
         Some(b"MM") => Order(false),
@@ -129,7 +130,10 @@ pub(super) fn check_tiff(
     if !matches!(magic, 42 | 0x4f52 | 0x5352 | 0x55) {
         return Ok(());
     }
-    let first = order.u32(bytes, 4).ok_or("truncated TIFF header")? as u64;
+    let first = order
+        .u32(bytes, 4)
+        .ok_or_else(|| ContainerError::truncated("truncated TIFF header".into()))?
+        as u64;
     let walk = walk_ifds(bytes, order, first, sub_tags, chain)?;
     let layout = match notes {
         Notes::Skip => None,
@@ -180,7 +184,7 @@ pub(super) fn walk_ifds<'a>(
     first: u64,
     sub_tags: &'static [u16],
     chain: bool,
-) -> Result<Walk<'a>, String> {
+) -> Result<Walk<'a>, ContainerError> {
     let mut walk = Walk::new(bytes, order, sub_tags, false);
     walk.follow_next = chain;
     if first != 0 {
@@ -259,7 +263,7 @@ impl<'a> Walk<'a> {
     /// by rawler itself), but a sub-IFD pointer of 0 is followed by rawler:
     /// to the file header, read as an IFD, so it is walked (and refused: the
     /// header is no IFD).
-    pub(super) fn ifd(&mut self, off: u64, chain: bool) -> Result<(), String> {
+    pub(super) fn ifd(&mut self, off: u64, chain: bool) -> Result<(), ContainerError> {
         let (n, end) = self.enter(off)?;
         if chain {
             self.chain.push(off);
@@ -317,17 +321,17 @@ impl<'a> Walk<'a> {
     /// The IFD at `off` checked before its entries are read (not reached
     /// twice, within the walk's bounds, its entry count and entries inside
     /// the file): its entry count and where its entries end.
-    fn enter(&mut self, off: u64) -> Result<(usize, u64), String> {
+    fn enter(&mut self, off: u64) -> Result<(usize, u64), ContainerError> {
         if self.path.contains(&off) {
-            return Err(format!(
+            return Err(ContainerError::malformed(format!(
                 "malformed TIFF structure: the IFD at byte {off} is reached twice (a loop in the IFD chain)"
-            ));
+            )));
         }
         self.visits += 1;
         if self.visits > MAX_IFDS || self.path.len() >= MAX_DEPTH {
-            return Err(format!(
+            return Err(ContainerError::malformed(format!(
                 "malformed TIFF structure: more than {MAX_IFDS} IFDs or {MAX_DEPTH} levels"
-            ));
+            )));
         }
         let (bytes, order) = (self.bytes, self.order);
         let len = bytes.len() as u64;
@@ -335,25 +339,25 @@ impl<'a> Walk<'a> {
             .u16(bytes, off as usize)
             .filter(|_| off + 2 <= len)
             .ok_or_else(|| {
-                format!("malformed TIFF structure: an IFD offset ({off}) lies beyond the file's {len} bytes")
+                ContainerError::malformed(format!("malformed TIFF structure: an IFD offset ({off}) lies beyond the file's {len} bytes"))
             })? as usize;
         if n > MAX_ENTRIES {
-            return Err(format!(
+            return Err(ContainerError::malformed(format!(
                 "malformed TIFF structure: an IFD at byte {off} claims {n} entries"
-            ));
+            )));
         }
         let end = off + 2 + 12 * n as u64;
         if end > len {
-            return Err(format!(
+            return Err(ContainerError::malformed(format!(
                 "malformed TIFF structure: the IFD at byte {off} ({n} entries) runs past the end of the file"
-            ));
+            )));
         }
         Ok((n, end))
     }
 
     /// Entry `k` of the IFD at `off` (inside the file: [`Walk::enter`]),
     /// its values checked to lie inside the file.
-    fn entry(&self, off: u64, k: usize) -> Result<(u16, Entry), String> {
+    fn entry(&self, off: u64, k: usize) -> Result<(u16, Entry), ContainerError> {
         let (bytes, order) = (self.bytes, self.order);
         let len = bytes.len() as u64;
         let e_at = off as usize + 2 + 12 * k;
@@ -366,9 +370,9 @@ impl<'a> Walk<'a> {
         } else {
             let v = order.u32(bytes, e_at + 8).expect("inside") as u64;
             if v.saturating_add(size) > len {
-                return Err(format!(
+                return Err(ContainerError::malformed(format!(
                     "malformed TIFF structure: tag {tag}'s {count} values at byte {v} run past the end of the file"
-                ));
+                )));
             }
             v as usize
         };
@@ -378,7 +382,7 @@ impl<'a> Walk<'a> {
     /// Count a list the walk reads in full (strip and tile offsets and
     /// counts, sub-IFD pointers): bound the sum, or one IFD repeating a
     /// long list's tag thousands of times would be billions of reads.
-    fn count_listed(&mut self, tag: u16, count: u64) -> Result<(), String> {
+    fn count_listed(&mut self, tag: u16, count: u64) -> Result<(), ContainerError> {
         let listed = !self.note
             && matches!(
                 tag,
@@ -388,9 +392,9 @@ impl<'a> Walk<'a> {
         if listed {
             self.listed = self.listed.saturating_add(count);
             if self.listed > MAX_LISTED {
-                return Err(format!(
+                return Err(ContainerError::malformed(format!(
                     "malformed TIFF structure: more than {MAX_LISTED} strip, tile and IFD offsets"
-                ));
+                )));
             }
         }
         Ok(())
@@ -437,13 +441,15 @@ impl<'a> Walk<'a> {
     }
 }
 
-fn check_image(img: &Image, bytes: &[u8], dng: bool) -> Result<(), String> {
+fn check_image(img: &Image, bytes: &[u8], dng: bool) -> Result<(), ContainerError> {
     let len = bytes.len() as u64;
     let (Some(w), Some(h)) = (img.width, img.length) else {
         return Ok(());
     };
     if let Some(what) = too_many_pixels(w, h) {
-        return Err(format!("the file claims {what}: its header is damaged"));
+        return Err(ContainerError::damaged_header(format!(
+            "the file claims {what}: its header is damaged"
+        )));
     }
     for (what, offsets, counts) in [
         ("strip", &img.strips, &img.strip_counts),
@@ -451,14 +457,14 @@ fn check_image(img: &Image, bytes: &[u8], dng: bool) -> Result<(), String> {
     ] {
         for (i, (&o, &c)) in offsets.iter().zip(counts.iter()).enumerate() {
             if c > 0 && o < 8 {
-                return Err(format!(
+                return Err(ContainerError::malformed(format!(
                     "malformed TIFF structure: {what} {i} starts at byte {o}, inside the file header"
-                ));
+                )));
             }
             if o.saturating_add(c) > len {
-                return Err(format!(
+                return Err(ContainerError::truncated(format!(
                     "the image data is truncated: {what} {i} ({c} bytes at byte {o}) runs past the file's {len} bytes"
-                ));
+                )));
             }
         }
     }
@@ -470,9 +476,9 @@ fn check_image(img: &Image, bytes: &[u8], dng: bool) -> Result<(), String> {
     if img.tiled {
         let (tw, th) = (img.tile_width.unwrap_or(0), img.tile_length.unwrap_or(0));
         if tw == 0 || th == 0 {
-            return Err(format!(
+            return Err(ContainerError::inconsistent(format!(
                 "inconsistent DNG: a tiled {w} x {h} image with TileWidth {tw} and TileLength {th}"
-            ));
+            )));
         }
         // rawler decodes whole tiles: the padded area is what it allocates.
         let padded = (
@@ -480,9 +486,9 @@ fn check_image(img: &Image, bytes: &[u8], dng: bool) -> Result<(), String> {
             h.div_ceil(th).saturating_mul(th),
         );
         if let Some(what) = too_many_pixels(padded.0, padded.1) {
-            return Err(format!(
+            return Err(ContainerError::inconsistent(format!(
                 "inconsistent DNG: tiles of {tw} x {th} make a {w} x {h} image {what}"
-            ));
+            )));
         }
     }
     let (what, offsets, counts) = if img.tiled {
@@ -509,7 +515,7 @@ fn check_uncompressed(
     counts: &[u64],
     (w, h): (u64, u64),
     (spp, bits): (u64, u64),
-) -> Result<(), String> {
+) -> Result<(), ContainerError> {
     let slack = |need: u64| need / 64 + 16;
     let row = |width: u64| width.saturating_mul(spp).saturating_mul(bits).div_ceil(8);
     let held = |have: u64, pixels: u64| have as f64 * 8.0 / (pixels as f64 * spp as f64).max(1.0);
@@ -521,19 +527,19 @@ fn check_uncompressed(
             .enumerate()
             .find(|(_, &c)| c < need || c > need.saturating_add(slack(need)))
         {
-            return Err(format!(
+            return Err(ContainerError::inconsistent(format!(
                     "inconsistent DNG: BitsPerSample says {bits} for tiles of {tw} x {th}, but tile {i} holds {:.1} bits per sample",
                     held(have, tw * th)
-                ));
+                )));
         }
     } else if !counts.is_empty() {
         let need = row(w).saturating_mul(h);
         let have: u64 = counts.iter().fold(0u64, |a, &c| a.saturating_add(c));
         if have < need || have > need.saturating_add(slack(need)) {
-            return Err(format!(
+            return Err(ContainerError::inconsistent(format!(
                     "inconsistent DNG: BitsPerSample says {bits} for a {w} x {h} image, but its uncompressed strips hold {:.1} bits per sample",
                     held(have, w * h)
-                ));
+                )));
         }
     }
     Ok(())
@@ -547,21 +553,23 @@ fn check_ljpeg(
     what: &str,
     (offsets, counts): (&[u64], &[u64]),
     spp: u64,
-) -> Result<(), String> {
+) -> Result<(), ContainerError> {
     for (i, (&o, &c)) in offsets.iter().zip(counts.iter()).enumerate() {
         let data = &bytes[o as usize..(o + c) as usize];
         let frame = lossless_jpeg(data).map_err(|why| {
-            format!("damaged DNG: {what} {i}'s LJPEG data ({c} bytes at byte {o}) {why}")
+            ContainerError::damaged(format!(
+                "damaged DNG: {what} {i}'s LJPEG data ({c} bytes at byte {o}) {why}"
+            ))
         })?;
         if let (Some((wide, high, clrs)), true) = (frame, img.tiled) {
             let (tw, th) = (img.tile_width.unwrap_or(0), img.tile_length.unwrap_or(0));
             if wide.saturating_mul(clrs).saturating_mul(high)
                 != tw.saturating_mul(th).saturating_mul(spp)
             {
-                return Err(format!(
+                return Err(ContainerError::inconsistent(format!(
                         "inconsistent DNG: tile {i}'s LJPEG frame is {} x {high} samples, TileWidth x TileLength say {tw} x {th}",
                         wide * clrs
-                    ));
+                    )));
             }
         }
     }
@@ -572,12 +580,16 @@ fn check_ljpeg(
 /// line, lines, components) of its SOF3, checked to be whole: markers in
 /// order up to the scan, then coded data that ends in a marker (EOI) inside
 /// `data`. `Ok(None)` for a JPEG of another kind (a baseline preview: not
-/// checked here); `Err` says what is wrong, for one line.
-fn lossless_jpeg(data: &[u8]) -> Result<Option<(u64, u64, u64)>, String> {
+/// checked here); `Err` says what is wrong, as the end of a sentence about
+/// the stream (the caller names it).
+fn lossless_jpeg(data: &[u8]) -> Result<Option<(u64, u64, u64)>, ContainerError> {
+    let cut_short = |why: &str| ContainerError::damaged(why.to_string());
     if data.get(..2) != Some(&[0xff, 0xd8][..]) {
-        return Err("does not start with a JPEG start-of-image marker".into());
+        return Err(cut_short(
+            "does not start with a JPEG start-of-image marker",
+        ));
     }
-    let cut = || "ends inside its JPEG header".to_string();
+    let cut = || cut_short("ends inside its JPEG header");
     let mut at = 2usize;
     let mut frame = None;
     loop {
@@ -586,7 +598,9 @@ fn lossless_jpeg(data: &[u8]) -> Result<Option<(u64, u64, u64)>, String> {
             data.get(at + 1).ok_or_else(cut)?,
         );
         if b != 0xff {
-            return Err(format!("has no JPEG marker at byte {at} of its header"));
+            return Err(ContainerError::damaged(format!(
+                "has no JPEG marker at byte {at} of its header"
+            )));
         }
         if m == 0xff {
             at += 1; // fill byte
@@ -597,7 +611,7 @@ fn lossless_jpeg(data: &[u8]) -> Result<Option<(u64, u64, u64)>, String> {
             continue;
         }
         if m == 0xd9 {
-            return Err("ends (EOI) before its scan".into());
+            return Err(cut_short("ends (EOI) before its scan"));
         }
         let len = data
             .get(at..at + 2)
@@ -607,7 +621,7 @@ fn lossless_jpeg(data: &[u8]) -> Result<Option<(u64, u64, u64)>, String> {
         match m {
             0xc3 => {
                 let [_, hh, hl, wh, wl, n, ..] = *seg else {
-                    return Err("has a short frame header".into());
+                    return Err(cut_short("has a short frame header"));
                 };
                 let (high, wide) = (u16::from_be_bytes([hh, hl]), u16::from_be_bytes([wh, wl]));
                 frame = Some((wide as u64, high as u64, n as u64));
@@ -622,7 +636,7 @@ fn lossless_jpeg(data: &[u8]) -> Result<Option<(u64, u64, u64)>, String> {
         at += len.max(2);
     }
     let Some(frame) = frame else {
-        return Err("has a scan but no lossless frame header (SOF3)".into());
+        return Err(cut_short("has a scan but no lossless frame header (SOF3)"));
     };
     // The coded data ends at the first marker: 0xFF followed by neither a
     // stuffed zero, a restart marker nor a fill byte.
@@ -639,7 +653,7 @@ fn lossless_jpeg(data: &[u8]) -> Result<Option<(u64, u64, u64)>, String> {
             Some(_) => return Ok(Some(frame)),
         }
     }
-    Err("is cut short: its coded data runs to the end of the bytes the file gives it, with no end-of-image marker".into())
+    Err(cut_short("is cut short: its coded data runs to the end of the bytes the file gives it, with no end-of-image marker"))
 }
 
 #[cfg(test)]
@@ -679,20 +693,31 @@ mod tests {
     #[test]
     fn loops_and_offsets_outside_the_file_are_refused() {
         // The first IFD's next-IFD offset is its own.
-        let e = check(&tiff(&[(256, 3, 1, 4)], 8, &[])).unwrap_err();
+        let e = check(&tiff(&[(256, 3, 1, 4)], 8, &[]))
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("reached twice"), "{e}");
         // A SubIFD pointing back at the root.
-        let e = check(&tiff(&[(330, 4, 1, 8)], 0, &[])).unwrap_err();
+        let e = check(&tiff(&[(330, 4, 1, 8)], 0, &[]))
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("reached twice"), "{e}");
-        let e = check(&tiff(&[(256, 3, 1, 4)], 1 << 30, &[])).unwrap_err();
+        let e = check(&tiff(&[(256, 3, 1, 4)], 1 << 30, &[]))
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("beyond the file"), "{e}");
         // Values (10 LONGs) said to lie past the end.
-        let e = check(&tiff(&[(273, 4, 10, 4000)], 0, &[])).unwrap_err();
+        let e = check(&tiff(&[(273, 4, 10, 4000)], 0, &[]))
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("past the end"), "{e}");
         // An IFD claiming more entries than the file holds.
         let mut b = tiff(&[(256, 3, 1, 4)], 0, &[]);
         b[8] = 200;
-        assert!(check(&b).unwrap_err().contains("runs past the end"));
+        assert!(check(&b)
+            .unwrap_err()
+            .to_string()
+            .contains("runs past the end"));
     }
 
     #[test]
@@ -701,9 +726,9 @@ mod tests {
         // ImageLength 0xFFFFFFFF as a LONG.
         huge[8 + 2 + 12 + 2..8 + 2 + 12 + 4].copy_from_slice(&4u16.to_le_bytes());
         huge[8 + 2 + 12 + 8..8 + 2 + 12 + 12].copy_from_slice(&u32::MAX.to_le_bytes());
-        assert!(check(&huge).unwrap_err().contains("megapixels"));
+        assert!(check(&huge).unwrap_err().to_string().contains("megapixels"));
         // BitsPerSample 8 over 16-bit data, and 16 over too little data.
-        let e = check(&image(8, 4096, true)).unwrap_err();
+        let e = check(&image(8, 4096, true)).unwrap_err().to_string();
         assert!(
             e.contains("BitsPerSample says 8") && e.contains("16.0 bits"),
             "{e}"
@@ -711,10 +736,13 @@ mod tests {
         let mut short = image(16, 4096, true);
         let at = 8 + 2 + 12 * 6 + 8;
         short[at..at + 4].copy_from_slice(&8u32.to_le_bytes());
-        assert!(check(&short).unwrap_err().contains("BitsPerSample says 16"));
+        assert!(check(&short)
+            .unwrap_err()
+            .to_string()
+            .contains("BitsPerSample says 16"));
         // 14 over 16-bit data: 1/7 more bytes than the bits claimed, beyond
         // the few bytes of padding allowed (before issue 37: a quarter).
-        let e = check(&image(14, 4096, true)).unwrap_err();
+        let e = check(&image(14, 4096, true)).unwrap_err().to_string();
         assert!(e.contains("BitsPerSample says 14"), "{e}");
         assert_eq!(check(&image(16, 4096 + 16, true)), Ok(()));
         // Outside a DNG the bits are not checked (unpacked 12-bit NEFs).
@@ -723,10 +751,23 @@ mod tests {
         let mut zero = image(16, 4096, true);
         let at = 8 + 2 + 12 * 4 + 8;
         zero[at..at + 4].copy_from_slice(&0u32.to_le_bytes());
-        assert!(check(&zero).unwrap_err().contains("inside the file header"));
+        assert!(check(&zero)
+            .unwrap_err()
+            .to_string()
+            .contains("inside the file header"));
         let mut past = image(16, 4096, false);
         past.truncate(past.len() - 4);
-        assert!(check(&past).unwrap_err().contains("truncated"));
+        assert!(check(&past).unwrap_err().to_string().contains("truncated"));
+        // The cause, for callers that act on it (a file cut short can be
+        // fetched again; one whose header lies cannot).
+        use super::super::Cause;
+        assert_eq!(check(&past).unwrap_err().cause, Cause::Truncated);
+        assert_eq!(check(&zero).unwrap_err().cause, Cause::Malformed);
+        assert_eq!(
+            check(&image(8, 4096, true)).unwrap_err().cause,
+            Cause::Inconsistent
+        );
+        assert_eq!(check(&huge).unwrap_err().cause, Cause::Damaged);
     }
 
     /// SOI, SOF3 (14 bits, 4 lines of 2 samples, 2 components), SOS, coded
@@ -748,7 +789,7 @@ mod tests {
         for cut in [1, 3, 10, 20, 30, s.len() - 3, s.len() - 1] {
             assert!(lossless_jpeg(&s[..cut]).is_err(), "cut at {cut}");
         }
-        let e = lossless_jpeg(&s[..s.len() - 2]).unwrap_err();
+        let e = lossless_jpeg(&s[..s.len() - 2]).unwrap_err().to_string();
         assert!(e.contains("cut short"), "{e}");
         // Fill bytes before the EOI, bytes after it: whole.
         let mut filled = s[..s.len() - 2].to_vec();
@@ -757,18 +798,25 @@ mod tests {
         // Not JPEG; a baseline JPEG (a preview) is not checked here.
         assert!(lossless_jpeg(b"\x00\x01\x02")
             .unwrap_err()
+            .to_string()
             .contains("start-of-image"));
         assert_eq!(lossless_jpeg(&[0xff, 0xd8, 0xff, 0xc0, 0, 2]), Ok(None));
-        let e = lossless_jpeg(&[0xff, 0xd8, 0xff, 0xd9]).unwrap_err();
+        let e = lossless_jpeg(&[0xff, 0xd8, 0xff, 0xd9])
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("before its scan"), "{e}");
     }
 
     #[test]
     fn values_of_unknown_types_must_lie_inside_the_file() {
         // rawler reads an unknown type as bytes: 2^32 - 1 of them here.
-        let e = check(&tiff(&[(256, 3, 1, 4), (700, 0, u32::MAX, 8)], 0, &[])).unwrap_err();
+        let e = check(&tiff(&[(256, 3, 1, 4), (700, 0, u32::MAX, 8)], 0, &[]))
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("past the end"), "{e}");
-        let e = check(&tiff(&[(700, 99, 50, 8)], 0, &[])).unwrap_err();
+        let e = check(&tiff(&[(700, 99, 50, 8)], 0, &[]))
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("past the end"), "{e}");
         // Four bytes or fewer sit inline, as for any type.
         assert_eq!(check(&tiff(&[(700, 0, 4, 0)], 0, &[])), Ok(()));
@@ -787,7 +835,7 @@ mod tests {
             )
         };
         // 4000 of them: 4.4 million values.
-        let e = check(&lists(4000)).unwrap_err();
+        let e = check(&lists(4000)).unwrap_err().to_string();
         assert!(
             e.contains("more than 4194304 strip, tile and IFD offsets"),
             "{e}"
