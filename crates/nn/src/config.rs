@@ -6,6 +6,7 @@
 //! Keys are the command-line flags with underscores (`--ratio-min` is
 //! `ratio_min`); a file may hold any subset and the flags override it.
 
+use crate::arch::{Architecture, SidUnetConfig, Sr3Config};
 use crate::condition::Conditioning;
 use crate::error::{NnError, Result};
 use crate::schedule::Schedule;
@@ -22,47 +23,7 @@ pub const MAX_STEPS: u64 = 1_000_000_000;
 /// would run the process out of them.
 pub const MAX_WORKERS: usize = 64;
 
-/// What `pgrf train` trains: the paper's two methods.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum Method {
-    /// SPC: the SID U-Net denoiser, L1(denoise(noisy x ratio), clean).
-    #[serde(alias = "denoiser")]
-    Spc,
-    /// PGRF: the SR3 velocity field of the physics-guided rectified flow.
-    #[serde(alias = "flow")]
-    Pgrf,
-}
-
-impl Method {
-    /// The name users see ("spc", "pgrf").
-    pub fn name(self) -> &'static str {
-        match self {
-            Method::Spc => "spc",
-            Method::Pgrf => "pgrf",
-        }
-    }
-}
-
-impl std::str::FromStr for Method {
-    type Err = String;
-    /// `spc` or `pgrf`; `denoiser` and `flow` (what they train) also work.
-    fn from_str(s: &str) -> std::result::Result<Method, String> {
-        match s.to_ascii_lowercase().as_str() {
-            "spc" | "denoiser" => Ok(Method::Spc),
-            "pgrf" | "flow" => Ok(Method::Pgrf),
-            o => Err(format!(
-                "unknown method '{o}' (spc or pgrf; denoiser and flow name the same)"
-            )),
-        }
-    }
-}
-
-impl std::fmt::Display for Method {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(self.name())
-    }
-}
+pub use crate::arch::Method;
 
 /// Every training setting, the one type behind the `--config` TOML file,
 /// `pgrf train`'s flags (with the `clap` feature: each field's doc comment
@@ -390,7 +351,7 @@ impl Default for TrainConfig {
             camera_like: None,
             photo_downscale: 2,
             photo_inverse_tone: false,
-            photo_wb_spread: crate::data::photos::WB_SPREAD,
+            photo_wb_spread: pgrf_scenes::unprocess::WB_SPREAD,
             ratio_min: 1.0,
             ratio_max: 300.0,
             ratio_draw: RatioDraw::Uniform,
@@ -697,6 +658,68 @@ impl TrainConfig {
         }
         self.iso_range()?;
         Ok(())
+    }
+}
+
+impl TrainConfig {
+    /// The network this configuration trains for `method`, checked.
+    pub fn architecture(&self, method: Method) -> Result<Architecture> {
+        Ok(match method {
+            Method::Spc => Architecture::SidUnet(self.sid_unet()?),
+            Method::Pgrf => Architecture::Sr3(self.sr3()?),
+        })
+    }
+
+    /// The network `pgrf train spc` builds from `c`: SID's defaults, the
+    /// width `c.width` when given (at least 1), residual as `c.residual`.
+    fn sid_unet(&self) -> Result<SidUnetConfig> {
+        let c = self;
+        let cfg = SidUnetConfig::new()
+            .with_residual(c.residual)
+            .with_conditioning(c.conditioning)
+            .with_keep_below_black(c.keep_below_black)
+            .with_in_channels(4 + c.conditioning.extra_channels());
+        let w = c.width.unwrap_or(cfg.width);
+        if w == 0 {
+            return Err(NnError::Config("--width must be at least 1".into()));
+        }
+        Ok(cfg.with_width(w))
+    }
+
+    /// The network `pgrf train pgrf` builds from `c`: SR3's defaults where
+    /// a setting is not given (`width` stands for the inner channels when
+    /// `inner_channels` is not), GroupNorm groups the largest count <= 32
+    /// that divides every level, checked.
+    fn sr3(&self) -> Result<Sr3Config> {
+        let c = self;
+        let d = Sr3Config::new();
+        let inner = c.inner_channels.or(c.width).unwrap_or(d.inner_channels);
+        let mults = c.channel_mults.clone().unwrap_or(d.channel_mults);
+        let attn = c.attn_levels.clone().unwrap_or(d.attn_levels);
+        if let Some(l) = attn.iter().find(|&&l| l >= mults.len()) {
+            return Err(NnError::Config(format!(
+                "--attn-levels {l} does not exist: the network has {} levels (0..{})",
+                mults.len(),
+                mults.len().saturating_sub(1)
+            )));
+        }
+        let groups = c
+            .norm_groups
+            .unwrap_or_else(|| crate::arch::sr3::default_groups(inner, &mults));
+        let cfg = Sr3Config::new()
+            .with_inner_channels(inner)
+            .with_channel_mults(mults)
+            .with_res_blocks(c.res_blocks.unwrap_or(d.res_blocks))
+            .with_attn_levels(attn)
+            .with_norm_groups(groups)
+            .with_dropout(c.dropout.unwrap_or(d.dropout))
+            .with_residual(c.residual)
+            .with_conditioning(c.conditioning)
+            .with_keep_below_black(c.keep_below_black)
+            .with_in_channels(8 + c.conditioning.extra_channels());
+        cfg.validate()
+            .map_err(|e| NnError::Config(format!("flow network: {e}")))?;
+        Ok(cfg)
     }
 }
 

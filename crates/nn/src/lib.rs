@@ -28,12 +28,13 @@
 //!
 //! # Adding a network
 //!
-//! One new file in [`arch`] and one arm per match in `arch/mod.rs`:
+//! One new file in [`arch`], one arm per match in `arch/mod.rs` and
+//! `apply.rs`, and how the training settings make its configuration (a
+//! method of [`TrainConfig`] in `config.rs`, above the networks):
 //!
 //! 1. `arch/NAME.rs` holds the network's configuration (a burn `Config`,
-//!    serialised into weight files), its module and `forward`, how
-//!    `pgrf train`'s settings make its configuration (`from_train_config`)
-//!    and its answers to `arch::network::NetworkConfig`: the method it
+//!    serialised into weight files), its module and `forward`, and its
+//!    answers to `arch::network::NetworkConfig`: the method it
 //!    implements, its description, the checks before building from a record,
 //!    its parameter lower bound, its memory per pixel and attention tokens,
 //!    its tile multiple and cap, whether it is sampled from start noise, and

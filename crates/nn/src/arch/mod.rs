@@ -6,26 +6,26 @@
 //! - [`sid_unet`]: the SID U-Net, the SPC denoiser (one pass);
 //! - [`sr3`]: the SR3 velocity field of the PGRF flow model (sampled).
 //!
-//! Each network file owns its configuration (and how `pgrf train`'s
-//! settings make one), its initialisation, its parameters (named by their
+//! Each network file owns its configuration, its initialisation, its
+//! parameters (named by their
 //! field path, [`crate::named`]), its memory estimate and what restoring a
 //! tile with it needs (`network::NetworkConfig`). [`Architecture`] is the
 //! configuration as a weight file records it; [`Net`] the built network.
 //! Adding a network: see the crate documentation.
 
+mod kinds;
 mod network;
 pub mod sid_names;
 pub mod sid_unet;
 pub mod sr3;
 mod widen;
 
+pub use kinds::{Extras, Method};
 pub(crate) use network::MEMORY_TILE_CAP;
 pub use sid_unet::{SidUnet, SidUnetConfig};
 pub use sr3::{Sr3Config, Sr3Unet};
 
 use crate::condition::Conditioning;
-use crate::config::{Method, TrainConfig};
-use crate::data::Extras;
 use crate::error::{NnError, Result};
 use crate::named::{self, NamedTensor};
 use crate::ops::PgrfOps;
@@ -343,17 +343,6 @@ fn same_tensors_json(a: &Architecture) -> Option<serde_json::Value> {
     Some(v)
 }
 
-impl TrainConfig {
-    /// The network this configuration trains for `method`, checked (each
-    /// network's file says how the settings make its configuration).
-    pub fn architecture(&self, method: Method) -> Result<Architecture> {
-        Ok(match method {
-            Method::Spc => Architecture::SidUnet(SidUnetConfig::from_train_config(self)?),
-            Method::Pgrf => Architecture::Sr3(Sr3Config::from_train_config(self)?),
-        })
-    }
-}
-
 impl<B: Backend> Net<B> {
     /// Every parameter by its field path ([`crate::named`]): what a weight
     /// file stores.
@@ -446,6 +435,7 @@ mod tests {
     use crate::backend::Cpu;
     use crate::condition::NoiseLevel;
     use crate::config::LossRule;
+    use crate::config::TrainConfig;
     use burn::tensor::{Distribution, TensorData};
 
     fn config(conditioning: Conditioning) -> TrainConfig {

@@ -4,9 +4,9 @@
 //! its own so that the network files and `arch/mod.rs` share it without
 //! importing each other.
 
+use super::Extras;
+use super::Method;
 use crate::condition::Conditioning;
-use crate::config::Method;
-use crate::data::Extras;
 use crate::error::Result;
 
 /// The tile cap of a network limited by memory alone: the convolutional

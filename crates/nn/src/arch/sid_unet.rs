@@ -9,9 +9,8 @@
 //! back, so any packed image size works.
 
 use super::network::NetworkConfig;
+use super::{Extras, Method};
 use crate::condition::Conditioning;
-use crate::config::{Method, TrainConfig};
-use crate::data::Extras;
 use crate::error::{NnError, Result as NnResult};
 use crate::layers::Layer;
 use crate::named::NamedTensor;
@@ -244,23 +243,6 @@ impl<B: Backend> SidUnet<B> {
         }
         out.push(Layer::conv(&self.head, h, w));
         out
-    }
-}
-
-impl SidUnetConfig {
-    /// The network `pgrf train spc` builds from `c`: SID's defaults, the
-    /// width `c.width` when given (at least 1), residual as `c.residual`.
-    pub(crate) fn from_train_config(c: &TrainConfig) -> NnResult<SidUnetConfig> {
-        let cfg = SidUnetConfig::new()
-            .with_residual(c.residual)
-            .with_conditioning(c.conditioning)
-            .with_keep_below_black(c.keep_below_black)
-            .with_in_channels(4 + c.conditioning.extra_channels());
-        let w = c.width.unwrap_or(cfg.width);
-        if w == 0 {
-            return Err(NnError::Config("--width must be at least 1".into()));
-        }
-        Ok(cfg.with_width(w))
     }
 }
 

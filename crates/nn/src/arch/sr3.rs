@@ -10,9 +10,8 @@
 //! level 3 is the paper's 16 x 16 level.
 
 use super::network::NetworkConfig;
+use super::{Extras, Method};
 use crate::condition::Conditioning;
-use crate::config::{Method, TrainConfig};
-use crate::data::Extras;
 use crate::error::{NnError, Result as NnResult};
 use crate::layers::Layer;
 use crate::named::NamedTensor;
@@ -239,46 +238,9 @@ impl Sr3Config {
     }
 }
 
-impl Sr3Config {
-    /// The network `pgrf train pgrf` builds from `c`: SR3's defaults where
-    /// a setting is not given (`width` stands for the inner channels when
-    /// `inner_channels` is not), GroupNorm groups the largest count <= 32
-    /// that divides every level, checked.
-    pub(crate) fn from_train_config(c: &TrainConfig) -> NnResult<Sr3Config> {
-        let d = Sr3Config::new();
-        let inner = c.inner_channels.or(c.width).unwrap_or(d.inner_channels);
-        let mults = c.channel_mults.clone().unwrap_or(d.channel_mults);
-        let attn = c.attn_levels.clone().unwrap_or(d.attn_levels);
-        if let Some(l) = attn.iter().find(|&&l| l >= mults.len()) {
-            return Err(NnError::Config(format!(
-                "--attn-levels {l} does not exist: the network has {} levels (0..{})",
-                mults.len(),
-                mults.len().saturating_sub(1)
-            )));
-        }
-        let groups = c
-            .norm_groups
-            .unwrap_or_else(|| default_groups(inner, &mults));
-        let cfg = Sr3Config::new()
-            .with_inner_channels(inner)
-            .with_channel_mults(mults)
-            .with_res_blocks(c.res_blocks.unwrap_or(d.res_blocks))
-            .with_attn_levels(attn)
-            .with_norm_groups(groups)
-            .with_dropout(c.dropout.unwrap_or(d.dropout))
-            .with_residual(c.residual)
-            .with_conditioning(c.conditioning)
-            .with_keep_below_black(c.keep_below_black)
-            .with_in_channels(8 + c.conditioning.extra_channels());
-        cfg.validate()
-            .map_err(|e| NnError::Config(format!("flow network: {e}")))?;
-        Ok(cfg)
-    }
-}
-
 /// The largest group count <= 32 that divides every level's channel count, so
 /// reduced configurations work without the user doing the arithmetic.
-fn default_groups(inner: usize, mults: &[usize]) -> usize {
+pub(crate) fn default_groups(inner: usize, mults: &[usize]) -> usize {
     (1..=32usize)
         .rev()
         .find(|&g| inner.is_multiple_of(g) && mults.iter().all(|m| (m * inner).is_multiple_of(g)))

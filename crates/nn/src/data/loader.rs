@@ -23,18 +23,7 @@ use std::sync::mpsc::{sync_channel, Receiver};
 use std::sync::Arc;
 use std::thread::JoinHandle;
 
-/// What to put in a batch besides (noisy, clean).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub(crate) enum Extras {
-    /// Nothing else: the denoiser's batches.
-    None,
-    /// X0 ~ N(0, I) and t ~ U(0, t_max) per item, for the rectified flow;
-    /// `t_max` in (0, 1] (1: Algorithm 1's U(0, 1)).
-    Flow {
-        /// Upper end of the training times (`pgrf train --time-max`).
-        t_max: f32,
-    },
-}
+pub(crate) use crate::arch::Extras;
 
 /// One batch, NCHW f32 (`(n, 4, P, P)` flattened), ready to become tensors.
 #[derive(Clone, Debug)]

@@ -15,6 +15,6 @@ pub mod source;
 pub mod validation;
 
 pub use loader::loader_rate;
-pub(crate) use loader::{Batch, Extras, Loader, SampleSpec};
+pub(crate) use loader::{Batch, Loader, SampleSpec};
 pub use photos::{PhotoFolder, PhotoOptions};
 pub use source::{Folder, Source};
