@@ -635,6 +635,36 @@ struct LoopEnd {
     seconds: f64,
 }
 
+/// A validation's PSNR: the moving average's, and the raw weights' when a
+/// moving average is kept.
+type Validated = (f32, Option<f32>);
+
+/// The run's last validation (none when it was stopped: the moving
+/// average's and the raw weights' PSNR) and the noisy input's PSNR on the
+/// same pairs, when there are validation pairs.
+fn final_validation<B: PgrfAutodiff>(
+    run: &mut Run<B>,
+    net: &Net<B>,
+    val: Option<&ValSet>,
+    interrupted: bool,
+) -> Result<(Option<Validated>, Option<f32>)> {
+    let Some(v) = val else {
+        return Ok((None, None));
+    };
+    let final_val = if interrupted {
+        None
+    } else {
+        Some(run.validate_both(net, v)?)
+    };
+    let input = v
+        .pairs
+        .iter()
+        .map(|p| psnr(&p.noisy, &p.clean))
+        .sum::<f32>()
+        / v.pairs.len().max(1) as f32;
+    Ok((final_val, Some(input)))
+}
+
 /// The end of a run: the final validation (unless stopped), the last log
 /// row, the checkpoint and the weight file with its training record.
 fn finish<B: PgrfAutodiff>(
@@ -654,22 +684,8 @@ fn finish<B: PgrfAutodiff>(
         seconds,
     } = end;
     let images_per_s = ((step - start) as usize * s.batch) as f64 / seconds.max(1e-9);
-    let (mut val_psnr, mut val_input_psnr) = (run.last_val, None);
-    let mut final_val = None;
-    if let Some(v) = val {
-        if !interrupted {
-            let (p, raw) = run.validate_both(net, v)?;
-            val_psnr = Some(p);
-            final_val = Some((p, raw));
-        }
-        val_input_psnr = Some(
-            v.pairs
-                .iter()
-                .map(|p| psnr(&p.noisy, &p.clean))
-                .sum::<f32>()
-                / v.pairs.len().max(1) as f32,
-        );
-    }
+    let (final_val, val_input_psnr) = final_validation(run, net, val, interrupted)?;
+    let val_psnr = final_val.map(|(p, _)| p).or(run.last_val);
     if window.1 > 0 {
         let mean = (window.0 / window.1 as f64) as f32;
         let lr = s.schedule.lr(s.lr, step.saturating_sub(1), s.steps);

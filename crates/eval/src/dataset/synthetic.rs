@@ -812,12 +812,11 @@ mod tests {
         std::fs::remove_dir_all(&d).unwrap();
     }
 
-    #[test]
-    fn a_run_covers_every_image_condition_and_method_reproducibly() {
-        use crate::method::{CaseInfo, FnMethod};
-        use pgrf_core::NoProgress;
+    /// A fresh folder holding the same 128 x 96 chart as one.dng and
+    /// two.dng, and the chart.
+    fn chart_folder(tag: &str) -> (std::path::PathBuf, pgrf_raw::RawFrame) {
         use pgrf_scenes::chart::{render_chart, ChartSpec};
-        let d = std::env::temp_dir().join(format!("pgrf-synth-run-{}", std::process::id()));
+        let d = std::env::temp_dir().join(format!("pgrf-synth-{tag}-{}", std::process::id()));
         let _ = std::fs::remove_dir_all(&d);
         std::fs::create_dir_all(&d).unwrap();
         let frame = render_chart(&ChartSpec {
@@ -829,39 +828,60 @@ mod tests {
         for n in ["one.dng", "two.dng"] {
             pgrf_raw::write_dng(&frame, &d.join(n), &Default::default()).unwrap();
         }
-        let images = walk(std::slice::from_ref(&d)).unwrap();
-        let synth = Synthetic::new(
+        (d, frame)
+    }
+
+    /// The A7S2 at ISO 1600, x100 and x200.
+    fn a7s2_x100_x200() -> Synthetic {
+        Synthetic::new(
             "sony-a7s2",
             ModelKind::Pgrf,
             grid(&[1600], &[100.0, 200.0]),
             0,
             None,
         )
-        .unwrap();
-        // A 3x3 box blur per plane: a "denoiser" that must beat the input.
-        let blur = |x: ArrayView3<f32>, _: &CaseInfo| -> std::result::Result<Array3<f32>, String> {
-            let (c, h, w) = x.dim();
-            Ok(Array3::from_shape_fn((c, h, w), |(p, i, j)| {
-                let (mut s, mut n) = (0.0, 0.0);
-                for y in i.saturating_sub(1)..(i + 2).min(h) {
-                    for xx in j.saturating_sub(1)..(j + 2).min(w) {
-                        s += x[[p, y, xx]];
-                        n += 1.0;
-                    }
+        .unwrap()
+    }
+
+    /// A 3x3 box blur per plane: a "denoiser" that must beat the input.
+    fn box_blur(
+        x: ArrayView3<f32>,
+        _: &crate::method::CaseInfo,
+    ) -> std::result::Result<Array3<f32>, String> {
+        let (c, h, w) = x.dim();
+        Ok(Array3::from_shape_fn((c, h, w), |(p, i, j)| {
+            let (mut s, mut n) = (0.0, 0.0);
+            for y in i.saturating_sub(1)..(i + 2).min(h) {
+                for xx in j.saturating_sub(1)..(j + 2).min(w) {
+                    s += x[[p, y, xx]];
+                    n += 1.0;
                 }
-                s / n
-            }))
-        };
-        let blur = FnMethod {
-            name: "blur".into(),
-            f: blur,
-        };
-        let methods: Vec<&dyn MethodUnderTest> = vec![&blur];
-        let opts = RunOptions {
+            }
+            s / n
+        }))
+    }
+
+    fn worst_two() -> RunOptions {
+        RunOptions {
             baseline: true,
             worst_count: 2,
             ..Default::default()
+        }
+    }
+
+    #[test]
+    fn a_run_covers_every_image_condition_and_method_reproducibly() {
+        use crate::method::{CaseInfo, FnMethod};
+        use pgrf_core::NoProgress;
+        let (d, _) = chart_folder("run");
+        let images = walk(std::slice::from_ref(&d)).unwrap();
+        let synth = a7s2_x100_x200();
+        let blur = FnMethod {
+            name: "blur".into(),
+            f: box_blur,
         };
+        let methods: Vec<&dyn MethodUnderTest> = vec![&blur];
+        let opts = worst_two();
         let a = run(&images, &synth, &methods, &opts, &NoProgress).unwrap();
         assert_eq!(a.rows.len(), 2 * 2 * 2);
         assert!(a.notes.is_empty(), "{:?}", a.notes);
@@ -905,16 +925,29 @@ mod tests {
             e.contains("one.dng (ISO 1600 x100): model bad: out of memory"),
             "{e}"
         );
-        // A file without white balance or colour matrix: measured with the
-        // fallbacks, and a note says so.
-        let mut plain = frame.clone();
+        std::fs::remove_dir_all(&d).unwrap();
+    }
+
+    /// A file without white balance or colour matrix: measured with the
+    /// fallbacks, and a note says so.
+    #[test]
+    fn a_file_without_colour_data_is_measured_with_a_note() {
+        let (d, frame) = chart_folder("plain");
+        let mut plain = frame;
         plain.wb = None;
         plain.color_matrices.clear();
         let p = d.join("plain").join("plain.dng");
         std::fs::create_dir_all(p.parent().unwrap()).unwrap();
         pgrf_raw::write_dng(&plain, &p, &Default::default()).unwrap();
         let methods: Vec<&dyn MethodUnderTest> = vec![];
-        let o = run(&walk(&[p]).unwrap(), &synth, &methods, &opts, &NoProgress).unwrap();
+        let o = run(
+            &walk(&[p]).unwrap(),
+            &a7s2_x100_x200(),
+            &methods,
+            &worst_two(),
+            &pgrf_core::NoProgress,
+        )
+        .unwrap();
         assert_eq!(o.rows.len(), 2);
         let c = o.rows[0].cast.unwrap();
         assert!(!c.white_balance && !c.matrix, "{c:?}");
