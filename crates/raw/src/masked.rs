@@ -145,28 +145,21 @@ pub fn measure(
         return None;
     }
     let mut level = [0.0f32; 4];
-    for (l, p) in level.iter_mut().zip(planes.iter_mut()) {
+    for (l, p) in level.iter_mut().zip(&planes) {
         *l = clipped_mean(p) as f32;
     }
     Some((level, fewest))
 }
 
 /// The mean of the values within 5 robust standard deviations (1.4826 x
-/// the median absolute deviation, at least 1 DN) of their median.
-pub fn clipped_mean(v: &mut [u16]) -> f64 {
-    let n = v.len();
-    let (_, &mut med, _) = v.select_nth_unstable(n / 2);
-    let mut dev: Vec<u16> = v.iter().map(|&x| x.abs_diff(med)).collect();
-    let (_, &mut mad, _) = dev.select_nth_unstable(n / 2);
-    let reach = (5.0 * 1.4826 * mad as f64).max(1.0);
-    let (mut sum, mut count) = (0.0f64, 0usize);
-    for &x in v.iter() {
-        if (x as f64 - med as f64).abs() <= reach {
-            sum += x as f64;
-            count += 1;
-        }
-    }
-    sum / count as f64
+/// the median absolute deviation, at least 1 DN) of their median
+/// ([`pgrf_core::stats::median_and_robust_sd`]).
+pub fn clipped_mean(v: &[u16]) -> f64 {
+    let mut x: Vec<f64> = v.iter().map(|&x| x as f64).collect();
+    let (med, sd) = pgrf_core::stats::median_and_robust_sd(&mut x);
+    let reach = (5.0 * sd).max(1.0);
+    let kept: Vec<f64> = x.into_iter().filter(|x| (x - med).abs() <= reach).collect();
+    kept.iter().sum::<f64>() / kept.len() as f64
 }
 
 #[cfg(test)]
