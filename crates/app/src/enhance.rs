@@ -331,10 +331,7 @@ pub const MASKED_BLACK_REACH: f32 = 0.02;
 pub fn masked_black(frame: &mut RawFrame) -> Option<String> {
     let m = frame.masked.as_ref()?;
     let range = frame.white as f32 - frame.black.iter().copied().fold(0.0, f32::max);
-    let fmt = |v: [f32; 4]| {
-        let v: Vec<String> = v.iter().map(|x| format!("{x:.2}")).collect();
-        v.join("/")
-    };
+    let fmt = pgrf_raw::masked::levels_text;
     let off = m
         .level
         .iter()

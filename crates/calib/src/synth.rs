@@ -93,8 +93,8 @@ impl Synthesized {
             Some(m) => format!(
                 "; {} masked columns, black {} DN (metadata {})",
                 m.strip.as_ref().map_or(0, |s| s.columns),
-                levels(m.level),
-                levels(self.frame.black)
+                pgrf_raw::masked::levels_text(m.level),
+                pgrf_raw::masked::levels_text(self.frame.black)
             ),
             None => String::new(),
         };
@@ -110,11 +110,6 @@ impl Synthesized {
             c.seed
         )
     }
-}
-
-/// Four per-plane levels as "a/b/c/d" with two decimals.
-fn levels(v: [f32; 4]) -> String {
-    v.map(|x| format!("{x:.2}")).join("/")
 }
 
 /// What a simulated capture was made with.

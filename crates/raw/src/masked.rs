@@ -95,6 +95,12 @@ impl Masked {
     }
 }
 
+/// Four per-plane levels as "a/b/c/d" with two decimals, as the lines that
+/// report a masked level print them.
+pub fn levels_text(v: [f32; 4]) -> String {
+    v.map(|x| format!("{x:.2}")).join("/")
+}
+
 /// One masked rectangle of the readout, half-open: rows `top..bottom`,
 /// columns `left..right` (the DNG tag's order).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

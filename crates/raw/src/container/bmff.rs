@@ -362,7 +362,7 @@ impl Boxes<'_> {
                     )));
                 };
                 if let Some(what) = too_many_pixels(w as u64, ht as u64) {
-                    return Err(ContainerError::damaged_header(format!(
+                    return Err(ContainerError::damaged(format!(
                         "the CR3's CMP1 box at byte {} claims {what}: its header is damaged",
                         h.at
                     )));

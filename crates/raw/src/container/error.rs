@@ -65,17 +65,13 @@ impl ContainerError {
         }
     }
 
-    /// Data that do not decode whole.
+    /// Data that do not decode whole, or a header claiming more than a file
+    /// holds.
     pub(crate) fn damaged(message: String) -> Self {
         ContainerError {
             cause: Cause::Damaged,
             message,
         }
-    }
-
-    /// A header claiming more than a file holds.
-    pub(crate) fn damaged_header(message: String) -> Self {
-        Self::damaged(message)
     }
 
     /// A tag that cannot be used.

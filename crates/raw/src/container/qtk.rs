@@ -32,13 +32,13 @@ pub(super) fn check_qtk(bytes: &[u8]) -> Result<(), ContainerError> {
     }
     let (w, h) = (w.max(h) as u64, w.min(h) as u64);
     if let Some(what) = too_many_pixels(w, h) {
-        return Err(ContainerError::damaged_header(format!(
+        return Err(ContainerError::damaged(format!(
             "the QuickTake header claims {what}: it is damaged"
         )));
     }
     let data = (bytes.len() as u64).saturating_sub(if hint == 30 { 738 } else { 736 });
     if w * h > data * QTK_PIXELS_PER_BYTE {
-        return Err(ContainerError::damaged_header(format!(
+        return Err(ContainerError::damaged(format!(
             "the QuickTake header claims a {w} x {h} image, but the file holds only {data} bytes of pixel data (at least 1 per {QTK_PIXELS_PER_BYTE} pixels): it is truncated or damaged"
         )));
     }

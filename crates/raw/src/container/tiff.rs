@@ -447,7 +447,7 @@ fn check_image(img: &Image, bytes: &[u8], dng: bool) -> Result<(), ContainerErro
         return Ok(());
     };
     if let Some(what) = too_many_pixels(w, h) {
-        return Err(ContainerError::damaged_header(format!(
+        return Err(ContainerError::damaged(format!(
             "the file claims {what}: its header is damaged"
         )));
     }
