@@ -79,6 +79,8 @@ impl Masked {
             bottom: height,
             right: c,
         };
+        // The visible area begins right of the strip (no pixels of it are
+        // here); the strip's columns are even, so its phase is the area's.
         let (level, pixels) = measure(
             &strip.values,
             (height, c),
