@@ -4,7 +4,7 @@
 
 use ndarray::{Array3, ArrayView3};
 use pgrf_core::NoProgress;
-use pgrf_eval::{CaseInfo, MethodUnderTest};
+use pgrf_eval::{CaseInfo, MethodUnderTest, RestoreError};
 use pgrf_nn::condition::NoiseLevel;
 use pgrf_nn::infer::{restore_packed, Restore, Tiling};
 
@@ -31,7 +31,11 @@ impl MethodUnderTest for NetworkMethod {
         &self.name
     }
 
-    fn restore(&self, input: ArrayView3<f32>, case: &CaseInfo<'_>) -> Result<Array3<f32>, String> {
+    fn restore(
+        &self,
+        input: ArrayView3<f32>,
+        case: &CaseInfo<'_>,
+    ) -> Result<Array3<f32>, RestoreError> {
         let level = (case.noise)
             .map(|n| NoiseLevel::from_dn(n.k, n.read, n.row, n.range, case.ratio as f64));
         restore_packed(
@@ -42,6 +46,6 @@ impl MethodUnderTest for NetworkMethod {
             &NoProgress,
         )
         .map(|o| o.output)
-        .map_err(|e| e.to_string())
+        .map_err(RestoreError::method)
     }
 }

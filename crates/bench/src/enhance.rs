@@ -22,6 +22,7 @@
 use anyhow::{ensure, Context, Result};
 use burn::module::Module;
 use clap::{Args, ValueEnum};
+use pgrf_core::parse::ParseError;
 use pgrf_core::seed::mix64;
 use pgrf_core::stats::median;
 use pgrf_nn::backend::DeviceKind;
@@ -62,14 +63,19 @@ pub struct FrameSize {
 }
 
 impl std::str::FromStr for FrameSize {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
+    type Err = ParseError;
+    fn from_str(s: &str) -> Result<Self, ParseError> {
         let parse = |v: &str| {
             v.trim()
                 .parse::<usize>()
                 .ok()
                 .filter(|n| *n > 0)
-                .ok_or_else(|| format!("'{s}': expected HxW or N in packed pixels, e.g. 1424x2128"))
+                .ok_or_else(|| {
+                    ParseError::malformed(
+                        s,
+                        format!("'{s}': expected HxW or N in packed pixels, e.g. 1424x2128"),
+                    )
+                })
         };
         match s.split_once(['x', 'X']) {
             Some((h, w)) => Ok(FrameSize {
@@ -420,6 +426,7 @@ impl Plan {
             net: match r.meta().arch {
                 Architecture::SidUnet(_) => "unet",
                 Architecture::Sr3(_) => "sr3",
+                Architecture::Sr3Prior(_) => "sr3-prior",
             },
             model: r.meta().arch.describe(),
             params,

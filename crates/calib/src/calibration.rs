@@ -1,10 +1,9 @@
 //! The calibration file: per-pixel maps in safetensors plus one JSON record of
 //! how they were measured, and its conversion into the noise model's maps.
 
-use crate::error::{CalibError, Result};
+use crate::error::{CalibError, RecordFault, Result};
 use crate::estimate::{defect, GainMethod};
 use ndarray::Array3;
-use pgrf_core::number::shown;
 use pgrf_noise::mapfile::write_maps;
 use pgrf_noise::{DarkLaw, Map, PixelMaps};
 use pgrf_raw::Cfa;
@@ -169,13 +168,13 @@ impl CalibMeta {
     /// exposures that are times. A record failing any of these would write
     /// saturated or black frames (white 0, black 1e9) or divide by zero
     /// (K 0), so it is refused with the field named.
-    pub(crate) fn check(&self) -> std::result::Result<(), String> {
+    pub(crate) fn check(&self) -> std::result::Result<(), RecordFault> {
         self.check_frame()?;
         self.check_figures()
     }
 
     /// The frame's size, CFA and levels.
-    fn check_frame(&self) -> std::result::Result<(), String> {
+    fn check_frame(&self) -> std::result::Result<(), RecordFault> {
         const MAX_SIDE: usize = 1 << 16;
         if self.width < 2
             || self.height < 2
@@ -184,41 +183,38 @@ impl CalibMeta {
             || self.width > MAX_SIDE
             || self.height > MAX_SIDE
         {
-            return Err(format!(
-                "frame size {}x{} (must be even, 2..{MAX_SIDE} on each side)",
-                self.width, self.height
-            ));
+            return Err(RecordFault::FrameSize {
+                width: self.width,
+                height: self.height,
+                max: MAX_SIDE,
+            });
         }
         if self.cfa != "mono" {
             self.cfa
                 .parse::<pgrf_raw::Cfa>()
-                .map_err(|_| format!("unknown CFA '{}'", self.cfa))?;
+                .map_err(|_| RecordFault::Cfa(self.cfa.clone()))?;
         }
         if !(1..=65535).contains(&self.white) {
-            return Err(format!("white level {} (must be 1..65535)", self.white));
+            return Err(RecordFault::White(self.white));
         }
-        for &b in &self.black {
-            if !(b.is_finite() && b >= 0.0 && (b as f64) < self.white as f64) {
-                return Err(format!(
-                    "black level {} (must be at least 0 and below the white level {})",
-                    shown(b as f64),
-                    self.white
-                ));
+        for &black in &self.black {
+            if !(black.is_finite() && black >= 0.0 && (black as f64) < self.white as f64) {
+                return Err(RecordFault::Black {
+                    black,
+                    white: self.white,
+                });
             }
         }
         Ok(())
     }
 
     /// The gain, noise figures, ISO, exposures and dark-signal figures.
-    fn check_figures(&self) -> std::result::Result<(), String> {
-        let max_k = pgrf_noise::profile::MAX_GAIN;
-        if !(self.k.is_finite() && self.k > 0.0 && self.k <= max_k) {
-            return Err(format!(
-                "gain K {} DN/e- (must be positive and at most {max_k}, more than any sensor)",
-                shown(self.k)
-            ));
+    fn check_figures(&self) -> std::result::Result<(), RecordFault> {
+        let max = pgrf_noise::profile::MAX_GAIN;
+        if !(self.k.is_finite() && self.k > 0.0 && self.k <= max) {
+            return Err(RecordFault::Gain { k: self.k, max });
         }
-        for (name, v) in [
+        for (field, value) in [
             ("row_sigma", self.row_sigma),
             ("read_sigma_median", self.read_sigma_median),
             ("dark_noise_sigma", self.dark_noise_sigma.unwrap_or(0.0)),
@@ -227,40 +223,26 @@ impl CalibMeta {
         ] {
             // A noise figure or exposure beyond the DN range (or a day) is
             // no sensor's: 1e300 would overflow once squared or scaled.
-            if !(v.is_finite() && (0.0..=65535.0).contains(&v)) {
-                return Err(format!(
-                    "{name} {} (must be a number in 0..=65535)",
-                    shown(v)
-                ));
+            if !(value.is_finite() && (0.0..=65535.0).contains(&value)) {
+                return Err(RecordFault::Figure { field, value });
             }
         }
-        if let Some(iso) = self.iso {
-            if iso == 0 {
-                return Err("ISO 0".into());
-            }
+        if self.iso == Some(0) {
+            return Err(RecordFault::ZeroIso);
         }
         for &t in self.dark_exposures_s.iter().chain(&self.flat_exposures_s) {
             if !(t.is_finite() && (0.0..=1e6).contains(&t)) {
-                return Err(format!(
-                    "exposure {} s (must be a number in 0..=1e6)",
-                    shown(t)
-                ));
+                return Err(RecordFault::Exposure(t));
             }
         }
         if let Some(r) = self.dark_rate_mean {
             if !(r.is_finite() && r.abs() <= 1e9) {
-                return Err(format!(
-                    "dark_rate_mean {} (must be a finite rate)",
-                    shown(r)
-                ));
+                return Err(RecordFault::DarkRate(r));
             }
         }
         if let Some(c) = self.dark_offset_mean {
             if !(c.is_finite() && c.abs() <= self.white as f64) {
-                return Err(format!(
-                    "dark_offset_mean {} DN (must be finite and within the white level)",
-                    shown(c)
-                ));
+                return Err(RecordFault::DarkOffset(c));
             }
         }
         Ok(())
@@ -479,12 +461,12 @@ impl Calibration {
                 path: path.to_path_buf(),
             });
         }
-        let bad_record = |reason: String| CalibError::BadRecord {
+        let bad_record = |fault| CalibError::BadRecord {
             path: path.to_path_buf(),
-            reason,
+            fault,
         };
         let meta: CalibMeta =
-            serde_json::from_value(meta).map_err(|e| bad_record(e.to_string()))?;
+            serde_json::from_value(meta).map_err(|e| bad_record(RecordFault::Json(e)))?;
         meta.check().map_err(bad_record)?;
         let shape = [4, meta.height / 2, meta.width / 2];
         // A monochrome sensor's maps are one plane of its pixels (records

@@ -5,6 +5,7 @@
 //! damaged file) without reading the message; the message is the one line
 //! the CLI prints.
 
+use pgrf_core::number::shown;
 use std::path::PathBuf;
 
 /// Why a calibration could not be made, read, written or applied.
@@ -227,12 +228,12 @@ pub enum CalibError {
         path: PathBuf,
     },
     /// A calibration record that cannot be read or fails its checks.
-    #[error("{}: bad calibration record: {reason}", path.display())]
+    #[error("{}: bad calibration record: {fault}", path.display())]
     BadRecord {
         /// The file.
         path: PathBuf,
         /// The field and what is wrong with it.
-        reason: String,
+        fault: RecordFault,
     },
     /// A map whose shape disagrees with the record's frame size.
     #[error("{}: map '{map}' has shape {shape:?}, the record says {expected:?}", path.display())]
@@ -388,4 +389,67 @@ fn mismatch(what: FrameField, expected: &str, found: &str) -> String {
             "row order {found} (ROWORDER; a FITS file without one is BOTTOM-UP) differs from the other frames' {expected}"
         ),
     }
+}
+
+/// What is wrong with a calibration record
+/// ([`crate::Calibration::from_bytes`]): it is not the record's JSON, or a
+/// value that synthesis and restoration rely on is out of its range; each
+/// names the field.
+#[derive(Debug, thiserror::Error)]
+pub enum RecordFault {
+    /// The record's JSON has missing, unknown or mistyped keys.
+    #[error("{0}")]
+    Json(serde_json::Error),
+    /// A frame size that is odd, below 2 or beyond the largest side.
+    #[error("frame size {width}x{height} (must be even, 2..{max} on each side)")]
+    FrameSize {
+        /// Width, pixels.
+        width: usize,
+        /// Height, pixels.
+        height: usize,
+        /// The largest side accepted.
+        max: usize,
+    },
+    /// A CFA name that is none of the four Bayer phases nor "mono".
+    #[error("unknown CFA '{0}'")]
+    Cfa(String),
+    /// A white level outside 1..65535.
+    #[error("white level {0} (must be 1..65535)")]
+    White(u32),
+    /// A black level that is negative, not a number, or not below white.
+    #[error("black level {} (must be at least 0 and below the white level {white})", shown(*.black as f64))]
+    Black {
+        /// The black level, DN.
+        black: f32,
+        /// The white level, DN.
+        white: u32,
+    },
+    /// A gain that is not positive or beyond any sensor's.
+    #[error("gain K {} DN/e- (must be positive and at most {max}, more than any sensor)", shown(*.k))]
+    Gain {
+        /// The gain, DN/e-.
+        k: f64,
+        /// The largest gain accepted.
+        max: f64,
+    },
+    /// A noise figure or exposure outside 0..=65535.
+    #[error("{field} {} (must be a number in 0..=65535)", shown(*.value))]
+    Figure {
+        /// The field (`row_sigma`, `dsnu`, ...).
+        field: &'static str,
+        /// Its value.
+        value: f64,
+    },
+    /// ISO 0.
+    #[error("ISO 0")]
+    ZeroIso,
+    /// A dark or flat exposure that is not a time.
+    #[error("exposure {} s (must be a number in 0..=1e6)", shown(*.0))]
+    Exposure(f64),
+    /// A mean dark rate that is not a finite rate.
+    #[error("dark_rate_mean {} (must be a finite rate)", shown(*.0))]
+    DarkRate(f64),
+    /// A mean dark offset that is not finite or beyond the white level.
+    #[error("dark_offset_mean {} DN (must be finite and within the white level)", shown(*.0))]
+    DarkOffset(f64),
 }

@@ -26,7 +26,7 @@ pub mod synth;
 
 pub use calibrate::{calibrate, CalibrateInput, CalibrationRun};
 pub use calibration::{CalibMaps, CalibMeta, Calibration};
-pub use error::{CalibError, FrameField, Result};
+pub use error::{CalibError, FrameField, RecordFault, Result};
 pub use estimate::GainMethod;
 pub use outputs::{
     calibrate_to_files, CalibrateConfig, CalibrateOutcome, DarktableOutcome, DarktableOutput,

@@ -180,7 +180,8 @@ pub fn check(c: &SynthConfig) -> Result<(), SynthError> {
         }
     }
     if let Some(r) = c.ratio {
-        pgrf_noise::pair::check_ratio("--ratio", r).map_err(|m| bad("--ratio", m))?;
+        pgrf_noise::pair::ratio_in_range("--ratio", r)
+            .map_err(|e| bad("--ratio", e.to_string()))?;
     }
     if !c.masked_columns.is_multiple_of(2) || c.masked_columns > MAX_MASKED_COLUMNS {
         return Err(bad(

@@ -6,7 +6,7 @@
 //! 16 x 16 pixels whose K was 1e300, which loaded and then turned the dark
 //! shading `pgrf enhance --calib` subtracts into infinities.
 
-use pgrf_calib::Calibration;
+use pgrf_calib::{CalibError, Calibration, RecordFault};
 use std::path::Path;
 
 const FOUND: &str = "tests/fuzz_regressions/k_1e300.safetensors";
@@ -42,6 +42,14 @@ fn the_fuzz_finding_is_refused_and_its_repair_loads() {
     let bytes = found();
     let e = load(&bytes).unwrap_err();
     assert!(e.contains("gain K 1e300") && !e.contains('\n'), "{e}");
+    // The field at fault is there for a caller, not only in the words.
+    match Calibration::from_bytes(&bytes, Path::new("c.safetensors")) {
+        Err(CalibError::BadRecord {
+            fault: RecordFault::Gain { k, .. },
+            ..
+        }) => assert_eq!(k, 1e300),
+        other => panic!("expected a gain fault, got {:?}", other.err()),
+    }
     // The same file with a real sensor's K loads, and its maps are finite
     // where they are used: the check refuses the record, not the file kind.
     let fixed = with_record(&bytes, |r| r["K"] = serde_json::json!(1.53));

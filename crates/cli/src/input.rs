@@ -3,6 +3,7 @@
 
 use anyhow::{bail, Result};
 use clap::Args;
+use pgrf_core::parse::ParseError;
 use pgrf_raw::{decode_file, read_headerless, Cfa, HeaderlessSpec, LevelOverrides, RawFrame};
 use std::path::Path;
 
@@ -36,7 +37,8 @@ pub struct InputArgs {
 #[derive(Clone, Copy, Debug)]
 pub struct Layout(pub Option<Cfa>);
 
-fn parse_layout(s: &str) -> std::result::Result<Layout, String> {
+/// `--cfa`: "mono", or a Bayer phase ([`Cfa`]'s words when it is neither).
+fn parse_layout(s: &str) -> std::result::Result<Layout, ParseError> {
     if s.eq_ignore_ascii_case("mono") {
         return Ok(Layout(None));
     }

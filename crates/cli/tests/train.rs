@@ -1038,3 +1038,80 @@ fn values_below_black_and_the_loss_are_recorded() {
     let training = &clamped_record["training"]["config"];
     assert!(training.get("item_weight").is_none() && training.get("loss").is_none());
 }
+
+/// Issue 51, lever 5: a flow trained with `--prior` carries the denoiser
+/// in its own file, bit for bit, and (its last layer starting at zero)
+/// restores what the denoiser does, however different that is from the
+/// noisy input; a prior that is not a denoiser, or one for the denoiser, is
+/// refused in one line.
+#[test]
+fn a_flow_with_a_prior_restores_what_its_denoiser_does() {
+    let d = scratch("prior");
+    let spc = d.join("spc.safetensors");
+    let mut a = vec!["train", "spc", "--steps", "2", "--width", "4"];
+    // Not residual: its restoration is far from the input it is given.
+    a.extend_from_slice(&["-o", s(&spc)]);
+    a.extend_from_slice(SMALL);
+    summary(&pgrf(&a));
+    let flow = d.join("flow.safetensors");
+    let mut f = vec!["train", "flow", "--steps", "1", "--lr", "1e-30"];
+    f.extend_from_slice(&["--inner-channels", "8", "--channel-mults", "1,2"]);
+    f.extend_from_slice(&["--attn-levels", "1", "--residual"]);
+    f.extend_from_slice(&["--prior", s(&spc), "-o", s(&flow)]);
+    f.extend_from_slice(SMALL);
+    summary(&pgrf(&f));
+    let rec = record(&flow);
+    assert_eq!(rec["arch"], "sr3-prior");
+    assert_eq!(rec["config"]["prior"]["width"], 4);
+    assert_eq!(rec["config"]["flow"]["in_channels"], 12);
+    let (_, denoiser) = pgrf_nn::weights::read(&spc).unwrap();
+    let (_, field) = pgrf_nn::weights::read(&flow).unwrap();
+    for (name, t) in &denoiser {
+        assert_eq!(&field[&format!("prior.{name}")], t, "{name}");
+    }
+
+    let load = |p: &Path| {
+        pgrf_nn::infer::load(
+            p,
+            pgrf_nn::SamplerChoice::default(),
+            pgrf_nn::DeviceKind::Cpu,
+        )
+        .unwrap()
+    };
+    let wave = |k: f32| {
+        pgrf_raw::ndarray::Array3::from_shape_fn((4, 32, 32), |(c, y, x)| {
+            0.3 + 0.25 * ((c * 1024 + y * 32 + x) as f32 * k).sin()
+        })
+    };
+    let (noisy, x0) = (wave(0.37), wave(1.91));
+    let by_spc = load(&spc)
+        .restore(noisy.view(), &[x0.view()], None)
+        .unwrap();
+    let by_flow = load(&flow)
+        .restore(noisy.view(), &[x0.view()], None)
+        .unwrap();
+    let most = |a: &pgrf_raw::ndarray::Array3<f32>, b: &pgrf_raw::ndarray::Array3<f32>| {
+        a.iter()
+            .zip(b)
+            .map(|(x, y)| (x - y).abs())
+            .fold(0.0f32, f32::max)
+    };
+    assert!(
+        most(&by_spc, &by_flow) < 1e-5,
+        "{}",
+        most(&by_spc, &by_flow)
+    );
+    assert!(most(&by_spc, &noisy) > 0.01, "{}", most(&by_spc, &noisy));
+
+    for (method, prior, says) in [
+        ("flow", &flow, "not an SPC denoiser"),
+        ("spc", &spc, "--prior starts a flow model"),
+    ] {
+        let bad = d.join("bad.safetensors");
+        let mut args = vec!["train", method, "--patch", "32", "--prior", s(prior)];
+        args.extend_from_slice(&["-o", s(&bad)]);
+        let e = one_line_error(&pgrf(&args));
+        assert!(e.contains(says), "{e}");
+        assert!(!bad.exists());
+    }
+}

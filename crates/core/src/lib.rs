@@ -2,7 +2,8 @@
 //! once: atomic file writes and the checks on output paths, the robust statistics helper, seeding of
 //! thread-count-independent random streams, the progress interface the
 //! libraries report through, the safetensors + JSON record format used by
-//! calibration files and weight files, and the process's memory figures.
+//! calibration files and weight files, the process's memory figures, and the
+//! one error every value parser returns ([`parse::ParseError`]).
 //!
 //! It depends on no other pgrf crate and on no deep-learning framework.
 
@@ -14,6 +15,7 @@ pub mod exit;
 pub mod mem;
 pub mod number;
 pub mod panic_guard;
+pub mod parse;
 pub mod paths;
 mod progress;
 pub mod record;

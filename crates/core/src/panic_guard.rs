@@ -34,28 +34,52 @@ fn install_hook() {
     });
 }
 
-/// Run `f`; a panic inside it becomes `Err(message)`, the message led by
-/// `lead` (who failed and what it means: "the RAW decoder failed on this
-/// file (malformed or truncated data?)").
-pub fn quietly<T>(lead: &str, f: impl FnOnce() -> T) -> Result<T, String> {
+/// A reader that gave up by panicking: who failed and what that means
+/// (`lead`), and the panic's own words when it had any, kept for a bug
+/// report. Its own type, so that a caller can tell a reader's crash from
+/// the reader's ordinary refusals.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Panicked {
+    /// Who failed and what it means: "the RAW decoder failed on this file
+    /// (malformed or truncated data?)".
+    pub lead: String,
+    /// The panic's message, when it was a string.
+    pub message: Option<String>,
+}
+
+impl std::fmt::Display for Panicked {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match &self.message {
+            Some(m) => write!(f, "{}: {m}", self.lead),
+            None => f.write_str(&self.lead),
+        }
+    }
+}
+
+impl std::error::Error for Panicked {}
+
+/// Run `f`; a panic inside it becomes `Err(`[`Panicked`]`)`, led by `lead`
+/// (who failed and what it means: "the RAW decoder failed on this file
+/// (malformed or truncated data?)").
+pub fn quietly<T>(lead: &str, f: impl FnOnce() -> T) -> Result<T, Panicked> {
     install_hook();
     let was = QUIET_HERE.with(|q| q.replace(true));
     QUIET_CALLS.fetch_add(1, Ordering::SeqCst);
     let out = panic::catch_unwind(AssertUnwindSafe(f));
     QUIET_CALLS.fetch_sub(1, Ordering::SeqCst);
     QUIET_HERE.with(|q| q.set(was));
-    out.map_err(|payload| payload_message(lead, payload.as_ref()))
+    out.map_err(|payload| Panicked {
+        lead: lead.to_string(),
+        message: payload_message(payload.as_ref()),
+    })
 }
 
-/// What a user reads when a reader gave up by panicking: `lead`, and the
-/// reader's own words kept for a bug report.
-fn payload_message(lead: &str, p: &(dyn Any + Send)) -> String {
+/// The reader's own words in a panic's payload, when they are text.
+fn payload_message(p: &(dyn Any + Send)) -> Option<String> {
     if let Some(s) = p.downcast_ref::<&str>() {
-        format!("{lead}: {s}")
-    } else if let Some(s) = p.downcast_ref::<String>() {
-        format!("{lead}: {s}")
+        Some(s.to_string())
     } else {
-        lead.to_string()
+        p.downcast_ref::<String>().cloned()
     }
 }
 
@@ -63,8 +87,13 @@ fn payload_message(lead: &str, p: &(dyn Any + Send)) -> String {
 mod tests {
     #[test]
     fn panic_becomes_error() {
-        let r: Result<(), String> = super::quietly("the reader failed", || panic!("boom {}", 7));
-        assert_eq!(r.unwrap_err(), "the reader failed: boom 7");
+        let r: Result<(), super::Panicked> =
+            super::quietly("the reader failed", || panic!("boom {}", 7));
+        let e = r.unwrap_err();
+        assert_eq!(e.to_string(), "the reader failed: boom 7");
+        assert_eq!(e.message.as_deref(), Some("boom 7"));
+        let quiet = super::quietly("the reader failed", || std::panic::panic_any(7_u8));
+        assert_eq!(quiet.unwrap_err().to_string(), "the reader failed");
         assert_eq!(super::quietly("unused", || 3).unwrap(), 3);
     }
 }

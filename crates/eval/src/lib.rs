@@ -23,7 +23,7 @@ pub mod npy;
 
 pub use compare::{compare_files, CompareError, FileScores};
 pub use evaluation::{run_protocol, worst_path, EvalConfig, EvalError, Evaluation, SyntheticSpec};
-pub use method::{CaseInfo, CaseNoise, MethodUnderTest};
+pub use method::{CaseInfo, CaseNoise, MethodUnderTest, RestoreError};
 
 pub use metrics::cast;
 pub use metrics::{artefacts, seams, speckles, Seams, Speckles};

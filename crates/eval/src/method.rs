@@ -4,6 +4,7 @@
 //! [`MethodUnderTest`] for its restorers, and restorations made outside pgrf
 //! are read back from `.npy` files ([`SavedOutputs`]).
 
+use crate::npy::NpyError;
 use ndarray::{Array3, ArrayView3};
 use std::path::{Path, PathBuf};
 
@@ -45,8 +46,42 @@ pub trait MethodUnderTest {
     /// The restoration of `input` (packed `(4, h, w)` R, G1, B, G2,
     /// normalised, multiplied by `case.ratio` and clipped at 1, values below
     /// black kept: a network that reads them clamped clamps them itself), of the
-    /// same shape, or a one-line reason.
-    fn restore(&self, input: ArrayView3<f32>, case: &CaseInfo<'_>) -> Result<Array3<f32>, String>;
+    /// same shape, or why not.
+    fn restore(
+        &self,
+        input: ArrayView3<f32>,
+        case: &CaseInfo<'_>,
+    ) -> Result<Array3<f32>, RestoreError>;
+}
+
+/// Why a method gave no restoration of a case: its saved output could not
+/// be read or has another shape than the input, or the method itself
+/// failed (a network's error, kept whole for callers that look into it).
+#[derive(Debug, thiserror::Error)]
+pub enum RestoreError {
+    /// A saved output ([`SavedOutputs`]) that could not be read.
+    #[error(transparent)]
+    Output(#[from] NpyError),
+    /// A saved output of another shape than the input.
+    #[error("{}: shape {found:?}, the input is {input:?}", path.display())]
+    OutputShape {
+        /// The output's file.
+        path: PathBuf,
+        /// Its shape.
+        found: (usize, usize, usize),
+        /// The input's shape.
+        input: (usize, usize, usize),
+    },
+    /// The method's own error.
+    #[error(transparent)]
+    Method(Box<dyn std::error::Error + Send + Sync>),
+}
+
+impl RestoreError {
+    /// The method's own error `e` (a network's, or a message).
+    pub fn method(e: impl Into<Box<dyn std::error::Error + Send + Sync>>) -> Self {
+        RestoreError::Method(e.into())
+    }
 }
 
 /// A closure as a method: for methods computed in place (and tests).
@@ -59,13 +94,17 @@ pub struct FnMethod<F> {
 
 impl<F> MethodUnderTest for FnMethod<F>
 where
-    F: Fn(ArrayView3<f32>, &CaseInfo<'_>) -> Result<Array3<f32>, String>,
+    F: Fn(ArrayView3<f32>, &CaseInfo<'_>) -> Result<Array3<f32>, RestoreError>,
 {
     fn name(&self) -> &str {
         &self.name
     }
 
-    fn restore(&self, input: ArrayView3<f32>, case: &CaseInfo<'_>) -> Result<Array3<f32>, String> {
+    fn restore(
+        &self,
+        input: ArrayView3<f32>,
+        case: &CaseInfo<'_>,
+    ) -> Result<Array3<f32>, RestoreError> {
         (self.f)(input, case)
     }
 }
@@ -93,23 +132,26 @@ impl MethodUnderTest for SavedOutputs {
         &self.name
     }
 
-    fn restore(&self, input: ArrayView3<f32>, case: &CaseInfo<'_>) -> Result<Array3<f32>, String> {
+    fn restore(
+        &self,
+        input: ArrayView3<f32>,
+        case: &CaseInfo<'_>,
+    ) -> Result<Array3<f32>, RestoreError> {
         read_output(&self.dir, case.key, input)
     }
 }
 
 /// The outside method's restoration of case `key`: DIR/KEY.output.npy, of
 /// the input's shape (a larger file is refused before it is read).
-fn read_output(dir: &Path, key: &str, input: ArrayView3<f32>) -> Result<Array3<f32>, String> {
+fn read_output(dir: &Path, key: &str, input: ArrayView3<f32>) -> Result<Array3<f32>, RestoreError> {
     let path = dir.join(format!("{key}.output.npy"));
     let out = crate::npy::read(&path, 8 * input.len() as u64 + 65_536)?;
     if out.dim() != input.dim() {
-        return Err(format!(
-            "{}: shape {:?}, the input is {:?}",
-            path.display(),
-            out.dim(),
-            input.dim()
-        ));
+        return Err(RestoreError::OutputShape {
+            path,
+            found: out.dim(),
+            input: input.dim(),
+        });
     }
     Ok(out)
 }

@@ -37,9 +37,126 @@ pub fn encode(a: ArrayView3<f32>) -> Vec<u8> {
     out
 }
 
+/// Why a `.npy` file could not be read or written; every variant names the
+/// file (`file`) and renders as one line. A caller can tell a file that is
+/// not NumPy's, one of another dtype or shape, and one that could not be
+/// read or written at all.
+#[derive(Debug, thiserror::Error)]
+pub enum NpyError {
+    /// Not a `.npy` file: no magic string.
+    #[error("{file}: not a NumPy .npy file")]
+    NotNpy {
+        /// The file.
+        file: String,
+    },
+    /// A format version other than 1.0, 2.0 or 3.0.
+    #[error("{file}: .npy format version {version} is not supported")]
+    Version {
+        /// The file.
+        file: String,
+        /// Its major version.
+        version: u8,
+    },
+    /// A header that does not fit the file, is not text, or lacks a key.
+    #[error("{file}: {fault}")]
+    Header {
+        /// The file.
+        file: String,
+        /// What is wrong with the header.
+        fault: HeaderFault,
+    },
+    /// Values that are not little-endian float32 or float64.
+    #[error("{file}: dtype {dtype} (expected little-endian float32 or float64)")]
+    Dtype {
+        /// The file.
+        file: String,
+        /// The header's `descr`.
+        dtype: String,
+    },
+    /// A Fortran-ordered (column-major) array.
+    #[error("{file}: Fortran-ordered arrays are not supported")]
+    FortranOrder {
+        /// The file.
+        file: String,
+    },
+    /// A shape that is not three sizes, or that the data do not fill.
+    #[error("{file}: shape {shape}{fault}")]
+    Shape {
+        /// The file.
+        file: String,
+        /// The header's shape, as written.
+        shape: String,
+        /// What is wrong with it.
+        fault: ShapeFault,
+    },
+    /// A file larger than the planes it is read for can be.
+    #[error("{file}: {len} bytes, more than the {max} this case's planes can take")]
+    TooLarge {
+        /// The file.
+        file: String,
+        /// Its size, bytes.
+        len: u64,
+        /// The most accepted, bytes.
+        max: u64,
+    },
+    /// The file could not be read.
+    #[error("{file}: {error}")]
+    Read {
+        /// The file.
+        file: String,
+        /// The operating system's error.
+        error: std::io::Error,
+    },
+    /// The file could not be written.
+    #[error("{file}: {error}")]
+    Write {
+        /// The file.
+        file: String,
+        /// Why not.
+        error: pgrf_core::WriteError,
+    },
+}
+
+/// What is wrong with a `.npy` header.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum HeaderFault {
+    /// A header length beyond the file or 64 KiB (NumPy writes well under
+    /// 1 KiB).
+    #[error("header of {0} bytes does not fit the file")]
+    Length(usize),
+    /// A header that is not UTF-8.
+    #[error("header is not text")]
+    NotText,
+    /// A header without a key the file needs.
+    #[error("header has no '{0}'")]
+    Missing(&'static str),
+}
+
+/// What is wrong with a `.npy` shape (the text after `shape (..)`).
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum ShapeFault {
+    /// Not a tuple of sizes.
+    #[error(" is not a tuple of sizes")]
+    NotSizes,
+    /// Not three dimensions.
+    #[error(": expected three dimensions (4, H, W)")]
+    NotThree,
+    /// A value count other than the data bytes hold.
+    #[error(" of {size}-byte values does not match the {bytes} data bytes")]
+    DataSize {
+        /// Bytes per value.
+        size: usize,
+        /// The data's bytes.
+        bytes: usize,
+    },
+}
+
 /// Write `a` to `path` atomically.
-pub fn write(path: &Path, a: ArrayView3<f32>) -> Result<(), String> {
-    pgrf_core::write_atomic(path, &encode(a)).map_err(|e| format!("{}: {e}", path.display()))
+pub fn write(path: &Path, a: ArrayView3<f32>) -> Result<(), NpyError> {
+    pgrf_core::write_atomic(path, &encode(a)).map_err(|error| NpyError::Write {
+        file: path.display().to_string(),
+        error,
+    })
 }
 
 /// The value of `key` in a NumPy header dict (text up to the next top-level
@@ -57,40 +174,53 @@ fn field<'a>(dict: &'a str, key: &str) -> Option<&'a str> {
 
 /// Parse `.npy` bytes into a three-dimensional f32 array; `name` names them
 /// in errors.
-pub fn decode(name: &str, bytes: &[u8]) -> Result<Array3<f32>, String> {
-    let bad = |why: String| format!("{name}: {why}");
+pub fn decode(name: &str, bytes: &[u8]) -> Result<Array3<f32>, NpyError> {
+    let file = || name.to_string();
     if bytes.len() < 10 || &bytes[..6] != MAGIC {
-        return Err(bad("not a NumPy .npy file".into()));
+        return Err(NpyError::NotNpy { file: file() });
     }
+    let header = |fault| NpyError::Header {
+        file: file(),
+        fault,
+    };
     let (header_len, start) = match bytes[6] {
         1 => (u16::from_le_bytes([bytes[8], bytes[9]]) as usize, 10),
         2 | 3 if bytes.len() >= 12 => (
             u32::from_le_bytes([bytes[8], bytes[9], bytes[10], bytes[11]]) as usize,
             12,
         ),
-        v => return Err(bad(format!(".npy format version {v} is not supported"))),
+        version => {
+            return Err(NpyError::Version {
+                file: file(),
+                version,
+            })
+        }
     };
     if header_len > MAX_HEADER || start + header_len > bytes.len() {
-        return Err(bad(format!(
-            "header of {header_len} bytes does not fit the file"
-        )));
+        return Err(header(HeaderFault::Length(header_len)));
     }
     let dict = std::str::from_utf8(&bytes[start..start + header_len])
-        .map_err(|_| bad("header is not text".into()))?;
-    let descr = field(dict, "descr").ok_or_else(|| bad("header has no 'descr'".into()))?;
+        .map_err(|_| header(HeaderFault::NotText))?;
+    let descr = field(dict, "descr").ok_or(header(HeaderFault::Missing("descr")))?;
     let size = match descr.trim_matches(['\'', '"']) {
         "<f4" => 4,
         "<f8" => 8,
         d => {
-            return Err(bad(format!(
-                "dtype {d} (expected little-endian float32 or float64)"
-            )))
+            return Err(NpyError::Dtype {
+                file: file(),
+                dtype: d.to_string(),
+            })
         }
     };
     if field(dict, "fortran_order") != Some("False") {
-        return Err(bad("Fortran-ordered arrays are not supported".into()));
+        return Err(NpyError::FortranOrder { file: file() });
     }
-    let shape_text = field(dict, "shape").ok_or_else(|| bad("header has no 'shape'".into()))?;
+    let shape_text = field(dict, "shape").ok_or(header(HeaderFault::Missing("shape")))?;
+    let shape = |fault| NpyError::Shape {
+        file: file(),
+        shape: shape_text.to_string(),
+        fault,
+    };
     let dims: Vec<usize> = shape_text
         .trim_matches(['(', ')'])
         .split(',')
@@ -98,22 +228,19 @@ pub fn decode(name: &str, bytes: &[u8]) -> Result<Array3<f32>, String> {
         .filter(|s| !s.is_empty())
         .map(|s| s.parse::<usize>())
         .collect::<Result<_, _>>()
-        .map_err(|_| bad(format!("shape {shape_text} is not a tuple of sizes")))?;
+        .map_err(|_| shape(ShapeFault::NotSizes))?;
     let [c, h, w] = dims[..] else {
-        return Err(bad(format!(
-            "shape {shape_text}: expected three dimensions (4, H, W)"
-        )));
+        return Err(shape(ShapeFault::NotThree));
     };
     let data = &bytes[start + header_len..];
-    let count = c
-        .checked_mul(h)
+    c.checked_mul(h)
         .and_then(|n| n.checked_mul(w))
         .filter(|n| n.checked_mul(size) == Some(data.len()))
         .ok_or_else(|| {
-            bad(format!(
-                "shape {shape_text} of {size}-byte values does not match the {} data bytes",
-                data.len()
-            ))
+            shape(ShapeFault::DataSize {
+                size,
+                bytes: data.len(),
+            })
         })?;
     let values: Vec<f32> = if size == 4 {
         data.chunks_exact(4)
@@ -124,24 +251,27 @@ pub fn decode(name: &str, bytes: &[u8]) -> Result<Array3<f32>, String> {
             .map(|b| f64::from_le_bytes(b.try_into().expect("8 bytes")) as f32)
             .collect()
     };
-    debug_assert_eq!(values.len(), count);
-    Array3::from_shape_vec((c, h, w), values).map_err(|e| bad(e.to_string()))
+    Ok(Array3::from_shape_vec((c, h, w), values).expect("the data fill the checked shape"))
 }
 
 /// Read a `.npy` file of at most `max_bytes` (refused before reading when
 /// larger).
-pub fn read(path: &Path, max_bytes: u64) -> Result<Array3<f32>, String> {
-    let name = path.display().to_string();
-    let len = std::fs::metadata(path)
-        .map_err(|e| format!("{name}: {e}"))?
-        .len();
+pub fn read(path: &Path, max_bytes: u64) -> Result<Array3<f32>, NpyError> {
+    let file = || path.display().to_string();
+    let read = |error| NpyError::Read {
+        file: file(),
+        error,
+    };
+    let len = std::fs::metadata(path).map_err(read)?.len();
     if len > max_bytes {
-        return Err(format!(
-            "{name}: {len} bytes, more than the {max_bytes} this case's planes can take"
-        ));
+        return Err(NpyError::TooLarge {
+            file: file(),
+            len,
+            max: max_bytes,
+        });
     }
-    let bytes = std::fs::read(path).map_err(|e| format!("{name}: {e}"))?;
-    decode(&name, &bytes)
+    let bytes = std::fs::read(path).map_err(read)?;
+    decode(&file(), &bytes)
 }
 
 #[cfg(test)]
@@ -199,19 +329,38 @@ mod tests {
         let mut long = f8.clone();
         long.extend_from_slice(&[0; 8]);
         assert!(decode("long", &long).is_err());
-        assert!(decode("be", &file(">f8", "(1, 1, 2)", &data))
-            .unwrap_err()
-            .contains("dtype"));
-        assert!(decode("2d", &file("<f8", "(1, 2)", &data))
-            .unwrap_err()
-            .contains("three dimensions"));
+        let be = decode("be", &file(">f8", "(1, 1, 2)", &data)).unwrap_err();
+        assert!(matches!(&be, NpyError::Dtype { dtype, .. } if dtype == ">f8"));
+        assert_eq!(
+            be.to_string(),
+            "be: dtype >f8 (expected little-endian float32 or float64)"
+        );
+        let flat = decode("2d", &file("<f8", "(1, 2)", &data)).unwrap_err();
+        assert_eq!(
+            flat.to_string(),
+            "2d: shape (1, 2): expected three dimensions (4, H, W)"
+        );
         let huge = file("<f4", "(9999999999, 99999, 9)", &data);
-        assert!(decode("huge", &huge)
-            .unwrap_err()
-            .contains("does not match"));
+        let e = decode("huge", &huge).unwrap_err();
+        assert!(
+            matches!(
+                &e,
+                NpyError::Shape {
+                    fault: ShapeFault::DataSize { size: 4, bytes: 16 },
+                    ..
+                }
+            ),
+            "{e}"
+        );
+        assert!(e.to_string().contains("does not match"), "{e}");
         let overflow = file("<f4", "(18446744073709551615, 2, 2)", &data);
         assert!(decode("overflow", &overflow).is_err());
-        assert!(decode("junk", b"PK\x03\x04 not numpy").is_err());
+        assert_eq!(
+            decode("junk", b"PK\x03\x04 not numpy")
+                .unwrap_err()
+                .to_string(),
+            "junk: not a NumPy .npy file"
+        );
         assert!(decode("empty", b"").is_err());
     }
 }

@@ -25,10 +25,10 @@ impl<B: PgrfOps> Net<B> {
         x0: Tensor<B, 4>,
         t2: f32,
     ) -> Tensor<B, 4> {
-        let c = Conditioned::new(self.conditioning(), self.as_read(noisy), levels);
+        let c = Conditioned::new(self.conditioning(), self.as_read(noisy.clone()), levels);
         let y = match self {
             Net::Spc(n) => n.forward(c.input.clone()),
-            Net::Pgrf(n) => two_stage(n, c.input.clone(), x0, t2),
+            Net::Pgrf(n) => two_stage(n, n.condition(&c, noisy, levels), x0, t2),
         };
         c.input_units_of(y)
     }
@@ -47,13 +47,14 @@ impl<B: PgrfOps> Net<B> {
         sampler: Sampler,
     ) -> Tensor<B, 4> {
         let levels: Vec<NoiseLevel> = level.into_iter().collect();
-        let c = Conditioned::new(self.conditioning(), self.as_read(cond), &levels);
+        let c = Conditioned::new(self.conditioning(), self.as_read(cond.clone()), &levels);
         let y = match self {
             Net::Spc(n) => n.forward(c.input.clone()),
             Net::Pgrf(n) => {
+                let t = n.condition(&c, cond, &levels);
                 let mut acc: Option<Tensor<B, 4>> = None;
                 for k in 0..samples {
-                    let y = sampler.run(n, c.input.clone(), x0(k));
+                    let y = sampler.run(n, t.clone(), x0(k));
                     acc = Some(match acc {
                         None => y,
                         Some(a) => a + y,
@@ -84,11 +85,15 @@ impl<B: PgrfOps> Net<B> {
         t: impl FnOnce() -> Tensor<B, 1>,
     ) -> Tensor<B, 1> {
         let kind = self.conditioning();
+        let raw = noisy.clone();
         let noisy = self.as_read(noisy);
         if kind == Conditioning::None && rule == LossRule::default() {
             return match self {
                 Net::Spc(n) => denoiser_loss(n, noisy, clean),
-                Net::Pgrf(n) => flow_loss(n, noisy, clean, x0(), t()),
+                Net::Pgrf(n) => {
+                    let cond = n.condition(&Conditioned::new(kind, noisy, levels), raw, levels);
+                    flow_loss(n, cond, clean, x0(), t())
+                }
             };
         }
         let c = Conditioned::new(kind, noisy, levels);
@@ -98,7 +103,7 @@ impl<B: PgrfOps> Net<B> {
                 let x1 = c.domain_of(clean.clone());
                 let (x0, t) = (x0(), t());
                 let xt = crate::flow::interpolate(x1.clone(), x0.clone(), t.clone());
-                let err = x1 - x0 - n.forward(xt, c.input.clone(), t);
+                let err = x1 - x0 - n.forward(xt, n.condition(&c, raw, levels), t);
                 match c.inverse_scale() {
                     Some(s) => err * s,
                     None => err,

@@ -34,12 +34,15 @@ pub enum DeviceKind {
 }
 
 impl std::str::FromStr for DeviceKind {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
+    type Err = pgrf_core::parse::ParseError;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
         match s {
             "cpu" => Ok(Self::Cpu),
             "cuda" | "gpu" => Ok(Self::Cuda),
-            _ => Err(format!("unknown device '{s}' (expected cpu or cuda)")),
+            _ => Err(pgrf_core::parse::ParseError::unknown_name(
+                s,
+                format!("unknown device '{s}' (expected cpu or cuda)"),
+            )),
         }
     }
 }

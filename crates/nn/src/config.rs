@@ -6,7 +6,7 @@
 //! Keys are the command-line flags with underscores (`--ratio-min` is
 //! `ratio_min`); a file may hold any subset and the flags override it.
 
-use crate::arch::{Architecture, SidUnetConfig, Sr3Config};
+use crate::arch::{Architecture, PriorFlowConfig, SidUnetConfig, Sr3Config};
 use crate::condition::Conditioning;
 use crate::error::{NnError, Result};
 use crate::schedule::Schedule;
@@ -146,6 +146,10 @@ pub struct TrainConfig {
     /// Start from this weight file's weights (a trained network of this configuration, e.g. models/spc.safetensors; or the same network without noise conditioning, whose noise planes then start at zero weights; or a narrower SID U-Net, whose channels start a wider one computing what it did) instead of fresh ones: fine-tuning on other data or conditions; the optimiser and the learning-rate schedule start afresh (a resumed run takes its weights from the checkpoint), and the output records the file and its training.
     #[cfg_attr(feature = "clap", arg(long))]
     pub init: Option<PathBuf>,
+    /// PGRF only: start the flow from this SPC weight file's restoration (MODELS.md, "The flow from the SPC's restoration"): the velocity field reads the frozen denoiser's output as four more planes and corrects it instead of the noisy input, so that a fresh field samples exactly what the SPC restores; the denoiser is stored in the flow's weight file and never trained.
+    #[cfg_attr(feature = "clap", arg(long))]
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub prior: Option<PathBuf>,
     /// SR3 channels of the first level [default: 64, or --width].
     #[cfg_attr(feature = "clap", arg(long))]
     pub inner_channels: Option<usize>,
@@ -374,6 +378,7 @@ impl Default for TrainConfig {
             residual: false,
             conditioning: Conditioning::None,
             init: None,
+            prior: None,
             inner_channels: None,
             channel_mults: None,
             res_blocks: None,
@@ -568,7 +573,7 @@ impl TrainConfig {
         }
         let (lo, hi) = (self.ratio_min, self.ratio_max);
         for (flag, r) in [("--ratio-min", lo), ("--ratio-max", hi)] {
-            pgrf_noise::pair::check_ratio(flag, r).map_err(|m| bad(flag, m))?;
+            pgrf_noise::pair::ratio_in_range(flag, r).map_err(|e| bad(flag, e.to_string()))?;
         }
         if hi < lo {
             return Err(bad(
@@ -663,10 +668,21 @@ impl TrainConfig {
 
 impl TrainConfig {
     /// The network this configuration trains for `method`, checked.
+    /// With a `prior`, its file's record is read (not its tensors).
     pub fn architecture(&self, method: Method) -> Result<Architecture> {
-        Ok(match method {
-            Method::Spc => Architecture::SidUnet(self.sid_unet()?),
-            Method::Pgrf => Architecture::Sr3(self.sr3()?),
+        Ok(match (method, &self.prior) {
+            (Method::Spc, None) => Architecture::SidUnet(self.sid_unet()?),
+            (Method::Pgrf, None) => Architecture::Sr3(self.sr3()?),
+            (Method::Pgrf, Some(path)) => {
+                Architecture::Sr3Prior(PriorFlowConfig::new(self.sr3()?, prior_denoiser(path)?))
+            }
+            (Method::Spc, Some(_)) => {
+                return Err(NnError::BadSetting {
+                    flag: "--prior",
+                    message: "--prior starts a flow model (pgrf train pgrf), not the SPC denoiser"
+                        .into(),
+                })
+            }
         })
     }
 
@@ -720,6 +736,22 @@ impl TrainConfig {
         cfg.validate()
             .map_err(|e| NnError::Config(format!("flow network: {e}")))?;
         Ok(cfg)
+    }
+}
+
+/// The SID U-Net configuration of the SPC weight file `path` (a flow's
+/// `prior`), checked to be one.
+fn prior_denoiser(path: &Path) -> Result<SidUnetConfig> {
+    match crate::weights::read_meta(path)?.arch {
+        Architecture::SidUnet(c) => Ok(c),
+        other => Err(NnError::BadSetting {
+            flag: "--prior",
+            message: format!(
+                "--prior {}: holds {}, not an SPC denoiser",
+                path.display(),
+                other.describe()
+            ),
+        }),
     }
 }
 

@@ -12,7 +12,7 @@
 //! milliseconds against a step's second, and checkpoints hold it as a
 //! safetensors block so that a resumed run continues it exactly.
 
-use crate::arch::{Architecture, Net};
+use crate::arch::{is_prior, Architecture, Net};
 use crate::error::{NnError, Result};
 use crate::named::NamedTensor;
 use burn::tensor::backend::Backend;
@@ -50,7 +50,8 @@ impl Ema {
     /// construction; a mismatch is a bug and panics.
     pub(crate) fn update(&mut self, step: u64, params: &BTreeMap<String, NamedTensor>) {
         let d = self.decay_at(step);
-        for (name, avg) in &mut self.tensors {
+        // A flow's frozen prior stays as loaded, bit for bit.
+        for (name, avg) in self.tensors.iter_mut().filter(|(n, _)| !is_prior(n)) {
             let p = &params[name];
             assert_eq!(avg.shape, p.shape, "EMA of {name}: shape changed");
             for (a, &v) in avg.values.iter_mut().zip(&p.values) {

@@ -170,3 +170,89 @@ pub enum NnError {
 
 /// The crate's result type.
 pub type Result<T> = std::result::Result<T, NnError>;
+
+/// Why a network's configuration cannot be built (read from a weight
+/// file's record or made from a run's settings): each names the setting at
+/// fault, so a caller may say which to change.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum ArchFault {
+    /// An SR3 field with no level, residual block or channel.
+    #[error("SR3 needs at least one level, one residual block and some channels")]
+    Empty,
+    /// The flow's input or output planes are not what pgrf feeds it.
+    #[error("pgrf's flow network takes {planes} planes ({what}, packed; {}) and gives 4, not {found_in} and {found_out}", .conditioning.describe())]
+    FlowPlanes {
+        /// The planes pgrf feeds it.
+        planes: usize,
+        /// What they are, in words.
+        what: &'static str,
+        /// Its conditioning.
+        conditioning: crate::condition::Conditioning,
+        /// The record's input planes.
+        found_in: usize,
+        /// The record's output planes.
+        found_out: usize,
+    },
+    /// The SID U-Net's width or planes are not what pgrf feeds it.
+    #[error("the SID U-Net needs a width of at least 1, {planes} planes in ({}) and 4 out (got width {width}, {found_in} in, {found_out} out)", .conditioning.describe())]
+    SidPlanes {
+        /// The planes pgrf feeds it.
+        planes: usize,
+        /// Its conditioning.
+        conditioning: crate::condition::Conditioning,
+        /// The record's width.
+        width: usize,
+        /// The record's input planes.
+        found_in: usize,
+        /// The record's output planes.
+        found_out: usize,
+    },
+    /// An odd number of inner channels (the time embedding is sin/cos pairs).
+    #[error("inner channels must be even (the time embedding is sin/cos pairs), got {0}")]
+    OddInner(usize),
+    /// A channel multiplier of 0.
+    #[error("every channel multiplier must be at least 1, got {0:?}")]
+    ZeroMultiplier(Vec<usize>),
+    /// Attention at a level the network does not have.
+    #[error("attention level {level} does not exist: the network has {levels} levels")]
+    NoSuchLevel {
+        /// The level asked for.
+        level: usize,
+        /// The levels there are.
+        levels: usize,
+    },
+    /// No GroupNorm groups.
+    #[error("norm_groups must be at least 1")]
+    NoGroups,
+    /// A group count that does not divide a level's channels.
+    #[error("norm_groups {groups} does not divide {channels} channels")]
+    Groups {
+        /// The groups.
+        groups: usize,
+        /// The level's channels.
+        channels: usize,
+    },
+    /// A dropout probability outside [0, 1).
+    #[error("dropout must be in [0, 1), got {0}")]
+    Dropout(f64),
+    /// A statistics window that is not a multiple of the network's sides.
+    #[error("window {side} is not a multiple of the network's {multiple}")]
+    Window {
+        /// The window asked for.
+        side: usize,
+        /// The multiple the sides must be.
+        multiple: usize,
+    },
+    /// A flow's prior that cannot be built.
+    #[error("the prior: {0}")]
+    Prior(Box<ArchFault>),
+    /// A prior told the noise level, in a field that is not.
+    #[error("the prior is {} but the field is not told the noise level", .0.describe())]
+    PriorLevel(crate::condition::Conditioning),
+}
+
+impl From<ArchFault> for NnError {
+    fn from(e: ArchFault) -> NnError {
+        NnError::Config(e.to_string())
+    }
+}

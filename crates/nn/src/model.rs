@@ -57,7 +57,7 @@ fn fit<B: Backend>(
             meta.arch.describe()
         )));
     }
-    let fit = |e: String| {
+    let fit = |e: crate::named::Mismatch| {
         NnError::SizeMismatch(format!(
             "{}: weights do not fit {}: {e}",
             path.display(),
@@ -96,7 +96,7 @@ pub(crate) fn load_init<B: Backend>(
 ) -> Result<(Net<B>, WeightMeta, crate::arch::StartAdapted)> {
     let (meta, mut tensors) = weights::read(path)?;
     weights::check_arch(path, &meta, arch)?;
-    let fit = |e: String| {
+    let fit = |e: crate::named::Mismatch| {
         NnError::SizeMismatch(format!(
             "{}: weights do not fit {}: {e}",
             path.display(),

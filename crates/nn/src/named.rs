@@ -46,12 +46,75 @@ pub fn collect<B: Backend, M: Module<B>>(module: &M) -> BTreeMap<String, NamedTe
     c.out
 }
 
+/// One way named tensors fail to fit a network.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum TensorFault {
+    /// A parameter of the network that is not among the tensors.
+    #[error("{0} is missing")]
+    Missing(String),
+    /// A tensor whose shape is not its parameter's.
+    #[error("{name} has shape {found:?}, the network needs {wanted:?}")]
+    Shape {
+        /// The tensor's name.
+        name: String,
+        /// Its shape.
+        found: Vec<usize>,
+        /// The parameter's.
+        wanted: Vec<usize>,
+    },
+    /// A tensor that is no parameter of the network.
+    #[error("{0} is not part of this network")]
+    Unknown(String),
+    /// Tensor counts that do not match a network's convolutions (a weight
+    /// and a bias each).
+    #[error("{from} and {into} tensors for the {convolutions} convolutions of the network")]
+    Count {
+        /// Tensors of the file.
+        from: usize,
+        /// Tensors of the network.
+        into: usize,
+        /// Convolutions of the network.
+        convolutions: usize,
+    },
+    /// A convolution weight that is not `[out, in, kh, kw]`.
+    #[error("{0} is not 4-dimensional")]
+    NotConvolution(String),
+    /// A prior's weights for a flow that reads none.
+    #[error("the flow model reads no prior")]
+    NoPrior,
+}
+
+/// Why named tensors do not fit a network: every fault found (a caller may
+/// look for a missing or misshapen tensor by name); the message lists the
+/// first three.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Mismatch(pub Vec<TensorFault>);
+
+impl From<TensorFault> for Mismatch {
+    fn from(f: TensorFault) -> Mismatch {
+        Mismatch(vec![f])
+    }
+}
+
+impl std::fmt::Display for Mismatch {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let shown: Vec<String> = self.0.iter().take(3).map(|p| p.to_string()).collect();
+        f.write_str(&shown.join("; "))?;
+        if self.0.len() > 3 {
+            write!(f, " (and {} more)", self.0.len() - 3)?;
+        }
+        Ok(())
+    }
+}
+
+impl std::error::Error for Mismatch {}
+
 struct Assigner<'a, B: Backend> {
     path: Vec<String>,
     values: &'a BTreeMap<String, NamedTensor>,
     device: B::Device,
     used: usize,
-    problems: Vec<String>,
+    problems: Vec<TensorFault>,
 }
 
 impl<B: Backend> ModuleMapper<B> for Assigner<'_, B> {
@@ -65,15 +128,16 @@ impl<B: Backend> ModuleMapper<B> for Assigner<'_, B> {
         let name = self.path.join(".");
         let (id, tensor, mapper) = param.consume();
         let Some(v) = self.values.get(&name) else {
-            self.problems.push(format!("{name} is missing"));
+            self.problems.push(TensorFault::Missing(name));
             return Param::from_mapped_value(id, tensor, mapper);
         };
         let want = tensor.dims().to_vec();
         if v.shape != want {
-            self.problems.push(format!(
-                "{name} has shape {:?}, the network needs {want:?}",
-                v.shape
-            ));
+            self.problems.push(TensorFault::Shape {
+                name,
+                found: v.shape.clone(),
+                wanted: want,
+            });
             return Param::from_mapped_value(id, tensor, mapper);
         }
         self.used += 1;
@@ -92,7 +156,7 @@ pub fn assign<B: Backend, M: Module<B>>(
     module: M,
     values: &BTreeMap<String, NamedTensor>,
     device: &B::Device,
-) -> Result<M, String> {
+) -> Result<M, Mismatch> {
     let mut a = Assigner {
         path: Vec::new(),
         values,
@@ -108,20 +172,13 @@ pub fn assign<B: Backend, M: Module<B>>(
             values
                 .keys()
                 .filter(|k| !known.contains_key(*k))
-                .map(|k| format!("{k} is not part of this network")),
+                .map(|k| TensorFault::Unknown(k.clone())),
         );
     }
     if problems.is_empty() {
         return Ok(module);
     }
-    let n = problems.len();
-    problems.truncate(3);
-    let more = if n > 3 {
-        format!(" (and {} more)", n - 3)
-    } else {
-        String::new()
-    };
-    Err(format!("{}{more}", problems.join("; ")))
+    Err(Mismatch(problems))
 }
 
 #[cfg(test)]
@@ -152,7 +209,18 @@ mod tests {
         let a = SidUnetConfig::new().with_width(2).init::<Cpu>(&device);
         let b = SidUnetConfig::new().with_width(4).init::<Cpu>(&device);
         let e = assign(b, &collect::<Cpu, _>(&a), &device).unwrap_err();
-        assert!(e.contains("has shape"), "{e}");
+        assert!(e.to_string().contains("has shape"), "{e}");
+        // Every misshapen tensor, by name; the message shows three.
+        assert!(e.0.len() > 3, "{e:?}");
+        assert!(e
+            .0
+            .iter()
+            .all(|f| matches!(f, TensorFault::Shape { found, wanted, .. } if found != wanted)));
+        assert!(
+            e.to_string()
+                .ends_with(&format!("(and {} more)", e.0.len() - 3)),
+            "{e}"
+        );
         let mut extra = collect::<Cpu, _>(&a);
         extra.insert(
             "stray.weight".into(),
@@ -163,6 +231,7 @@ mod tests {
         );
         let c = SidUnetConfig::new().with_width(2).init::<Cpu>(&device);
         let e = assign(c, &extra, &device).unwrap_err();
-        assert!(e.contains("stray.weight is not part"), "{e}");
+        assert_eq!(e.0, vec![TensorFault::Unknown("stray.weight".into())]);
+        assert_eq!(e.to_string(), "stray.weight is not part of this network");
     }
 }

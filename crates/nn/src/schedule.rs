@@ -19,14 +19,15 @@ pub enum Schedule {
 }
 
 impl std::str::FromStr for Schedule {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
+    type Err = pgrf_core::parse::ParseError;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
         match s {
             "eld" => Ok(Self::Eld),
             "constant" => Ok(Self::Constant),
             "cosine" => Ok(Self::Cosine),
-            _ => Err(format!(
-                "unknown schedule '{s}' (expected eld, constant or cosine)"
+            _ => Err(pgrf_core::parse::ParseError::unknown_name(
+                s,
+                format!("unknown schedule '{s}' (expected eld, constant or cosine)"),
             )),
         }
     }

@@ -884,7 +884,7 @@ impl<'j, 'a, B: PgrfAutodiff> Run<'j, 'a, B> {
                 let avg = e
                     .network::<B::InnerBackend>(&self.j.arch, self.device)?
                     .with_window(s.window.unwrap_or(0))
-                    .map_err(NnError::Invalid)?;
+                    .map_err(|e| NnError::Invalid(e.to_string()))?;
                 (validate(&avg, v, s.val_t2, self.device), Some(raw))
             }
         })
@@ -990,7 +990,8 @@ fn resume<B: PgrfAutodiff>(
 }
 
 /// The network a run starts from before any checkpoint: seeded fresh
-/// weights, or `init`'s (a resumed run reads only `init`'s record).
+/// weights, or `init`'s (a resumed run reads only `init`'s record), with
+/// the run's prior loaded into a flow that reads one.
 fn initial_net<B: PgrfAutodiff>(
     j: &Job,
     device: &B::Device,
@@ -998,7 +999,8 @@ fn initial_net<B: PgrfAutodiff>(
 ) -> Result<(Net<B>, Option<StartedFrom>)> {
     let net: Net<B> = j.arch.init_seeded(device, j.config.seed)?;
     match &j.config.init {
-        None => Ok((net, None)),
+        None if j.resume => Ok((net, None)),
+        None => Ok((with_prior(net, j.config, device)?, None)),
         Some(path) if j.resume => Ok((
             net,
             Some(StartedFrom::of(
@@ -1009,19 +1011,48 @@ fn initial_net<B: PgrfAutodiff>(
         Some(path) => {
             let (trained, meta, adapted) =
                 crate::model::load_init::<B>(path, &j.arch, net, device)?;
-            match adapted {
-                StartAdapted::AsIs => {}
-                StartAdapted::Conditioned => progress.note(&format!(
-                    "starting from {}'s unconditioned weights: the noise planes' input weights start at zero",
-                    path.display()
-                )),
-                StartAdapted::Widened { from, to } => progress.note(&format!(
-                    "starting from {}'s width-{from} weights in the old channels of width {to}: the new channels start from seed {} and are read through weights that start at zero",
-                    path.display(),
-                    j.config.seed
-                )),
+            if let Some(note) = adapted_note(adapted, path, j.config.seed) {
+                progress.note(&note);
             }
+            let trained = with_prior(trained, j.config, device)?;
             Ok((trained, Some(StartedFrom::of(path, &meta))))
         }
+    }
+}
+
+/// What the run says about how `init`'s weights (`path`) were fitted, if
+/// they were.
+fn adapted_note(adapted: StartAdapted, path: &std::path::Path, seed: u64) -> Option<String> {
+    match adapted {
+        StartAdapted::AsIs => None,
+        StartAdapted::Conditioned => Some(format!(
+            "starting from {}'s unconditioned weights: the noise planes' input weights start at zero",
+            path.display()
+        )),
+        StartAdapted::Widened { from, to } => Some(format!(
+            "starting from {}'s width-{from} weights in the old channels of width {to}: the new channels start from seed {seed} and are read through weights that start at zero",
+            path.display(),
+        )),
+        StartAdapted::PriorAdded => Some(format!(
+            "starting from {}'s weights with the prior's restoration read through weights that start at zero and a last layer at zero: the flow starts out sampling the prior's restoration",
+            path.display()
+        )),
+    }
+}
+
+/// `net` with the weights of the run's `prior` (an SPC weight file) in
+/// its frozen denoiser; unchanged without one.
+fn with_prior<B: PgrfAutodiff>(net: Net<B>, c: &TrainConfig, device: &B::Device) -> Result<Net<B>> {
+    let Some(path) = &c.prior else {
+        return Ok(net);
+    };
+    match net {
+        Net::Pgrf(flow) => {
+            let (_, tensors) = crate::weights::read(path)?;
+            flow.with_prior_weights(&tensors, device)
+                .map(Net::Pgrf)
+                .map_err(|e| NnError::SizeMismatch(format!("--prior {}: {e}", path.display())))
+        }
+        spc => Ok(spc),
     }
 }

@@ -768,46 +768,66 @@ fn grid(measured: &[Measured]) -> Vec<u32> {
     out
 }
 
+/// A member of darktable's JSON that is missing or of the wrong type: the
+/// maker, model or entry holding it says where.
+#[derive(Debug, thiserror::Error)]
+enum MemberFault {
+    /// Not a JSON object.
+    #[error("not an object")]
+    NotObject,
+    /// A member that is absent.
+    #[error("missing `{0}`")]
+    Missing(&'static str),
+    /// A member that is not a string.
+    #[error("`{0}` is not a string")]
+    NotString(&'static str),
+    /// An ISO that is not a positive integer.
+    #[error("`iso` must be a positive integer, got {0}")]
+    Iso(Value),
+    /// A coefficient list that is not an array.
+    #[error("`{0}` is not an array")]
+    NotArray(&'static str),
+    /// A coefficient list without one value per colour.
+    #[error("`{key}` has {count} values, darktable needs 3 (red, green, blue)")]
+    Count {
+        /// `a` or `b`.
+        key: &'static str,
+        /// How many it has.
+        count: usize,
+    },
+    /// A coefficient that is not a number.
+    #[error("`{key}[{index}]` is not a number: {value}")]
+    NotNumber {
+        /// `a` or `b`.
+        key: &'static str,
+        /// Its place in the list.
+        index: usize,
+        /// The value.
+        value: Value,
+    },
+    /// A `skip` that is not a boolean.
+    #[error("`skip` is not true or false: {0}")]
+    Skip(Value),
+}
+
 /// One entry's fields, checked as darktable's verification checks them,
 /// plus numbers where numbers belong.
-fn parse_entry(p: &Value) -> std::result::Result<Entry, String> {
+fn parse_entry(p: &Value) -> std::result::Result<Entry, MemberFault> {
     if !p.is_object() {
-        return Err("not an object".into());
+        return Err(MemberFault::NotObject);
     }
     let name = str_member(p, "name")?;
-    let iso_v = p.get("iso").ok_or("missing `iso`")?;
+    let iso_v = p.get("iso").ok_or(MemberFault::Missing("iso"))?;
     let iso = iso_v
         .as_f64()
         .filter(|v| v.fract() == 0.0 && *v >= 1.0 && *v <= u32::MAX as f64)
         .map(|v| v as u32)
-        .ok_or_else(|| format!("`iso` must be a positive integer, got {iso_v}"))?;
-    let triple = |key: &str| -> std::result::Result<[f64; 3], String> {
-        let v = p
-            .get(key)
-            .ok_or_else(|| format!("missing `{key}`"))?
-            .as_array()
-            .ok_or_else(|| format!("`{key}` is not an array"))?;
-        if v.len() != 3 {
-            return Err(format!(
-                "`{key}` has {} values, darktable needs 3 (red, green, blue)",
-                v.len()
-            ));
-        }
-        let mut out = [0.0; 3];
-        for (i, x) in v.iter().enumerate() {
-            out[i] = x
-                .as_f64()
-                .ok_or_else(|| format!("`{key}[{i}]` is not a number: {x}"))?;
-        }
-        Ok(out)
-    };
-    let a = triple("a")?;
-    let b = triple("b")?;
+        .ok_or_else(|| MemberFault::Iso(iso_v.clone()))?;
+    let a = triple(p, "a")?;
+    let b = triple(p, "b")?;
     let skip = match p.get("skip") {
         None => false,
-        Some(v) => v
-            .as_bool()
-            .ok_or_else(|| format!("`skip` is not true or false: {v}"))?,
+        Some(v) => v.as_bool().ok_or_else(|| MemberFault::Skip(v.clone()))?,
     };
     Ok(Entry {
         name,
@@ -818,12 +838,36 @@ fn parse_entry(p: &Value) -> std::result::Result<Entry, String> {
     })
 }
 
-fn str_member(v: &Value, key: &str) -> std::result::Result<String, String> {
+/// An entry's coefficients `key` (`a` or `b`): one number per colour.
+fn triple(p: &Value, key: &'static str) -> std::result::Result<[f64; 3], MemberFault> {
+    let v = p
+        .get(key)
+        .ok_or(MemberFault::Missing(key))?
+        .as_array()
+        .ok_or(MemberFault::NotArray(key))?;
+    if v.len() != 3 {
+        return Err(MemberFault::Count {
+            key,
+            count: v.len(),
+        });
+    }
+    let mut out = [0.0; 3];
+    for (index, x) in v.iter().enumerate() {
+        out[index] = x.as_f64().ok_or_else(|| MemberFault::NotNumber {
+            key,
+            index,
+            value: x.clone(),
+        })?;
+    }
+    Ok(out)
+}
+
+fn str_member(v: &Value, key: &'static str) -> std::result::Result<String, MemberFault> {
     v.get(key)
-        .ok_or_else(|| format!("missing `{key}`"))?
+        .ok_or(MemberFault::Missing(key))?
         .as_str()
         .map(String::from)
-        .ok_or_else(|| format!("`{key}` is not a string"))
+        .ok_or(MemberFault::NotString(key))
 }
 
 /// `s` without one pair of surrounding quotes (a name quoted twice over).

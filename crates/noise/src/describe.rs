@@ -48,7 +48,7 @@ pub struct FrameInfo<'a> {
     /// ([`find_noise`]): K, read and row noise in DN and the source, or why
     /// none was found (serialised as `noise_parameters`).
     #[serde(rename = "noise_parameters", serialize_with = "noise_json")]
-    pub noise: std::result::Result<FrameNoise, String>,
+    pub noise: std::result::Result<FrameNoise, NoiseError>,
     /// FITS header fields beyond the common ones (FITS input only).
     pub fits: Option<&'a FitsHeader>,
     /// EXIF orientation.
@@ -88,8 +88,7 @@ impl<'a> FrameInfo<'a> {
                     darktable: darktable.map(Path::to_path_buf),
                     ..KnownNoise::default()
                 },
-            )
-            .map_err(|e| e.to_string()),
+            ),
             fits: f.fits.as_ref(),
             orientation: f.orientation,
             visible_origin: [f.sensor_origin.0, f.sensor_origin.1],
@@ -110,14 +109,14 @@ fn black_levels(f: &RawFrame) -> Vec<f32> {
 }
 
 fn noise_json<S: Serializer>(
-    noise: &std::result::Result<FrameNoise, String>,
+    noise: &std::result::Result<FrameNoise, NoiseError>,
     s: S,
 ) -> std::result::Result<S::Ok, S::Error> {
     match noise {
         Ok(n) => serde_json::json!({
             "K": n.k, "read": n.read, "row": n.row, "source": n.source.to_string()
         }),
-        Err(e) => serde_json::json!({ "error": e }),
+        Err(e) => serde_json::json!({ "error": e.to_string() }),
     }
     .serialize(s)
 }

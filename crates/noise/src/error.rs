@@ -4,6 +4,7 @@
 //! wrong with it, so a caller can act on the case; the message is the one
 //! line the CLI prints.
 
+use crate::profile::{MAX_GAIN, MAX_SIGMA_DN};
 use pgrf_core::number::shown;
 use std::path::PathBuf;
 
@@ -18,6 +19,15 @@ pub enum NoiseError {
         name: String,
         /// What is wrong with it.
         reason: String,
+    },
+    /// A camera profile whose values fail validation; the
+    /// [`ProfileFault`] names the field, for callers that point at it.
+    #[error("profile {name}: {fault}")]
+    ProfileValues {
+        /// The profile's name or file.
+        name: String,
+        /// The field and what is wrong with it.
+        fault: ProfileFault,
     },
     /// A number outside the range it must lie in (an exposure ratio, an
     /// exposure time, a gain, a noise scale, a map's constant value).
@@ -221,6 +231,104 @@ pub enum NoiseError {
     /// An output file could not be written.
     #[error(transparent)]
     Write(#[from] pgrf_core::WriteError),
+}
+
+/// Why a camera profile's values were refused
+/// ([`crate::CameraProfile::from_json`]): each names the field at fault, in
+/// the profile's own key names.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum ProfileFault {
+    /// A schema other than 1.
+    #[error("schema {0} is not supported (expected 1)")]
+    Schema(u32),
+    /// A field that must be a positive number (`dn_range`, `k_min`, a gain).
+    #[error("{field} must be a positive number, got {}", shown(*.value))]
+    NotPositive {
+        /// The field.
+        field: String,
+        /// Its value.
+        value: f64,
+    },
+    /// A `dn_range` beyond a 16-bit scale.
+    #[error("dn_range must be at most 65535 (a 16-bit scale), got {}", shown(*.0))]
+    DnRange(f64),
+    /// A gain range whose top is below its bottom.
+    #[error("k_max {k_max} is below k_min {k_min}")]
+    GainRangeReversed {
+        /// Its bottom, DN/e-.
+        k_min: f64,
+        /// Its top, DN/e-.
+        k_max: f64,
+    },
+    /// A gain above any sensor's ([`crate::profile::MAX_GAIN`]).
+    #[error("{field} {} DN/e- is beyond any sensor (at most {})", shown(*.value), MAX_GAIN)]
+    GainBeyond {
+        /// The field.
+        field: String,
+        /// Its value, DN/e-.
+        value: f64,
+    },
+    /// A black level that is negative or not a number.
+    #[error("black must be >= 0, got {0}")]
+    Black(f64),
+    /// ELD's fits without a Tukey shape.
+    #[error("eld.tukey_shapes is empty")]
+    NoTukeyShapes,
+    /// One of ELD's scale fits with a non-finite value or a negative sigma.
+    #[error("eld.{fit} has a non-finite value or a negative sigma")]
+    FitNotFinite {
+        /// The fit (`tukey_scale`, `gauss_scale`, `row_scale`).
+        fit: &'static str,
+    },
+    /// One of ELD's scale fits that leaves every sensor's noise over the
+    /// gain range.
+    #[error("eld.{fit} gives noise scales above {} DN (or a fit sigma above 10) over the gain range {k_min}..{k_max}", MAX_SIGMA_DN)]
+    FitUnbounded {
+        /// The fit.
+        fit: &'static str,
+        /// The profile's lowest gain, DN/e-.
+        k_min: f64,
+        /// Its highest, DN/e-.
+        k_max: f64,
+    },
+    /// A Tukey shape that is not finite.
+    #[error("eld.tukey_shapes has a non-finite value")]
+    TukeyShapeNotFinite,
+    /// A colour-bias table with another number of rows than Tukey shapes.
+    #[error("eld.color_bias has {rows} rows, tukey_shapes {shapes} (one per calibration setting)")]
+    ColorBiasRows {
+        /// Rows of `eld.color_bias`.
+        rows: usize,
+        /// Entries of `eld.tukey_shapes`.
+        shapes: usize,
+    },
+    /// A per-ISO table out of order.
+    #[error("per_iso must be sorted by increasing ISO (ISO {iso} after {previous})")]
+    IsoOrder {
+        /// The ISO out of place.
+        iso: u32,
+        /// The ISO before it.
+        previous: u32,
+    },
+    /// A per-ISO standard deviation outside what a sensor can have.
+    #[error("per_iso[{iso}].{what} must be a standard deviation in 0..={} DN, got {}", MAX_SIGMA_DN, shown(*.value))]
+    Sigma {
+        /// The row's ISO.
+        iso: u32,
+        /// The field (`sigma_tukey`, `sigma_gauss`, `sigma_row`).
+        what: &'static str,
+        /// Its value, DN.
+        value: f64,
+    },
+    /// A per-ISO row with a non-finite Tukey shape or black-level error.
+    #[error("per_iso[{iso}] has a non-finite value")]
+    IsoNotFinite {
+        /// The row's ISO.
+        iso: u32,
+    },
+    /// A dark-current rate that is negative or not a number.
+    #[error("dark_current.rate must be >= 0, got {0}")]
+    DarkRate(f64),
 }
 
 /// Result of every fallible function of the noise crate.

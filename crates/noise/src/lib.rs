@@ -31,7 +31,7 @@ pub mod sensor_stacks;
 mod tukey;
 
 pub use components::Components;
-pub use error::{NoiseError, Result};
+pub use error::{NoiseError, ProfileFault, Result};
 pub use maps::{Map, PixelMaps};
 pub use model::{Capture, ModelKind, NoiseModel, ReadDist};
 pub use params::CaptureParams;

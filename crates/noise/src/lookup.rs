@@ -18,6 +18,7 @@
 
 use crate::error::{NoiseError, Result};
 use crate::profile::CameraProfile;
+use pgrf_core::parse::ParseError;
 use pgrf_raw::RawFrame;
 use std::fmt;
 use std::path::{Path, PathBuf};
@@ -108,14 +109,15 @@ pub struct NoiseFlag {
 }
 
 impl std::str::FromStr for NoiseFlag {
-    type Err = String;
+    type Err = ParseError;
 
-    fn from_str(text: &str) -> std::result::Result<NoiseFlag, String> {
+    fn from_str(text: &str) -> std::result::Result<NoiseFlag, ParseError> {
         let (mut k, mut read, mut row) = (None, None, 0.0);
         for item in text.split(',') {
             let Some((key, value)) = item.split_once('=') else {
-                return Err(format!(
-                    "{item:?}: expected KEY=VALUE (K=.., read=.., row=..)"
+                return Err(ParseError::malformed(
+                    item,
+                    format!("{item:?}: expected KEY=VALUE (K=.., read=.., row=..)"),
                 ));
             };
             let v: f64 = value
@@ -123,18 +125,28 @@ impl std::str::FromStr for NoiseFlag {
                 .parse()
                 .ok()
                 .filter(|v: &f64| v.is_finite() && *v >= 0.0)
-                .ok_or_else(|| format!("{item:?}: expected a non-negative number"))?;
+                .ok_or_else(|| {
+                    ParseError::malformed(item, format!("{item:?}: expected a non-negative number"))
+                })?;
             match key.trim().to_ascii_lowercase().as_str() {
                 "k" => k = Some(v),
                 "read" => read = Some(v),
                 "row" => row = v,
-                other => return Err(format!("unknown key {other:?} (K, read, row)")),
+                other => {
+                    return Err(ParseError::unknown_name(
+                        key,
+                        format!("unknown key {other:?} (K, read, row)"),
+                    ))
+                }
             }
         }
         match (k, read) {
             (Some(k), Some(read)) if k > 0.0 => Ok(NoiseFlag { k, read, row }),
-            (Some(_), Some(_)) => Err("K must be positive".into()),
-            _ => Err("give at least K=.. and read=..".into()),
+            (Some(_), Some(_)) => Err(ParseError::out_of_range(text, "K must be positive")),
+            _ => Err(ParseError::malformed(
+                text,
+                "give at least K=.. and read=..",
+            )),
         }
     }
 }
@@ -312,6 +324,7 @@ pub fn find_noise(frame: &RawFrame, known: &KnownNoise) -> Result<FrameNoise> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use pgrf_core::parse::ParseErrorKind;
     use pgrf_raw::Cfa;
 
     fn frame() -> RawFrame {
@@ -347,6 +360,11 @@ mod tests {
         ] {
             assert!(bad.parse::<NoiseFlag>().is_err(), "{bad}");
         }
+        let e = "K=0,read=1".parse::<NoiseFlag>().unwrap_err();
+        assert_eq!(e.kind(), ParseErrorKind::OutOfRange);
+        assert_eq!(e.to_string(), "K must be positive");
+        let e = "K=1,read=1,gain=2".parse::<NoiseFlag>().unwrap_err();
+        assert_eq!((e.kind(), e.input()), (ParseErrorKind::UnknownName, "gain"));
     }
 
     /// Calibration, then the flag, then the DNG tag, then a built-in

@@ -35,6 +35,7 @@ use crate::poisson::poisson;
 use crate::profile::{CameraProfile, DarkLaw};
 use crate::tukey;
 use ndarray::{Array3, ArrayView3};
+use pgrf_core::parse::ParseError;
 use pgrf_core::seed::{open01, stream, Domain};
 use rand::Rng;
 use rand_distr::StandardNormal;
@@ -98,13 +99,16 @@ impl std::fmt::Display for ModelKind {
 }
 
 impl std::str::FromStr for ModelKind {
-    type Err = String;
-    fn from_str(s: &str) -> std::result::Result<Self, String> {
+    type Err = ParseError;
+    fn from_str(s: &str) -> std::result::Result<Self, ParseError> {
         match s.to_ascii_lowercase().as_str() {
             "pg" => Ok(ModelKind::PoissonGaussian),
             "eld" => Ok(ModelKind::Eld),
             "pgrf" => Ok(ModelKind::Pgrf),
-            o => Err(format!("unknown noise model '{o}' (pg, eld or pgrf)")),
+            o => Err(ParseError::unknown_name(
+                s,
+                format!("unknown noise model '{o}' (pg, eld or pgrf)"),
+            )),
         }
     }
 }

@@ -22,19 +22,42 @@ use pgrf_core::seed::{open01, stream, Domain};
 /// nothing a camera records.
 pub const RATIO_RANGE: std::ops::RangeInclusive<f32> = 1.0..=10_000.0;
 
+/// An exposure ratio outside [`RATIO_RANGE`] (or not a number), with the
+/// flag or field that gave it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RatioError {
+    /// The flag or field that gave it ("--ratio", "ratio").
+    pub flag: String,
+    /// The ratio given.
+    pub ratio: f32,
+}
+
+impl std::fmt::Display for RatioError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "{} {}: the exposure ratio must be from {} to {} (a capture at most {} times darker than its reference; SID and ELD use 100 to 300)",
+            self.flag,
+            shown(self.ratio),
+            RATIO_RANGE.start(),
+            RATIO_RANGE.end(),
+            RATIO_RANGE.end()
+        )
+    }
+}
+
+impl std::error::Error for RatioError {}
+
 /// `ratio`, given with `flag`, when it lies in [`RATIO_RANGE`]; else the
-/// one-line reason, naming the flag and the value.
-pub fn check_ratio(flag: &str, ratio: f32) -> std::result::Result<f32, String> {
+/// error naming the flag and the value.
+pub fn ratio_in_range(flag: &str, ratio: f32) -> std::result::Result<f32, RatioError> {
     if ratio.is_finite() && RATIO_RANGE.contains(&ratio) {
         return Ok(ratio);
     }
-    Err(format!(
-        "{flag} {}: the exposure ratio must be from {} to {} (a capture at most {} times darker than its reference; SID and ELD use 100 to 300)",
-        shown(ratio),
-        RATIO_RANGE.start(),
-        RATIO_RANGE.end(),
-        RATIO_RANGE.end()
-    ))
+    Err(RatioError {
+        flag: flag.to_string(),
+        ratio,
+    })
 }
 
 /// `v` as typed: its shortest f32 form, in scientific notation beyond
@@ -341,7 +364,12 @@ impl PairSpec {
 
 #[cfg(test)]
 mod ratio_tests {
-    use super::check_ratio;
+    use super::{ratio_in_range, RatioError};
+
+    /// The message of [`ratio_in_range`]'s refusal, or the ratio.
+    fn check_ratio(flag: &str, ratio: f32) -> Result<f32, String> {
+        ratio_in_range(flag, ratio).map_err(|e| e.to_string())
+    }
 
     #[test]
     fn ratios_outside_one_to_ten_thousand_are_refused_with_the_flag() {
@@ -372,6 +400,15 @@ mod ratio_tests {
         assert!(check_ratio("--ratio", 0.5)
             .unwrap_err()
             .starts_with("--ratio 0.5:"));
+        let e = ratio_in_range("ratio", 0.5).unwrap_err();
+        assert_eq!(
+            e,
+            RatioError {
+                flag: "ratio".into(),
+                ratio: 0.5
+            }
+        );
+        assert_eq!(Err(e.to_string()), check_ratio("ratio", 0.5));
     }
 }
 

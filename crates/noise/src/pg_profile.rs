@@ -158,7 +158,10 @@ pub fn poisson_gaussian_table(
         per_iso,
         dark_current: None,
     };
-    p.checked().map_err(bad)
+    p.checked().map_err(|fault| NoiseError::ProfileValues {
+        name: name.to_string(),
+        fault,
+    })
 }
 
 /// ln(sigma) = slope ln(K) + bias through the rows with a read noise, by

@@ -7,8 +7,8 @@
 //! A7S2 table and embedded in the binary; users can write their own JSON with
 //! the same keys (see docs/guide.md "Camera profiles").
 
-use crate::error::{NoiseError, Result};
-use pgrf_core::number::shown;
+use crate::error::{NoiseError, ProfileFault, Result};
+use pgrf_core::parse::ParseError;
 use serde::{Deserialize, Serialize};
 
 /// Natural-log-linear fit of a noise scale against the system gain:
@@ -107,12 +107,15 @@ impl DarkLaw {
 }
 
 impl std::str::FromStr for DarkLaw {
-    type Err = String;
-    fn from_str(s: &str) -> std::result::Result<Self, String> {
+    type Err = ParseError;
+    fn from_str(s: &str) -> std::result::Result<Self, ParseError> {
         match s {
             "sqrt" => Ok(DarkLaw::Sqrt),
             "linear" => Ok(DarkLaw::Linear),
-            o => Err(format!("dark-current law '{o}' (expected sqrt or linear)")),
+            o => Err(ParseError::unknown_name(
+                o,
+                format!("dark-current law '{o}' (expected sqrt or linear)"),
+            )),
         }
     }
 }
@@ -201,9 +204,9 @@ impl CameraProfile {
             name: name.to_string(),
             reason: e.to_string(),
         })?;
-        p.validate().map_err(|reason| NoiseError::Profile {
+        p.validate().map_err(|fault| NoiseError::ProfileValues {
             name: name.to_string(),
-            reason,
+            fault,
         })?;
         Ok(p)
     }
@@ -218,51 +221,45 @@ impl CameraProfile {
     }
 
     /// This profile if it passes the checks every loaded profile passes.
-    pub(crate) fn checked(self) -> std::result::Result<CameraProfile, String> {
+    pub(crate) fn checked(self) -> std::result::Result<CameraProfile, ProfileFault> {
         self.validate().map(|()| self)
     }
 
-    fn validate(&self) -> std::result::Result<(), String> {
+    fn validate(&self) -> Checked {
         self.validate_scale()?;
         self.validate_eld()?;
         self.validate_per_iso()?;
         if let Some(d) = &self.dark_current {
             if !(d.rate.is_finite() && d.rate >= 0.0) {
-                return Err(format!("dark_current.rate must be >= 0, got {}", d.rate));
+                return Err(ProfileFault::DarkRate(d.rate));
             }
         }
         Ok(())
     }
 
     /// The schema, the DN scale, the gain range and the black level.
-    fn validate_scale(&self) -> std::result::Result<(), String> {
+    fn validate_scale(&self) -> Checked {
         if self.schema != 1 {
-            return Err(format!(
-                "schema {} is not supported (expected 1)",
-                self.schema
-            ));
+            return Err(ProfileFault::Schema(self.schema));
         }
         positive(self.dn_range, "dn_range")?;
         if self.dn_range > 65535.0 {
-            return Err(format!(
-                "dn_range must be at most 65535 (a 16-bit scale), got {}",
-                shown(self.dn_range)
-            ));
+            return Err(ProfileFault::DnRange(self.dn_range));
         }
         positive(self.k_min, "k_min")?;
         sensor_gain(self.k_max, "k_max")?;
         if self.k_max < self.k_min {
-            return Err(format!(
-                "k_max {} is below k_min {}",
-                self.k_max, self.k_min
-            ));
+            return Err(ProfileFault::GainRangeReversed {
+                k_min: self.k_min,
+                k_max: self.k_max,
+            });
         }
         if let Some(k) = self.k_per_iso {
             sensor_gain(k, "k_per_iso")?;
         }
         if let Some(b) = self.black {
             if !(b.is_finite() && b >= 0.0) {
-                return Err(format!("black must be >= 0, got {b}"));
+                return Err(ProfileFault::Black(b));
             }
         }
         Ok(())
@@ -270,52 +267,50 @@ impl CameraProfile {
 
     /// ELD's fits: finite, bounded over the gain range, one colour-bias row
     /// per Tukey shape.
-    fn validate_eld(&self) -> std::result::Result<(), String> {
+    fn validate_eld(&self) -> Checked {
         let e = &self.eld;
         if e.tukey_shapes.is_empty() {
-            return Err("eld.tukey_shapes is empty".into());
+            return Err(ProfileFault::NoTukeyShapes);
         }
-        for (name, f) in [
+        for (fit, f) in [
             ("tukey_scale", &e.tukey_scale),
             ("gauss_scale", &e.gauss_scale),
             ("row_scale", &e.row_scale),
         ] {
             if !(f.slope.is_finite() && f.bias.is_finite() && f.sigma.is_finite() && f.sigma >= 0.0)
             {
-                return Err(format!(
-                    "eld.{name} has a non-finite value or a negative sigma"
-                ));
+                return Err(ProfileFault::FitNotFinite { fit });
             }
             if !f.bounded_over(self.k_min, self.k_max) {
-                return Err(format!(
-                    "eld.{name} gives noise scales above {MAX_SIGMA_DN} DN (or a fit sigma above 10) over the gain range {}..{}",
-                    self.k_min, self.k_max
-                ));
+                return Err(ProfileFault::FitUnbounded {
+                    fit,
+                    k_min: self.k_min,
+                    k_max: self.k_max,
+                });
             }
         }
         if e.tukey_shapes.iter().any(|l| !l.is_finite()) {
-            return Err("eld.tukey_shapes has a non-finite value".into());
+            return Err(ProfileFault::TukeyShapeNotFinite);
         }
         if !e.color_bias.is_empty() && e.color_bias.len() != e.tukey_shapes.len() {
-            return Err(format!(
-                "eld.color_bias has {} rows, tukey_shapes {} (one per calibration setting)",
-                e.color_bias.len(),
-                e.tukey_shapes.len()
-            ));
+            return Err(ProfileFault::ColorBiasRows {
+                rows: e.color_bias.len(),
+                shapes: e.tukey_shapes.len(),
+            });
         }
         Ok(())
     }
 
     /// The per-ISO table: increasing ISOs, sensor gains, standard
     /// deviations within range, finite values.
-    fn validate_per_iso(&self) -> std::result::Result<(), String> {
+    fn validate_per_iso(&self) -> Checked {
         let mut last = 0;
         for p in &self.per_iso {
             if p.iso <= last {
-                return Err(format!(
-                    "per_iso must be sorted by increasing ISO (ISO {} after {last})",
-                    p.iso
-                ));
+                return Err(ProfileFault::IsoOrder {
+                    iso: p.iso,
+                    previous: last,
+                });
             }
             last = p.iso;
             sensor_gain(p.k, &format!("per_iso[{}].k", p.iso))?;
@@ -325,41 +320,45 @@ impl CameraProfile {
                 ("sigma_row", p.sigma_row),
             ] {
                 if !(v.is_finite() && (0.0..=MAX_SIGMA_DN).contains(&v)) {
-                    return Err(format!(
-                        "per_iso[{}].{what} must be a standard deviation in 0..={MAX_SIGMA_DN} DN, got {}",
-                        p.iso,
-                        shown(v)
-                    ));
+                    return Err(ProfileFault::Sigma {
+                        iso: p.iso,
+                        what,
+                        value: v,
+                    });
                 }
             }
             if !p.tukey_lambda.is_finite() || !p.black_level_error.is_finite() {
-                return Err(format!("per_iso[{}] has a non-finite value", p.iso));
+                return Err(ProfileFault::IsoNotFinite { iso: p.iso });
             }
         }
         Ok(())
     }
 }
 
+/// What a check of a profile's values gives: nothing, or the field at
+/// fault.
+type Checked = std::result::Result<(), ProfileFault>;
+
 /// `v` must be a positive number.
-fn positive(v: f64, what: &str) -> std::result::Result<(), String> {
+fn positive(v: f64, field: &str) -> Checked {
     if v.is_finite() && v > 0.0 {
         Ok(())
     } else {
-        Err(format!(
-            "{what} must be a positive number, got {}",
-            shown(v)
-        ))
+        Err(ProfileFault::NotPositive {
+            field: field.to_string(),
+            value: v,
+        })
     }
 }
 
 /// A gain is positive and no more than any sensor's.
-fn sensor_gain(v: f64, what: &str) -> std::result::Result<(), String> {
-    positive(v, what)?;
+fn sensor_gain(v: f64, field: &str) -> Checked {
+    positive(v, field)?;
     if v > MAX_GAIN {
-        return Err(format!(
-            "{what} {} DN/e- is beyond any sensor (at most {MAX_GAIN})",
-            shown(v)
-        ));
+        return Err(ProfileFault::GainBeyond {
+            field: field.to_string(),
+            value: v,
+        });
     }
     Ok(())
 }
@@ -413,7 +412,14 @@ mod tests {
             .to_string();
         assert!(e.contains("sigma_gauss") && e.contains("0..="), "{e}");
         let swapped = json_with(|v| v["k_max"] = serde_json::json!(0.01));
-        assert!(CameraProfile::from_json("x", &swapped).is_err());
+        // The field at fault is there for a caller, not only in the words.
+        assert!(matches!(
+            CameraProfile::from_json("x", &swapped),
+            Err(NoiseError::ProfileValues {
+                fault: ProfileFault::GainRangeReversed { .. },
+                ..
+            })
+        ));
         let neg_fit = json_with(|v| v["eld"]["row_scale"]["sigma"] = serde_json::json!(-0.2));
         assert!(CameraProfile::from_json("x", &neg_fit).is_err());
         let unknown = json_with(|v| v["frobnicate"] = serde_json::json!(1));

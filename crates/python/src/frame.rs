@@ -8,6 +8,7 @@
 use crate::errors::{bad, to_py};
 use crate::threads::run;
 use numpy::{IntoPyArray, PyArray3, PyReadonlyArray3};
+use pgrf_core::parse::ParseError;
 use pgrf_raw::{pack_normalized, unpack_normalized, Cfa, ColorMatrix, RawFrame};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
@@ -106,7 +107,7 @@ pub fn frame_of_meta(d: &Bound<'_, PyDict>) -> PyResult<RawFrame> {
     } else {
         cfa_name
             .parse()
-            .map_err(|e: String| bad(format!("metadata cfa: {e}")))?
+            .map_err(|e: ParseError| bad(format!("metadata cfa: {e}")))?
     };
     let header = d
         .get_item("header")?

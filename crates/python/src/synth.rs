@@ -12,6 +12,7 @@ use numpy::{IntoPyArray, PyArray3, PyArray4, PyReadonlyArray3, PyReadonlyArray4}
 use pgrf_calib::synth::{
     synthesize_packed, with_dark_rate, CleanFacts, PackedCapture, SynthConfig,
 };
+use pgrf_core::parse::ParseError;
 use pgrf_noise::{DarkLaw, ModelKind};
 use pgrf_raw::{Cfa, RawFrame};
 use pyo3::prelude::*;
@@ -72,7 +73,7 @@ fn facts(frame: Option<&RawFrame>, cfa: Option<&str>) -> PyResult<CleanFacts> {
         Some(c) if c.eq_ignore_ascii_case("mono") => Cfa::Rggb,
         Some(c) => c
             .parse()
-            .map_err(|e: String| bad(format!("synth cfa: {e}")))?,
+            .map_err(|e: ParseError| bad(format!("synth cfa: {e}")))?,
     };
     Ok(CleanFacts {
         plane_rows: cfa.offsets().map(|(r, _)| r),
@@ -155,11 +156,11 @@ fn parse_settings(d: &Bound<'_, PyDict>) -> PyResult<Settings> {
     let model: String = setting(d, "model", "pgrf".to_string())?;
     let model: ModelKind = model
         .parse()
-        .map_err(|e: String| bad(format!("synth model: {e}")))?;
+        .map_err(|e: ParseError| bad(format!("synth model: {e}")))?;
     let law: String = setting(d, "dark_law", "sqrt".to_string())?;
     let dark_law: DarkLaw = law
         .parse()
-        .map_err(|e: String| bad(format!("synth dark_law: {e}")))?;
+        .map_err(|e: ParseError| bad(format!("synth dark_law: {e}")))?;
     let components: String = setting(d, "components", "P,G,H,Q,F,A".to_string())?;
     Ok(Settings {
         ratio: setting(d, "ratio", None)?,

@@ -5,6 +5,7 @@
 //! cell each of those four planes sits. G1 is the green on the red row, G2 the
 //! green on the blue row.
 
+use pgrf_core::parse::ParseError;
 use serde::{Deserialize, Serialize};
 use std::fmt;
 use std::str::FromStr;
@@ -97,15 +98,18 @@ impl fmt::Display for Cfa {
 }
 
 impl FromStr for Cfa {
-    type Err = String;
+    type Err = ParseError;
     fn from_str(s: &str) -> Result<Self, Self::Err> {
         match s.to_ascii_uppercase().as_str() {
             "RGGB" => Ok(Cfa::Rggb),
             "BGGR" => Ok(Cfa::Bggr),
             "GRBG" => Ok(Cfa::Grbg),
             "GBRG" => Ok(Cfa::Gbrg),
-            other => Err(format!(
-                "CFA pattern '{other}' is not a 2x2 Bayer phase (expected RGGB, BGGR, GRBG or GBRG)"
+            other => Err(ParseError::unknown_name(
+                s,
+                format!(
+                    "CFA pattern '{other}' is not a 2x2 Bayer phase (expected RGGB, BGGR, GRBG or GBRG)"
+                ),
             )),
         }
     }

@@ -35,11 +35,7 @@ pub fn decode_file(path: &Path, overrides: &LevelOverrides) -> Result<RawFrame> 
     if meta.len() == 0 {
         return Err(RawError::decode(path, "file is empty"));
     }
-    decode_source(
-        path,
-        || RawSource::new(path).map_err(|e| e.to_string()),
-        overrides,
-    )
+    decode_source(path, || RawSource::new(path), overrides)
 }
 
 /// [`decode_file`] for a file already in memory (e.g. one built into the
@@ -54,10 +50,10 @@ pub fn decode_bytes(name: &Path, bytes: &[u8], overrides: &LevelOverrides) -> Re
 /// Decode what `open` gives through rawler; `path` names it in errors.
 fn decode_source(
     path: &Path,
-    open: impl FnOnce() -> std::result::Result<RawSource, String>,
+    open: impl FnOnce() -> std::io::Result<RawSource>,
     overrides: &LevelOverrides,
 ) -> Result<RawFrame> {
-    let source = open().map_err(|reason| RawError::decode(path, reason))?;
+    let source = open().map_err(|e| RawError::decode(path, e.to_string()))?;
     if crate::fits::is_fits(source.buf()) {
         return crate::fits_frame::frame_from_fits(path, source.buf(), overrides);
     }
@@ -83,7 +79,7 @@ fn decode_source(
         let exif = decoder.raw_metadata(&source, &params).ok();
         Ok((image, exif))
     })
-    .map_err(|reason| RawError::decode(path, tidy_reason(&reason)))?
+    .map_err(|panic| RawError::decode(path, tidy_reason(&panic.to_string())))?
     .map_err(|stop| match stop {
         Stop::Decoder(reason) => RawError::decode(path, tidy_reason(&reason)),
         Stop::Memory(e) => e,
@@ -333,7 +329,7 @@ fn bayer_phase(path: &Path, config: &CFAConfig, y0: usize, x0: usize) -> Result<
     }
     let full_cfa: Cfa = cfa_name
         .parse()
-        .map_err(|e: String| RawError::unsupported(path, e))?;
+        .map_err(|e: pgrf_core::parse::ParseError| RawError::unsupported(path, e.to_string()))?;
     Ok(full_cfa.shifted(y0, x0))
 }
 

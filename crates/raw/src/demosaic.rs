@@ -9,6 +9,7 @@
 //! reflection with a period of 2, so the CFA phase is preserved across the edge.
 
 use crate::cfa::Cfa;
+use pgrf_core::parse::ParseError;
 use rayon::prelude::*;
 
 /// The interpolation a preview demosaics with; parsed from the CLI's
@@ -24,12 +25,15 @@ pub enum Demosaic {
 }
 
 impl std::str::FromStr for Demosaic {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
+    type Err = ParseError;
+    fn from_str(s: &str) -> Result<Self, ParseError> {
         match s.to_ascii_lowercase().as_str() {
             "bilinear" => Ok(Demosaic::Bilinear),
             "malvar" | "mhc" => Ok(Demosaic::Malvar),
-            o => Err(format!("unknown demosaic '{o}' (bilinear or malvar)")),
+            o => Err(ParseError::unknown_name(
+                s,
+                format!("unknown demosaic '{o}' (bilinear or malvar)"),
+            )),
         }
     }
 }

@@ -135,9 +135,9 @@ fn encode_readout(frame: &RawFrame, masked: usize, opts: &DngOptions) -> Result<
         });
     }
     let exif = exif_for(frame);
-    quietly(|| -> std::result::Result<Vec<u8>, String> {
+    quietly(|| -> Result<Vec<u8>> {
         let mut buf = Cursor::new(Vec::with_capacity(frame.mosaic.len() * 2 + 65536));
-        let mut dng = DngWriter::new(&mut buf, DNG_VERSION_V1_4).map_err(|e| e.to_string())?;
+        let mut dng = DngWriter::new(&mut buf, DNG_VERSION_V1_4).map_err(dng_fault)?;
         // The raw image in IFD0, its tags and pixels written by pgrf (the
         // tile layout is LibRaw's business: [`tile_width`]); the pixels go
         // before the metadata's blobs, as rawler's writer placed them.
@@ -158,7 +158,7 @@ fn encode_readout(frame: &RawFrame, masked: usize, opts: &DngOptions) -> Result<
         root.add_tag(TiffCommonTag::Model, frame.model.as_str());
         let unique = format!("{} {}", frame.make, frame.model);
         root.add_tag(DngTag::UniqueCameraModel, unique.as_str());
-        dng.load_metadata(&exif).map_err(|e| e.to_string())?;
+        dng.load_metadata(&exif).map_err(dng_fault)?;
         write_color_tags(&mut dng, frame);
         if let Some(t) = frame.temperature_c.filter(|t| t.is_finite()) {
             dng.exif_ifd_mut().add_tag(
@@ -169,14 +169,19 @@ fn encode_readout(frame: &RawFrame, masked: usize, opts: &DngOptions) -> Result<
         let root = dng.root_ifd_mut();
         root.add_tag(ExifTag::Orientation, frame.orientation);
         root.add_tag(TiffCommonTag::Software, opts.software.as_str());
-        dng.close().map_err(|e| e.to_string())?;
+        dng.close().map_err(dng_fault)?;
         Ok(buf.into_inner())
     })
-    .and_then(|r| r)
-    .map_err(|reason| RawError::Encode {
+    .map_err(dng_fault)?
+}
+
+/// The DNG writer's (or a panic's) complaint as the error that names the
+/// format: the data given could not be encoded.
+fn dng_fault(reason: impl std::fmt::Display) -> RawError {
+    RawError::Encode {
         format: "DNG",
-        reason,
-    })
+        reason: reason.to_string(),
+    }
 }
 
 /// Encode `frame` as DNG (same pixels, CFA, levels, colour matrices, white
@@ -259,10 +264,7 @@ fn raw_tags(ifd: &mut DirectoryWriter, frame: &RawFrame, masked: usize) {
 /// rows as two-component JPEG rows (the two colours of a row alternate), a
 /// monochrome frame's as one component. The tiles are compressed in
 /// parallel.
-fn put_ljpeg<W: Write + Seek>(
-    dng: &mut DngWriter<W>,
-    frame: &RawFrame,
-) -> std::result::Result<(), String> {
+fn put_ljpeg<W: Write + Seek>(dng: &mut DngWriter<W>, frame: &RawFrame) -> Result<()> {
     use rayon::prelude::*;
     let (tw, th) = (tile_width(frame.width), DNG_TILE);
     // The frame's bits, or more when a sample needs them (LJPEG-92 refuses
@@ -280,12 +282,12 @@ fn put_ljpeg<W: Write + Seek>(
             let tile = tiler.build_tile(i);
             LjpegCompressor::new(&tile, tw / components, th, components, bps, 1, 0, 0)
                 .and_then(|c| c.encode())
-                .map_err(|e| format!("LJPEG encoding failed: {e}"))
+                .map_err(|e| dng_fault(format!("LJPEG encoding failed: {e}")))
         })
-        .collect::<std::result::Result<Vec<Vec<u8>>, String>>()?;
+        .collect::<Result<Vec<Vec<u8>>>>()?;
     let (mut offsets, mut sizes) = (Vec::new(), Vec::new());
     for t in &tiles {
-        offsets.push(dng.dng.write_data(t).map_err(|e| e.to_string())?);
+        offsets.push(dng.dng.write_data(t).map_err(dng_fault)?);
         sizes.push(t.len() as u32);
     }
     let ifd = dng.root_ifd_mut();
@@ -301,10 +303,7 @@ fn put_ljpeg<W: Write + Seek>(
 
 /// The pixels as 16-bit little-endian strips: one strip up to 100 rows,
 /// strips of 256 rows above.
-fn put_uncompressed<W: Write + Seek>(
-    dng: &mut DngWriter<W>,
-    frame: &RawFrame,
-) -> std::result::Result<(), String> {
+fn put_uncompressed<W: Write + Seek>(dng: &mut DngWriter<W>, frame: &RawFrame) -> Result<()> {
     let rows = if frame.height > 100 {
         256
     } else {
@@ -312,11 +311,7 @@ fn put_uncompressed<W: Write + Seek>(
     };
     let (mut offsets, mut sizes, mut counts) = (Vec::new(), Vec::new(), Vec::new());
     for strip in frame.mosaic.chunks(rows * frame.width.max(1)) {
-        offsets.push(
-            dng.dng
-                .write_data_u16_le(strip)
-                .map_err(|e| e.to_string())?,
-        );
+        offsets.push(dng.dng.write_data_u16_le(strip).map_err(dng_fault)?);
         sizes.push(std::mem::size_of_val(strip) as u32);
         counts.push((strip.len() / frame.width.max(1)) as u32);
     }

@@ -38,6 +38,16 @@ pub enum RawError {
         /// What is wrong with its structure.
         source: crate::container::ContainerError,
     },
+    /// A FITS header card whose value pgrf cannot use; the
+    /// [`crate::fits::KeywordError`] names the keyword, for callers that
+    /// point the user at it.
+    #[error("{}: cannot decode: {}", path.display(), one_line(error.to_string()))]
+    FitsKeyword {
+        /// The file.
+        path: PathBuf,
+        /// The card and what is wrong with its value.
+        error: crate::fits::KeywordError,
+    },
     /// A readable file of a kind pgrf does not handle: linear (demosaiced) or
     /// monochrome data, X-Trans, floating-point samples.
     #[error("{path}: unsupported: {reason}")]
@@ -334,6 +344,13 @@ impl RawError {
         RawError::Decode {
             path: path.to_path_buf(),
             reason: one_line(reason.into()),
+        }
+    }
+
+    pub(crate) fn fits_keyword(path: &Path, error: crate::fits::KeywordError) -> Self {
+        RawError::FitsKeyword {
+            path: path.to_path_buf(),
+            error,
         }
     }
 

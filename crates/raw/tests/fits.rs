@@ -5,8 +5,9 @@
 
 use pgrf_raw::fits::{
     encode_fits_f32, encode_fits_u16, is_fits, read_fits, FitsCard, FitsImage, FitsValue,
+    KeywordError,
 };
-use pgrf_raw::Cfa;
+use pgrf_raw::{Cfa, RawError};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use std::alloc::{GlobalAlloc, Layout, System};
@@ -451,6 +452,15 @@ fn unusable_metadata_is_named() {
     assert!(
         try_read(&[card("INSTRUME", FitsValue::Int(5))]).contains("INSTRUME = 5 is not a string")
     );
+    // The card at fault is there for a caller, not only in the words.
+    let bytes = encode_fits_u16(2, 2, &[1, 2, 3, 4], &[card("EXPTIME", s("long"))]).unwrap();
+    match read_fits(&name(), &bytes) {
+        Err(RawError::FitsKeyword { error, .. }) => {
+            assert_eq!(error.key(), "EXPTIME");
+            assert!(matches!(error, KeywordError::NotANumber { .. }), "{error}");
+        }
+        other => panic!("expected a keyword error, got {other:?}"),
+    }
     // Numbers written as strings by some programs are read.
     let bytes = encode_fits_u16(2, 2, &[1, 2, 3, 4], &[card("EXPTIME", s("30"))]).unwrap();
     assert_eq!(read_fits(&name(), &bytes).unwrap().exposure_s, Some(30.0));

@@ -1089,11 +1089,12 @@ impl Mosaic {
     /// Encode as a grayscale PNG and write it atomically at `path`.
     fn write(&self, path: &Path) -> Result<(), ReportError> {
         let (w, h) = self.size;
-        let png = encode_png(&self.gray, w as u32, h as u32, image::ExtendedColorType::L8)
-            .map_err(|reason| ReportError::Encode {
-                file: path.display().to_string(),
-                reason,
-            })?;
+        let png = encode_png(
+            path,
+            &self.gray,
+            (w as u32, h as u32),
+            image::ExtendedColorType::L8,
+        )?;
         pgrf_core::write_atomic(path, &png)?;
         Ok(())
     }

@@ -21,8 +21,11 @@ pub enum ReportError {
     #[error("{0}")]
     Empty(&'static str),
     /// The embedded font did not load.
-    #[error("cannot load the embedded plot font: {0}")]
-    Font(String),
+    #[error("cannot load the embedded plot font: DejaVu Sans {face} is not a valid font")]
+    Font {
+        /// The face that failed ("regular" or "bold").
+        face: &'static str,
+    },
     /// plotters failed while drawing `file`.
     #[error("{file}: cannot draw: {reason}")]
     Plot {

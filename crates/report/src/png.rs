@@ -15,15 +15,15 @@ pub(crate) const FONT_FAMILY: &str = "sans-serif";
 /// no system-font fallback, and without a registered family every text draw
 /// fails.
 pub(crate) fn ensure_font() -> Result<(), ReportError> {
-    static FONT: OnceLock<Result<(), String>> = OnceLock::new();
+    // The face that failed to load, once for the process.
+    static FONT: OnceLock<Result<(), &'static str>> = OnceLock::new();
     FONT.get_or_init(|| {
         plotters::style::register_font(FONT_FAMILY, FontStyle::Normal, dejavu::sans::regular())
-            .map_err(|_| "DejaVu Sans regular is not a valid font".to_string())?;
+            .map_err(|_| "regular")?;
         plotters::style::register_font(FONT_FAMILY, FontStyle::Bold, dejavu::sans::bold())
-            .map_err(|_| "DejaVu Sans bold is not a valid font".to_string())
+            .map_err(|_| "bold")
     })
-    .clone()
-    .map_err(ReportError::Font)
+    .map_err(|face| ReportError::Font { face })
 }
 
 /// What a drawing closure returns: plotters' errors are boxed.
@@ -38,7 +38,6 @@ pub(crate) fn render_png(
     (w, h): (u32, u32),
     draw: impl FnOnce(&DrawingArea<BitMapBackend, plotters::coord::Shift>) -> PlotResult,
 ) -> Result<(), ReportError> {
-    let file = path.display().to_string();
     let mut rgb = vec![0u8; w as usize * h as usize * 3];
     {
         let root = BitMapBackend::with_buffer(&mut rgb, (w, h)).into_drawing_area();
@@ -48,32 +47,31 @@ pub(crate) fn render_png(
             .and_then(|_| draw(&root))
             .and_then(|_| root.present().map_err(|e| e.into()));
         result.map_err(|e| ReportError::Plot {
-            file: file.clone(),
+            file: path.display().to_string(),
             reason: one_line(&e.to_string()),
         })?;
     }
-    let png = encode_png(&rgb, w, h, image::ExtendedColorType::Rgb8).map_err(|reason| {
-        ReportError::Encode {
-            file: file.clone(),
-            reason,
-        }
-    })?;
+    let png = encode_png(path, &rgb, (w, h), image::ExtendedColorType::Rgb8)?;
     pgrf_core::write_atomic(path, &png)?;
     Ok(())
 }
 
-/// Encode 8-bit pixels (`color` says the channels) as PNG bytes.
+/// Encode 8-bit pixels (`color` says the channels) as the PNG bytes of
+/// `path` (which names it in the error).
 pub(crate) fn encode_png(
+    path: &Path,
     pixels: &[u8],
-    w: u32,
-    h: u32,
+    (w, h): (u32, u32),
     color: image::ExtendedColorType,
-) -> Result<Vec<u8>, String> {
+) -> Result<Vec<u8>, ReportError> {
     use image::ImageEncoder as _;
     let mut out = Vec::new();
     image::codecs::png::PngEncoder::new(&mut out)
         .write_image(pixels, w, h, color)
-        .map_err(|e| one_line(&e.to_string()))?;
+        .map_err(|e| ReportError::Encode {
+            file: path.display().to_string(),
+            reason: one_line(&e.to_string()),
+        })?;
     Ok(out)
 }
 

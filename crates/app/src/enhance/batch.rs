@@ -43,25 +43,32 @@ impl Shard {
 }
 
 impl std::str::FromStr for Shard {
-    type Err = String;
+    type Err = pgrf_core::parse::ParseError;
     /// `I/N` with `0 <= I < N`; the message says what is wrong (the caller
     /// names the flag).
-    fn from_str(s: &str) -> Result<Self, String> {
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
         let parsed = s
             .split_once('/')
             .and_then(|(i, n)| Some((i.trim().parse().ok()?, n.trim().parse().ok()?)));
         let Some((index, count)) = parsed else {
-            return Err(format!(
-                "--shard {s}: expected I/N, two whole numbers (shard I of N, counted from 0), e.g. 0/8"
+            return Err(pgrf_core::parse::ParseError::malformed(
+                s,
+                format!("--shard {s}: expected I/N, two whole numbers (shard I of N, counted from 0), e.g. 0/8"),
             ));
         };
         if count == 0 {
-            return Err(format!("--shard {s}: N must be at least 1"));
+            return Err(pgrf_core::parse::ParseError::out_of_range(
+                s,
+                format!("--shard {s}: N must be at least 1"),
+            ));
         }
         if index >= count {
-            return Err(format!(
-                "--shard {s}: I counts from 0 and must be below N (0/{count} .. {}/{count})",
-                count - 1
+            return Err(pgrf_core::parse::ParseError::out_of_range(
+                s,
+                format!(
+                    "--shard {s}: I counts from 0 and must be below N (0/{count} .. {}/{count})",
+                    count - 1
+                ),
             ));
         }
         Ok(Shard { index, count })
@@ -431,7 +438,7 @@ mod tests {
             ("1/2/3", "expected I/N"),
             ("", "expected I/N"),
         ] {
-            let e = bad.parse::<Shard>().unwrap_err();
+            let e = bad.parse::<Shard>().unwrap_err().to_string();
             assert!(
                 e.contains(&format!("--shard {bad}")) && e.contains(says),
                 "{e}"

@@ -110,15 +110,17 @@ pub enum RatioFlag {
 }
 
 impl std::str::FromStr for RatioFlag {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
+    type Err = pgrf_core::parse::ParseError;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
         if s.eq_ignore_ascii_case("auto") {
             return Ok(RatioFlag::Auto);
         }
-        s.trim()
-            .parse::<f32>()
-            .map(RatioFlag::Value)
-            .map_err(|_| format!("expected a number or auto, got {s:?}"))
+        s.trim().parse::<f32>().map(RatioFlag::Value).map_err(|_| {
+            pgrf_core::parse::ParseError::malformed(
+                s,
+                format!("expected a number or auto, got {s:?}"),
+            )
+        })
     }
 }
 
@@ -133,7 +135,8 @@ impl EnhanceFlags {
     /// manifest's path.
     pub fn batch(&self) -> Result<Batch, NnError> {
         if let Some(RatioFlag::Value(r)) = self.ratio {
-            pgrf_noise::pair::check_ratio("--ratio", r).map_err(|m| refused("--ratio", m))?;
+            pgrf_noise::pair::ratio_in_range("--ratio", r)
+                .map_err(|e| refused("--ratio", e.to_string()))?;
         }
         if let Some(t) = self.t2 {
             if !(0.0..=1.0).contains(&t) {
@@ -142,7 +145,10 @@ impl EnhanceFlags {
         }
         check_tiling_args(self.tile, self.overlap)?;
         let shard = (self.shard.as_deref())
-            .map(|s| s.parse::<Shard>().map_err(|m| refused("--shard", m)))
+            .map(|s| {
+                s.parse::<Shard>()
+                    .map_err(|e| refused("--shard", e.to_string()))
+            })
             .transpose()?;
         let mut given = self.inputs.clone();
         if let Some(list) = &self.from_list {

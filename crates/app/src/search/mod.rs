@@ -295,12 +295,14 @@ fn pairs_noise(req: &SearchRequest, meta: &WeightMeta) -> Result<PairsNoise> {
     let noise = &meta.noise;
     let trained = meta.training.as_ref().and_then(|t| t.config.as_ref());
     let ratio = match req.ratio {
-        Some(r) => RatioSpec::Fixed(pgrf_noise::pair::check_ratio("--ratio", r).map_err(
-            |message| NnError::BadSetting {
-                flag: "--ratio",
-                message,
-            },
-        )?),
+        Some(r) => {
+            RatioSpec::Fixed(pgrf_noise::pair::ratio_in_range("--ratio", r).map_err(|e| {
+                NnError::BadSetting {
+                    flag: "--ratio",
+                    message: e.to_string(),
+                }
+            })?)
+        }
         None => trained
             .map_or(pgrf_nn::RatioDraw::Uniform, |c| c.ratio_draw)
             .spec(noise.ratio[0], noise.ratio[1]),
@@ -476,9 +478,10 @@ pub(crate) fn search_with<B: PgrfOps>(
             *acc.1 += s.ssim / count as f64;
             Ok(())
         };
-        let noisy = input_as_read(net.keeps_below_black(), tensor(&pair.noisy)?);
+        let raw = tensor(&pair.noisy)?;
+        let noisy = input_as_read(net.keeps_below_black(), raw.clone());
         let c = Conditioned::new(net.conditioning(), noisy, &[pair.level]);
-        let cond = c.input.clone();
+        let cond = net.condition(&c, raw, &[pair.level]);
         let x0 = tensor(&pair.x0)?;
         let xz = first_stage(net, cond.clone(), x0.clone());
         score(c.input_units_of(xz.clone()), (&mut one.0, &mut one.1))?;
@@ -538,10 +541,10 @@ fn average<B: PgrfOps>(
     let mut out: Vec<(usize, f64, f64)> = report.iter().map(|&k| (k, 0.0, 0.0)).collect();
     for (i, pair) in list.iter().enumerate() {
         let clean = view(&pair.clean, patch)?;
-        let noisy = to_tensor::<B>(&pair.noisy, patch, device)?;
-        let noisy = input_as_read(net.keeps_below_black(), noisy);
+        let raw = to_tensor::<B>(&pair.noisy, patch, device)?;
+        let noisy = input_as_read(net.keeps_below_black(), raw.clone());
         let c = Conditioned::new(net.conditioning(), noisy, &[pair.level]);
-        let cond = c.input.clone();
+        let cond = net.condition(&c, raw, &[pair.level]);
         let mut sum: Option<Tensor<B, 4>> = None;
         for k in 1..=k_max.max(1) {
             let x0 = if k == 1 {

@@ -112,6 +112,8 @@ pub fn run_export(a: &ExportArgs) -> Result<()> {
                     "note: this network is residual: add the input to UNetSeeInDark's output (tests/reference/sid_unet_torch.py check --residual)",
                 pgrf_nn::Architecture::Sr3(_) =>
                     "note: this network is residual: v = (T + network - Xt) / max(1 - t, 0.1) (bench/sr3_reference.py, --config the pgrf file for its settings)",
+                pgrf_nn::Architecture::Sr3Prior(_) =>
+                    "note: this network is residual around its prior's restoration P (the prior.* tensors, an SPC SID U-Net, read as the condition's last four planes): v = (P + network - Xt) / max(1 - t, 0.1); bench/sr3_reference.py builds the field, not the prior",
             }
         );
     }

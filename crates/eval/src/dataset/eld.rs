@@ -23,6 +23,7 @@
 //! or `.dng` (what `pgrf make-dataset --layout eld` writes).
 
 use super::{err, existing, with_alternatives, DatasetKind, RatioRule, Result, Sample};
+use pgrf_core::parse::ParseError;
 use std::path::{Path, PathBuf};
 
 /// Camera folder name in the ELD release.
@@ -129,10 +130,15 @@ pub fn walk(root: &Path, scenes: &[u32]) -> Result<Vec<Sample>> {
 }
 
 /// Parse a scene list: "1-10", "1,3,5", "2".
-pub fn parse_scenes(s: &str) -> std::result::Result<Vec<u32>, String> {
+pub fn parse_scenes(s: &str) -> std::result::Result<Vec<u32>, ParseError> {
     let mut v = Vec::new();
     for part in s.split(',').map(str::trim).filter(|p| !p.is_empty()) {
-        let bad = || format!("bad scene list {s:?}: expected e.g. 1-10 or 1,2,5");
+        let bad = || {
+            ParseError::malformed(
+                s,
+                format!("bad scene list {s:?}: expected e.g. 1-10 or 1,2,5"),
+            )
+        };
         if let Some((a, b)) = part.split_once('-') {
             let a: u32 = a.trim().parse().map_err(|_| bad())?;
             let b: u32 = b.trim().parse().map_err(|_| bad())?;
@@ -149,7 +155,7 @@ pub fn parse_scenes(s: &str) -> std::result::Result<Vec<u32>, String> {
         }
     }
     if v.is_empty() {
-        return Err(format!("empty scene list {s:?}"));
+        return Err(ParseError::malformed(s, format!("empty scene list {s:?}")));
     }
     Ok(v)
 }

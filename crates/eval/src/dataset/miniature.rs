@@ -9,6 +9,7 @@
 //! exposure times give the benchmark's ratios.
 
 use super::{eld, sid, DatasetError, Result};
+use pgrf_core::parse::ParseError;
 use pgrf_noise::capture::DarkCapture;
 use pgrf_noise::{CameraProfile, ModelKind};
 use pgrf_raw::{write_dng, Cfa, DngOptions, RawFrame};
@@ -25,12 +26,15 @@ pub enum Layout {
 }
 
 impl std::str::FromStr for Layout {
-    type Err = String;
-    fn from_str(s: &str) -> std::result::Result<Layout, String> {
+    type Err = ParseError;
+    fn from_str(s: &str) -> std::result::Result<Layout, ParseError> {
         match s.to_ascii_lowercase().as_str() {
             "eld" => Ok(Layout::Eld),
             "sid" => Ok(Layout::Sid),
-            o => Err(format!("unknown layout '{o}' (eld or sid)")),
+            o => Err(ParseError::unknown_name(
+                s,
+                format!("unknown layout '{o}' (eld or sid)"),
+            )),
         }
     }
 }

@@ -28,6 +28,7 @@ pub mod table;
 
 use crate::method::CaseNoise;
 use ndarray::{s, Array3, ArrayView3};
+use pgrf_core::parse::ParseError;
 use pgrf_noise::lookup::{find_noise, range_of, KnownNoise};
 use pgrf_raw::{decode_file, pack_normalized, LevelOverrides, RawFrame};
 use std::fmt;
@@ -104,15 +105,16 @@ impl fmt::Display for DatasetKind {
 }
 
 impl std::str::FromStr for DatasetKind {
-    type Err = String;
-    fn from_str(s: &str) -> std::result::Result<Self, String> {
+    type Err = ParseError;
+    fn from_str(s: &str) -> std::result::Result<Self, ParseError> {
         match s.to_ascii_lowercase().as_str() {
             "eld" => Ok(DatasetKind::Eld),
             "sid" => Ok(DatasetKind::Sid),
             "pairs" => Ok(DatasetKind::Pairs),
             "synthetic" => Ok(DatasetKind::Synthetic),
-            _ => Err(format!(
-                "unknown protocol {s:?}: expected eld, sid, pairs or synthetic"
+            _ => Err(ParseError::unknown_name(
+                s,
+                format!("unknown protocol {s:?}: expected eld, sid, pairs or synthetic"),
             )),
         }
     }

@@ -124,7 +124,7 @@ fn dump_case(
     reference: ArrayView3<f32>,
     crop: Option<usize>,
 ) -> Result<()> {
-    let at = |e: String| DatasetError(format!("--dump: {e}"));
+    let at = |e: crate::npy::NpyError| DatasetError(format!("--dump: {e}"));
     let key = &case.key;
     crate::npy::write(&dir.join(format!("{key}.input.npy")), input).map_err(at)?;
     crate::npy::write(&dir.join(format!("{key}.reference.npy")), reference).map_err(at)?;
@@ -142,7 +142,7 @@ fn dump_case(
     }
     let text = serde_json::to_string_pretty(&meta).expect("JSON of plain values");
     pgrf_core::write_atomic(&dir.join(format!("{key}.json")), text.as_bytes())
-        .map_err(|e| at(e.to_string()))
+        .map_err(|e| DatasetError(format!("--dump: {e}")))
 }
 
 /// Run `methods` (in column order) over `samples`.

@@ -104,7 +104,8 @@ pub fn parse_ratios(text: &str) -> Result<Vec<f32>> {
     let mut out: Vec<f32> = Vec::new();
     for item in split(text, "--ratio")? {
         let v = match item.parse::<f32>() {
-            Ok(v) => pgrf_noise::pair::check_ratio("--ratio", v).or_else(err)?,
+            Ok(v) => pgrf_noise::pair::ratio_in_range("--ratio", v)
+                .map_err(|e| DatasetError(e.to_string()))?,
             Err(_) => {
                 return err(format!(
                     "--ratio {item:?}: not a number (the exposure ratio, from 1 to 10000)"
@@ -260,7 +261,8 @@ impl Synthetic {
             CameraProfile::load(profile, darktable).map_err(|e| DatasetError(e.to_string()))?;
         let mut specs = Vec::new();
         for c in &conditions {
-            pgrf_noise::pair::check_ratio("ratio", c.ratio).map_err(DatasetError)?;
+            pgrf_noise::pair::ratio_in_range("ratio", c.ratio)
+                .map_err(|e| DatasetError(e.to_string()))?;
             camera
                 .params_at_iso(c.iso)
                 .map_err(|e| DatasetError(format!("--iso {}: {e}", c.iso)))?;
@@ -847,7 +849,7 @@ mod tests {
     fn box_blur(
         x: ArrayView3<f32>,
         _: &crate::method::CaseInfo,
-    ) -> std::result::Result<Array3<f32>, String> {
+    ) -> std::result::Result<Array3<f32>, crate::method::RestoreError> {
         let (c, h, w) = x.dim();
         Ok(Array3::from_shape_fn((c, h, w), |(p, i, j)| {
             let (mut s, mut n) = (0.0, 0.0);
@@ -871,7 +873,7 @@ mod tests {
 
     #[test]
     fn a_run_covers_every_image_condition_and_method_reproducibly() {
-        use crate::method::{CaseInfo, FnMethod};
+        use crate::method::{CaseInfo, FnMethod, RestoreError};
         use pgrf_core::NoProgress;
         let (d, _) = chart_folder("run");
         let images = walk(std::slice::from_ref(&d)).unwrap();
@@ -912,8 +914,10 @@ mod tests {
         // A failing method is an error naming the file and condition.
         let fail = FnMethod {
             name: "bad".into(),
-            f: |_: ArrayView3<f32>, _: &CaseInfo| -> std::result::Result<Array3<f32>, String> {
-                Err("out of memory".into())
+            f: |_: ArrayView3<f32>,
+                _: &CaseInfo|
+             -> std::result::Result<Array3<f32>, RestoreError> {
+                Err(RestoreError::method("out of memory"))
             },
         };
         let methods: Vec<&dyn MethodUnderTest> = vec![&fail];

@@ -197,7 +197,7 @@ fn find_cases(cfg: &EvalConfig) -> Result<Cases, DatasetError> {
     let root = one_root(cfg)?;
     Ok(Cases::Pairs(match cfg.protocol {
         DatasetKind::Eld => {
-            let scenes = eld::parse_scenes(&cfg.scenes).map_err(DatasetError)?;
+            let scenes = eld::parse_scenes(&cfg.scenes).map_err(|e| DatasetError(e.to_string()))?;
             eld::walk(root, &scenes)?
         }
         DatasetKind::Sid => sid::walk(root, cfg.list.as_deref(), cfg.keep_misaligned)?,
@@ -280,7 +280,7 @@ pub fn run_protocol<P: Progress>(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::method::{CaseInfo, FnMethod};
+    use crate::method::{CaseInfo, FnMethod, RestoreError};
     use ndarray::{Array3, ArrayView3};
     use pgrf_core::NoProgress;
     use pgrf_scenes::chart::{render_chart, ChartSpec};
@@ -288,7 +288,7 @@ mod tests {
     fn identity() -> Box<dyn MethodUnderTest> {
         Box::new(FnMethod {
             name: "same".into(),
-            f: |x: ArrayView3<f32>, _: &CaseInfo| -> Result<Array3<f32>, String> {
+            f: |x: ArrayView3<f32>, _: &CaseInfo| -> Result<Array3<f32>, RestoreError> {
                 Ok(x.to_owned())
             },
         })

@@ -27,14 +27,15 @@ impl Method {
 }
 
 impl std::str::FromStr for Method {
-    type Err = String;
+    type Err = pgrf_core::parse::ParseError;
     /// `spc` or `pgrf`; `denoiser` and `flow` (what they train) also work.
-    fn from_str(s: &str) -> std::result::Result<Method, String> {
+    fn from_str(s: &str) -> std::result::Result<Method, Self::Err> {
         match s.to_ascii_lowercase().as_str() {
             "spc" | "denoiser" => Ok(Method::Spc),
             "pgrf" | "flow" => Ok(Method::Pgrf),
-            o => Err(format!(
-                "unknown method '{o}' (spc or pgrf; denoiser and flow name the same)"
+            o => Err(pgrf_core::parse::ParseError::unknown_name(
+                s,
+                format!("unknown method '{o}' (spc or pgrf; denoiser and flow name the same)"),
             )),
         }
     }

@@ -15,6 +15,7 @@
 
 mod kinds;
 mod network;
+mod prior;
 pub mod sid_names;
 pub mod sid_unet;
 pub mod sr3;
@@ -22,12 +23,14 @@ mod widen;
 
 pub use kinds::{Extras, Method};
 pub(crate) use network::MEMORY_TILE_CAP;
+pub(crate) use prior::is_prior;
+pub use prior::PriorFlowConfig;
 pub use sid_unet::{SidUnet, SidUnetConfig};
 pub use sr3::{Sr3Config, Sr3Unet};
 
 use crate::condition::Conditioning;
-use crate::error::{NnError, Result};
-use crate::named::{self, NamedTensor};
+use crate::error::{ArchFault, Result};
+use crate::named::{self, Mismatch, NamedTensor};
 use crate::ops::PgrfOps;
 use burn::module::Module;
 use burn::tensor::backend::Backend;
@@ -46,6 +49,8 @@ pub enum Architecture {
     SidUnet(SidUnetConfig),
     /// PGRF: the SR3 velocity field of the rectified flow.
     Sr3(Sr3Config),
+    /// PGRF started from an SPC denoiser's restoration ([`PriorFlowConfig`]).
+    Sr3Prior(PriorFlowConfig),
 }
 
 /// Either network, as one module so one optimiser type serves both. Made by
@@ -71,6 +76,7 @@ impl Architecture {
         match self {
             Architecture::SidUnet(c) => c,
             Architecture::Sr3(c) => c,
+            Architecture::Sr3Prior(c) => c,
         }
     }
 
@@ -156,7 +162,7 @@ impl Architecture {
     ) -> Result<(Vec<(String, &'a NamedTensor)>, &'static str)> {
         match self {
             Architecture::SidUnet(_) => sid_unet::export_names(tensors),
-            Architecture::Sr3(_) => sr3::export_names(tensors),
+            Architecture::Sr3(_) | Architecture::Sr3Prior(_) => sr3::export_names(tensors),
         }
     }
 
@@ -175,6 +181,14 @@ impl Architecture {
                     .with_conditioning(Conditioning::None)
                     .with_in_channels(c.in_channels.saturating_sub(extra)),
             ),
+            Architecture::Sr3Prior(c) => Architecture::Sr3Prior(PriorFlowConfig {
+                flow: c
+                    .flow
+                    .clone()
+                    .with_conditioning(Conditioning::None)
+                    .with_in_channels(c.flow.in_channels.saturating_sub(extra)),
+                prior: c.prior.clone(),
+            }),
         }
     }
 
@@ -185,7 +199,14 @@ impl Architecture {
     pub fn can_start_from(&self, file: &Architecture) -> bool {
         let narrower = self.narrower_sid(file).is_some();
         let file = same_tensors_json(file);
+        let prior_added = match (self, &file) {
+            (Architecture::Sr3Prior(p), Some(_)) => {
+                file == same_tensors_json(&Architecture::Sr3(p.without_prior()))
+            }
+            _ => false,
+        };
         narrower
+            || prior_added
             || file == same_tensors_json(self)
             || (self.conditioning().extra_channels() > 0
                 && file == same_tensors_json(&self.unconditioned()))
@@ -214,15 +235,21 @@ impl Architecture {
     /// Make the tensors of `file`'s network (read from an `--init` file) fit
     /// this one, the run's, whose freshly seeded network is `fresh`: as they
     /// are, widened to take the noise planes ([`Self::widen_unconditioned`]),
-    /// or written into the old channels of a wider SID U-Net ([`widen`]).
+    /// given a prior ([`PriorFlowConfig::add_prior`]), or written into the
+    /// old channels of a wider SID U-Net ([`widen`]).
     pub(crate) fn adapt_start<B: Backend>(
         &self,
         file: &Architecture,
         tensors: &mut BTreeMap<String, NamedTensor>,
         fresh: &Net<B>,
-    ) -> std::result::Result<StartAdapted, String> {
+    ) -> std::result::Result<StartAdapted, Mismatch> {
         if self.widen_unconditioned(file, tensors) {
             return Ok(StartAdapted::Conditioned);
+        }
+        if let (Architecture::Sr3Prior(p), Architecture::Sr3(f)) = (self, file) {
+            if p.add_prior(f, tensors, &fresh.parameters()) {
+                return Ok(StartAdapted::PriorAdded);
+            }
         }
         if let Some((narrow, wide)) = self.narrower_sid(file) {
             let mut out = fresh.parameters();
@@ -258,27 +285,10 @@ impl Architecture {
         if extra == 0 || same_tensors_json(file) != same_tensors_json(&self.unconditioned()) {
             return false;
         }
-        let Some(t) = tensors.get_mut(self.spec().input_conv()) else {
-            return false;
-        };
-        let [o, i, kh, kw] = t.shape[..] else {
-            return false;
-        };
-        if i < 4 || t.values.len() != o * i * kh * kw {
-            return false;
+        match tensors.get_mut(self.spec().input_conv()) {
+            Some(t) => insert_zero_inputs(t, 4, extra),
+            None => false,
         }
-        let k = kh * kw;
-        let mut values = Vec::with_capacity(o * (i + extra) * k);
-        for row in t.values.chunks_exact(i * k) {
-            values.extend_from_slice(&row[..4 * k]);
-            values.extend(std::iter::repeat_n(0.0f32, extra * k));
-            values.extend_from_slice(&row[4 * k..]);
-        }
-        *t = NamedTensor {
-            shape: vec![o, i + extra, kh, kw],
-            values,
-        };
-        true
     }
 
     /// A freshly initialised network of this architecture. Records come from
@@ -288,7 +298,8 @@ impl Architecture {
         self.spec().check()?;
         Ok(match self {
             Architecture::SidUnet(c) => Net::Spc(c.init(device)),
-            Architecture::Sr3(c) => Net::Pgrf(c.init(device).map_err(NnError::Config)?),
+            Architecture::Sr3(c) => Net::Pgrf(c.init(device)?),
+            Architecture::Sr3Prior(c) => Net::Pgrf(c.init(device)?),
         })
     }
 
@@ -309,6 +320,10 @@ pub enum StartAdapted {
     AsIs,
     /// Its unconditioned form: the noise planes' input weights start at zero.
     Conditioned,
+    /// The same flow without a prior: the prior's planes are read through
+    /// zero weights and the last layer starts at zero (the network samples
+    /// the prior's restoration).
+    PriorAdded,
     /// The same SID U-Net at width `from`, written into the old channels of
     /// width `to`.
     Widened {
@@ -332,6 +347,31 @@ pub fn input_as_read<B: Backend>(keep_below_black: bool, noisy: Tensor<B, 4>) ->
     }
 }
 
+/// Give the convolution weight `t` (`[out, in, kh, kw]`) `count` more
+/// input channels at channel `at`, with zero weights: the network computes
+/// what it did, the new planes multiplied by zero. False (untouched) when
+/// `t` is not such a weight or has fewer than `at` input channels.
+fn insert_zero_inputs(t: &mut NamedTensor, at: usize, count: usize) -> bool {
+    let [o, i, kh, kw] = t.shape[..] else {
+        return false;
+    };
+    if i < at || t.values.len() != o * i * kh * kw {
+        return false;
+    }
+    let k = kh * kw;
+    let mut values = Vec::with_capacity(o * (i + count) * k);
+    for row in t.values.chunks_exact(i * k) {
+        values.extend_from_slice(&row[..at * k]);
+        values.extend(std::iter::repeat_n(0.0f32, count * k));
+        values.extend_from_slice(&row[at * k..]);
+    }
+    *t = NamedTensor {
+        shape: vec![o, i + count, kh, kw],
+        values,
+    };
+    true
+}
+
 /// The record of `a` as JSON without what leaves its tensors as they are:
 /// whether values below black are kept changes what the input holds, not
 /// the network, so weights trained either way can start a run of the other.
@@ -339,6 +379,12 @@ fn same_tensors_json(a: &Architecture) -> Option<serde_json::Value> {
     let mut v = serde_json::to_value(a).ok()?;
     if let Some(c) = v.get_mut("config").and_then(|c| c.as_object_mut()) {
         c.remove("keep_below_black");
+        // A flow with a prior: the field's and the prior's own records.
+        for part in ["flow", "prior"] {
+            if let Some(p) = c.get_mut(part).and_then(|p| p.as_object_mut()) {
+                p.remove("keep_below_black");
+            }
+        }
     }
     Some(v)
 }
@@ -359,7 +405,7 @@ impl<B: Backend> Net<B> {
         self,
         tensors: &BTreeMap<String, NamedTensor>,
         device: &B::Device,
-    ) -> std::result::Result<Net<B>, String> {
+    ) -> std::result::Result<Net<B>, Mismatch> {
         Ok(match self {
             Net::Spc(n) => Net::Spc(named::assign(n, tensors, device)?),
             Net::Pgrf(n) => Net::Pgrf(named::assign(n, tensors, device)?),
@@ -374,7 +420,7 @@ impl<B: Backend> Net<B> {
     /// The flow network with its statistics taken over windows of `side`
     /// ([`Sr3Unet::with_window`]; 0: whole inputs); the denoiser, which has
     /// no statistics, unchanged.
-    pub(crate) fn with_window(self, side: usize) -> std::result::Result<Net<B>, String> {
+    pub(crate) fn with_window(self, side: usize) -> std::result::Result<Net<B>, ArchFault> {
         Ok(match self {
             Net::Pgrf(n) => Net::Pgrf(n.with_window(side)?),
             spc => spc,

@@ -11,7 +11,7 @@
 use super::network::NetworkConfig;
 use super::{Extras, Method};
 use crate::condition::Conditioning;
-use crate::error::{NnError, Result as NnResult};
+use crate::error::{ArchFault, NnError, Result as NnResult};
 use crate::layers::Layer;
 use crate::named::NamedTensor;
 use crate::ops::{self, PgrfOps};
@@ -123,6 +123,23 @@ pub struct SidUnet<B: Backend> {
 }
 
 impl SidUnetConfig {
+    /// What pgrf cannot run in this configuration (read from a file): a
+    /// width of 0, or planes other than pgrf's four (and the
+    /// conditioning's) in and four out.
+    pub(crate) fn fault(&self) -> Result<(), ArchFault> {
+        let planes = 4 + self.conditioning.extra_channels();
+        if self.width == 0 || self.in_channels != planes || self.out_channels != 4 {
+            return Err(ArchFault::SidPlanes {
+                planes,
+                conditioning: self.conditioning,
+                width: self.width,
+                found_in: self.in_channels,
+                found_out: self.out_channels,
+            });
+        }
+        Ok(())
+    }
+
     /// A network of this architecture on `device`, with burn's default
     /// initialisation (drawn lazily from burn's generator: see
     /// [`crate::seeded`] for reproducible weights); a residual network's
@@ -299,14 +316,7 @@ impl NetworkConfig for SidUnetConfig {
     }
 
     fn check(&self) -> NnResult<()> {
-        let planes = 4 + self.conditioning.extra_channels();
-        if self.width == 0 || self.in_channels != planes || self.out_channels != 4 {
-            return Err(NnError::Config(format!(
-                "the SID U-Net needs a width of at least 1, {planes} planes in ({}) and 4 out (got width {}, {} in, {} out)",
-                self.conditioning.describe(), self.width, self.in_channels, self.out_channels
-            )));
-        }
-        Ok(())
+        Ok(self.fault()?)
     }
 
     fn conditioning(&self) -> Conditioning {

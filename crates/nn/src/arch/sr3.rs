@@ -10,9 +10,10 @@
 //! level 3 is the paper's 16 x 16 level.
 
 use super::network::NetworkConfig;
+use super::sid_unet::SidUnet;
 use super::{Extras, Method};
 use crate::condition::Conditioning;
-use crate::error::{NnError, Result as NnResult};
+use crate::error::{ArchFault, Result as NnResult};
 use crate::layers::Layer;
 use crate::named::NamedTensor;
 use crate::norm::{window_padding, windowed};
@@ -92,58 +93,55 @@ pub struct Sr3Config {
 impl Sr3Config {
     /// Configurations GroupNorm cannot run are refused here, with the reason,
     /// rather than by an assertion deep in initialisation.
-    pub(crate) fn validate(&self) -> Result<(), String> {
+    pub(crate) fn validate(&self) -> Result<(), ArchFault> {
+        self.validate_planes(8 + self.conditioning.extra_channels(), "T and Xt")
+    }
+
+    /// [`Sr3Config::validate`] for a field that reads `planes` input planes
+    /// (`what` names them): a flow with a prior reads four more
+    /// ([`super::PriorFlowConfig`]).
+    pub(crate) fn validate_planes(
+        &self,
+        planes: usize,
+        what: &'static str,
+    ) -> Result<(), ArchFault> {
         if self.channel_mults.is_empty() || self.res_blocks == 0 || self.inner_channels == 0 {
-            return Err(
-                "SR3 needs at least one level, one residual block and some channels".into(),
-            );
+            return Err(ArchFault::Empty);
         }
-        let planes = 8 + self.conditioning.extra_channels();
         if self.in_channels != planes || self.out_channels != 4 {
-            return Err(format!(
-                "pgrf's flow network takes {planes} planes (T and Xt, packed; {}) and gives 4, not {} and {}",
-                self.conditioning.describe(),
-                self.in_channels,
-                self.out_channels
-            ));
+            return Err(ArchFault::FlowPlanes {
+                planes,
+                what,
+                conditioning: self.conditioning,
+                found_in: self.in_channels,
+                found_out: self.out_channels,
+            });
         }
         if !self.inner_channels.is_multiple_of(2) {
-            return Err(format!(
-                "inner channels must be even (the time embedding is sin/cos pairs), got {}",
-                self.inner_channels
-            ));
+            return Err(ArchFault::OddInner(self.inner_channels));
         }
         if self.channel_mults.contains(&0) {
-            return Err(format!(
-                "every channel multiplier must be at least 1, got {:?}",
-                self.channel_mults
-            ));
+            return Err(ArchFault::ZeroMultiplier(self.channel_mults.clone()));
         }
-        if let Some(l) = self
-            .attn_levels
-            .iter()
-            .find(|&&l| l >= self.channel_mults.len())
-        {
-            return Err(format!(
-                "attention level {l} does not exist: the network has {} levels",
-                self.channel_mults.len()
-            ));
+        let levels = self.channel_mults.len();
+        if let Some(&level) = self.attn_levels.iter().find(|&&l| l >= levels) {
+            return Err(ArchFault::NoSuchLevel { level, levels });
         }
         if self.norm_groups == 0 {
-            return Err("norm_groups must be at least 1".into());
+            return Err(ArchFault::NoGroups);
         }
-        for c in std::iter::once(self.inner_channels)
+        for channels in std::iter::once(self.inner_channels)
             .chain(self.channel_mults.iter().map(|m| m * self.inner_channels))
         {
-            if c % self.norm_groups != 0 {
-                return Err(format!(
-                    "norm_groups {} does not divide {c} channels",
-                    self.norm_groups
-                ));
+            if channels % self.norm_groups != 0 {
+                return Err(ArchFault::Groups {
+                    groups: self.norm_groups,
+                    channels,
+                });
             }
         }
         if !(0.0..1.0).contains(&self.dropout) {
-            return Err(format!("dropout must be in [0, 1), got {}", self.dropout));
+            return Err(ArchFault::Dropout(self.dropout));
         }
         Ok(())
     }
@@ -159,8 +157,13 @@ impl Sr3Config {
     /// output layer starts at zero. Errors name what is wrong with the
     /// configuration (no levels, a group count that does not divide a
     /// level, dropout outside [0, 1)).
-    pub fn init<B: Backend>(&self, device: &B::Device) -> Result<Sr3Unet<B>, String> {
+    pub fn init<B: Backend>(&self, device: &B::Device) -> Result<Sr3Unet<B>, ArchFault> {
         self.validate()?;
+        Ok(self.build(device))
+    }
+
+    /// The network of a checked configuration, without a prior.
+    pub(crate) fn build<B: Backend>(&self, device: &B::Device) -> Sr3Unet<B> {
         let inner = self.inner_channels;
         let levels = self.channel_mults.len();
         let block = |cin: usize, cout: usize, attn: bool| {
@@ -210,7 +213,7 @@ impl Sr3Config {
             LinearConfig::new(inner, 4 * inner).init(device),
             LinearConfig::new(4 * inner, inner).init(device),
         );
-        Ok(Sr3Unet {
+        Sr3Unet {
             first: conv3(self.in_channels, inner, 1, device),
             t_in: t_mlp.0,
             t_out: t_mlp.1,
@@ -234,7 +237,8 @@ impl Sr3Config {
             conditioning: self.conditioning,
             keep_below_black: self.keep_below_black,
             window: 0,
-        })
+            prior: None,
+        }
     }
 }
 
@@ -264,7 +268,7 @@ impl NetworkConfig for Sr3Config {
     }
 
     fn check(&self) -> NnResult<()> {
-        self.validate().map_err(NnError::Config)
+        Ok(self.validate()?)
     }
 
     /// Counts only 3x3 convolutions of a level's width C taken as C to C:
@@ -543,6 +547,10 @@ pub struct Sr3Unet<B: Backend> {
     /// training ([`Sr3Unet::with_window`]).
     #[module(skip)]
     window: usize,
+    /// The frozen denoiser whose restoration the field starts from, read
+    /// as the last four planes of the condition ([`super::prior`]); None
+    /// for the paper's flow.
+    pub(crate) prior: Option<SidUnet<B>>,
 }
 
 /// Sinusoidal embedding of t (one value per batch item) into `dim` features:
@@ -561,17 +569,33 @@ fn time_embedding<B: Backend>(t: Tensor<B, 1>, dim: usize) -> Tensor<B, 2> {
 }
 
 impl<B: PgrfOps> Sr3Unet<B> {
+    /// The residual parametrisation's skip: the difference from Xt to the
+    /// planes the field corrects (T, or the prior's restoration: the
+    /// condition's last four planes) and the divisor max(1 - t, 0.1).
+    fn skip(
+        &self,
+        cond: &Tensor<B, 4>,
+        xt: &Tensor<B, 4>,
+        t: Tensor<B, 1>,
+    ) -> (Tensor<B, 4>, Tensor<B, 4>) {
+        let [n, _, h, w] = xt.dims();
+        let scale = t.neg().add_scalar(1.0).clamp_min(RESIDUAL_FLOOR);
+        let from = if self.prior.is_some() {
+            cond.dims()[1] - 4
+        } else {
+            0
+        };
+        let planes = cond.clone().slice([0..n, from..from + 4, 0..h, 0..w]);
+        (planes - xt.clone(), scale.reshape([n, 1, 1, 1]))
+    }
+
     /// v(Xt, T, t): `xt` is `(batch, 4, H, W)`, `cond` is `(batch, 4 +
     /// extra, H, W)` (T, then the conditioning's planes), `t` is `(batch)`.
     /// Returns `(batch, 4, H, W)`; sides that are not multiples of
     /// 2^(levels-1) are padded by reflection (zeros if too small) and cropped back.
     pub fn forward(&self, xt: Tensor<B, 4>, cond: Tensor<B, 4>, t: Tensor<B, 1>) -> Tensor<B, 4> {
         let [n, _, h, w] = xt.dims();
-        let skip = self.residual.then(|| {
-            let scale = t.clone().neg().add_scalar(1.0).clamp_min(RESIDUAL_FLOOR);
-            let planes = cond.clone().slice([0..n, 0..4, 0..h, 0..w]);
-            (planes - xt.clone(), scale.reshape([n, 1, 1, 1]))
-        });
+        let skip = self.residual.then(|| self.skip(&cond, &xt, t.clone()));
         let m = 1 << (self.levels - 1);
         // Whole windows first (none without windows), then the levels' multiple.
         let (wh, ww) = window_padding(h, w, self.window);
@@ -663,12 +687,10 @@ impl<B: Backend> Sr3Unet<B> {
     /// frame's result does not depend on its tiling and every window sees
     /// what a training crop did; training leaves it 0 (a crop is one
     /// window).
-    pub fn with_window(mut self, side: usize) -> Result<Self, String> {
-        let m = 1 << (self.levels - 1);
-        if !side.is_multiple_of(m) {
-            return Err(format!(
-                "window {side} is not a multiple of the network's {m}"
-            ));
+    pub fn with_window(mut self, side: usize) -> Result<Self, ArchFault> {
+        let multiple = 1 << (self.levels - 1);
+        if !side.is_multiple_of(multiple) {
+            return Err(ArchFault::Window { side, multiple });
         }
         self.window = side;
         Ok(self)
@@ -851,13 +873,30 @@ mod tests {
 
     #[test]
     fn invalid_configs_are_refused() {
-        assert!(small()
-            .with_norm_groups(3)
-            .validate()
-            .unwrap_err()
-            .contains("does not divide"));
-        assert!(small().with_channel_mults(vec![]).validate().is_err());
-        assert!(small().with_dropout(1.0).validate().is_err());
+        let e = small().with_norm_groups(3).validate().unwrap_err();
+        assert_eq!(
+            e,
+            ArchFault::Groups {
+                groups: 3,
+                channels: 8
+            }
+        );
+        assert_eq!(e.to_string(), "norm_groups 3 does not divide 8 channels");
+        assert_eq!(
+            small().with_channel_mults(vec![]).validate(),
+            Err(ArchFault::Empty)
+        );
+        assert_eq!(
+            small().with_dropout(1.0).validate(),
+            Err(ArchFault::Dropout(1.0))
+        );
+        assert_eq!(
+            small().with_attn_levels(vec![5]).validate(),
+            Err(ArchFault::NoSuchLevel {
+                level: 5,
+                levels: 3
+            })
+        );
         // The paper-size default is valid and halves four times.
         assert!(Sr3Config::new().validate().is_ok());
         assert_eq!(Sr3Config::new().side_multiple(), 16);

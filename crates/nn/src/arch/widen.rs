@@ -15,7 +15,7 @@
 //! form, which starts the copies identical and needs noise to tell them
 //! apart.
 
-use crate::named::NamedTensor;
+use crate::named::{NamedTensor, TensorFault};
 use std::collections::BTreeMap;
 
 /// One convolution's channels: the output and input dimensions as
@@ -67,27 +67,26 @@ pub(super) fn widen(
     wide: &[Layout],
     from: &BTreeMap<String, NamedTensor>,
     into: &mut BTreeMap<String, NamedTensor>,
-) -> Result<(), String> {
+) -> Result<(), TensorFault> {
     if narrow.len() != wide.len() || from.len() != 2 * narrow.len() || into.len() != 2 * wide.len()
     {
-        return Err(format!(
-            "{} and {} tensors for the {} convolutions of the network",
-            from.len(),
-            into.len(),
-            wide.len()
-        ));
+        return Err(TensorFault::Count {
+            from: from.len(),
+            into: into.len(),
+            convolutions: wide.len(),
+        });
     }
     for (n, w) in narrow.iter().zip(wide) {
         let get = |map: &BTreeMap<String, NamedTensor>, part: &str| {
             map.get(&format!("{}.{part}", w.name))
                 .cloned()
-                .ok_or_else(|| format!("no tensor {}.{part}", w.name))
+                .ok_or_else(|| TensorFault::Missing(format!("{}.{part}", w.name)))
         };
         let (mut weight, mut bias) = (get(into, "weight")?, get(into, "bias")?);
         let (old_weight, old_bias) = (get(from, "weight")?, get(from, "bias")?);
         let kernel = match weight.shape[..] {
             [_, _, kh, kw] => [kh, kw],
-            _ => return Err(format!("{}.weight is not 4-dimensional", w.name)),
+            _ => return Err(TensorFault::NotConvolution(format!("{}.weight", w.name))),
         };
         for (t, shape) in [
             (&weight, weight_shape(w, kernel)),
@@ -96,10 +95,11 @@ pub(super) fn widen(
             (&old_bias, vec![n.out.iter().sum()]),
         ] {
             if t.shape != shape || t.values.len() != shape.iter().product::<usize>() {
-                return Err(format!(
-                    "{}: shape {:?} where {shape:?} was expected",
-                    w.name, t.shape
-                ));
+                return Err(TensorFault::Shape {
+                    name: w.name.to_string(),
+                    found: t.shape.clone(),
+                    wanted: shape,
+                });
             }
         }
         fill_weight(n, w, kernel, &old_weight, &mut weight);
@@ -237,10 +237,16 @@ mod tests {
             .parameters();
         let mut short = from.clone();
         short.remove("head.bias");
-        assert!(widen(&n, &w, &short, &mut into.clone()).is_err());
+        assert!(matches!(
+            widen(&n, &w, &short, &mut into.clone()),
+            Err(TensorFault::Count { .. })
+        ));
         // The narrow file read as if it were already wide.
         let e = widen(&w, &w, &from, &mut into).unwrap_err();
-        assert!(e.contains("down.0.first: shape [2, 8, 3, 3]"), "{e}");
+        assert!(
+            matches!(&e, TensorFault::Shape { name, found, .. } if name == "down.0.first" && found == &vec![2, 8, 3, 3]),
+            "{e:?}"
+        );
     }
 
     #[test]

@@ -26,9 +26,10 @@
 
 use super::path::interpolate;
 use crate::arch::sr3::Sr3Unet;
-use crate::condition::Conditioning;
+use crate::condition::{Conditioned, Conditioning, NoiseLevel};
 use crate::ops::PgrfOps;
 use burn::tensor::Tensor;
+use pgrf_core::parse::ParseError;
 
 /// A velocity field v(X, T, t) (the paper's v, an SR3-style U-Net with the
 /// condition T concatenated to its input). The samplers are written against
@@ -48,6 +49,19 @@ pub trait Velocity<B: PgrfOps> {
     fn keeps_below_black(&self) -> bool {
         false
     }
+
+    /// The condition the samplers pass, from the prepared batch `c` and
+    /// the capture `noisy` as handed over (clipped at white only; item i at
+    /// `levels[i]`): `c`'s input, unless the field also reads a prior's
+    /// restoration ([`Sr3Unet::condition`]).
+    fn condition(
+        &self,
+        c: &Conditioned<B>,
+        _noisy: Tensor<B, 4>,
+        _levels: &[NoiseLevel],
+    ) -> Tensor<B, 4> {
+        c.input.clone()
+    }
 }
 
 impl<B: PgrfOps> Velocity<B> for Sr3Unet<B> {
@@ -61,6 +75,15 @@ impl<B: PgrfOps> Velocity<B> for Sr3Unet<B> {
 
     fn keeps_below_black(&self) -> bool {
         Sr3Unet::keeps_below_black(self)
+    }
+
+    fn condition(
+        &self,
+        c: &Conditioned<B>,
+        noisy: Tensor<B, 4>,
+        levels: &[NoiseLevel],
+    ) -> Tensor<B, 4> {
+        Sr3Unet::condition(self, c, noisy, levels)
     }
 }
 
@@ -212,8 +235,8 @@ pub enum SamplerKind {
 }
 
 impl std::str::FromStr for SamplerKind {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
+    type Err = ParseError;
+    fn from_str(s: &str) -> Result<Self, ParseError> {
         let lower = s.to_ascii_lowercase();
         match lower.as_str() {
             "two-stage" | "twostage" | "2" => return Ok(Self::TwoStage),
@@ -225,12 +248,16 @@ impl std::str::FromStr for SamplerKind {
             .strip_prefix("euler")
             .map(|r| r.strip_prefix([':', '-']).unwrap_or(r))
             .ok_or_else(|| {
-                format!("unknown sampler '{s}' (expected two-stage, one-step or euler:N)")
+                ParseError::unknown_name(
+                    s,
+                    format!("unknown sampler '{s}' (expected two-stage, one-step or euler:N)"),
+                )
             })?;
         match n.parse::<usize>() {
             Ok(n) if (1..=10_000).contains(&n) => Ok(Self::Euler(n)),
-            _ => Err(format!(
-                "sampler '{s}': Euler needs a step count from 1 to 10000, e.g. euler:50"
+            _ => Err(ParseError::out_of_range(
+                s,
+                format!("sampler '{s}': Euler needs a step count from 1 to 10000, e.g. euler:50"),
             )),
         }
     }
@@ -253,7 +280,7 @@ mod tests {
         assert!("euler:0".parse::<SamplerKind>().is_err());
         // A sign is not a separator (issue 37: euler:-5 ran as euler:5).
         for bad in ["euler:-5", "euler--5", "euler::5", "euler:", "euler:10001"] {
-            let e = bad.parse::<SamplerKind>().unwrap_err();
+            let e = bad.parse::<SamplerKind>().unwrap_err().to_string();
             assert!(e.contains("from 1 to 10000"), "{bad}: {e}");
         }
         assert_eq!("euler5".parse(), Ok(SamplerKind::Euler(5)));

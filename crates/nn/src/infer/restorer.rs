@@ -162,7 +162,7 @@ impl<B: PgrfOps> Restorer<B> {
         };
         let net = net
             .with_window(trained_window(&meta))
-            .map_err(NnError::Invalid)?;
+            .map_err(|e| NnError::Invalid(e.to_string()))?;
         Ok(Restorer {
             net,
             meta,
@@ -182,7 +182,7 @@ impl<B: PgrfOps> Restorer<B> {
             .with_window(side)
             .map_err(|e| NnError::BadSetting {
                 flag: "--window",
-                message: e,
+                message: e.to_string(),
             })?;
         Ok(self)
     }

@@ -39,15 +39,20 @@ pub enum Source {
 }
 
 impl std::str::FromStr for Source {
-    type Err = String;
-    fn from_str(s: &str) -> std::result::Result<Self, String> {
+    type Err = pgrf_core::parse::ParseError;
+    fn from_str(s: &str) -> std::result::Result<Self, Self::Err> {
         Ok(match s.to_ascii_lowercase().as_str() {
             "sid" => Source::Sid,
             "eld" => Source::Eld,
             "pmn" => Source::Pmn,
             "pnnp" => Source::Pnnp,
             "led" => Source::Led,
-            _ => return Err(format!("unknown source '{s}' (sid, eld, pmn, pnnp, led)")),
+            _ => {
+                return Err(pgrf_core::parse::ParseError::unknown_name(
+                    s,
+                    format!("unknown source '{s}' (sid, eld, pmn, pnnp, led)"),
+                ))
+            }
         })
     }
 }
@@ -327,7 +332,7 @@ pub fn export(
     let (named, naming) = meta.arch.export_names(tensors)?;
     let residual = meta.arch.residual();
     let bytes = if pth {
-        pth_write::encode(&named).map_err(NnError::Invalid)?
+        pth_write::encode(&named)?
     } else {
         let mut meta_map = std::collections::HashMap::new();
         meta_map.insert("format".to_string(), "pt".to_string());

@@ -65,6 +65,9 @@ fn arg_of(op: u8) -> Option<Arg> {
 /// one after the other (1 for a zip checkpoint's data.pkl; a legacy
 /// checkpoint starts with 4: magic number, protocol, system info, data).
 /// Returns the number of bytes they take, or why the file is refused.
+// String because a refused pickle can only be reported, never mended: the
+// reader (`torch_file`) puts the sentence, with the byte it names, into its
+// own error about the file.
 pub fn check(bytes: &[u8], programs: usize) -> Result<usize, String> {
     let mut at = 0usize;
     for _ in 0..programs {
@@ -98,7 +101,9 @@ fn check_one(bytes: &[u8]) -> Result<usize, (usize, String)> {
             b'c' => {
                 let s = text(arg);
                 let (module, name) = s.split_once('\n').unwrap_or((&s, ""));
-                allowed(module, name).map_err(|e| (start, e))?;
+                if let Some(why) = refused_call(module, name) {
+                    return Err((start, why));
+                }
             }
             0x93 => {
                 let (Some(module), Some(name)) = (&top[0], &top[1]) else {
@@ -107,7 +112,9 @@ fn check_one(bytes: &[u8]) -> Result<usize, (usize, String)> {
                         "a STACK_GLOBAL whose module and name are not the two strings pushed just before it".into(),
                     ));
                 };
-                allowed(module, name).map_err(|e| (start, e))?;
+                if let Some(why) = refused_call(module, name) {
+                    return Err((start, why));
+                }
             }
             b'i' | b'o' | 0x81 | 0x92 | 0x82 | 0x83 | 0x84 => {
                 return Err((
@@ -217,14 +224,14 @@ fn line_end(bytes: &[u8], from: usize) -> Option<usize> {
         .map(|i| from + i)
 }
 
-fn allowed(module: &str, name: &str) -> Result<(), String> {
-    if ALLOWED.contains(&(module, name)) {
-        Ok(())
-    } else {
-        Err(format!(
+/// Why the pickle may not call `module.name`; None when a state dict of
+/// tensors needs it.
+fn refused_call(module: &str, name: &str) -> Option<String> {
+    (!ALLOWED.contains(&(module, name))).then(|| {
+        format!(
             "the pickle calls {module}.{name}, which a state dict of tensors does not need (pgrf reads only tensors, ordered dicts, numbers and strings)"
-        ))
-    }
+        )
+    })
 }
 
 #[cfg(test)]

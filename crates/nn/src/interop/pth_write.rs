@@ -5,6 +5,7 @@
 //! The pickle uses only what `torch.load(weights_only=True)` allows and
 //! what [`super::pickle_check`] accepts, so pgrf reads its own files back.
 
+use crate::error::NnError;
 use crate::named::NamedTensor;
 use std::io::Write;
 
@@ -14,18 +15,18 @@ const ARCHIVE: &str = "archive";
 
 /// The `.pth` bytes of `tensors` (contiguous f32, little-endian), in the
 /// order given.
-pub fn encode(tensors: &[(String, &NamedTensor)]) -> Result<Vec<u8>, String> {
+pub fn encode(tensors: &[(String, &NamedTensor)]) -> Result<Vec<u8>, NnError> {
     let mut pkl: Vec<u8> = vec![0x80, 0x02];
     global(&mut pkl, "collections", "OrderedDict");
     pkl.extend_from_slice(b")R(");
     for (i, (name, t)) in tensors.iter().enumerate() {
         let numel: usize = t.shape.iter().product();
         if numel != t.values.len() || numel > i32::MAX as usize {
-            return Err(format!(
+            return Err(NnError::SizeMismatch(format!(
                 "tensor {name}: {} values for shape {:?}",
                 t.values.len(),
                 t.shape
-            ));
+            )));
         }
         string(&mut pkl, name);
         global(&mut pkl, "torch._utils", "_rebuild_tensor_v2");
@@ -61,10 +62,11 @@ pub fn encode(tensors: &[(String, &NamedTensor)]) -> Result<Vec<u8>, String> {
     let opts = zip::write::SimpleFileOptions::default()
         .compression_method(zip::CompressionMethod::Stored)
         .last_modified_time(zip::DateTime::default());
-    let mut put = |name: &str, bytes: &[u8]| -> Result<(), String> {
+    let zipped = |e: &dyn std::fmt::Display| NnError::Invalid(e.to_string());
+    let mut put = |name: &str, bytes: &[u8]| -> Result<(), NnError> {
         zip.start_file(format!("{ARCHIVE}/{name}"), opts)
-            .map_err(|e| e.to_string())?;
-        zip.write_all(bytes).map_err(|e| e.to_string())
+            .map_err(|e| zipped(&e))?;
+        zip.write_all(bytes).map_err(|e| zipped(&e))
     };
     put("data.pkl", &pkl)?;
     put("byteorder", b"little")?;
@@ -73,7 +75,7 @@ pub fn encode(tensors: &[(String, &NamedTensor)]) -> Result<Vec<u8>, String> {
         put(&format!("data/{i}"), &bytes)?;
     }
     put("version", b"3\n")?;
-    let out = zip.finish().map_err(|e| e.to_string())?;
+    let out = zip.finish().map_err(|e| zipped(&e))?;
     Ok(out.into_inner())
 }
 

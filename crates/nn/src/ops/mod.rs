@@ -57,12 +57,15 @@ pub enum Kernels {
 }
 
 impl std::str::FromStr for Kernels {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
+    type Err = pgrf_core::parse::ParseError;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
         match s {
             "pgrf" => Ok(Self::Pgrf),
             "burn" => Ok(Self::Burn),
-            _ => Err(format!("unknown kernels '{s}' (expected pgrf or burn)")),
+            _ => Err(pgrf_core::parse::ParseError::unknown_name(
+                s,
+                format!("unknown kernels '{s}' (expected pgrf or burn)"),
+            )),
         }
     }
 }

@@ -58,11 +58,13 @@
 //! Bayer phases (X-Trans, CMYG) are refused too. An empty BAYERPAT or the
 //! logical F mean no colour filter.
 
+mod keyword;
 mod read;
 #[cfg(test)]
 mod tests;
 mod write;
 
+pub use keyword::KeywordError;
 pub(crate) use read::stored_phase;
 pub use read::{is_fits, read_fits, read_fits_samples};
 pub use write::{card_text, encode_fits_f32, encode_fits_f32_history, encode_fits_u16};

@@ -2,6 +2,7 @@
 //! brought to u16 ADU or refused with the reason; the Bayer phase and the
 //! header values pgrf keeps.
 
+use super::keyword::{binning, integer, number, row_order, show, string, KeywordError};
 use super::*;
 
 use crate::cfa::Cfa;
@@ -41,7 +42,8 @@ pub fn read_fits(name: &Path, bytes: &[u8]) -> Result<FitsImage> {
         ));
     }
     // fitsrs asserts on some malformed input; a panic there becomes an error.
-    panic_guard::quietly(|| read_primary(name, bytes)).map_err(|m| RawError::decode(name, m))?
+    panic_guard::quietly(|| read_primary(name, bytes))
+        .map_err(|panic| RawError::decode(name, panic.to_string()))?
 }
 
 /// The samples of a FITS file in DN as floats, unrounded, beside what
@@ -64,14 +66,15 @@ pub fn read_fits_samples(name: &Path, bytes: &[u8]) -> Result<(FitsImage, Vec<f3
     };
     let n = image.width * image.height;
     let decode = |m: String| RawError::decode(name, m);
+    let keyword = |e| RawError::fits_keyword(name, e);
     let samples = panic_guard::quietly(|| -> Result<Vec<f32>> {
         let mut fits = Fits::from_reader(Cursor::new(bytes));
         let Some(Ok(HDU::Primary(hdu))) = fits.next() else {
             return Err(decode("no primary HDU".into()));
         };
         let header = hdu.get_header();
-        let bzero = number(header, "BZERO").map_err(decode)?.unwrap_or(0.0);
-        let bscale = number(header, "BSCALE").map_err(decode)?.unwrap_or(1.0);
+        let bzero = number(header, "BZERO").map_err(keyword)?.unwrap_or(0.0);
+        let bscale = number(header, "BSCALE").map_err(keyword)?.unwrap_or(1.0);
         let physical = |v: f64| ((bzero + bscale * v) * scale) as f32;
         let samples: Vec<f32> = match fits.get_data(&hdu).pixels() {
             Pixels::F32(it) => it.take(n).map(|v| physical(f64::from(v))).collect(),
@@ -80,7 +83,7 @@ pub fn read_fits_samples(name: &Path, bytes: &[u8]) -> Result<(FitsImage, Vec<f3
         };
         Ok(samples)
     })
-    .map_err(decode)??;
+    .map_err(|panic| decode(panic.to_string()))??;
     Ok((image, samples))
 }
 
@@ -107,7 +110,8 @@ fn read_primary(name: &Path, bytes: &[u8]) -> Result<FitsImage> {
         .map_err(|_| decode("data offset does not fit in memory".into()))?;
     let (width, height) = geometry(name, bytes, &naxis, bitpix, data_start)?;
     let n = width * height;
-    let scaling = Scaling::of(header, bitpix).map_err(decode)?;
+    let keyword = |e| RawError::fits_keyword(name, e);
+    let scaling = Scaling::of(header, bitpix).map_err(keyword)?;
     let meta = Metadata::of(name, header, height)?;
 
     // Pixels.
@@ -129,7 +133,7 @@ fn read_primary(name: &Path, bytes: &[u8]) -> Result<FitsImage> {
         Refusal::Unsupported(m) => unsupported(m),
     })?;
     let (white, white_conflict) =
-        white_level(header, &data, bitpix, &scaling, conversion.as_deref()).map_err(decode)?;
+        white_level(header, &data, bitpix, &scaling, conversion.as_deref()).map_err(keyword)?;
 
     Ok(FitsImage {
         width,
@@ -215,11 +219,11 @@ struct Scaling {
 }
 
 impl Scaling {
-    fn of(header: &ValueMap, bitpix: i32) -> std::result::Result<Scaling, String> {
+    fn of(header: &ValueMap, bitpix: i32) -> std::result::Result<Scaling, KeywordError> {
         let bzero = number(header, "BZERO")?.unwrap_or(0.0);
         let bscale = number(header, "BSCALE")?.unwrap_or(1.0);
         if bscale == 0.0 {
-            return Err("BSCALE = 0: every sample would read as BZERO".into());
+            return Err(KeywordError::ZeroScale);
         }
         let blank = if bitpix > 0 {
             integer(header, "BLANK")?
@@ -252,9 +256,10 @@ struct Metadata {
 impl Metadata {
     fn of(name: &Path, header: &ValueMap, height: usize) -> Result<Metadata> {
         let decode = |m: String| RawError::decode(name, m);
+        let keyword = |e| RawError::fits_keyword(name, e);
         let first = |keys: [&'static str; 2]| -> Result<Option<(&'static str, f64)>> {
             for key in keys {
-                if let Some(v) = number(header, key).map_err(decode)? {
+                if let Some(v) = number(header, key).map_err(keyword)? {
                     return Ok(Some((key, v)));
                 }
             }
@@ -266,13 +271,13 @@ impl Metadata {
                 return Err(decode(format!("{key} = {t} s is negative")));
             }
         }
-        let egain_e_per_adu = number(header, "EGAIN").map_err(decode)?;
+        let egain_e_per_adu = number(header, "EGAIN").map_err(keyword)?;
         if let Some(g) = egain_e_per_adu {
             if g <= 0.0 {
                 return Err(decode(format!("EGAIN = {g} e-/ADU is not positive")));
             }
         }
-        let gain_setting = number(header, "GAIN").map_err(decode)?;
+        let gain_setting = number(header, "GAIN").map_err(keyword)?;
         let temperature = first(["CCD-TEMP", "CCD_TEMP"])?;
         if let Some((key, t)) = temperature {
             if !(-273.15..=200.0).contains(&t) {
@@ -281,15 +286,15 @@ impl Metadata {
                 )));
             }
         }
-        let iso = match integer(header, "ISOSPEED").map_err(decode)? {
+        let iso = match integer(header, "ISOSPEED").map_err(keyword)? {
             None => None,
             Some(v) if (1..=i64::from(u32::MAX)).contains(&v) => Some(v as u32),
             Some(v) => return Err(decode(format!("ISOSPEED = {v} is not a positive ISO"))),
         };
-        let instrument = string(header, "INSTRUME").map_err(decode)?;
-        let date_obs = string(header, "DATE-OBS").map_err(decode)?;
-        let binning = binning(header).map_err(decode)?;
-        let row_order = row_order(header).map_err(decode)?;
+        let instrument = string(header, "INSTRUME").map_err(keyword)?;
+        let date_obs = string(header, "DATE-OBS").map_err(keyword)?;
+        let binning = binning(header).map_err(keyword)?;
+        let row_order = row_order(header).map_err(keyword)?;
         Ok(Metadata {
             exposure,
             egain_e_per_adu,
@@ -316,7 +321,7 @@ fn white_level(
     bitpix: i32,
     s: &Scaling,
     conversion: Option<&str>,
-) -> std::result::Result<(u32, Option<String>), String> {
+) -> std::result::Result<(u32, Option<String>), KeywordError> {
     let normalised = bitpix < 0 && conversion.is_some_and(|c| c.ends_with("scaled by 65535"));
     let max_sample = u32::from(data.iter().copied().max().unwrap_or(0));
     let white = if bitpix == 8 && s.bzero == 0.0 && s.bscale == 1.0 {
@@ -508,21 +513,6 @@ fn floats<T: Copy + Into<f64>>(
     Ok((data, Some(conversion)))
 }
 
-/// ROWORDER: TOP-DOWN or BOTTOM-UP (any case), `None` when absent; any
-/// other value is refused, since what pgrf writes from the frame states it.
-fn row_order(header: &ValueMap) -> std::result::Result<Option<RowOrder>, String> {
-    match string(header, "ROWORDER")? {
-        None => Ok(None),
-        Some(r) => match r.to_ascii_uppercase().as_str() {
-            "TOP-DOWN" => Ok(Some(RowOrder::TopDown)),
-            "BOTTOM-UP" => Ok(Some(RowOrder::BottomUp)),
-            other => Err(format!(
-                "ROWORDER = '{other}' is neither TOP-DOWN nor BOTTOM-UP"
-            )),
-        },
-    }
-}
-
 /// The phase of `data[0]` from BAYERPAT, XBAYROFF, YBAYROFF and ROWORDER
 /// (`rows`, module documentation).
 fn bayer_phase(
@@ -565,9 +555,9 @@ fn bayer_phase(
             ))
         }
     };
-    let dec = |m: String| RawError::decode(name, m);
-    let xoff = integer(header, "XBAYROFF").map_err(dec)?.unwrap_or(0);
-    let yoff = integer(header, "YBAYROFF").map_err(dec)?.unwrap_or(0);
+    let keyword = |e| RawError::fits_keyword(name, e);
+    let xoff = integer(header, "XBAYROFF").map_err(keyword)?.unwrap_or(0);
+    let yoff = integer(header, "YBAYROFF").map_err(keyword)?.unwrap_or(0);
     let bottom_up = rows == Some(RowOrder::BottomUp);
     Ok(Some(stored_phase(pattern, xoff, yoff, bottom_up, height)))
 }
@@ -584,80 +574,6 @@ pub(crate) fn stored_phase(
     let dy = (yoff.rem_euclid(2) as usize + flip) % 2;
     let dx = xoff.rem_euclid(2) as usize;
     pattern.shifted(dy, dx)
-}
-
-/// A numeric keyword (integer, real, or a string holding a number).
-fn number(header: &ValueMap, key: &str) -> std::result::Result<Option<f64>, String> {
-    let v = match header.get(key) {
-        None | Some(Value::Undefined) => return Ok(None),
-        Some(Value::Integer { value, .. }) => *value as f64,
-        Some(Value::Float { value, .. }) => *value,
-        Some(Value::String { value, .. }) => {
-            let t = value.trim();
-            if t.is_empty() {
-                return Ok(None);
-            }
-            t.parse::<f64>()
-                .map_err(|_| format!("{key} = '{t}' is not a number"))?
-        }
-        Some(other) => return Err(format!("{key} = {} is not a number", show(other))),
-    };
-    if !v.is_finite() {
-        return Err(format!("{key} = {v} is not a finite number"));
-    }
-    Ok(Some(v))
-}
-
-/// An integer keyword (a real with no fraction is accepted).
-/// XBINNING and YBINNING (1 to 64 each; an absent one is 1), None when
-/// the header states neither.
-fn binning(header: &ValueMap) -> std::result::Result<Option<(u32, u32)>, String> {
-    let axis = |key: &str| -> std::result::Result<Option<u32>, String> {
-        match integer(header, key)? {
-            None => Ok(None),
-            Some(v) if (1..=64).contains(&v) => Ok(Some(v as u32)),
-            Some(v) => Err(format!("{key} = {v} is not a binning factor (1 to 64)")),
-        }
-    };
-    Ok(match (axis("XBINNING")?, axis("YBINNING")?) {
-        (None, None) => None,
-        (x, y) => Some((x.unwrap_or(1), y.unwrap_or(1))),
-    })
-}
-
-fn integer(header: &ValueMap, key: &str) -> std::result::Result<Option<i64>, String> {
-    match header.get(key) {
-        Some(Value::Integer { value, .. }) => Ok(Some(*value)),
-        _ => match number(header, key)? {
-            None => Ok(None),
-            Some(v) if v.fract() == 0.0 && v.abs() < 9e15 => Ok(Some(v as i64)),
-            Some(v) => Err(format!("{key} = {v} is not an integer")),
-        },
-    }
-}
-
-/// A string keyword, trimmed; blank reads as absent.
-fn string(header: &ValueMap, key: &str) -> std::result::Result<Option<String>, String> {
-    match header.get(key) {
-        None | Some(Value::Undefined) => Ok(None),
-        Some(Value::String { value, .. }) => {
-            let t = value.trim();
-            Ok((!t.is_empty()).then(|| t.to_string()))
-        }
-        Some(other) => Err(format!("{key} = {} is not a string", show(other))),
-    }
-}
-
-/// A header value as the file wrote it, for messages.
-fn show(v: &Value) -> String {
-    match v {
-        Value::Integer { value, .. } => value.to_string(),
-        Value::Float { value, .. } => value.to_string(),
-        Value::Logical { value, .. } => if *value { "T" } else { "F" }.to_string(),
-        Value::String { value, .. } => format!("'{value}'"),
-        Value::Undefined => "(blank)".to_string(),
-        Value::Invalid(s) => format!("'{}'", s.trim()),
-    }
 }
 
 /// Turn a fitsrs header error into a message naming what is wrong, looking

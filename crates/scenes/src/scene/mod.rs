@@ -29,6 +29,7 @@ use crate::chart::A7S2_D65_MATRIX;
 use crate::error::{Result, SceneError};
 use deadleaves::DeadLeaves;
 use ndarray::Array3;
+use pgrf_core::parse::ParseError;
 use pgrf_raw::color::SRGB_TO_XYZ;
 use pgrf_raw::{bits_for, Cfa, ColorMatrix, RawFrame};
 use std::fmt;
@@ -64,13 +65,14 @@ impl fmt::Display for SceneKind {
 }
 
 impl FromStr for SceneKind {
-    type Err = String;
+    type Err = ParseError;
     fn from_str(s: &str) -> std::result::Result<Self, Self::Err> {
         match s.to_ascii_lowercase().replace('_', "-").as_str() {
             "dead-leaves" | "deadleaves" => Ok(SceneKind::DeadLeaves),
             "gradient" => Ok(SceneKind::Gradient),
-            other => Err(format!(
-                "scene '{other}' is not known (expected dead-leaves or gradient)"
+            other => Err(ParseError::unknown_name(
+                s,
+                format!("scene '{other}' is not known (expected dead-leaves or gradient)"),
             )),
         }
     }
@@ -407,7 +409,7 @@ mod tests {
             "Dead_Leaves".parse::<SceneKind>().unwrap(),
             SceneKind::DeadLeaves
         );
-        let e = "checker".parse::<SceneKind>().unwrap_err();
+        let e = "checker".parse::<SceneKind>().unwrap_err().to_string();
         assert!(e.contains("dead-leaves"), "{e}");
     }
 
