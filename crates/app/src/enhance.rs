@@ -69,6 +69,10 @@ pub enum EnhanceError {
     /// The DNG (or FITS file) or the preview could not be made or written.
     #[error(transparent)]
     Write(#[from] RawError),
+    /// Enhancing the file panicked (a bug, in pgrf or a library it calls):
+    /// the batch records it as this file's failure and goes on.
+    #[error(transparent)]
+    Panicked(#[from] pgrf_core::panic_guard::Panicked),
 }
 
 /// How bright the result is made.

@@ -264,10 +264,18 @@ pub struct PackedCapture {
     pub noisy: ndarray::Array3<f32>,
     /// What it was made with.
     pub info: CaptureInfo,
-    /// The dark capture's DNG NoiseProfile, for the Poisson-Gaussian model
-    /// only: variance K x + sigma^2 in DN, normalised by the range. The ELD
-    /// and pgrf models add row noise, heavy tails and per-pixel maps that
-    /// one (S, O) pair cannot state, so theirs is None rather than wrong.
+    /// The dark capture's DNG NoiseProfile (DNG 1.3, tag 51041), one pair
+    /// for every colour plane ([`PackedCapture::stamp`] writes it per
+    /// plane, as the tag's ColorPlanes): variance = S x + O of the
+    /// normalised signal x, with
+    /// S = K / range and O = (sigma_read^2 + sigma_row^2) / range^2 of the
+    /// parameters drawn (range: the profile's, on which they were drawn and
+    /// normalised). That is the level the networks are conditioned on in
+    /// training, so `pgrf enhance` finds the noise the capture was made
+    /// with instead of estimating it. The ELD and pgrf models' heavy tails
+    /// and per-pixel maps are beyond one pair; cameras write the same
+    /// summary of theirs. Always set (an Option for frames that carry
+    /// none).
     pub noise_profile: Option<Vec<[f64; 2]>>,
 }
 
@@ -284,17 +292,19 @@ impl PackedCapture {
     }
 
     /// Set the capture's ISO, exposure and NoiseProfile (the last only for
-    /// the dark form: a brightened frame's noise is not its own) on `frame`,
-    /// a frame of the capture's pixels.
+    /// the dark form: a brightened frame's noise is not its own; one pair
+    /// per colour plane, 3 or 1 for a monochrome frame) on `frame`, a frame
+    /// of the capture's pixels.
     pub fn stamp(&self, frame: &mut RawFrame, brightened: bool) {
         if let Some(iso) = self.info.iso {
             frame.iso = Some(iso);
         }
         frame.exposure_s = Some(self.info.exposure_s as f64);
-        frame.noise_profile = if brightened {
-            None
-        } else {
-            self.noise_profile.clone()
+        let planes = if frame.mono { 1 } else { 3 };
+        frame.noise_profile = match (&self.noise_profile, brightened) {
+            (Some(np), false) if np.len() == 1 => Some(vec![np[0]; planes]),
+            (np, false) => np.clone(),
+            (_, true) => None,
         };
     }
 }
@@ -346,8 +356,10 @@ pub fn synthesize_packed(
     // The noise was drawn on the profile's scale and normalised by it.
     let range = spec.dn_range();
     Ok(PackedCapture {
-        noise_profile: (c.model == ModelKind::PoissonGaussian)
-            .then(|| vec![[p.k / range, (p.sigma_gauss / range).powi(2)]]),
+        noise_profile: Some(vec![[
+            p.k / range,
+            (p.sigma_gauss.powi(2) + row_dn(c, components, p).powi(2)) / range.powi(2),
+        ]]),
         info: CaptureInfo {
             ratio: pair.ratio,
             exposure_s: pair.exposure_s,
@@ -359,14 +371,20 @@ pub fn synthesize_packed(
             } else {
                 p.sigma_gauss
             },
-            row_dn: if c.model.components(components).row() {
-                p.sigma_row
-            } else {
-                0.0
-            },
+            row_dn: row_dn(c, components, p),
         },
         noisy: pair.noisy,
     })
+}
+
+/// The row noise (DN) a capture of `c`'s model with `components` drew:
+/// the parameters' own, or none when the model leaves it out.
+fn row_dn(c: &SynthConfig, components: Components, p: &pgrf_noise::CaptureParams) -> f64 {
+    if c.model.components(components).row() {
+        p.sigma_row
+    } else {
+        0.0
+    }
 }
 
 /// Simulate the low-light capture of the clean frame `frame` (read from

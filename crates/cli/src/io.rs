@@ -131,8 +131,6 @@ fn declare_train(a: &cmd::train::TrainArgs, io: &mut Io) -> Result<()> {
 
 fn declare_enhance(a: &cmd::enhance::EnhanceArgs, io: &mut Io) -> Result<()> {
     let e = &a.enhance;
-    let is_file = pgrf_app::enhance::jobs::output_is_file(&e.output)?;
-    let kind = if is_file { Kind::File } else { Kind::Folder };
     // The files a list names are inputs too (a list that cannot be read
     // is reported by the command itself).
     let listed = (e.from_list.as_deref())
@@ -140,11 +138,28 @@ fn declare_enhance(a: &cmd::enhance::EnhanceArgs, io: &mut Io) -> Result<()> {
         .unwrap_or_default();
     io.inputs("", &e.inputs)
         .inputs("--from-list", &e.from_list)
-        .inputs("--from-list", listed)
-        .input("--model", &e.model)
+        .inputs("--from-list", &listed)
+        .inputs("--model", &e.model)
         .inputs("--calib", &e.calib)
-        .output("-o", &e.output, kind)
         .output_opt("--manifest", e.manifest.as_ref(), Kind::File);
+    match &e.output {
+        Some(o) => {
+            let is_file = pgrf_app::enhance::jobs::output_is_file(o)?;
+            let kind = if is_file { Kind::File } else { Kind::Folder };
+            io.output("-o", o, kind);
+        }
+        // Each result beside its input file (a folder input, and two
+        // inputs whose results share a name, are refused by the plan with
+        // their own words).
+        None => {
+            let files = e.inputs.iter().chain(&listed).filter(|p| !p.is_dir());
+            let beside: std::collections::BTreeSet<PathBuf> =
+                files.map(|p| pgrf_app::enhance::jobs::beside(p)).collect();
+            for output in beside {
+                io.file("-o", output);
+            }
+        }
+    }
     if let Some(Some(png)) = &e.png {
         io.file("--png", png);
     }

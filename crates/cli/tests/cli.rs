@@ -401,7 +401,9 @@ fn a_pg_capture_states_its_noise_and_serves_as_a_profile() {
         .params_at_iso(3200)
         .unwrap();
     let np = f.noise_profile.expect("a NoiseProfile");
-    assert_eq!(np.len(), 1);
+    // One pair per colour plane (the tag's ColorPlanes: 3), all the same.
+    assert_eq!(np.len(), 3);
+    assert!(np.iter().all(|pair| *pair == np[0]), "{np:?}");
     assert!((np[0][0] - p.k / range).abs() < 1e-12, "{np:?}");
     assert!(
         (np[0][1] - (p.sigma_gauss / range).powi(2)).abs() < 1e-15,
@@ -430,6 +432,59 @@ fn a_pg_capture_states_its_noise_and_serves_as_a_profile() {
                 p.k / range * (f.white as f64 - f.black[0] as f64)
             )),
         "{err}"
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// Issue 53, item 3: every model's capture states the noise it was drawn
+/// with (the pgrf model's read and row noise as one variance), so that
+/// enhance's lookup takes it from the file ("DNG NoiseProfile") instead of
+/// estimating it, on the file's own scale.
+#[test]
+fn every_capture_states_its_noise_for_enhance() {
+    let dir = scratch("npall");
+    let demo = dir.join("demo");
+    let r = pgrf(&["demo", "-o", s(&demo), "--size", "128x96", "--quiet"]);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    let clean = demo.join("clean.dng");
+    let dark = dir.join("dark.dng");
+    let r = pgrf(&[
+        "synth",
+        s(&clean),
+        "--profile",
+        "sony-a7s2",
+        "--iso",
+        "1600",
+        "--ratio",
+        "100",
+        "--seed",
+        "3",
+        "-o",
+        s(&dark),
+    ]);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    let p = pgrf_noise::CameraProfile::built_in("sony-a7s2")
+        .unwrap()
+        .params_at_iso(1600)
+        .unwrap();
+    let f = pgrf_raw::decode_file(&dark, &Default::default()).unwrap();
+    let (range, file) = (16383.0 - 512.0, f.white as f64 - f.black[0] as f64);
+    let np = f.noise_profile.expect("a NoiseProfile");
+    assert_eq!(np.len(), 3);
+    assert!((np[0][0] - p.k / range).abs() < 1e-12, "{np:?}");
+    // The read noise the profile draws at the ISO and its row noise.
+    let read2 = p.sigma_gauss.powi(2) + p.sigma_row.powi(2);
+    assert!((np[0][1] - read2 / range.powi(2)).abs() < 1e-15, "{np:?}");
+    let r = pgrf(&["info", s(&dark), "--json"]);
+    let v: Value = serde_json::from_slice(&r.stdout).unwrap();
+    let n = &v["noise_parameters"];
+    assert_eq!(n["source"], "the file's DNG NoiseProfile tag");
+    let k = n["K"].as_f64().unwrap();
+    assert!((k - p.k / range * file).abs() < 1e-9 * k, "{k}");
+    let read = n["read"].as_f64().unwrap();
+    assert!(
+        (read - read2.sqrt() / range * file).abs() < 1e-9 * read,
+        "{read}"
     );
     std::fs::remove_dir_all(&dir).unwrap();
 }

@@ -617,9 +617,10 @@ fn the_calibrated_fixed_pattern_is_subtracted() {
 
 /// A noise-aware model (trained two steps with `--conditioning
 /// sigma-map`): `enhance` tells it the noise of each file and says where
-/// the numbers came from, `--noise` first, else the lookup (here a camera
-/// nothing knows: the frame's own estimate); the weight file records the
-/// conditioning; a malformed `--noise` is one line.
+/// the numbers came from, `--noise` first, else the lookup (here the DNG
+/// NoiseProfile `pgrf synth` writes: the noise it drew, on the file's
+/// scale); the weight file records the conditioning; a malformed `--noise`
+/// is one line.
 #[test]
 fn a_noise_aware_model_is_told_the_noise_and_the_source_is_named() {
     let dir = scratch("noise-aware");
@@ -680,7 +681,18 @@ fn a_noise_aware_model_is_told_the_noise_and_the_source_is_named() {
     };
     let j = run(&[], &dir.join("a.dng"));
     let said = j["noise"].as_str().unwrap();
-    assert!(said.contains("estimated from the frame"), "{said}");
+    assert!(said.contains("(the file's DNG NoiseProfile tag)"), "{said}");
+    // The A7S2's K at ISO 3200 on the chart's scale (white - black).
+    let p = pgrf_noise::CameraProfile::built_in("sony-a7s2")
+        .unwrap()
+        .params_at_iso(3200)
+        .unwrap();
+    let f = pgrf_raw::decode_file(&noisy, &Default::default()).unwrap();
+    let k = p.k / (16383.0 - 512.0) * (f.white as f64 - f.black[0] as f64);
+    assert!(
+        said.starts_with(&format!("K {k:.4} DN/e-")),
+        "{said} vs {k}"
+    );
     let j = run(&["--noise", "K=3,read=4,row=0.5"], &dir.join("b.dng"));
     assert_eq!(
         j["noise"],
@@ -925,4 +937,92 @@ fn the_kernels_flag_reaches_the_run() {
         .max()
         .unwrap();
     assert!(worst <= 2, "burn and pgrf differ by {worst} DN");
+}
+
+/// Issue 53, item 1: `pgrf enhance FILE` with nothing else restores with
+/// the built-in SPC, says so, and writes `FILE.pgrf.dng` (and with a bare
+/// `--png`, `FILE.pgrf.png`) beside the input: the same bytes as naming
+/// the model and the output. A folder without `-o`, or two inputs whose
+/// results would share a name, are refused in one line, nothing written.
+#[test]
+fn with_no_flags_the_builtin_spc_writes_beside_the_input() {
+    let d = scratch("noflags");
+    let input = d.join("night.dng");
+    dark_dng(&input, 64, 48, Cfa::Rggb, 4);
+    let r = pgrf(&["enhance", s(&input), "--png"]);
+    let err = String::from_utf8_lossy(&r.stderr);
+    assert!(r.status.success(), "{err}");
+    assert!(
+        err.contains("(builtin:spc, the default without --model)"),
+        "{err}"
+    );
+    assert_eq!(
+        files_in(&d),
+        ["night.dng", "night.pgrf.dng", "night.pgrf.png"]
+    );
+    let named = d.join("named.dng");
+    let r = pgrf(&[
+        "enhance",
+        s(&input),
+        "--model",
+        "builtin:spc",
+        "-o",
+        s(&named),
+        "--quiet",
+    ]);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    assert!(std::fs::read(&named).unwrap() == std::fs::read(d.join("night.pgrf.dng")).unwrap());
+
+    let folder = d.join("shoot");
+    std::fs::create_dir(&folder).unwrap();
+    dark_dng(&folder.join("a.dng"), 48, 32, Cfa::Rggb, 5);
+    let e = one_line_error(&pgrf(&["enhance", s(&folder)]));
+    assert!(e.contains("is a folder: give -o FOLDER"), "{e}");
+    std::fs::copy(folder.join("a.dng"), folder.join("a.DNG")).unwrap();
+    let (a, b) = (folder.join("a.dng"), folder.join("a.DNG"));
+    let e = one_line_error(&pgrf(&["enhance", s(&a), s(&b)]));
+    assert!(e.contains("would both be written to"), "{e}");
+    assert_eq!(files_in(&folder), ["a.DNG", "a.dng"]);
+}
+
+/// Issue 53, item 2: a frame whose blind estimate finds no signal-dependent
+/// noise (pgrf's noise-free chart) is restored at the quietest level the
+/// estimate resolves, which is named, and comes out nearly unchanged; in a
+/// batch beside a noisy frame both are written and the batch exits 0.
+#[test]
+fn a_frame_without_measurable_noise_passes_through_nearly_unchanged() {
+    let d = scratch("quiet");
+    let shoot = d.join("shoot");
+    std::fs::create_dir(&shoot).unwrap();
+    let chart = shoot.join("chart.dng");
+    let r = pgrf(&[
+        "chart",
+        "-o",
+        s(&chart),
+        "--width",
+        "192",
+        "--height",
+        "128",
+    ]);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    dark_dng(&shoot.join("night.dng"), 64, 48, Cfa::Rggb, 6);
+    let out = d.join("out");
+    let r = pgrf(&["enhance", s(&shoot), "--ratio", "1", "-o", s(&out)]);
+    let err = String::from_utf8_lossy(&r.stderr);
+    assert!(r.status.success(), "{err}");
+    assert!(
+        err.contains("no signal-dependent noise in the frame")
+            && err.contains("the smallest level the estimate resolves"),
+        "{err}"
+    );
+    assert_eq!(files_in(&out), ["chart.dng", "night.dng"]);
+    let r = pgrf(&["metrics", s(&out.join("chart.dng")), s(&chart)]);
+    let text = String::from_utf8_lossy(&r.stdout);
+    let psnr: f64 = text
+        .lines()
+        .find_map(|l| l.strip_prefix("PSNR"))
+        .and_then(|v| v.trim().trim_end_matches("dB").trim().parse().ok())
+        .unwrap_or_else(|| panic!("{text}"));
+    // Measured 63.6 dB on the 256 x 192 chart: a near-identity.
+    assert!(psnr > 50.0, "{psnr}");
 }

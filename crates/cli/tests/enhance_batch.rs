@@ -491,3 +491,71 @@ fn shards_killed_and_restarted_finish_the_batch_as_one_run_would() {
         .unwrap_or(0);
     assert!(landed >= 1, "{text}");
 }
+
+/// The offset and length of the first tile of a little-endian DNG's first
+/// IFD (tags 324 TileOffsets and 325 TileByteCounts).
+fn first_tile(b: &[u8]) -> (usize, usize) {
+    let u16_at = |at: usize| u16::from_le_bytes([b[at], b[at + 1]]) as usize;
+    let u32_at = |at: usize| u32::from_le_bytes(b[at..at + 4].try_into().unwrap()) as usize;
+    assert_eq!(&b[..2], b"II");
+    let ifd = u32_at(4);
+    let first = |tag: usize| {
+        (0..u16_at(ifd))
+            .map(|i| ifd + 2 + 12 * i)
+            .find(|&e| u16_at(e) == tag)
+            .map(|e| {
+                // One tile: the value itself; several: a pointer to LONGs.
+                if u32_at(e + 4) == 1 {
+                    u32_at(e + 8)
+                } else {
+                    u32_at(u32_at(e + 8))
+                }
+            })
+            .expect("a tiled DNG")
+    };
+    (first(324), first(325))
+}
+
+/// Issue 53, item 5: a DNG damaged inside its compressed tile data, whose
+/// structure still decodes (to wrong pixels), is redone by
+/// `--skip-existing`: its pixels no longer match the digest it was written
+/// with. The whole file is left alone.
+#[test]
+fn skip_existing_redoes_a_dng_damaged_inside_its_tiles() {
+    let d = scratch("tiles");
+    let inputs = charts(&d.join("in"), 1);
+    let out = d.join("c0.dng");
+    let args = [s(&inputs[0]), "-o", s(&out), "--skip-existing"];
+    ok(&enhance(&args));
+    let whole = std::fs::read(&out).unwrap();
+    let pixels = pgrf_raw::decode_file(&out, &Default::default())
+        .unwrap()
+        .mosaic;
+    let (tile, len) = first_tile(&whole);
+    // A byte in the tile's entropy-coded data that still decodes, to other
+    // pixels (a flip can also break the decoding, which was caught before).
+    let damaged = (1..16)
+        .map(|k| tile + len * k / 16)
+        .find_map(|at| {
+            let mut b = whole.clone();
+            b[at] ^= 0x08;
+            std::fs::write(&out, &b).unwrap();
+            let f = pgrf_raw::decode_file(&out, &Default::default()).ok()?;
+            (f.mosaic != pixels).then_some(b)
+        })
+        .expect("a flipped byte that decodes to other pixels");
+    assert!(damaged != whole);
+    let m = d.join("m.jsonl");
+    ok(&enhance(&[&args[..], &["--manifest", s(&m)]].concat()));
+    assert!(
+        std::fs::read(&out).unwrap() == whole,
+        "the damaged DNG is redone"
+    );
+    ok(&enhance(&[&args[..], &["--manifest", s(&m)]].concat()));
+    let (lines, _) = manifest(&m);
+    let status: Vec<&str> = lines
+        .iter()
+        .map(|l| l["status"].as_str().unwrap())
+        .collect();
+    assert_eq!(status, ["done", "skipped"]);
+}

@@ -42,7 +42,7 @@ pub const KSIGMA_REF_GAIN: f32 = 0.01;
 
 /// The smallest gain a level may have: below it the k-sigma domain's scale
 /// (`KSIGMA_REF_GAIN / gain`) exceeds 10^6 and f32 loses the image.
-const MIN_GAIN: f32 = 1e-8;
+const MIN_GAIN: f32 = pgrf_noise::lookup::MIN_SIGNAL_GAIN as f32;
 
 /// The log-sigma planes are (ln sigma - centre) / spread: sigma 0.03 (ln
 /// -3.5, mid-range training noise) maps to 0.

@@ -65,6 +65,13 @@ pub enum NoiseSource {
         /// 8 x 8 blocks the fit used.
         blocks: usize,
     },
+    /// The frame shows no signal-dependent noise (a clean, well-exposed
+    /// frame, or one already denoised): the smallest level the estimate
+    /// resolves ([`resolution_floor`]).
+    Floor {
+        /// 8 x 8 blocks the fit used.
+        blocks: usize,
+    },
 }
 
 impl fmt::Display for NoiseSource {
@@ -82,6 +89,10 @@ impl fmt::Display for NoiseSource {
             NoiseSource::Estimate { blocks } => {
                 write!(f, "estimated from the frame ({blocks} flat blocks)")
             }
+            NoiseSource::Floor { blocks } => write!(
+                f,
+                "no signal-dependent noise in the frame ({blocks} flat blocks): the smallest level the estimate resolves, 1 DN rounding"
+            ),
         }
     }
 }
@@ -307,11 +318,16 @@ pub fn find_noise(frame: &RawFrame, known: &KnownNoise) -> Result<FrameNoise> {
         e => e,
     })?;
     let (k, read) = fit.in_dn(range);
-    if !(k.is_finite() && k > 0.0 && read.is_finite()) {
-        return Err(NoiseError::Estimate(format!(
-            "the frame shows no signal-dependent noise (K estimated as {k:.3e} DN/e- from {} blocks); {NO_SOURCE}",
-            fit.blocks
-        )));
+    // Below the floor's gain (none at all, or rounding error of none) the
+    // fit has found no signal-dependent noise.
+    if !(k.is_finite() && read.is_finite() && k / range >= MIN_SIGNAL_GAIN) {
+        let (k, read) = resolution_floor(range);
+        return Ok(FrameNoise {
+            k,
+            read,
+            row: 0.0,
+            source: NoiseSource::Floor { blocks: fit.blocks },
+        });
     }
     Ok(FrameNoise {
         k,
@@ -319,6 +335,27 @@ pub fn find_noise(frame: &RawFrame, known: &KnownNoise) -> Result<FrameNoise> {
         row: 0.0,
         source: NoiseSource::Estimate { blocks: fit.blocks },
     })
+}
+
+/// The smallest signal-dependent variance per unit of normalised signal
+/// (K / range, at ratio 1) a noise level may state: 10^-8, a deviation of
+/// 10^-4 of white at white, 600x below the quietest built-in camera's
+/// (A7S2 ISO 100: 6e-6). Below it the networks' k-sigma domain (scale
+/// 0.01 / gain) loses the image in f32, so they refuse such levels.
+pub const MIN_SIGNAL_GAIN: f64 = 1e-8;
+
+/// The quietest noise the blind estimate's answer can stand for, on a
+/// scale of `range` DN, as (K, read): the rounding of the samples to whole
+/// DN (variance 1/12 DN²) as the read noise, and the smallest gain a noise
+/// level may state ([`MIN_SIGNAL_GAIN`]; the gain whose shot noise equals
+/// the rounding at white, 1 / (12 range), is below it for any real
+/// range). A frame that shows no signal-dependent noise (a clean,
+/// well-exposed photo) is restored as that quiet: nearly unchanged, instead
+/// of refused.
+pub fn resolution_floor(range: f64) -> (f64, f64) {
+    let rounding: f64 = 1.0 / 12.0;
+    let k = (rounding / range).max(MIN_SIGNAL_GAIN * range);
+    (k, rounding.sqrt())
 }
 
 #[cfg(test)]
@@ -334,6 +371,33 @@ mod tests {
         f.make = "SONY".into();
         f.model = "ILCE-7SM2".into();
         f
+    }
+
+    /// The floor: rounding's sqrt(1/12) DN of read noise and the smallest
+    /// gain a level may state, on the frame's scale; a noise-free frame
+    /// gets it (not an error) and says so.
+    #[test]
+    fn a_frame_without_noise_gets_the_floor() {
+        let (k, read) = resolution_floor(15871.0);
+        assert!((read - (1.0f64 / 12.0).sqrt()).abs() < 1e-12);
+        assert!((k / 15871.0 - MIN_SIGNAL_GAIN).abs() < 1e-20, "{k}");
+        // A flat frame of constant values, no camera pgrf knows.
+        let mut f = RawFrame::from_mosaic(
+            192,
+            192,
+            (0..192 * 192).map(|i| 600 + (i % 192) as u16 * 4).collect(),
+            Cfa::Rggb,
+            [512.0; 4],
+            16383,
+        )
+        .unwrap();
+        f.make = "Nobody".into();
+        let n = find_noise(&f, &KnownNoise::default()).unwrap();
+        assert!(matches!(n.source, NoiseSource::Floor { .. }), "{n}");
+        assert_eq!((n.k, n.read), resolution_floor(16383.0 - 512.0));
+        assert!(n
+            .to_string()
+            .contains("smallest level the estimate resolves"));
     }
 
     #[test]

@@ -106,10 +106,18 @@ def test_byte_equal_to_the_command(asset_dng, run_pgrf, tmp_path, model, brighte
         pgrf.write_dng(mine, cap.dark, cap.meta)
     a, b = cli.read_bytes(), mine.read_bytes()
     assert len(a) == len(b) and a == b
-    if model == "pg" and not brightened:
-        # The P-G capture states its noise in the DNG (S = K / R, O = (sigma / R)^2).
+    if not brightened:
+        # Every capture states its noise in the DNG, one pair per colour
+        # plane: S = K / R and O = (read^2 + row^2) / R^2 of the Gaussian
+        # read noise drawn (ELD's heavy-tailed read noise is reported by its
+        # Tukey scale, so only S is checked there).
         R = A7S2.dn_range
-        assert cap.meta.noise_profile == [pytest.approx((cap.k / R, (cap.read_dn / R) ** 2))]
+        np_ = cap.meta.noise_profile
+        assert len(np_) == 3 and np_[0] == np_[1] == np_[2]
+        assert np_[0][0] == pytest.approx(cap.k / R, rel=1e-12)
+        if model != "eld":
+            o = (cap.read_dn ** 2 + cap.row_dn ** 2) / R ** 2
+            assert np_[0][1] == pytest.approx(o, rel=1e-9)
 
 
 def test_the_gil_is_released_while_pgrf_works():

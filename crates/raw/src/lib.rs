@@ -37,7 +37,10 @@ pub use ndarray;
 pub use cfa::Cfa;
 pub use decode::{decode_bytes, decode_file};
 pub use demosaic::Demosaic;
-pub use dng::{encode_dng, tile_width, write_dng, Compression, DngOptions, DNG_TILE};
+pub use dng::{
+    encode_dng, pixels_intact, raw_image_digest, tile_width, write_dng, Compression, DngOptions,
+    DNG_TILE,
+};
 pub use error::{RawError, Result};
 pub use fits::{FitsHeader, RowOrder};
 pub use fits_frame::{encode_fits_frame, encode_fits_light, encode_fits_master, write_fits_frame};

@@ -292,10 +292,13 @@ impl Manifest {
 
 /// Whether `job`'s outputs are there and read back whole: the DNG (or
 /// FITS file) decodes with pgrf's own reader to the input's size and CFA or
-/// monochrome layout (what enhancing it would write), and the preview, when asked for, decodes to the same
-/// size (either way round: the preview is turned upright). A file cut short
-/// or damaged in its structure is redone; a run of pgrf never leaves one
-/// (its writes are atomic), but a copy or a full disk may.
+/// monochrome layout (what enhancing it would write), a DNG's pixels match
+/// the digest it was written with ([`pgrf_raw::pixels_intact`]: a byte
+/// flipped inside a compressed tile can decode to wrong pixels), and the
+/// preview, when asked for, decodes to the same size (either way round:
+/// the preview is turned upright). A file cut short or damaged is redone;
+/// a run of pgrf never leaves one (its writes are atomic), but a copy, a
+/// full disk or a failing drive may.
 pub fn reads_back(job: &Job, open: &dyn Fn(&Path) -> Result<RawFrame, BoxError>) -> bool {
     if !job.output.is_file() || job.png.as_ref().is_some_and(|p| !p.is_file()) {
         return false;
@@ -309,6 +312,7 @@ pub fn reads_back(job: &Job, open: &dyn Fn(&Path) -> Result<RawFrame, BoxError>)
     let size = (input.width, input.height);
     if (written.width, written.height) != size
         || (written.cfa, written.mono) != (input.cfa, input.mono)
+        || !pgrf_raw::pixels_intact(&job.output, &written).unwrap_or(false)
     {
         return false;
     }
@@ -318,6 +322,10 @@ pub fn reads_back(job: &Job, open: &dyn Fn(&Path) -> Result<RawFrame, BoxError>)
         Some(png) => png_size(png).is_ok_and(|(w, h)| (w, h) == size || (h, w) == size),
     }
 }
+
+/// What a file whose enhancement panicked reports, before the panic's own
+/// words.
+const PANIC_LEAD: &str = "pgrf crashed on this file (a bug: please report it with the file)";
 
 /// Run `batch`: each of this run's files skipped, enhanced or failed in
 /// turn ([`enhance_file`] with `cfg` and `restorer`, inputs opened by
@@ -342,7 +350,13 @@ pub fn run_batch<E: BatchEvents>(
             None
         } else {
             let start = || events.tiles(index, count, job);
-            Some(enhance_file(cfg, restorer, job, open, start))
+            // A panic (a bug) is this file's failure, not the shoot's end.
+            Some(
+                pgrf_core::panic_guard::quietly(PANIC_LEAD, || {
+                    enhance_file(cfg, restorer, job, open, start)
+                })
+                .unwrap_or_else(|p| Err(p.into())),
+            )
         };
         let (status, report, error) = match result {
             None => (Status::Skipped, None, None),
@@ -412,6 +426,89 @@ mod tests {
         let _ = std::fs::remove_dir_all(&d);
         std::fs::create_dir_all(&d).unwrap();
         d
+    }
+
+    /// A file whose enhancement panics (planted in its opener) is that
+    /// file's failure, named with the panic's words; the files after it are
+    /// done.
+    #[test]
+    fn a_panic_inside_one_file_fails_that_file_only() {
+        use crate::enhance::RatioChoice;
+        use pgrf_core::NoProgress;
+        use pgrf_nn::arch::{Architecture, SidUnetConfig};
+        use pgrf_nn::backend::{Cpu, DeviceKind};
+        use pgrf_nn::infer::{SamplerChoice, Tiling};
+        use pgrf_nn::weights::{NoiseSource, WeightMeta};
+        struct Quiet;
+        impl BatchEvents for Quiet {
+            type Tiles = NoProgress;
+            fn files(&self) -> &dyn Progress {
+                &NoProgress
+            }
+            fn tiles(&self, _: usize, _: usize, _: &Job) -> NoProgress {
+                NoProgress
+            }
+            fn finished(&self, _: &Record, _: Option<&FileReport>) {}
+        }
+        let d = scratch("panic");
+        let arch = Architecture::SidUnet(SidUnetConfig::new().with_width(2));
+        let model = d.join("m.safetensors");
+        let net = arch.init_seeded::<Cpu>(&Default::default(), 1).unwrap();
+        net.save(&model, &WeightMeta::new(arch, NoiseSource::default()))
+            .unwrap();
+        let restorer =
+            pgrf_nn::infer::load(&model, SamplerChoice::default(), DeviceKind::Cpu).unwrap();
+        let cfg = EnhanceConfig {
+            ratio: RatioChoice::Fixed(1.0),
+            calib: None,
+            force: false,
+            tiling: Tiling {
+                tile: None,
+                overlap: None,
+                seed: 0,
+                device: DeviceKind::Cpu,
+                kernels: Default::default(),
+            },
+            noise: None,
+            masked_black: false,
+            darktable: None,
+        };
+        let job = |n: &str| Job {
+            input: d.join(format!("{n}.dng")),
+            output: d.join(format!("{n}.out.dng")),
+            png: None,
+        };
+        let batch = Batch {
+            jobs: vec![job("a"), job("b"), job("c")],
+            shard: None,
+            skip_existing: false,
+            manifest: None,
+        };
+        let frame = RawFrame::from_mosaic(
+            32,
+            32,
+            vec![600; 32 * 32],
+            pgrf_raw::Cfa::Rggb,
+            [512.0; 4],
+            16383,
+        )
+        .unwrap();
+        let open = |p: &Path| -> Result<RawFrame, BoxError> {
+            if p.ends_with("b.dng") {
+                panic!("planted panic");
+            }
+            Ok(frame.clone())
+        };
+        let outcome = run_batch(&cfg, restorer.as_ref(), &batch, &open, &Quiet).unwrap();
+        assert_eq!(outcome.done, 2);
+        assert_eq!(outcome.failed.len(), 1);
+        let e = outcome.failed[0].error.to_string();
+        assert!(
+            e.contains("pgrf crashed on this file") && e.contains("planted panic"),
+            "{e}"
+        );
+        assert!(d.join("a.out.dng").is_file() && d.join("c.out.dng").is_file());
+        assert!(!d.join("b.out.dng").exists());
     }
 
     fn jobs(n: usize) -> Vec<Job> {

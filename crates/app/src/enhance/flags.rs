@@ -15,6 +15,11 @@ use pgrf_nn::NnError;
 use pgrf_noise::lookup::NoiseFlag;
 use std::path::PathBuf;
 
+/// The model `pgrf enhance` restores with when `--model` is not given: the
+/// built-in SPC denoiser, noise-aware and one pass (a photographer has no
+/// weight file).
+pub const DEFAULT_MODEL: &str = "builtin:spc";
+
 /// `pgrf enhance`'s flags (the input-opening options are the caller's).
 #[derive(clap::Args, Debug)]
 pub struct EnhanceFlags {
@@ -33,9 +38,9 @@ pub struct EnhanceFlags {
     /// Append one JSON line per file to FILE (input, output, png, status done|skipped|failed, seconds, noise, error, shard).
     #[arg(long, value_name = "FILE")]
     pub manifest: Option<PathBuf>,
-    /// Weight file from `pgrf train` (SPC denoiser or PGRF flow model).
+    /// Weight file from `pgrf train` (SPC denoiser or PGRF flow model), or builtin:spc or builtin:pgrf, the built-in models [default: builtin:spc].
     #[arg(long, short = 'm')]
-    pub model: PathBuf,
+    pub model: Option<PathBuf>,
     /// Exposure ratio, 1 to 10000: the input is multiplied by it before denoising; `auto` (the default without --target-exposure) meters each frame, bringing its mean level (brightest 1 % left out) to 1/8 of white, ratio 1..300, and prints what it chose.
     #[arg(
         long,
@@ -60,9 +65,10 @@ pub struct EnhanceFlags {
     pub force: bool,
     /// Output DNG or FITS (.fits, .fit, .fts) for one input file, or folder
     /// for the results (created if its parent exists); files keep their names
-    /// with a .dng extension, .fits for FITS inputs.
+    /// with a .dng extension, .fits for FITS inputs [default: NAME.pgrf.dng
+    /// beside each input file, NAME.pgrf.fits for a FITS input].
     #[arg(short, long)]
-    pub output: PathBuf,
+    pub output: Option<PathBuf>,
     /// Also write an sRGB preview: to this .png with one input, next to each
     /// DNG without a value.
     #[arg(long, num_args = 0..=1)]
@@ -165,7 +171,7 @@ impl EnhanceFlags {
             Some(None) => Previews::BesideEach,
             Some(Some(p)) => Previews::At(p),
         };
-        let jobs = plan_jobs(&given, &self.output, previews)?;
+        let jobs = plan_jobs(&given, self.output.as_deref(), previews)?;
         if let Some(m) = &self.manifest {
             check_manifest(m, &given, &jobs)?;
         }
@@ -213,6 +219,14 @@ impl EnhanceFlags {
         })
     }
 
+    /// The weight file (or built-in model) to restore with: `--model`, else
+    /// [`DEFAULT_MODEL`].
+    pub fn model(&self) -> PathBuf {
+        self.model
+            .clone()
+            .unwrap_or_else(|| PathBuf::from(DEFAULT_MODEL))
+    }
+
     /// The flow model's sampler as the flags choose it.
     pub fn sampler(&self) -> SamplerChoice {
         SamplerChoice {
@@ -226,22 +240,27 @@ impl EnhanceFlags {
     /// before the first image is processed (so that an input that fails at
     /// once still gives a single line).
     pub fn notes(&self, restorer: &dyn Restore, kernels: Kernels) -> Vec<String> {
+        let default = if self.model.is_none() {
+            format!(" ({DEFAULT_MODEL}, the default without --model)")
+        } else {
+            String::new()
+        };
         let mut lines = vec![format!(
-            "model: {}; device {}",
+            "model: {}{default}; device {}",
             super::describe_method(restorer),
             pgrf_nn::backend::describe(self.device, kernels)
         )];
         if restorer.sampler().is_some() && restorer.meta().t2.is_none() && self.t2.is_none() {
             lines.push(format!(
                 "note: {} has no searched t2; using {UNSEARCHED_T2} (run `pgrf search` to find the best)",
-                self.model.display(),
+                self.model().display(),
             ));
         }
         if restorer.meta().noise.calibrated_dark_level && self.calib.is_none() {
             lines.push(format!(
                 "note: {} learned calibrated captures (dark level subtracted); without --calib \
 the file's black level is taken as exact, and an error in it tints dark areas",
-                self.model.display()
+                self.model().display()
             ));
         }
         lines

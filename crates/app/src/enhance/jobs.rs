@@ -77,53 +77,23 @@ pub fn read_list(list: &Path) -> Result<Vec<PathBuf>, NnError> {
 }
 
 /// Expand folders, decide every output path (`output` is a .dng for one
-/// input file, else a folder, created if its parent exists), and check
-/// that the outputs can be written.
+/// input file, else a folder, created if its parent exists; without it each
+/// result goes [`beside`] its input), and check that the outputs can be
+/// written.
 pub fn plan_jobs(
     paths: &[PathBuf],
-    output: &Path,
+    output: Option<&Path>,
     previews: Previews,
 ) -> Result<Vec<Job>, NnError> {
-    let is_file = output_is_file(output)?;
     let (mut inputs, had_dir) = expand_inputs(paths)?;
     let single = inputs.len() == 1 && !had_dir;
-    if let Previews::At(p) = previews {
-        if !p.extension().is_some_and(|e| e.eq_ignore_ascii_case("png")) {
-            return Err(refused("--png", format!(
-                "--png {}: expected a .png path (give --png after the input files, or without a value to write previews next to the DNGs)",
-                p.display()
-            )));
-        }
-        if !single {
-            return Err(refused(
-                "--png",
-                "--png PATH names one preview; with several inputs give --png without a value"
-                    .into(),
-            ));
-        }
-        require_parent_dir(p)?;
-    }
+    check_previews(previews, single)?;
+    let Some(output) = output else {
+        return beside_jobs(paths, inputs, had_dir, previews);
+    };
+    let is_file = output_is_file(output)?;
     if single && is_file {
-        require_parent_dir(output)?;
-        if same_file(output, &inputs[0]) {
-            return Err(refused(
-                "-o",
-                format!(
-                    "-o {} is the input file; write the result elsewhere",
-                    output.display()
-                ),
-            ));
-        }
-        let png = match previews {
-            Previews::None => None,
-            Previews::BesideEach => Some(output.with_extension("png")),
-            Previews::At(p) => Some(p.to_path_buf()),
-        };
-        return Ok(vec![Job {
-            input: inputs.remove(0),
-            output: output.to_path_buf(),
-            png,
-        }]);
+        return single_job(inputs.remove(0), output, previews);
     }
     if is_file {
         return Err(refused(
@@ -135,6 +105,105 @@ pub fn plan_jobs(
         ));
     }
     folder_jobs(inputs, output, previews != Previews::None)
+}
+
+/// `--png PATH` names one .png preview in an existing folder, for one input.
+fn check_previews(previews: Previews, single: bool) -> Result<(), NnError> {
+    let Previews::At(p) = previews else {
+        return Ok(());
+    };
+    if !p.extension().is_some_and(|e| e.eq_ignore_ascii_case("png")) {
+        return Err(refused("--png", format!(
+            "--png {}: expected a .png path (give --png after the input files, or without a value to write previews next to the DNGs)",
+            p.display()
+        )));
+    }
+    if !single {
+        return Err(refused(
+            "--png",
+            "--png PATH names one preview; with several inputs give --png without a value".into(),
+        ));
+    }
+    Ok(require_parent_dir(p)?)
+}
+
+/// The preview of the result `output`: none, beside it, or `--png PATH`.
+fn preview_of(output: &Path, previews: Previews) -> Option<PathBuf> {
+    match previews {
+        Previews::None => None,
+        Previews::BesideEach => Some(output.with_extension("png")),
+        Previews::At(p) => Some(p.to_path_buf()),
+    }
+}
+
+/// Where a result is written without `-o`: beside its input, named
+/// `NAME.pgrf.dng` (`NAME.pgrf.fits` for a FITS input), so that neither the
+/// input nor another camera file of the same name is touched.
+pub fn beside(input: &Path) -> PathBuf {
+    let stem = input
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "out".into());
+    let ext = output_format(input).extension();
+    input.with_file_name(format!("{stem}.pgrf.{ext}"))
+}
+
+/// One job per input file, its result [`beside`] it. A folder is refused:
+/// its results would land in the folder being read (the path rule).
+fn beside_jobs(
+    paths: &[PathBuf],
+    inputs: Vec<PathBuf>,
+    had_dir: bool,
+    previews: Previews,
+) -> Result<Vec<Job>, NnError> {
+    if had_dir {
+        let folder = paths.iter().find(|p| p.is_dir()).unwrap_or(&paths[0]);
+        return Err(refused(
+            "-o",
+            format!(
+                "{} is a folder: give -o FOLDER for its results (without -o each result is written beside its input, inside the folder being read)",
+                folder.display()
+            ),
+        ));
+    }
+    let mut seen = HashSet::new();
+    inputs
+        .into_iter()
+        .map(|input| {
+            let output = beside(&input);
+            if !seen.insert(output.clone()) {
+                return Err(refused(
+                    "-o",
+                    format!(
+                        "two inputs would both be written to {} (same name, another extension): give -o FOLDER",
+                        output.display()
+                    ),
+                ));
+            }
+            let png = preview_of(&output, previews);
+            Ok(Job { input, output, png })
+        })
+        .collect()
+}
+
+/// The job of one input file written to the file `output`.
+fn single_job(input: PathBuf, output: &Path, previews: Previews) -> Result<Vec<Job>, NnError> {
+    require_parent_dir(output)?;
+    if same_file(output, &input) {
+        return Err(refused(
+            "-o",
+            format!(
+                "-o {} is the input file; write the result elsewhere",
+                output.display()
+            ),
+        ));
+    }
+    let png = preview_of(output, previews);
+    Ok(vec![Job {
+        input,
+        output: output.to_path_buf(),
+        png,
+    }])
 }
 
 /// Whether `-o` names one output file (else a folder): a `.dng` name, or

@@ -34,8 +34,9 @@ pub fn run(a: &EnhanceArgs, g: &crate::Globals) -> Result<()> {
     cfg.masked_black = a.input.black.is_none();
     cfg.tiling.kernels = kernels;
     cfg.darktable = g.darktable.map(Into::into);
-    let restorer = crate::shipped::load_model(&e.model, e.sampler(), e.device)
-        .with_context(|| format!("--model {}", e.model.display()))?;
+    let model = e.model();
+    let restorer = crate::shipped::load_model(&model, e.sampler(), e.device)
+        .with_context(|| format!("--model {}", model.display()))?;
     if let (Some(shard), 0) = (batch.shard, batch.selected_count()) {
         if !e.quiet {
             eprintln!(

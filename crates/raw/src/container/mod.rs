@@ -189,6 +189,16 @@ pub fn masked_areas(bytes: &[u8]) -> Vec<crate::masked::Area> {
     areas
 }
 
+/// The raw IFD's NewRawImageDigest (tag 51111): 16 bytes of MD5, BYTE or
+/// UNDEFINED; None when the file has none or it is not 16 bytes.
+pub fn raw_digest(bytes: &[u8]) -> Option<[u8; 16]> {
+    let (_, e) = raw_ifd_entry(bytes, 51111)?;
+    if !(e.kind == 1 || e.kind == 7) || e.count != 16 {
+        return None;
+    }
+    bytes.get(e.at..e.at + 16)?.try_into().ok()
+}
+
 /// The DNG NoiseProfile tag (51041) of a TIFF-based file: (S, O) pairs,
 /// one for all planes or one per colour plane, such that a pixel's noise
 /// variance is S x + O for x its signal normalised to [0, 1] (black 0,
