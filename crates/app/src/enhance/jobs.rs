@@ -140,12 +140,32 @@ fn preview_of(output: &Path, previews: Previews) -> Option<PathBuf> {
 /// `NAME.pgrf.dng` (`NAME.pgrf.fits` for a FITS input), so that neither the
 /// input nor another camera file of the same name is touched.
 pub fn beside(input: &Path) -> PathBuf {
-    let stem = input
+    let ext = output_format(input).extension();
+    input.with_file_name(format!("{}.pgrf.{ext}", stem(input)))
+}
+
+/// The input's name without its extension ("out" for a path without one).
+fn stem(input: &Path) -> String {
+    input
         .file_stem()
         .map(|s| s.to_string_lossy().into_owned())
-        .unwrap_or_else(|| "out".into());
-    let ext = output_format(input).extension();
-    input.with_file_name(format!("{stem}.pgrf.{ext}"))
+        .unwrap_or_else(|| "out".into())
+}
+
+/// Claim `output` for one input: refused when another input of the plan
+/// has it already (`why`, after the path, says how two inputs came to
+/// share it and what to do).
+fn claim(seen: &mut HashSet<PathBuf>, output: &Path, why: &str) -> Result<(), NnError> {
+    if seen.insert(output.to_path_buf()) {
+        return Ok(());
+    }
+    Err(refused(
+        "-o",
+        format!(
+            "two inputs would both be written to {} {why}",
+            output.display()
+        ),
+    ))
 }
 
 /// One job per input file, its result [`beside`] it. A folder is refused:
@@ -171,15 +191,8 @@ fn beside_jobs(
         .into_iter()
         .map(|input| {
             let output = beside(&input);
-            if !seen.insert(output.clone()) {
-                return Err(refused(
-                    "-o",
-                    format!(
-                        "two inputs would both be written to {} (same name, another extension): give -o FOLDER",
-                        output.display()
-                    ),
-                ));
-            }
+            let why = "(same name, another extension): give -o FOLDER";
+            claim(&mut seen, &output, why)?;
             let png = preview_of(&output, previews);
             Ok(Job { input, output, png })
         })
@@ -266,21 +279,9 @@ fn folder_jobs(inputs: Vec<PathBuf>, folder: &Path, png: bool) -> Result<Vec<Job
     inputs
         .into_iter()
         .map(|input| {
-            let stem = input
-                .file_stem()
-                .map(|s| s.to_string_lossy().into_owned())
-                .unwrap_or_else(|| "out".into());
             let ext = output_format(&input).extension();
-            let output = folder.join(format!("{stem}.{ext}"));
-            if !seen.insert(output.clone()) {
-                return Err(refused(
-                    "-o",
-                    format!(
-                        "two inputs would both be written to {} (same name in different folders)",
-                        output.display()
-                    ),
-                ));
-            }
+            let output = folder.join(format!("{}.{ext}", stem(&input)));
+            claim(&mut seen, &output, "(same name in different folders)")?;
             if same_file(&output, &input) {
                 return Err(refused(
                     "-o",
