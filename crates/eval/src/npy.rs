@@ -172,9 +172,9 @@ fn field<'a>(dict: &'a str, key: &str) -> Option<&'a str> {
     Some(rest[..end].trim())
 }
 
-/// Parse `.npy` bytes into a three-dimensional f32 array; `name` names them
-/// in errors.
-pub fn decode(name: &str, bytes: &[u8]) -> Result<Array3<f32>, NpyError> {
+/// The header dict of `.npy` bytes (magic, version and length checked)
+/// and where the data start; `name` names the bytes in errors.
+fn header_dict<'a>(name: &str, bytes: &'a [u8]) -> Result<(&'a str, usize), NpyError> {
     let file = || name.to_string();
     if bytes.len() < 10 || &bytes[..6] != MAGIC {
         return Err(NpyError::NotNpy { file: file() });
@@ -201,6 +201,18 @@ pub fn decode(name: &str, bytes: &[u8]) -> Result<Array3<f32>, NpyError> {
     }
     let dict = std::str::from_utf8(&bytes[start..start + header_len])
         .map_err(|_| header(HeaderFault::NotText))?;
+    Ok((dict, start + header_len))
+}
+
+/// Parse `.npy` bytes into a three-dimensional f32 array; `name` names them
+/// in errors.
+pub fn decode(name: &str, bytes: &[u8]) -> Result<Array3<f32>, NpyError> {
+    let file = || name.to_string();
+    let (dict, data_start) = header_dict(name, bytes)?;
+    let header = |fault| NpyError::Header {
+        file: file(),
+        fault,
+    };
     let descr = field(dict, "descr").ok_or(header(HeaderFault::Missing("descr")))?;
     let size = match descr.trim_matches(['\'', '"']) {
         "<f4" => 4,
@@ -232,7 +244,7 @@ pub fn decode(name: &str, bytes: &[u8]) -> Result<Array3<f32>, NpyError> {
     let [c, h, w] = dims[..] else {
         return Err(shape(ShapeFault::NotThree));
     };
-    let data = &bytes[start + header_len..];
+    let data = &bytes[data_start..];
     c.checked_mul(h)
         .and_then(|n| n.checked_mul(w))
         .filter(|n| n.checked_mul(size) == Some(data.len()))
