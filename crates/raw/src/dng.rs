@@ -137,20 +137,17 @@ pub fn raw_image_digest(samples: &[u16]) -> [u8; 16] {
     md5.finalize().0
 }
 
-/// Whether the DNG at `path`, decoded as `frame`, holds the pixels it was
+/// Whether the DNG `bytes`, decoded as `frame`, hold the pixels they were
 /// written with: its NewRawImageDigest equals the digest of the decoded
-/// raw image. A file without the tag (another writer's, or an older pgrf's)
-/// or with masked columns beside the image (the digest covers them too)
-/// passes: nothing to check it against.
-pub fn pixels_intact(path: &Path, frame: &RawFrame) -> Result<bool> {
-    let bytes = std::fs::read(path).map_err(|e| RawError::io(path, e))?;
-    let Some(stored) = crate::container::raw_digest(&bytes) else {
-        return Ok(true);
-    };
-    if frame.masked.is_some() {
-        return Ok(true);
+/// raw image. A file without the tag (another writer's, an older pgrf's,
+/// a FITS file) or with masked columns beside the image (the digest covers
+/// them too) passes: nothing to check it against.
+pub fn pixels_intact(bytes: &[u8], frame: &RawFrame) -> bool {
+    match crate::container::raw_digest(bytes) {
+        None => true,
+        Some(_) if frame.masked.is_some() => true,
+        Some(stored) => stored == raw_image_digest(&frame.mosaic),
     }
-    Ok(stored == raw_image_digest(&frame.mosaic))
 }
 
 /// [`encode_dng`] of a readout whose first `masked` columns are shielded.

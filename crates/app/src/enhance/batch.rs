@@ -15,7 +15,7 @@ use pgrf_core::exit::PartialFailure;
 use pgrf_core::Progress;
 use pgrf_nn::infer::Restore;
 use pgrf_nn::NnError;
-use pgrf_raw::{decode_file, png_size, LevelOverrides, RawFrame};
+use pgrf_raw::{decode_bytes, png_size, LevelOverrides, RawFrame};
 use serde::Serialize;
 use std::fmt;
 use std::io::{Read, Seek, SeekFrom, Write};
@@ -303,7 +303,11 @@ pub fn reads_back(job: &Job, open: &dyn Fn(&Path) -> Result<RawFrame, BoxError>)
     if !job.output.is_file() || job.png.as_ref().is_some_and(|p| !p.is_file()) {
         return false;
     }
-    let Ok(written) = decode_file(&job.output, &LevelOverrides::default()) else {
+    // Read once: decoded, and checked against the digest it was written with.
+    let Ok(bytes) = std::fs::read(&job.output) else {
+        return false;
+    };
+    let Ok(written) = decode_bytes(&job.output, &bytes, &LevelOverrides::default()) else {
         return false;
     };
     let Ok(input) = open(&job.input) else {
@@ -312,11 +316,11 @@ pub fn reads_back(job: &Job, open: &dyn Fn(&Path) -> Result<RawFrame, BoxError>)
     let size = (input.width, input.height);
     if (written.width, written.height) != size
         || (written.cfa, written.mono) != (input.cfa, input.mono)
-        || !pgrf_raw::pixels_intact(&job.output, &written).unwrap_or(false)
+        || !pgrf_raw::pixels_intact(&bytes, &written)
     {
         return false;
     }
-    drop((written, input));
+    drop((written, input, bytes));
     match &job.png {
         None => true,
         Some(png) => png_size(png).is_ok_and(|(w, h)| (w, h) == size || (h, w) == size),
