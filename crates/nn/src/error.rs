@@ -33,6 +33,10 @@ pub enum NnError {
     /// A network or training configuration that cannot be built.
     #[error("{0}")]
     Config(String),
+    /// A network configuration (a weight file's record, or what a run's
+    /// settings make) that pgrf cannot build, by cause.
+    #[error(transparent)]
+    Architecture(#[from] ArchFault),
     /// A training configuration file (`--config`) that cannot be read or
     /// parsed.
     #[error("{}: {reason}", path.display())]
@@ -249,10 +253,4 @@ pub enum ArchFault {
     /// A prior told the noise level, in a field that is not.
     #[error("the prior is {} but the field is not told the noise level", .0.describe())]
     PriorLevel(crate::condition::Conditioning),
-}
-
-impl From<ArchFault> for NnError {
-    fn from(e: ArchFault) -> NnError {
-        NnError::Config(e.to_string())
-    }
 }

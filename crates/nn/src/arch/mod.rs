@@ -195,16 +195,15 @@ impl Architecture {
     /// Whether weights of `file`'s architecture can start a run of this one:
     /// the same architecture, or (for a noise-aware one) the same network
     /// without conditioning, which [`Architecture::widen_unconditioned`]
-    /// extends.
+    /// extends, a narrower SID U-Net, or (for a flow with a prior) the
+    /// same field without it ([`PriorFlowConfig::starts_from`]).
     pub fn can_start_from(&self, file: &Architecture) -> bool {
         let narrower = self.narrower_sid(file).is_some();
+        let prior_added = matches!(
+            (self, file),
+            (Architecture::Sr3Prior(p), Architecture::Sr3(f)) if p.starts_from(f)
+        );
         let file = same_tensors_json(file);
-        let prior_added = match (self, &file) {
-            (Architecture::Sr3Prior(p), Some(_)) => {
-                file == same_tensors_json(&Architecture::Sr3(p.without_prior()))
-            }
-            _ => false,
-        };
         narrower
             || prior_added
             || file == same_tensors_json(self)

@@ -94,6 +94,15 @@ impl PriorFlowConfig {
         Ok(net)
     }
 
+    /// Whether `file` is this field without the prior (what
+    /// `--init` with a prior starts a run from); whether values
+    /// below black are kept does not matter (`super::same_tensors_json`).
+    pub fn starts_from(&self, file: &Sr3Config) -> bool {
+        let same = |a: &Sr3Config| super::same_tensors_json(&super::Architecture::Sr3(a.clone()));
+        let file = same(file);
+        file.is_some() && file == same(&self.without_prior())
+    }
+
     /// Make the tensors of `file`'s field (this one without the prior,
     /// [`PriorFlowConfig::without_prior`]) fit this one: the first
     /// convolution gains the prior's four input planes after T and the
@@ -107,8 +116,7 @@ impl PriorFlowConfig {
         tensors: &mut BTreeMap<String, NamedTensor>,
         fresh: &BTreeMap<String, NamedTensor>,
     ) -> bool {
-        let same = |a: &Sr3Config| super::same_tensors_json(&super::Architecture::Sr3(a.clone()));
-        if same(file) != same(&self.without_prior()) {
+        if !self.starts_from(file) {
             return false;
         }
         let at = 4 + self.flow.conditioning.extra_channels();
