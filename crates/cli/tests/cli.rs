@@ -363,6 +363,14 @@ fn synth_is_byte_reproducible_and_keeps_the_frame_geometry() {
     assert_eq!(std::fs::read(&new).unwrap(), std::fs::read(&old).unwrap());
 }
 
+/// The clean reference DNG of a small photo demo (128 x 96) made in `dir`.
+fn demo_clean(dir: &Path) -> PathBuf {
+    let demo = dir.join("demo");
+    let r = pgrf(&["demo", "-o", s(&demo), "--size", "128x96", "--quiet"]);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    demo.join("clean.dng")
+}
+
 /// The P-G model's dark capture carries its exact noise as a DNG
 /// NoiseProfile (S = K / range, O = sigma^2 / range^2, range the profile's
 /// scale the noise was drawn on), and that file is a profile again
@@ -371,10 +379,7 @@ fn synth_is_byte_reproducible_and_keeps_the_frame_geometry() {
 #[test]
 fn a_pg_capture_states_its_noise_and_serves_as_a_profile() {
     let dir = scratch("dngnp");
-    let demo = dir.join("demo");
-    let r = pgrf(&["demo", "-o", s(&demo), "--size", "128x96", "--quiet"]);
-    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
-    let clean = demo.join("clean.dng");
+    let clean = demo_clean(&dir);
     let (a, b) = (dir.join("a.dng"), dir.join("b.dng"));
     let r = pgrf(&[
         "synth",
@@ -443,10 +448,7 @@ fn a_pg_capture_states_its_noise_and_serves_as_a_profile() {
 #[test]
 fn every_capture_states_its_noise_for_enhance() {
     let dir = scratch("npall");
-    let demo = dir.join("demo");
-    let r = pgrf(&["demo", "-o", s(&demo), "--size", "128x96", "--quiet"]);
-    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
-    let clean = demo.join("clean.dng");
+    let clean = demo_clean(&dir);
     let dark = dir.join("dark.dng");
     let r = pgrf(&[
         "synth",

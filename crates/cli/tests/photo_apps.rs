@@ -72,31 +72,8 @@ fn render(app: App, dng: &Path, work: &Path) -> image::RgbImage {
 
 /// CIE 1976 L*a*b* (D65) of an 8-bit sRGB pixel.
 fn lab(p: [u8; 3]) -> [f64; 3] {
-    let lin = p.map(|v| {
-        let x = v as f64 / 255.0;
-        if x <= 0.04045 {
-            x / 12.92
-        } else {
-            ((x + 0.055) / 1.055).powf(2.4)
-        }
-    });
-    const M: [[f64; 3]; 3] = [
-        [0.4124, 0.3576, 0.1805],
-        [0.2126, 0.7152, 0.0722],
-        [0.0193, 0.1192, 0.9505],
-    ];
-    let xyz: [f64; 3] = std::array::from_fn(|i| (0..3).map(|k| M[i][k] * lin[k]).sum());
-    let white: [f64; 3] = std::array::from_fn(|i| M[i].iter().sum());
-    let d = 6.0f64 / 29.0;
-    let f = |t: f64| {
-        if t > d * d * d {
-            t.cbrt()
-        } else {
-            t / (3.0 * d * d) + 4.0 / 29.0
-        }
-    };
-    let [fx, fy, fz] = [0, 1, 2].map(|i| f(xyz[i] / white[i]));
-    [116.0 * fy - 16.0, 500.0 * (fx - fy), 200.0 * (fy - fz)]
+    let linear = p.map(|v| pgrf_raw::color::srgb_decode(v as f32 / 255.0) as f64);
+    pgrf_eval::cast::lab_of_linear_srgb(linear)
 }
 
 /// Mean L*a*b* of the 41 x 41 box centred on (x, y) of the DNG's frame,
@@ -139,54 +116,14 @@ fn run(args: &[&str]) {
     );
 }
 
-/// A reduced light frame (DNG) of a small simulated sensor, as
-/// tests/reduce.rs makes it.
+/// A reduced light frame (DNG) of a simulated 640 x 480 sensor, as
+/// tests/reduce.rs makes them.
 fn reduced_light(d: &Path) -> PathBuf {
-    let (vs, src, out) = (d.join("vs"), d.join("src"), d.join("reduced"));
-    let size = ["--width", "640", "--height", "480"];
-    run(&[
-        &["simulate-sensor", "--frames", "4", "-o", s(&vs)][..],
-        &["--dark-exposures", "0.02,0.05"],
-        &size,
-    ]
-    .concat());
-    let m = vs.join("masters");
-    run(&[
-        "calibrate",
-        "--bias",
-        s(&vs.join("bias")),
-        "--dark",
-        s(&vs.join("dark")),
-        "--flat",
-        s(&vs.join("flat")),
-        "--masters",
-        s(&m),
-        "-o",
-        s(&vs.join("c.safetensors")),
-    ]);
-    let light = [
-        "--frames",
-        "2",
-        "--stacks",
-        "flat",
-        "--seed",
-        "9",
-        "-o",
-        s(&src),
-    ];
-    run(&[&["simulate-sensor"][..], &size, &light].concat());
-    let input = src.join("flat").join("flat_8000e_0000.dng");
-    run(&[
-        "reduce",
-        s(&input),
-        "--masters",
-        s(&m),
-        "--calib",
-        s(&vs.join("c.safetensors")),
-        "-o",
-        s(&out),
-    ]);
-    out.join("flat_8000e_0000.dng")
+    let (vs, lights) = common::sensor(d, (640, 480), false, false);
+    let out = d.join("reduced");
+    let r = common::reduce(&vs, &lights[..1], &out);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    out.join(lights[0].file_name().unwrap())
 }
 
 #[test]

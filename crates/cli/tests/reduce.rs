@@ -6,80 +6,8 @@
 //! nothing written.
 
 mod common;
-use common::{one_line_error, pgrf, s, scratch};
-use std::path::{Path, PathBuf};
-
-/// A calibrated virtual sensor (64x48 FITS, seed 1, darks at 0.02 and
-/// 0.05 s, -10 °C) and its lights (the 0.04 s flats of a second run, seed
-/// 9): what the reference script makes (`fits` false: DNG frames).
-/// Returns (vs, lights).
-fn sensor(dir: &Path, mono: bool, fits: bool) -> (PathBuf, Vec<PathBuf>) {
-    let (vs, src, lights) = (dir.join("vs"), dir.join("src"), dir.join("lights"));
-    let mut common = vec!["--width", "64", "--height", "48", "--temperature", "-10"];
-    if fits {
-        common.push("--fits");
-    }
-    if mono {
-        common.push("--mono");
-    }
-    let run = |args: &[&str]| {
-        let out = pgrf(args);
-        assert!(
-            out.status.success(),
-            "{args:?}: {}",
-            String::from_utf8_lossy(&out.stderr)
-        );
-    };
-    let mut a = vec!["simulate-sensor"];
-    a.extend(&common);
-    a.extend([
-        "--frames",
-        "8",
-        "--dark-exposures",
-        "0.02,0.05",
-        "-o",
-        s(&vs),
-    ]);
-    run(&a);
-    let (bias, dark, flat) = (vs.join("bias"), vs.join("dark"), vs.join("flat"));
-    let (masters, calib) = (vs.join("masters"), vs.join("calib.safetensors"));
-    run(&[
-        "calibrate",
-        "--bias",
-        s(&bias),
-        "--dark",
-        s(&dark),
-        "--flat",
-        s(&flat),
-        "--masters",
-        s(&masters),
-        "-o",
-        s(&calib),
-    ]);
-    let mut a = vec!["simulate-sensor"];
-    a.extend(&common);
-    a.extend([
-        "--frames",
-        "2",
-        "--stacks",
-        "flat",
-        "--seed",
-        "9",
-        "-o",
-        s(&src),
-    ]);
-    run(&a);
-    std::fs::create_dir_all(&lights).unwrap();
-    let mut files = Vec::new();
-    for i in 0..2 {
-        let ext = if fits { "fits" } else { "dng" };
-        let name = format!("flat_8000e_{i:04}.{ext}");
-        let to = lights.join(&name);
-        std::fs::copy(src.join("flat").join(&name), &to).unwrap();
-        files.push(to);
-    }
-    (vs, files)
-}
+use common::{one_line_error, pgrf, reduce, s, scratch, sensor};
+use std::path::Path;
 
 /// A FITS file's bytes with one more header card (`KEY = value`) where
 /// its END card was, END moved one card on (the header block has room).
@@ -98,23 +26,6 @@ fn with_card(fits: &[u8], key: &str, value: &str) -> Vec<u8> {
     out[end..end + 80].copy_from_slice(card.as_bytes());
     out[end + 80..end + 83].copy_from_slice(b"END");
     out
-}
-
-fn reduce(vs: &Path, lights: &[PathBuf], out: &Path) -> std::process::Output {
-    let mut args = vec!["reduce".to_string()];
-    args.extend(lights.iter().map(|l| s(l).to_string()));
-    for a in [
-        "--masters",
-        s(&vs.join("masters")),
-        "--calib",
-        s(&vs.join("calib.safetensors")),
-        "-o",
-        s(out),
-    ] {
-        args.push(a.to_string());
-    }
-    let args: Vec<&str> = args.iter().map(|a| a.as_str()).collect();
-    pgrf(&args)
 }
 
 /// The samples of a reduced FITS light in DN, and its header cards (key,
@@ -168,7 +79,7 @@ const CCDPROC: [(&str, bool, f64, [f64; 4]); 4] = [
 fn reduced_lights_match_ccdproc() {
     for mono in [false, true] {
         let dir = scratch("reduce", if mono { "mono" } else { "rggb" });
-        let (vs, lights) = sensor(&dir, mono, true);
+        let (vs, lights) = sensor(&dir, (64, 48), mono, true);
         let out = dir.join("out");
         let run = reduce(&vs, &lights, &out);
         assert!(
@@ -234,7 +145,7 @@ fn reduced_lights_match_ccdproc() {
 #[test]
 fn lights_that_do_not_fit_are_refused_naming_the_file() {
     let dir = scratch("reduce", "refusals");
-    let (vs, lights) = sensor(&dir, false, true);
+    let (vs, lights) = sensor(&dir, (64, 48), false, true);
     let odd = dir.join("odd");
     let base = [
         "simulate-sensor",
@@ -305,7 +216,7 @@ fn lights_that_do_not_fit_are_refused_naming_the_file() {
 #[test]
 fn raw_lights_become_dngs_at_the_light_level() {
     let dir = scratch("reduce", "dng");
-    let (vs, lights) = sensor(&dir, false, false);
+    let (vs, lights) = sensor(&dir, (64, 48), false, false);
     let light = &lights[0];
     let reduced = dir.join("out");
     let run = reduce(&vs, std::slice::from_ref(light), &reduced);

@@ -116,3 +116,102 @@ pub fn noise_aware_model(path: &Path) {
     ]);
     assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
 }
+
+/// A calibrated virtual sensor (`size` pixels, FITS, seed 1, darks at 0.02 and
+/// 0.05 s, -10 °C) and its lights (the 0.04 s flats of a second run, seed
+/// 9): what the reference script makes (`fits` false: DNG frames).
+/// Returns (vs, lights).
+pub fn sensor(dir: &Path, size: (u32, u32), mono: bool, fits: bool) -> (PathBuf, Vec<PathBuf>) {
+    let (vs, src, lights) = (dir.join("vs"), dir.join("src"), dir.join("lights"));
+    let (width, height) = (size.0.to_string(), size.1.to_string());
+    let mut common = vec![
+        "--width",
+        &width,
+        "--height",
+        &height,
+        "--temperature",
+        "-10",
+    ];
+    if fits {
+        common.push("--fits");
+    }
+    if mono {
+        common.push("--mono");
+    }
+    let run = |args: &[&str]| {
+        let out = pgrf(args);
+        assert!(
+            out.status.success(),
+            "{args:?}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+    };
+    let mut a = vec!["simulate-sensor"];
+    a.extend(&common);
+    a.extend([
+        "--frames",
+        "8",
+        "--dark-exposures",
+        "0.02,0.05",
+        "-o",
+        s(&vs),
+    ]);
+    run(&a);
+    let (bias, dark, flat) = (vs.join("bias"), vs.join("dark"), vs.join("flat"));
+    let (masters, calib) = (vs.join("masters"), vs.join("calib.safetensors"));
+    run(&[
+        "calibrate",
+        "--bias",
+        s(&bias),
+        "--dark",
+        s(&dark),
+        "--flat",
+        s(&flat),
+        "--masters",
+        s(&masters),
+        "-o",
+        s(&calib),
+    ]);
+    let mut a = vec!["simulate-sensor"];
+    a.extend(&common);
+    a.extend([
+        "--frames",
+        "2",
+        "--stacks",
+        "flat",
+        "--seed",
+        "9",
+        "-o",
+        s(&src),
+    ]);
+    run(&a);
+    std::fs::create_dir_all(&lights).unwrap();
+    let mut files = Vec::new();
+    for i in 0..2 {
+        let ext = if fits { "fits" } else { "dng" };
+        let name = format!("flat_8000e_{i:04}.{ext}");
+        let to = lights.join(&name);
+        std::fs::copy(src.join("flat").join(&name), &to).unwrap();
+        files.push(to);
+    }
+    (vs, files)
+}
+
+/// `pgrf reduce LIGHTS --masters --calib -o OUT` with the sensor's masters
+/// and calibration ([`sensor`]).
+pub fn reduce(vs: &Path, lights: &[PathBuf], out: &Path) -> std::process::Output {
+    let mut args = vec!["reduce".to_string()];
+    args.extend(lights.iter().map(|l| s(l).to_string()));
+    for a in [
+        "--masters",
+        s(&vs.join("masters")),
+        "--calib",
+        s(&vs.join("calib.safetensors")),
+        "-o",
+        s(out),
+    ] {
+        args.push(a.to_string());
+    }
+    let args: Vec<&str> = args.iter().map(|a| a.as_str()).collect();
+    pgrf(&args)
+}

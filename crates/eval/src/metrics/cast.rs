@@ -146,6 +146,13 @@ fn lab(xyz: Vec3) -> Vec3 {
     [116.0 * fy - 16.0, 500.0 * (fx - fy), 200.0 * (fy - fz)]
 }
 
+/// CIE 1976 L*a*b* (D65) of linear sRGB `rgb` (the primaries of
+/// [`SRGB_TO_XYZ`]): what the cast is measured in, and what a render's
+/// patches are compared in (`crates/cli/tests/photo_apps.rs`).
+pub fn lab_of_linear_srgb(rgb: [f64; 3]) -> [f64; 3] {
+    lab(mat_vec(&SRGB_TO_XYZ, rgb))
+}
+
 /// The colour cast of `result` against `reference`, both packed
 /// `(4, H, W)` R, G1, B, G2 normalised to white = 1, in the camera colour
 /// `colour` (see the module documentation for the definition). `Ok(None)`
