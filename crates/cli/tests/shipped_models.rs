@@ -5,14 +5,14 @@
 //! are `models/*.toml` too, with their logs in `models/logs`.
 
 use pgrf_nn::weights::{read_meta, WeightMeta};
-use pgrf_nn::{Method, TrainConfig};
+use pgrf_nn::{Architecture, Method, TrainConfig};
 use serde_json::Value;
 use std::path::PathBuf;
 
 /// Seconds of training behind each shipped file's last stage, as its
 /// record carries them (the stages' logs sum to the same within a second).
 const SPC_SECONDS: f64 = 29_198.8;
-const PGRF_SECONDS: f64 = 23_294.8;
+const PGRF_SECONDS: f64 = 28_730.0;
 
 fn models() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../models")
@@ -54,8 +54,11 @@ fn check(name: &str, method: Method) -> WeightMeta {
     let cfg = config(name);
     let meta = read_meta(&models().join(format!("{name}.safetensors"))).unwrap();
     assert_eq!(meta.arch.method(), method);
-    // The architecture the config builds is the file's, field for field.
-    let arch = cfg.architecture(method).unwrap();
+    // The architecture the config builds is the file's, field for field
+    // (a prior's path is the repository root's, as the run's).
+    let mut at_root = cfg.clone();
+    at_root.prior = cfg.prior.as_ref().map(|p| models().join("..").join(p));
+    let arch = at_root.architecture(method).unwrap();
     assert_eq!(
         serde_json::to_value(&arch).unwrap(),
         serde_json::to_value(&meta.arch).unwrap(),
@@ -99,12 +102,18 @@ fn check_stages(name: &str, meta: &WeightMeta, earlier: &[&str], method: Method)
         .as_ref()
         .and_then(|t| t.started_from.as_ref())
         .expect("a fine-tuned file");
+    // A flow that corrects a prior's restoration has the earlier stages'
+    // field inside it.
+    let shipped = match &meta.arch {
+        Architecture::Sr3Prior(p) => Architecture::Sr3(p.flow.clone()),
+        a => a.clone(),
+    };
     let mut steps = 0;
     for stage in earlier {
         let cfg = config(stage);
         assert_eq!(
             body(&cfg.architecture(method).unwrap()),
-            body(&meta.arch),
+            body(&shipped),
             "{stage}: architecture"
         );
         let ran = steps_run(stage);
@@ -148,8 +157,10 @@ fn spc_config_describes_the_shipped_denoiser() {
 #[test]
 fn pgrf_config_describes_the_shipped_flow_model() {
     let meta = check("pgrf", Method::Pgrf);
-    // Four blind stages (20,000 + 12,000 + 3,000 + 2,000 steps), then the
-    // noise-aware ones: 1,725 (stopped) + 2,000 + 477 (stopped) steps.
+    // Four blind stages (20,000 + 12,000 + 3,000 + 2,000 steps), the
+    // noise-aware ones (1,725 (stopped) + 2,000 + 477 (stopped) + 2,394
+    // (stopped) steps), then issue 51's lever 5: the last one's field
+    // correcting the built-in SPC's restoration.
     let stages = [
         "pgrf_base",
         "pgrf_stage2",
@@ -158,6 +169,7 @@ fn pgrf_config_describes_the_shipped_flow_model() {
         "pgrf_noise2",
         "pgrf_noise3",
         "pgrf_noise4",
+        "pgrf_noise5",
     ];
     let seconds = check_stages("pgrf", &meta, &stages, Method::Pgrf);
     assert!((seconds - PGRF_SECONDS).abs() < 1.0, "{seconds}");
@@ -166,6 +178,22 @@ fn pgrf_config_describes_the_shipped_flow_model() {
     assert_eq!((cfg.time_max, cfg.window), (0.5, Some(128)));
     assert!(meta.arch.conditioning().needs_level());
     assert!(meta.t2.is_some(), "searched");
+    // Its prior is the built-in SPC, byte for byte.
+    let prior = models()
+        .join("..")
+        .join(cfg.prior.as_ref().expect("a prior"));
+    assert_eq!(
+        std::fs::read(prior).unwrap(),
+        std::fs::read(models().join("spc.safetensors")).unwrap()
+    );
+    let Architecture::Sr3Prior(p) = &meta.arch else {
+        panic!("{:?}", meta.arch)
+    };
+    let spc = read_meta(&models().join("spc.safetensors")).unwrap().arch;
+    assert_eq!(
+        serde_json::to_value(Architecture::SidUnet(p.prior.clone())).unwrap(),
+        serde_json::to_value(spc).unwrap()
+    );
 }
 
 /// The check can fail: a config with another width is not the shipped file.
