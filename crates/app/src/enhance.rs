@@ -18,12 +18,11 @@
 use pgrf_calib::light::LightError;
 use pgrf_calib::{CalibError, Calibration};
 use pgrf_core::Progress;
-use pgrf_nn::condition::NoiseLevel;
 use pgrf_nn::infer::prepare::{auto_ratio, ratio_from_exposure};
 use pgrf_nn::infer::restorer::describe_sampler;
 use pgrf_nn::infer::{restore_frame, Restore, Tiling};
 use pgrf_nn::NnError;
-use pgrf_noise::lookup::{find_noise, range_of, FrameNoise, KnownNoise, NoiseFlag};
+use pgrf_noise::lookup::{find_noise, FrameNoise, KnownNoise, NoiseFlag};
 use pgrf_raw::{render_preview, write_frame, DngOptions, PreviewOptions, RawError, RawFrame};
 use serde::Serialize;
 use std::path::{Path, PathBuf};
@@ -283,7 +282,7 @@ pub fn enhance_file<P: Progress>(
     };
     let level = noise
         .as_ref()
-        .map(|n| NoiseLevel::from_dn(n.k, n.read, n.row, range_of(&frame), ratio as f64));
+        .map(|n| crate::array::level_of(n, &frame, ratio));
     let progress = start();
     let mut restored = restore_frame(
         restorer,

@@ -1,6 +1,10 @@
 //! What pgrf does with its networks, one recipe per command, over the
 //! networks, training and tensor inference of `pgrf-nn`:
 //!
+//! - [`array`]: a packed array restored as `pgrf enhance` restores a
+//!   file's (the Python package's `Model.restore`);
+//! - [`builtin`]: the models built in (`builtin:spc`, `builtin:pgrf`) and
+//!   loading a model by name or file;
 //! - [`enhance`]: a dark RAW file, or a batch of them, restored to a DNG
 //!   (calibration, exposure ratio, noise lookup, masked black, tiles),
 //!   with the batch runner's shards, manifests and skip-existing;
@@ -17,6 +21,8 @@
 
 #![warn(missing_docs)]
 
+pub mod array;
+pub mod builtin;
 pub mod demo;
 pub mod enhance;
 pub mod method;

@@ -6,7 +6,6 @@ mod cmd;
 mod input;
 mod io;
 mod progress;
-mod shipped;
 
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;

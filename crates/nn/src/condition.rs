@@ -78,6 +78,16 @@ impl NoiseLevel {
         }
     }
 
+    /// The level of a normalised capture whose variance is `s` x + `o` at
+    /// signal x (the DNG NoiseProfile's convention, on the scale (DN -
+    /// black) / (white - black)), amplified by `ratio`.
+    pub fn from_normalised(s: f64, o: f64, ratio: f64) -> NoiseLevel {
+        NoiseLevel {
+            gain: (ratio * s) as f32,
+            floor: (ratio * ratio * o) as f32,
+        }
+    }
+
     /// Whether both parts are finite, the gain positive and the floor not
     /// negative: what a network can be conditioned on.
     pub fn is_usable(&self) -> bool {
@@ -254,6 +264,31 @@ mod tests {
             .map(|i| (i as f32 * 0.37).sin() * 0.6 + 0.3)
             .collect();
         Tensor::from_data(TensorData::new(v, [2, 4, 3, 3]), &Default::default())
+    }
+
+    /// The NoiseProfile pair of a capture (S = K / range, O = (read^2 +
+    /// row^2) / range^2) gives the level its DN parameters give: the A7S2 at
+    /// ISO 1600 (K 1.5301, read 6.299, row 0.989 DN, range 15871) x100.
+    #[test]
+    fn the_noise_profile_pair_is_the_dn_parameters_level() {
+        let (k, read, row, range, ratio) = (1.5301, 6.299, 0.989, 15871.0, 100.0);
+        let dn = NoiseLevel::from_dn(k, read, row, range, ratio);
+        let s = k / range;
+        let o = (read * read + row * row) / (range * range);
+        let pair = NoiseLevel::from_normalised(s, o, ratio);
+        assert!(
+            (pair.gain - dn.gain).abs() <= 1e-7 * dn.gain,
+            "{pair:?} {dn:?}"
+        );
+        assert!(
+            (pair.floor - dn.floor).abs() <= 1e-7 * dn.floor,
+            "{pair:?} {dn:?}"
+        );
+        // 0.00964 and 0.00161: x100 of the A7S2's gain and floor.
+        assert!(
+            (dn.gain - 0.009641).abs() < 1e-6 && (dn.floor - 1.6140e-3).abs() < 1e-7,
+            "{dn:?}"
+        );
     }
 
     fn levels() -> Vec<NoiseLevel> {

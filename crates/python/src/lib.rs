@@ -1,5 +1,5 @@
 //! The `pgrf._pgrf` extension module: pgrf's RAW reading, noise synthesis,
-//! unprocessing, calibration and metrics for Python, numpy in and out. The
+//! unprocessing, calibration, metrics and networks for Python, numpy in and out. The
 //! Python package `pgrf` (crates/python/python/pgrf) wraps it with
 //! dataclasses, conversions and documentation; each function here makes one
 //! library call, releases the GIL while it works (`threads::run`) and
@@ -11,6 +11,7 @@ mod calibrate;
 mod errors;
 mod frame;
 mod metrics;
+mod model;
 mod profile;
 mod synth;
 mod threads;
@@ -22,6 +23,7 @@ fn _pgrf(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<frame::Header>()?;
     m.add_class::<profile::Profile>()?;
     m.add_class::<calibrate::Calibration>()?;
+    m.add_class::<model::Network>()?;
     m.add_function(wrap_pyfunction!(frame::read, m)?)?;
     m.add_function(wrap_pyfunction!(frame::write_dng, m)?)?;
     m.add_function(wrap_pyfunction!(frame::read_photo, m)?)?;

@@ -7,9 +7,9 @@
 //! with everything side by side.
 
 use crate::progress::Bar;
-use crate::shipped;
 use anyhow::{bail, Context, Result};
 use clap::{Args, ValueEnum};
+use pgrf_app::builtin;
 use pgrf_app::demo::{
     self, BoxError, Demo, DemoConfig, Models, PhotoSource, Scene as DemoScene, ISO, RATIOS,
 };
@@ -83,7 +83,7 @@ pub struct DemoArgs {
 /// expected method.
 fn model(file: Option<&Path>, builtin: &str, method: &str, flag: &str) -> Result<Box<dyn Restore>> {
     let path = file.unwrap_or(Path::new(builtin));
-    let r = shipped::load_model(path, SamplerChoice::default(), DeviceKind::Cpu)
+    let r = builtin::load_model(path, SamplerChoice::default(), DeviceKind::Cpu)
         .with_context(|| format!("{flag} {}", path.display()))?;
     if r.meta().arch.method().name() != method {
         bail!(

@@ -35,7 +35,7 @@ pub fn run(a: &EnhanceArgs, g: &crate::Globals) -> Result<()> {
     cfg.tiling.kernels = kernels;
     cfg.darktable = g.darktable.map(Into::into);
     let model = e.model();
-    let restorer = crate::shipped::load_model(&model, e.sampler(), e.device)
+    let restorer = pgrf_app::builtin::load_model(&model, e.sampler(), e.device)
         .with_context(|| format!("--model {}", model.display()))?;
     if let (Some(shard), 0) = (batch.shard, batch.selected_count()) {
         if !e.quiet {

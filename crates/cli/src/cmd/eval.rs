@@ -51,7 +51,7 @@ fn load_models(
     let mut names: Vec<String> = Vec::new();
     let mut models: Vec<Box<dyn MethodUnderTest>> = Vec::new();
     for m in &a.model {
-        let r = crate::shipped::load_model(m, SamplerChoice::default(), a.device)
+        let r = pgrf_app::builtin::load_model(m, SamplerChoice::default(), a.device)
             .with_context(|| format!("--model {}", m.display()))?;
         let mut name = m
             .file_stem()

@@ -20,15 +20,28 @@ pub fn network_input(
     ratio: f32,
     dark_dn: Option<&Array3<f32>>,
 ) -> Result<Array3<f32>> {
-    if !(ratio.is_finite() && ratio > 0.0) {
-        return Err(NnError::BadSetting {
-            flag: "--ratio",
-            message: format!("the exposure ratio must be a positive number, got {ratio}"),
-        });
+    check_ratio(ratio)?;
+    amplify(normalised_minus_dark(frame, dark_dn)?, ratio)
+}
+
+/// Refuse an exposure ratio that is not a positive number.
+fn check_ratio(ratio: f32) -> Result<()> {
+    if ratio.is_finite() && ratio > 0.0 {
+        return Ok(());
     }
-    let mut x = normalised_minus_dark(frame, dark_dn)?;
-    x.par_mapv_inplace(|v| (v * ratio).min(1.0));
-    Ok(x)
+    Err(NnError::BadSetting {
+        flag: "--ratio",
+        message: format!("the exposure ratio must be a positive number, got {ratio}"),
+    })
+}
+
+/// A packed, normalised dark capture made the network's input: multiplied
+/// by `ratio` (the exposure ratio, > 0) and clipped at 1, values below
+/// black kept (what [`network_input`] does after packing).
+pub fn amplify(mut packed: Array3<f32>, ratio: f32) -> Result<Array3<f32>> {
+    check_ratio(ratio)?;
+    packed.par_mapv_inplace(|v| (v * ratio).min(1.0));
+    Ok(packed)
 }
 
 /// `frame` packed, each plane normalised by its black and white levels,

@@ -47,7 +47,7 @@ impl Default for SamplerChoice {
 /// Restores packed `(4, h, w)` tiles of amplified noisy raw in [0, 1].
 /// Implemented by [`Restorer`] on every backend; [`load`] gives one as a
 /// `Box<dyn Restore>`.
-pub trait Restore {
+pub trait Restore: Send + Sync {
     /// The weight file's record (architecture, noise, training, t2).
     fn meta(&self) -> &WeightMeta;
     /// The flow model's sampler; None for the one-pass denoiser.

@@ -1,6 +1,6 @@
 """pgrf for Python: RAW reading, per-pixel noise calibration, physics-based
-low-light noise synthesis, unprocessing and the ELD protocol's metrics, as
-numpy arrays.
+low-light noise synthesis, unprocessing, the ELD protocol's metrics and the
+denoising networks (the built-in SPC and PGRF, or your own), on numpy arrays.
 
 The work is pgrf's Rust library (the same code the ``pgrf`` command runs),
 with the GIL released, so a PyTorch DataLoader's workers synthesise in
@@ -17,6 +17,7 @@ sub-lattices in the same order), normalised as (DN - black) / (white - black).
     >>> cap = pgrf.synth(clean, pgrf.Profile.builtin("sony-a7s2"), ratio=100, iso=1600, seed=1, meta=meta)
     >>> pgrf.write_dng("dark.dng", cap.dark, cap.meta)
     >>> pgrf.metrics.psnr(cap.brightened, clean)
+    >>> restored = pgrf.Model.load("builtin:spc").restore(cap.dark, ratio=cap.ratio, meta=cap.meta)
 """
 
 from __future__ import annotations
@@ -40,6 +41,7 @@ __all__ = [
     "Capture",
     "Header",
     "Metadata",
+    "Model",
     "Profile",
     "calibrate",
     "get_threads",
@@ -393,3 +395,116 @@ def calibrate(
         temperature_tolerance,
     )
     return Calibration(data)
+
+
+NoiseArg = Union[Tuple[float, float], Sequence[Tuple[float, float]]]
+
+
+def _noise_pair(noise: NoiseArg) -> Tuple[float, float]:
+    """(S, O) from a pair or from per-plane pairs (their means, as ``pgrf enhance`` reads a DNG's)."""
+    a = np.asarray(noise, dtype=np.float64)
+    if a.shape == (2,):
+        return float(a[0]), float(a[1])
+    if a.ndim == 2 and a.shape[1] == 2 and a.shape[0] >= 1:
+        return float(a[:, 0].mean()), float(a[:, 1].mean())
+    raise ValueError(f"noise: expected (S, O) or a list of (S, O) pairs, got shape {a.shape}")
+
+
+class Model:
+    """A denoising network: the built-in SPC or PGRF, or a weight file ``pgrf train`` wrote.
+
+    ``restore`` runs what ``pgrf enhance`` runs after decoding a file: the
+    capture multiplied by the exposure ratio and clipped at 1, the noise
+    level a noise-aware network is told, the tiled restoration; the same
+    array, ratio and noise give the pixels ``pgrf enhance`` writes. The GIL
+    is released while it works (in the thread pool ``set_threads`` sizes),
+    and one model may be used from several threads at once.
+
+        >>> model = pgrf.Model.load("builtin:spc")
+        >>> dark, meta = pgrf.read("dark.dng", clip=False)
+        >>> clean = model.restore(dark, ratio=100, meta=meta)
+    """
+
+    def __init__(self, net: "_pgrf.Network"):
+        self._net = net
+
+    @classmethod
+    def load(
+        cls,
+        spec: PathType = "builtin:spc",
+        *,
+        sampler: str = "two-stage",
+        t2: Optional[float] = None,
+        samples: int = 1,
+        device: str = "cpu",
+    ) -> "Model":
+        """Load ``"builtin:spc"``, ``"builtin:pgrf"`` or a weight file (``pgrf train``'s, or
+        ``pgrf import-weights``'). A flow model samples with ``sampler`` ("two-stage" at the
+        file's searched ``t2`` unless given, "one-step" or "euler:N"), averaging ``samples``
+        samples; ``device`` "cuda" needs a package built with CUDA."""
+        return cls(_pgrf.Network.load(fspath(spec), sampler, t2, int(samples), device))
+
+    @property
+    def description(self) -> str:
+        """The network and its sampler, as ``pgrf enhance`` prints them."""
+        return self._net.description
+
+    @property
+    def method(self) -> str:
+        """"spc" (one pass) or "pgrf" (the flow model)."""
+        return self._net.method
+
+    @property
+    def noise_aware(self) -> bool:
+        """Whether the network is told its input's noise (then ``restore`` needs ``noise`` or ``meta``)."""
+        return self._net.noise_aware
+
+    @property
+    def nfe(self) -> int:
+        """Network evaluations per tile."""
+        return self._net.nfe
+
+    @property
+    def record(self) -> Dict[str, Any]:
+        """The weight file's record: architecture, noise it learnt, training run, t2."""
+        return json.loads(self._net.record_json)
+
+    def restore(
+        self,
+        packed: Any,
+        *,
+        ratio: float,
+        noise: Optional[NoiseArg] = None,
+        meta: Optional[Metadata] = None,
+        tile: Optional[int] = None,
+        overlap: Optional[int] = None,
+        seed: int = 0,
+        return_noise: bool = False,
+    ) -> Any:
+        """Restore a dark capture: ``packed`` float32 ``(4, H/2, W/2)`` normalised as
+        ``read(path, clip=False)`` gives it (values below black kept), brightened by ``ratio``.
+
+        Returns the restored planes ``(4, H/2, W/2)`` in [0, 1] on the same scale (``write_dng``
+        writes them with ``meta``). A noise-aware model needs the capture's noise: ``noise``
+        as (S, O), the variance S x + O of ``packed`` at signal x before the ratio (the DNG
+        NoiseProfile's convention; per-plane pairs are averaged), or ``meta``, from which it is
+        found as ``pgrf enhance`` finds it (the NoiseProfile, darktable's or a built-in profile
+        of the camera at its ISO, else a blind estimate on the pixels). ``tile``/``overlap``:
+        tile side and overlap in packed pixels (default: from free memory, as ``pgrf enhance``);
+        ``seed``: the flow model's start noise. With ``return_noise`` also returns what the
+        lookup found (None when ``noise`` was given or the model needs none).
+        """
+        args = (
+            _array(packed, 3, "restore packed"),
+            float(ratio),
+            None if noise is None else _noise_pair(noise),
+            None if meta is None else meta._fields(),
+            tile,
+            overlap,
+            _seed(seed),
+        )
+        out, found = self._net.restore(*args)
+        return (out, found) if return_noise else out
+
+    def __repr__(self) -> str:
+        return f"pgrf.Model({self.description})"
