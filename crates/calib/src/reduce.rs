@@ -35,7 +35,8 @@ use std::path::{Path, PathBuf};
 /// reduced with, and where the results go.
 #[derive(Clone, Debug, Default)]
 pub struct ReduceConfig {
-    /// Light frames (FITS or camera RAW).
+    /// Light frames (FITS or camera RAW), or folders of them (their files,
+    /// sorted by name).
     pub lights: Vec<PathBuf>,
     /// The masters folder `pgrf calibrate --masters` wrote: `master_bias`,
     /// `master_dark_<t>s` (any number), `master_flat_<t>s` (the brightest
@@ -44,8 +45,9 @@ pub struct ReduceConfig {
     /// The calibration file of the same run: dark law, dark offset,
     /// defect map, temperature, camera.
     pub calib: PathBuf,
-    /// Output folder (created if missing): one file per light, its stem
-    /// kept, FITS for a FITS light and DNG for a camera RAW.
+    /// Output folder (created if missing): one file per light, its name
+    /// kept but for the final extension, FITS for a FITS light and DNG for
+    /// a camera RAW.
     pub output: PathBuf,
     /// How far (degrees C) a light's temperature may lie from the
     /// calibration's; None for [`crate::calibrate::TEMPERATURE_TOLERANCE_C`].
@@ -524,8 +526,18 @@ fn normalise_flat(m: &mut Masters) -> Result<(), ReduceError> {
     Ok(())
 }
 
+/// The master dark a light was given and how it was scaled.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct DarkUsed {
+    /// The master dark's file name.
+    pub master: String,
+    /// Its scale factor g(t) / g(t_d) (the dark law at the light's and the
+    /// master's exposures).
+    pub scale: f64,
+}
+
 /// What became of one light.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, serde::Serialize)]
 pub struct ReducedLight {
     /// The light.
     pub input: PathBuf,
@@ -533,14 +545,14 @@ pub struct ReducedLight {
     pub output: PathBuf,
     /// Its exposure, s.
     pub exposure_s: Option<f64>,
-    /// The master dark used and its scale factor g(t) / g(t_d).
-    pub dark: Option<(String, f64)>,
+    /// The master dark used and its scale.
+    pub dark: Option<DarkUsed>,
     /// Pixels replaced by cosmetic correction.
     pub replaced: usize,
 }
 
-/// What a run did.
-#[derive(Clone, Debug)]
+/// What a run did (`pgrf reduce --json` prints it).
+#[derive(Clone, Debug, serde::Serialize)]
 pub struct ReduceOutcome {
     /// Each light, in order.
     pub lights: Vec<ReducedLight>,
@@ -677,12 +689,28 @@ pub fn reduce_frame(
     (out, used, replaced)
 }
 
-/// The output file of `light` in `dir`: its stem, `.fits` for a FITS
-/// light, `.dng` for a camera RAW.
+/// The output file of `light` in `dir`: its file name with only the final
+/// extension changed, `.fits` for a FITS light, `.dng` for a camera RAW
+/// (`M51.00000003.FIT` -> `M51.00000003.fits`, `M51.00000004.DARK.FIT` ->
+/// `M51.00000004.DARK.fits`), so lights of one folder with different names
+/// keep different names unless they differ only in that extension.
 fn output_of(dir: &Path, light: &Path, fits: bool) -> PathBuf {
-    let stem = light.file_stem().unwrap_or(light.as_os_str());
-    dir.join(stem)
-        .with_extension(if fits { "fits" } else { "dng" })
+    let mut name = light.file_stem().unwrap_or(light.as_os_str()).to_owned();
+    name.push(if fits { ".fits" } else { ".dng" });
+    dir.join(name)
+}
+
+/// `lights` with each folder replaced by its files, sorted by name
+/// (hidden files left out; [`pgrf_raw::files::list_files`]).
+fn list_lights(lights: &[PathBuf]) -> Result<Vec<PathBuf>, ReduceError> {
+    let mut out = Vec::with_capacity(lights.len());
+    for l in lights {
+        match l.is_dir() {
+            true => out.extend(pgrf_raw::files::list_files(l)?),
+            false => out.push(l.clone()),
+        }
+    }
+    Ok(out)
 }
 
 fn is_fits_file(p: &Path) -> bool {
@@ -699,6 +727,10 @@ pub fn reduce_to_files(
     progress: &dyn Progress,
 ) -> Result<ReduceOutcome, ReduceError> {
     crate::calibrate::check_temperature_tolerance(config.temperature_tolerance)?;
+    let config = &ReduceConfig {
+        lights: list_lights(&config.lights)?,
+        ..config.clone()
+    };
     let calib = Calibration::load(&config.calib)?;
     let masters = load_masters(&config.masters, &calib, &config.calib)?;
     let outputs: Vec<PathBuf> = config
@@ -756,7 +788,7 @@ pub fn reduce_to_files(
             input: light.clone(),
             output,
             exposure_s: frame.exposure_s,
-            dark,
+            dark: dark.map(|(master, scale)| DarkUsed { master, scale }),
             replaced,
         });
         progress.advance(1);

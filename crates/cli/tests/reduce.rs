@@ -241,3 +241,92 @@ fn raw_lights_become_dngs_at_the_light_level() {
     assert!(((above - level) / level).abs() < 0.01, "{above} vs {level}");
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// A CCDSoft-named sequence of 10 lights (`M51.00000001.FIT` ..
+/// `M51.00000009.FIT` and a dark kept as `M51.00000010.DARK.FIT`), given as
+/// their folder, reduces in one run: each output is its light's file name
+/// with only the extension changed, the `--json` line lists all ten in name
+/// order with the dark and its scale, and a light reduces to the same
+/// pixels under its CCDSoft name as under its own.
+#[test]
+fn a_ccdsoft_named_sequence_reduces_in_one_run_from_its_folder() {
+    let dir = scratch("reduce", "ccdsoft");
+    let (vs, lights) = sensor(&dir, (64, 48), false, true);
+    let src = dir.join("src10");
+    let made = pgrf(&[
+        "simulate-sensor",
+        "--fits",
+        "--width",
+        "64",
+        "--height",
+        "48",
+        "--temperature",
+        "-10",
+        "--frames",
+        "9",
+        "--stacks",
+        "flat",
+        "--seed",
+        "11",
+        "-o",
+        s(&src),
+    ]);
+    assert!(made.status.success());
+    let seq = dir.join("seq");
+    std::fs::create_dir_all(&seq).unwrap();
+    let mut names = Vec::new();
+    for i in 1..=10 {
+        let name = match i {
+            10 => "M51.00000010.DARK.FIT".to_string(),
+            _ => format!("M51.{i:08}.FIT"),
+        };
+        let from = match i {
+            1 => lights[0].clone(),
+            10 => lights[1].clone(),
+            _ => src.join(format!("flat/flat_8000e_{:04}.fits", i - 2)),
+        };
+        std::fs::copy(&from, seq.join(&name)).unwrap();
+        names.push(name);
+    }
+    let out = dir.join("out");
+    let mut args: Vec<String> = ["reduce", s(&seq), "--masters"].map(String::from).to_vec();
+    args.extend([
+        s(&vs.join("masters")).to_string(),
+        "--calib".into(),
+        s(&vs.join("calib.safetensors")).to_string(),
+        "-o".into(),
+        s(&out).to_string(),
+        "--json".into(),
+    ]);
+    let run = pgrf(&args.iter().map(|a| a.as_str()).collect::<Vec<_>>());
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let mut written: Vec<String> = std::fs::read_dir(&out)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    written.sort();
+    let want: Vec<String> = names.iter().map(|n| n.replace(".FIT", ".fits")).collect();
+    assert_eq!(written, want);
+    let v: serde_json::Value = serde_json::from_slice(&run.stdout).unwrap();
+    let listed = v["lights"].as_array().unwrap();
+    assert_eq!(listed.len(), 10);
+    for (l, name) in listed.iter().zip(&names) {
+        assert!(l["input"].as_str().unwrap().ends_with(name.as_str()), "{l}");
+        assert_eq!(l["dark"]["master"], "master_dark_0.05s.fits");
+        let scale = l["dark"]["scale"].as_f64().unwrap();
+        assert!((scale - (0.04f64 / 0.05).sqrt()).abs() < 1e-6, "{scale}");
+    }
+    assert_eq!(v["law"], "sqrt");
+    // M51.00000001.FIT is the first light: the same pixels as under its
+    // own name.
+    let own = dir.join("own");
+    assert!(reduce(&vs, &lights[..1], &own).status.success());
+    let (a, _) = read_reduced(&own.join("flat_8000e_0000.fits"));
+    let (b, _) = read_reduced(&out.join("M51.00000001.fits"));
+    assert_eq!(a, b);
+    std::fs::remove_dir_all(&dir).unwrap();
+}

@@ -10,7 +10,7 @@ use std::path::PathBuf;
 
 #[derive(Args, Debug)]
 pub struct ReduceArgs {
-    /// Light frames (FITS or camera RAW), of the calibrated camera, size, filter layout and ISO.
+    /// Light frames (FITS or camera RAW), or folders of them, of the calibrated camera, size, filter layout and ISO.
     #[arg(required = true)]
     pub lights: Vec<PathBuf>,
     /// The masters folder `pgrf calibrate --masters DIR` wrote: master_bias, master_dark_EXPOSUREs (e.g. master_dark_10s; the one nearest each light's exposure is scaled to it), master_flat_EXPOSUREs (the brightest is used).
@@ -19,12 +19,15 @@ pub struct ReduceArgs {
     /// The calibration file of the same run (`pgrf calibrate -o`): its dark law scales the darks, its defect map drives the cosmetic correction.
     #[arg(long)]
     pub calib: PathBuf,
-    /// Output folder (created if missing): one file per light, its name kept, FITS (32-bit float, 0-1) for FITS lights, DNG for camera RAWs.
+    /// Output folder (created if missing): one file per light, its file name kept with only the final extension changed (M51.00000003.FIT -> M51.00000003.fits), FITS (32-bit float, 0-1) for FITS lights, DNG for camera RAWs.
     #[arg(short, long)]
     pub output: PathBuf,
     /// How far (°C) a light's recorded temperature may lie from the calibration's [default: 2].
     #[arg(long)]
     pub temperature_tolerance: Option<f32>,
+    /// Also print what was done as one JSON line on stdout (each light's input, output, exposure, master dark and scale, defects replaced; the masters and dark law).
+    #[arg(long)]
+    pub json: bool,
 }
 
 impl ReduceArgs {
@@ -46,7 +49,7 @@ pub fn run(a: &ReduceArgs) -> Result<()> {
     let outcome = reduce_to_files(&config, &bar)?;
     for l in &outcome.lights {
         let dark = match &l.dark {
-            Some((name, scale)) => format!(", {name} x{scale:.4}"),
+            Some(d) => format!(", {} x{:.4}", d.master, d.scale),
             None => String::new(),
         };
         eprintln!(
@@ -63,5 +66,8 @@ pub fn run(a: &ReduceArgs) -> Result<()> {
         outcome.flat,
         outcome.law
     );
+    if a.json {
+        println!("{}", serde_json::to_string(&outcome)?);
+    }
     Ok(())
 }
