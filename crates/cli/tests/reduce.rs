@@ -330,3 +330,105 @@ fn a_ccdsoft_named_sequence_reduces_in_one_run_from_its_folder() {
     assert_eq!(a, b);
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// What an astronomer's tools read in a reduced light: IMAGETYP 'Light
+/// Frame', BUNIT '65535 adu' (astropy's CCDData reads it and converts the
+/// 0-1 samples to ADU), no EGAIN (the raw frame's electrons per ADU do not
+/// hold for flat-divided, scaled samples), and the light's DATE-OBS,
+/// OBJECT, FILTER and EXPTIME kept.
+#[test]
+fn reduced_lights_keep_the_observation_and_state_their_unit() {
+    let dir = scratch("reduce", "headers");
+    let (vs, lights) = sensor(&dir, (64, 48), false, true);
+    let mut bytes = std::fs::read(&lights[0]).unwrap();
+    for (k, v) in [
+        ("DATE-OBS", "'2026-11-28T21:04:05'"),
+        ("OBJECT", "'M51'"),
+        ("FILTER", "'Ha'"),
+        ("EGAIN", "2.06"),
+    ] {
+        bytes = with_card(&bytes, k, v);
+    }
+    let light = dir.join("M51.00000001.FIT");
+    std::fs::write(&light, bytes).unwrap();
+    let out = dir.join("out");
+    assert!(reduce(&vs, &[light], &out).status.success());
+    let (_, cards) = read_reduced(&out.join("M51.00000001.fits"));
+    let card = |k: &str| {
+        cards
+            .iter()
+            .find(|(key, _)| key == k)
+            .map(|(_, v)| v.clone())
+    };
+    // A card's value, a string's quotes and FITS's padding to 8 taken off.
+    let value = |k: &str| {
+        let v = card(k).unwrap_or_else(|| panic!("no {k} in {cards:?}"));
+        let v = v
+            .trim_start_matches('=')
+            .split(" / ")
+            .next()
+            .unwrap()
+            .trim();
+        v.trim_matches('\'').trim_end().to_string()
+    };
+    assert_eq!(value("IMAGETYP"), "Light Frame");
+    assert_eq!(value("BUNIT"), "65535 adu");
+    assert_eq!(value("DATE-OBS"), "2026-11-28T21:04:05");
+    assert_eq!(value("OBJECT"), "M51");
+    assert_eq!(value("FILTER"), "Ha");
+    let t: f64 = value("EXPTIME").parse().unwrap();
+    assert!((t - 0.04).abs() < 1e-6, "{t}");
+    assert_eq!(card("EGAIN"), None, "{cards:?}");
+    assert_eq!(cards.iter().filter(|(k, _)| k == "IMAGETYP").count(), 1);
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// `pgrf info` states no noise-aware estimate where it would mean nothing,
+/// and says why: a calibration frame (the virtual sensor's stacks carry
+/// CCDSoft's IMAGETYP), a raw FITS light without a black level; with
+/// `--black` the light is estimated, and a reduced light (floats above
+/// black) is looked at as it is.
+#[test]
+fn info_states_no_noise_for_calibration_frames_or_an_unknown_black() {
+    let dir = scratch("reduce", "info");
+    let (vs, lights) = sensor(&dir, (64, 48), false, true);
+    let info = |args: &[&str]| {
+        let out = pgrf(args);
+        assert!(out.status.success(), "{args:?}");
+        let text = String::from_utf8_lossy(&out.stdout).into_owned();
+        let line = text
+            .lines()
+            .find(|l| l.starts_with("noise-aware models would use:"))
+            .unwrap_or_else(|| panic!("{text}"))
+            .to_string();
+        (text, line)
+    };
+    let bias = vs.join("bias/bias_0000.fits");
+    let (text, line) = info(&["info", s(&bias)]);
+    assert!(text.contains("imagetyp    Bias Frame"), "{text}");
+    assert!(
+        line.contains("nothing stated: IMAGETYP 'Bias Frame': a calibration frame"),
+        "{line}"
+    );
+    let flat = info(&["info", s(&lights[0])]).1;
+    assert!(flat.contains("IMAGETYP 'Flat Field'"), "{flat}");
+    // The same frame called a light: its black level is unknown.
+    let raw = std::fs::read(&lights[0]).unwrap();
+    let at = raw.windows(12).position(|w| w == b"'Flat Field'").unwrap();
+    let mut light = raw.clone();
+    light[at..at + 12].copy_from_slice(b"'LIGHT'     ");
+    let light_path = dir.join("light.fits");
+    std::fs::write(&light_path, light).unwrap();
+    let line = info(&["info", s(&light_path)]).1;
+    assert!(
+        line.contains("nothing stated: the FITS file records no black level"),
+        "{line}"
+    );
+    let line = info(&["info", s(&light_path), "--black", "512"]).1;
+    assert!(!line.contains("nothing stated"), "{line}");
+    let out = dir.join("out");
+    assert!(reduce(&vs, &[light_path], &out).status.success());
+    let line = info(&["info", s(&out.join("light.fits"))]).1;
+    assert!(!line.contains("nothing stated"), "{line}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}

@@ -82,13 +82,16 @@ impl<'a> FrameInfo<'a> {
             exposure_s: f.exposure_s,
             temperature_c: f.temperature_c,
             noise_profile: f.noise_profile.as_deref(),
-            noise: find_noise(
-                f,
-                &KnownNoise {
-                    darktable: darktable.map(Path::to_path_buf),
-                    ..KnownNoise::default()
-                },
-            ),
+            noise: match not_a_photo(f) {
+                Some(why) => Err(NoiseError::NotAPhoto { why }),
+                None => find_noise(
+                    f,
+                    &KnownNoise {
+                        darktable: darktable.map(Path::to_path_buf),
+                        ..KnownNoise::default()
+                    },
+                ),
+            },
             fits: f.fits.as_ref(),
             orientation: f.orientation,
             visible_origin: [f.sensor_origin.0, f.sensor_origin.1],
@@ -96,6 +99,29 @@ impl<'a> FrameInfo<'a> {
             planes: plane_stats(f).map_err(|error| NoiseError::Frame { error })?,
         })
     }
+}
+
+/// Why the noise a model would be told means nothing for `f`, if it does
+/// not: a FITS calibration frame (its noise is the sensor's, which `pgrf
+/// calibrate` measures from a stack; a flat's is mostly shot noise at one
+/// level, a bias's has no signal) or a FITS frame stored as the camera read
+/// it with no black level (an estimate would count the bias pedestal as
+/// signal). A bias-subtracted frame (pgrf's reduced lights, 32-bit floats)
+/// has its black at 0 and is estimated.
+fn not_a_photo(f: &RawFrame) -> Option<String> {
+    let h = f.fits.as_ref()?;
+    if let Some(t) = h.calibration_type() {
+        return Some(format!(
+            "IMAGETYP '{t}': a calibration frame, not a light; its noise is the sensor's, which `pgrf calibrate` measures from a stack of them"
+        ));
+    }
+    if h.conversion.is_none() && f.black.iter().all(|&b| b == 0.0) {
+        return Some(
+            "the FITS file records no black level, so an estimate from its pixels would count the bias pedestal as signal; give --black, or calibrate with bias frames"
+                .into(),
+        );
+    }
+    None
 }
 
 /// The black levels to show: one for a monochrome frame (one signal, one

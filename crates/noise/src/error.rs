@@ -146,6 +146,13 @@ pub enum NoiseError {
         /// Height in pixels.
         height: usize,
     },
+    /// A frame whose noise an estimate would misstate: a calibration frame,
+    /// or one whose black level is unknown.
+    #[error("{why}")]
+    NotAPhoto {
+        /// Why, in a sentence.
+        why: String,
+    },
     /// A frame the RAW layer refused to pack or build.
     #[error("invalid noise setting: {error}")]
     Frame {

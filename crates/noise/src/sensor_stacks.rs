@@ -317,6 +317,16 @@ impl StacksConfig {
     }
 }
 
+/// The IMAGETYP of a frame of stack `sub` ("bias", "dark", "flat"), as
+/// CCDSoft writes it.
+fn image_type(sub: &str) -> &'static str {
+    match sub {
+        "bias" => "Bias Frame",
+        "dark" => "Dark Frame",
+        _ => "Flat Field",
+    }
+}
+
 /// Writes one stack's frames after another, every frame with the next seed.
 struct FrameWriter<'a> {
     config: &'a StacksConfig,
@@ -344,7 +354,15 @@ impl FrameWriter<'_> {
             } else {
                 1.0
             };
-            let f = self.sensor.frame(electrons * lamp, t, self.seed)?;
+            let mut f = self.sensor.frame(electrons * lamp, t, self.seed)?;
+            if self.config.format == FrameFormat::Fits {
+                // What CCDSoft and MaxIm DL state of each frame.
+                f.fits = Some(pgrf_raw::FitsHeader {
+                    row_order: Some(f.row_order()),
+                    image_type: Some(image_type(sub).into()),
+                    ..Default::default()
+                });
+            }
             let path = self
                 .config
                 .output

@@ -49,6 +49,9 @@ pub(crate) fn frame_from_fits(
         egain_e_per_adu: img.egain_e_per_adu,
         gain_setting: img.gain_setting,
         date_obs: img.date_obs,
+        image_type: img.image_type,
+        filter: img.filter,
+        object: img.object,
         row_order: img.row_order,
         binning: img.binning,
         conversion: img.conversion,
@@ -133,6 +136,7 @@ fn frame_cards(frame: &RawFrame) -> Vec<FitsCard> {
     if !camera.is_empty() {
         cards.push(card("INSTRUME", FitsValue::Str(camera), "camera"));
     }
+    cards.extend(observation_cards(frame));
     if let Some(g) = frame.fits.as_ref().and_then(|h| h.egain_e_per_adu) {
         cards.push(card("EGAIN", FitsValue::Float(g), "electrons per ADU"));
     }
@@ -152,6 +156,40 @@ fn frame_cards(frame: &RawFrame) -> Vec<FitsCard> {
     cards
 }
 
+/// DATE-OBS, OBJECT and FILTER of a frame read from FITS, as read: what
+/// an astronomer's tools sort and stack by, kept in every FITS file
+/// written of the frame (its conversion, its reduction).
+fn observation_cards(frame: &RawFrame) -> Vec<FitsCard> {
+    let Some(h) = frame.fits.as_ref() else {
+        return Vec::new();
+    };
+    [
+        ("DATE-OBS", &h.date_obs, "start of the exposure"),
+        ("OBJECT", &h.object, "what was observed"),
+        ("FILTER", &h.filter, "filter"),
+    ]
+    .into_iter()
+    .filter_map(|(key, value, comment)| {
+        let text = crate::fits::card_text(value.as_deref()?);
+        (!text.is_empty()).then(|| FitsCard::new(key, FitsValue::Str(text), comment))
+    })
+    .collect()
+}
+
+/// The unit of the 32-bit float samples pgrf writes (DN / 65535), as
+/// astropy's CCDData reads BUNIT: `CCDData.read` gives the samples this
+/// unit and converts them to ADU exactly.
+const FLOAT_BUNIT: &str = "65535 adu";
+
+/// The BUNIT card of normalised float samples.
+fn float_unit_card() -> FitsCard {
+    FitsCard::new(
+        "BUNIT",
+        FitsValue::Str(FLOAT_BUNIT.into()),
+        "samples are ADU / 65535",
+    )
+}
+
 /// The camera as INSTRUME states it: make and model, printable ASCII, at
 /// most 60 characters (empty when the file names no camera).
 fn instrument(frame: &RawFrame) -> String {
@@ -164,14 +202,18 @@ fn instrument(frame: &RawFrame) -> String {
 }
 
 /// `frame` as a FITS file: unsigned 16-bit samples (BITPIX 16, BZERO
-/// 32768), black level included as the camera recorded it.
+/// 32768), black level included as the camera recorded it; a frame read
+/// from FITS keeps its IMAGETYP.
 pub fn encode_fits_frame(frame: &RawFrame) -> Result<Vec<u8>> {
-    encode_fits_u16(
-        frame.width,
-        frame.height,
-        &frame.mosaic,
-        &frame_cards(frame),
-    )
+    let mut cards = frame_cards(frame);
+    if let Some(t) = frame.fits.as_ref().and_then(|h| h.image_type.as_deref()) {
+        let text = crate::fits::card_text(t);
+        cards.insert(
+            0,
+            FitsCard::new("IMAGETYP", FitsValue::Str(text), "frame type"),
+        );
+    }
+    encode_fits_u16(frame.width, frame.height, &frame.mosaic, &cards)
 }
 
 /// [`encode_fits_frame`] written atomically to `path`.
@@ -206,6 +248,7 @@ pub fn encode_fits_master(
             comment: "calibration master".into(),
         },
     );
+    cards.push(float_unit_card());
     cards.push(FitsCard {
         key: "NCOMBINE".into(),
         value: FitsValue::Int(frames as i64),
@@ -241,8 +284,9 @@ fn check_values(template: &RawFrame, mosaic: &[f32]) -> Result<()> {
 /// kept), written as 32-bit floats normalised by 65535 as the masters are
 /// ([`encode_fits_master`]), so the frames and masters pgrf writes share one
 /// scale. Carries `template`'s cards (row order, Bayer pattern, EXPTIME,
-/// temperature, camera) but no SATURATE, IMAGETYP 'Light Frame', then the
-/// caller's `cards` (the masters used) and one HISTORY entry per step.
+/// temperature, camera, date, object, filter) but no SATURATE or EGAIN,
+/// IMAGETYP 'Light Frame', BUNIT, then the caller's `cards` (the masters
+/// used) and one HISTORY entry per step.
 pub fn encode_fits_light(
     template: &RawFrame,
     mosaic: &[f32],
@@ -255,11 +299,15 @@ pub fn encode_fits_light(
         FitsValue::Str("Light Frame".into()),
         "calibrated light",
     )];
+    // The camera's EGAIN (electrons per ADU of the raw frame) is not
+    // carried: the samples are flat-divided and scaled, and a tool that
+    // reads EGAIN without BUNIT would put its noise off by 65535.
     all.extend(
         frame_cards(template)
             .into_iter()
-            .filter(|c| c.key != SATURATE),
+            .filter(|c| c.key != SATURATE && c.key != "EGAIN"),
     );
+    all.push(float_unit_card());
     all.extend_from_slice(cards);
     let scaled: Vec<f32> = mosaic.iter().map(|v| v / 65535.0).collect();
     crate::fits::encode_fits_f32_history(template.width, template.height, &scaled, &all, history)

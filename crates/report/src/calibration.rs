@@ -19,6 +19,7 @@ use crate::chart::{
 use crate::error::ReportError;
 use crate::png::{encode_png, ensure_font, render_png, PlotResult};
 use ndarray::{s, ArrayView3};
+use plotters::coord::combinators::WithKeyPoints;
 use plotters::coord::ranged1d::{Ranged, ValueFormatter};
 use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
@@ -56,6 +57,13 @@ pub struct ReportData<'a> {
     pub r2_linear: Option<ArrayView3<'a, f32>>,
     /// Whether both fits carry the offset term c (y = a g(t) + c).
     pub dark_offset: bool,
+    /// The median read noise the summary table states, DN: the true
+    /// per-pixel sigma's, corrected for the frames' sampling error, which
+    /// the histogram marks (None: the map's own median).
+    pub read_sigma_median: Option<f64>,
+    /// The frames' sensor temperature, degrees C, for titles where no ISO
+    /// is recorded (a CCD's frames).
+    pub temperature_c: Option<f32>,
     /// Temporal noise variance without light (read, row and offset drift),
     /// DN^2: with the flat levels' shot variance it gives their SNR.
     pub dark_var_dn2: f64,
@@ -210,9 +218,19 @@ fn report_title(data: &ReportData) -> String {
     } else {
         camera
     };
-    match data.iso {
-        Some(iso) => format!("{camera}, ISO {iso}"),
-        None => format!("{camera}, ISO unknown"),
+    // A CCD's frames record no ISO: their temperature and gain say which
+    // setting the calibration is of.
+    let gain = data
+        .ptc_fit
+        .filter(|(k, _)| k.is_finite() && *k > 0.0)
+        .map(|(k, _)| format!("K {} DN/e⁻", fmt_sig(k, 4)));
+    let temperature = data.temperature_c.map(|t| format!("{t:.1} °C"));
+    match (data.iso, temperature, gain) {
+        (Some(iso), _, _) => format!("{camera}, ISO {iso}"),
+        (None, Some(t), Some(k)) => format!("{camera}, {t}, {k}"),
+        (None, Some(t), None) => format!("{camera}, {t}"),
+        (None, None, Some(k)) => format!("{camera}, {k}"),
+        (None, None, None) => format!("{camera}, no ISO, temperature or gain recorded"),
     }
 }
 
@@ -314,9 +332,48 @@ fn log_span(lo: f64, hi: f64, decades: f64) -> (f64, f64) {
 
 // ---------------------------------------------------------------------- PTC
 
+/// A log axis whose labels [`log_ticks`] chose.
+type LogAxis = WithKeyPoints<LogCoord<f64>>;
+
 /// A log-log chart on a report bitmap.
-type LogLogChart<'a, 'b> =
-    ChartContext<'a, BitMapBackend<'b>, Cartesian2d<LogCoord<f64>, LogCoord<f64>>>;
+type LogLogChart<'a, 'b> = ChartContext<'a, BitMapBackend<'b>, Cartesian2d<LogAxis, LogAxis>>;
+
+/// The fewest labels a log axis gets from [`log_ticks`].
+const MIN_LOG_LABELS: usize = 5;
+
+/// Labelled and grid values of a log axis over `lo..hi`: the labels are
+/// the multiples m x 10^k in range of the first set of m (1; 1, 2, 5; 1,
+/// 2, 3, 5; 1 .. 9) that gives [`MIN_LOG_LABELS`], the grid every 1 .. 9
+/// multiple. plotters' own choice labels one to three values on an axis of
+/// one or two decades (a CCD's flats at one level, a camera's at three).
+fn log_ticks(lo: f64, hi: f64) -> (Vec<f64>, Vec<f64>) {
+    let multiples = |ms: &[f64]| -> Vec<f64> {
+        if !(lo > 0.0 && hi > lo && (hi / lo).is_finite()) {
+            return Vec::new();
+        }
+        let (k0, k1) = (lo.log10().floor() as i32, hi.log10().ceil() as i32);
+        (k0..=k1)
+            .flat_map(|k| ms.iter().map(move |m| m * 10f64.powi(k)))
+            .filter(|v| (lo..=hi).contains(v))
+            .collect()
+    };
+    let all: Vec<f64> = (1..=9).map(f64::from).collect();
+    let labels = [&[1.0][..], &[1.0, 2.0, 5.0], &[1.0, 2.0, 3.0, 5.0], &all]
+        .iter()
+        .map(|ms| multiples(ms))
+        .find(|v| v.len() >= MIN_LOG_LABELS)
+        .unwrap_or_else(|| multiples(&all));
+    (labels, multiples(&all))
+}
+
+/// A log axis over `lo..hi` labelled by [`log_ticks`].
+fn log_axis(lo: f64, hi: f64) -> LogAxis {
+    let (labels, grid) = log_ticks(lo, hi);
+    (lo..hi)
+        .log_scale()
+        .with_key_points(labels)
+        .with_light_points(grid)
+}
 
 /// The chart of the plots against mean signal (photon transfer, SNR):
 /// log-log over `x` and `y`, the mesh drawn in the report's style with
@@ -330,7 +387,7 @@ fn log_log_chart<'a, 'b>(
 ) -> Result<LogLogChart<'a, 'b>, Box<dyn std::error::Error>> {
     let mut chart = REPORT
         .frame(root, caption)
-        .build_cartesian_2d((x_lo..x_hi).log_scale(), (y_lo..y_hi).log_scale())?;
+        .build_cartesian_2d(log_axis(x_lo, x_hi), log_axis(y_lo, y_hi))?;
     REPORT
         .mesh(&mut chart, "mean signal [DN]", y_desc)
         .x_label_formatter(&fmt_tick)
@@ -833,9 +890,19 @@ fn sigma_hist_section(dir: &Path, data: &ReportData, title: &str) -> Result<Sect
         },
         color: BARS,
         counts,
-        median: p[1],
+        median: data
+            .read_sigma_median
+            .filter(|m| m.is_finite())
+            .unwrap_or(p[1]),
     }];
     let mut note = Vec::new();
+    // Said in summary.md, not under the plot (one line there).
+    let corrected = data.read_sigma_median.is_some_and(|m| m.is_finite()).then(|| {
+        format!(
+            " The line is the true per-pixel sigma's median, corrected for the frames' sampling error, as the summary table states it; the bars are the per-pixel sample sigmas (their median {} DN).",
+            fmt_sig(p[1], 4)
+        )
+    });
     if above > 0 {
         note.push(format!(
             "{above} pixel(s) above the 99.95th percentile ({} DN) not shown",
@@ -866,8 +933,9 @@ fn sigma_hist_section(dir: &Path, data: &ReportData, title: &str) -> Result<Sect
         } else {
             "all four CFA planes"
         },
-        fmt_sig(p[1], 4)
+        fmt_sig(spec.series[0].median, 4)
     );
+    text.push_str(&corrected.unwrap_or_default());
     if let Some(note) = note {
         let _ = write!(text, " Note: {note}.");
     }
@@ -1283,6 +1351,8 @@ mod tests {
             r2_linear: Some(r2l.view()),
             dark_offset: false,
             dark_var_dn2: 30.0,
+            read_sigma_median: None,
+            temperature_c: None,
             mono: false,
             summary: summary_rows(),
         };
@@ -1362,6 +1432,58 @@ mod tests {
         let _ = std::fs::remove_dir_all(&dir);
     }
 
+    /// A log axis of about a decade and a half (a CCD's flats at one level
+    /// and the bias) gets five labels, not plotters' one to three; four
+    /// decades get their powers of ten.
+    #[test]
+    fn log_axes_get_enough_labels() {
+        let (labels, grid) = log_ticks(1300.0, 22000.0);
+        assert_eq!(labels, vec![2000.0, 3000.0, 5000.0, 10000.0, 20000.0]);
+        assert_eq!(grid.len(), 8 + 2, "{grid:?}");
+        let (labels, _) = log_ticks(100.0, 1.0e6);
+        assert_eq!(labels, vec![100.0, 1000.0, 1.0e4, 1.0e5, 1.0e6]);
+        assert_eq!(log_ticks(5.0, 5.0), (vec![], vec![]));
+    }
+
+    /// A CCD's report is titled by its temperature and gain, not "ISO
+    /// unknown".
+    #[test]
+    fn a_report_without_iso_is_titled_by_temperature_and_gain() {
+        let z = Array3::<f32>::zeros((4, 2, 2));
+        let mut data = ReportData {
+            camera: "SBIG STL-1001".into(),
+            iso: None,
+            ptc_points: vec![],
+            ptc_fit: Some((0.51736, 30.0)),
+            sigma_read: z.view(),
+            fixed_pattern: z.view(),
+            r2_sqrt: None,
+            r2_linear: None,
+            dark_offset: false,
+            dark_var_dn2: 30.0,
+            read_sigma_median: Some(6.690),
+            temperature_c: Some(-5.0),
+            mono: true,
+            summary: vec![],
+        };
+        assert_eq!(
+            report_title(&data),
+            "SBIG STL-1001, -5.0 °C, K 0.5174 DN/e⁻"
+        );
+        data.iso = Some(800);
+        assert_eq!(report_title(&data), "SBIG STL-1001, ISO 800");
+        // The histogram states the median the summary table states (the
+        // corrected one), and the bars' own.
+        let sigma = Array3::<f32>::from_elem((4, 8, 8), 6.436);
+        data.sigma_read = sigma.view();
+        let dir = scratch("corrected-median");
+        write_report(&dir, &data).unwrap();
+        let md = std::fs::read_to_string(dir.join(SUMMARY_MD)).unwrap();
+        assert!(md.contains("Median 6.69 DN."), "{md}");
+        assert!(md.contains("(their median 6.436 DN)"), "{md}");
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
     #[test]
     fn empty_inputs_are_skipped_and_explained() {
         let dir = scratch("empty");
@@ -1378,13 +1500,15 @@ mod tests {
             r2_linear: None,
             dark_offset: false,
             dark_var_dn2: 30.0,
+            read_sigma_median: None,
+            temperature_c: None,
             mono: false,
             summary: vec![],
         };
         let written = write_report(&dir, &data).unwrap();
         assert_eq!(written, vec![dir.join(SUMMARY_MD)]);
         let md = std::fs::read_to_string(dir.join(SUMMARY_MD)).unwrap();
-        assert!(md.contains("ISO unknown"), "{md}");
+        assert!(md.contains("no ISO, temperature or gain recorded"), "{md}");
         assert!(md.contains("no photon-transfer points"), "{md}");
         assert!(md.contains("no dark frames"), "{md}");
         assert!(md.matches("Skipped").count() >= 5, "{md}");
@@ -1415,6 +1539,8 @@ mod tests {
             r2_linear: None,
             dark_offset: false,
             dark_var_dn2: 30.0,
+            read_sigma_median: None,
+            temperature_c: None,
             mono: false,
             summary: vec![],
         };
@@ -1451,6 +1577,8 @@ mod tests {
             r2_linear: None,
             dark_offset: false,
             dark_var_dn2: 40.0,
+            read_sigma_median: None,
+            temperature_c: None,
             mono: true,
             summary: vec![],
         };
@@ -1485,6 +1613,8 @@ mod tests {
             r2_linear: None,
             dark_offset: false,
             dark_var_dn2: 30.0,
+            read_sigma_median: None,
+            temperature_c: None,
             mono: false,
             summary: vec![],
         };
@@ -1508,6 +1638,8 @@ mod tests {
             r2_linear: None,
             dark_offset: false,
             dark_var_dn2: 30.0,
+            read_sigma_median: None,
+            temperature_c: None,
             mono: false,
             summary: vec![],
         };
@@ -1537,6 +1669,8 @@ mod tests {
             r2_linear: None,
             dark_offset: false,
             dark_var_dn2: 30.0,
+            read_sigma_median: None,
+            temperature_c: None,
             mono: false,
             summary: vec![],
         };

@@ -57,6 +57,8 @@ fn report_data(run: &CalibrationRun) -> ReportData<'_> {
         r2_sqrt: maps.r2_sqrt.as_ref().map(|a| a.view()),
         r2_linear: maps.r2_linear.as_ref().map(|a| a.view()),
         dark_offset: m.dark_offset,
+        read_sigma_median: Some(m.read_sigma_median),
+        temperature_c: m.temperature_c,
         dark_var_dn2: run.dark_variance(),
         mono: m.layout() == "mono",
         summary: run.summary(),

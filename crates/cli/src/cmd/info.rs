@@ -83,8 +83,15 @@ fn print_header(f: &RawFrame, info: &FrameInfo) {
         if let Some(g) = h.gain_setting {
             println!("gain        {g} (the driver's gain setting)");
         }
-        if let Some(d) = &h.date_obs {
-            println!("date-obs    {d}");
+        for (label, v) in [
+            ("imagetyp", &h.image_type),
+            ("date-obs", &h.date_obs),
+            ("object", &h.object),
+            ("filter", &h.filter),
+        ] {
+            if let Some(v) = v {
+                println!("{label:<11} {v}");
+            }
         }
         if let Some((x, y)) = h.binning {
             println!("binning     {x}x{y} (XBINNING x YBINNING)");
@@ -108,14 +115,15 @@ fn print_levels(a: &InfoArgs, f: &RawFrame, info: &FrameInfo) {
         [one] => one.to_string(),
         _ => f.plane_levels(f.black),
     };
-    println!(
-        "black       {black} DN{}",
-        if f.fits.is_some() && a.input.black.is_none() {
+    let note = match (&f.fits, &a.input.black) {
+        // Floats (pgrf's reduced lights and masters): stored above black.
+        (Some(h), None) if h.conversion.is_some() => " (FITS records no black level)",
+        (Some(_), None) => {
             " (FITS records no black level: a bias stack measures it, --black sets one)"
-        } else {
-            ""
         }
-    );
+        _ => "",
+    };
+    println!("black       {black} DN{note}");
     if let Some(m) = &f.masked {
         let level = f.plane_levels(m.level.map(|v| (v * 100.0).round() / 100.0));
         let (on, n) = (m.source.describe(), m.pixels);
@@ -139,6 +147,9 @@ fn print_levels(a: &InfoArgs, f: &RawFrame, info: &FrameInfo) {
     }
     match &info.noise {
         Ok(n) => println!("noise-aware models would use: {n}"),
+        Err(e @ pgrf_noise::NoiseError::NotAPhoto { .. }) => {
+            println!("noise-aware models would use: nothing stated: {e}")
+        }
         Err(e) => println!("noise-aware models would use: nothing found ({e})"),
     }
 }

@@ -144,6 +144,21 @@ pub(super) fn string(header: &ValueMap, key: &str) -> Result<Option<String>> {
     }
 }
 
+/// A descriptive keyword (IMAGETYP, FILTER, OBJECT) as text: a string
+/// trimmed, any other value as written (a driver that writes FILTER = 2
+/// names its filter wheel's slot); None when absent or empty. Never an
+/// error: what only describes a frame does not make it unreadable.
+pub(super) fn text(header: &ValueMap, key: &str) -> Option<String> {
+    match header.get(key) {
+        None | Some(Value::Undefined) => None,
+        Some(Value::String { value, .. }) => {
+            let t = value.trim();
+            (!t.is_empty()).then(|| t.to_string())
+        }
+        Some(other) => Some(show(other)),
+    }
+}
+
 /// XBINNING and YBINNING (1 to 64 each; an absent one is 1), None when
 /// the header states neither.
 pub(super) fn binning(header: &ValueMap) -> Result<Option<(u32, u32)>> {

@@ -130,6 +130,13 @@ pub struct FitsImage {
     pub instrument: Option<String>,
     /// DATE-OBS: the start of the exposure, as written (ISO 8601).
     pub date_obs: Option<String>,
+    /// IMAGETYP: "Light Frame", "Dark Frame", "Flat Field", "Bias Frame"
+    /// (CCDSoft, MaxIm DL), "LIGHT", ... as written.
+    pub image_type: Option<String>,
+    /// FILTER: the filter the frame was taken through.
+    pub filter: Option<String>,
+    /// OBJECT: what was observed.
+    pub object: Option<String>,
     /// XBINNING x YBINNING: pixels summed per stored pixel, when the header
     /// states either (the other is then 1).
     pub binning: Option<(u32, u32)>,
@@ -178,6 +185,12 @@ pub struct FitsHeader {
     pub gain_setting: Option<f64>,
     /// DATE-OBS, as written.
     pub date_obs: Option<String>,
+    /// IMAGETYP, as written.
+    pub image_type: Option<String>,
+    /// FILTER, as written.
+    pub filter: Option<String>,
+    /// OBJECT, as written.
+    pub object: Option<String>,
     /// ROWORDER as the header states it; `None` without one.
     pub row_order: Option<RowOrder>,
     /// XBINNING x YBINNING, when the header states either: masters and
@@ -185,6 +198,20 @@ pub struct FitsHeader {
     pub binning: Option<(u32, u32)>,
     /// How samples that were not unsigned 16-bit integers became DN.
     pub conversion: Option<String>,
+}
+
+impl FitsHeader {
+    /// The IMAGETYP of a calibration frame (bias, dark, flat, or a master
+    /// of one; CCDSoft's "Bias Frame", "Dark Frame", "Flat Field", IRAF's
+    /// "zero", ...), None for a light or a frame that does not say.
+    pub fn calibration_type(&self) -> Option<&str> {
+        let t = self.image_type.as_deref()?;
+        let lower = t.to_ascii_lowercase();
+        ["bias", "dark", "flat", "zero", "offset", "master"]
+            .iter()
+            .any(|k| lower.contains(k))
+            .then_some(t)
+    }
 }
 
 /// A header card pgrf writes: a keyword, its value and a comment.

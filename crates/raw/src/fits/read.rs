@@ -2,7 +2,7 @@
 //! brought to u16 ADU or refused with the reason; the Bayer phase and the
 //! header values pgrf keeps.
 
-use super::keyword::{binning, integer, number, row_order, show, string, KeywordError};
+use super::keyword::{binning, integer, number, row_order, show, string, text, KeywordError};
 use super::*;
 
 use crate::cfa::Cfa;
@@ -150,6 +150,9 @@ fn read_primary(name: &Path, bytes: &[u8]) -> Result<FitsImage> {
         iso: meta.iso,
         instrument: meta.instrument,
         date_obs: meta.date_obs,
+        image_type: meta.image_type,
+        filter: meta.filter,
+        object: meta.object,
         binning: meta.binning,
         conversion,
         white_conflict,
@@ -248,6 +251,9 @@ struct Metadata {
     iso: Option<u32>,
     instrument: Option<String>,
     date_obs: Option<String>,
+    image_type: Option<String>,
+    filter: Option<String>,
+    object: Option<String>,
     binning: Option<(u32, u32)>,
     row_order: Option<RowOrder>,
     bayer: Option<Cfa>,
@@ -293,6 +299,9 @@ impl Metadata {
         };
         let instrument = string(header, "INSTRUME").map_err(keyword)?;
         let date_obs = string(header, "DATE-OBS").map_err(keyword)?;
+        let image_type = text(header, "IMAGETYP");
+        let filter = text(header, "FILTER");
+        let object = text(header, "OBJECT");
         let binning = binning(header).map_err(keyword)?;
         let row_order = row_order(header).map_err(keyword)?;
         Ok(Metadata {
@@ -303,6 +312,9 @@ impl Metadata {
             iso,
             instrument,
             date_obs,
+            image_type,
+            filter,
+            object,
             binning,
             row_order,
             bayer: bayer_phase(name, header, height, row_order)?,
