@@ -957,23 +957,35 @@ pub(crate) fn defects(
             }
         });
     }
-    use crate::columns::{defective_columns, Scale};
-    let mut columns = defective_columns(&bias.fixed_pattern, offsets, Scale::Offset);
-    if let Some(g) = gain {
-        columns.extend(defective_columns(&g.response, offsets, Scale::Response));
-    }
-    columns.sort_unstable();
-    columns.dedup();
-    for &x in &columns {
-        // The packed planes whose column offset matches hold sensor column x.
-        for (p, &(_, dx)) in offsets.iter().enumerate() {
-            if x % 2 == dx && p < out.dim().0 {
-                out.slice_mut(ndarray::s![p, .., (x - dx) / 2])
-                    .mapv_inplace(|o| if o == defect::GOOD { defect::COLUMN } else { o });
+    // Columns from the flats' response only: an offset column in the bias
+    // (a column amplifier's pedestal) is removed by subtracting the master
+    // bias or the fixed pattern, so replacing its pixels would only blur.
+    let columns = match gain {
+        Some(g) => mark_columns(&mut out, &g.response, offsets),
+        None => 0,
+    };
+    (out, columns)
+}
+
+/// Mark in the packed defect map `out` the stretches of sensor columns
+/// where `response` shows a column defect
+/// ([`crate::columns::defective_column_rows`]); returns how many sensor
+/// columns have one.
+fn mark_columns(
+    out: &mut Array3<f32>,
+    response: &Array3<f32>,
+    offsets: [(usize, usize); 4],
+) -> usize {
+    let (flags, columns) = crate::columns::defective_column_rows(response, offsets);
+    let w = 2 * out.dim().2;
+    for (p, &(dy, dx)) in offsets.iter().enumerate().take(out.dim().0) {
+        for ((i, j), o) in out.index_axis_mut(ndarray::Axis(0), p).indexed_iter_mut() {
+            if *o == defect::GOOD && flags[(2 * i + dy) * w + 2 * j + dx] {
+                *o = defect::COLUMN;
             }
         }
     }
-    (out, columns.len())
+    columns.len()
 }
 
 #[cfg(test)]

@@ -547,8 +547,8 @@ pub struct ReducedLight {
     pub exposure_s: Option<f64>,
     /// The master dark used and its scale.
     pub dark: Option<DarkUsed>,
-    /// Pixels replaced by cosmetic correction.
-    pub replaced: usize,
+    /// What cosmetic correction did.
+    pub cosmetic: Cosmetic,
 }
 
 /// What a run did (`pgrf reduce --json` prints it).
@@ -614,14 +614,34 @@ fn check_light(
     Ok(())
 }
 
+/// What cosmetic correction did to a frame.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
+pub struct Cosmetic {
+    /// Defective pixels replaced, in all.
+    pub replaced: usize,
+    /// Of those, pixels with no good same-colour neighbour in their 3 x 3
+    /// ring (a sensor's edge columns, a defective column's neighbour at the
+    /// edge), filled from the nearest good ones along their row.
+    pub along_row: usize,
+    /// Defective pixels whose whole row holds no good pixel of their
+    /// colour: kept (0 where not finite).
+    pub kept: usize,
+}
+
 /// Replace each defective pixel by the median of its non-defective
 /// neighbours of the same colour (the 3 x 3 ring at `step` pixels: 2 on a
-/// Bayer mosaic, 1 on a monochrome sensor); one without any is kept, or 0
-/// when it is not finite (a pixel the flat does not reach). Returns how
-/// many were replaced.
-pub fn replace_defects(data: &mut [f32], width: usize, defective: &[bool], step: usize) -> usize {
+/// Bayer mosaic, 1 on a monochrome sensor); one without any takes the mean
+/// of the nearest good same-colour pixels to its left and right along its
+/// row ([`along_row`]); one whose row has none is kept, or 0 when it is not
+/// finite (a pixel the flat does not reach).
+pub fn replace_defects(
+    data: &mut [f32],
+    width: usize,
+    defective: &[bool],
+    step: usize,
+) -> Cosmetic {
     let height = data.len() / width.max(1);
-    let mut replaced = 0;
+    let mut done = Cosmetic::default();
     let mut near = Vec::with_capacity(8);
     for i in (0..data.len()).filter(|&i| defective[i]) {
         let (y, x) = ((i / width) as isize, (i % width) as isize);
@@ -644,8 +664,18 @@ pub fn replace_defects(data: &mut [f32], width: usize, defective: &[bool], step:
             }
         }
         if near.is_empty() {
-            if !data[i].is_finite() {
-                data[i] = 0.0;
+            match along_row(data, width, defective, i, step) {
+                Some(v) => {
+                    data[i] = v;
+                    done.along_row += 1;
+                    done.replaced += 1;
+                }
+                None => {
+                    if !data[i].is_finite() {
+                        data[i] = 0.0;
+                    }
+                    done.kept += 1;
+                }
             }
             continue;
         }
@@ -656,9 +686,31 @@ pub fn replace_defects(data: &mut [f32], width: usize, defective: &[bool], step:
         } else {
             (near[n / 2 - 1] + near[n / 2]) / 2.0
         };
-        replaced += 1;
+        done.replaced += 1;
     }
-    replaced
+    done
+}
+
+/// The mean of the nearest good pixels of pixel `i`'s colour (`step`
+/// apart) to its left and to its right along its row, or the one there is;
+/// None when its row has none.
+fn along_row(data: &[f32], width: usize, defective: &[bool], i: usize, step: usize) -> Option<f32> {
+    let (row, x) = (i - i % width, i % width);
+    let good = |j: usize| !defective[j] && data[j].is_finite();
+    let step = step.max(1);
+    let left = (step..=x)
+        .step_by(step)
+        .map(|d| row + x - d)
+        .find(|&j| good(j));
+    let right = (step..width - x)
+        .step_by(step)
+        .map(|d| row + x + d)
+        .find(|&j| good(j));
+    match (left, right) {
+        (Some(a), Some(b)) => Some((data[a] + data[b]) / 2.0),
+        (Some(a), None) | (None, Some(a)) => Some(data[a]),
+        (None, None) => None,
+    }
 }
 
 /// A light reduced: (light - bias - dark(t)) / flat, then cosmetic
@@ -667,7 +719,7 @@ pub fn replace_defects(data: &mut [f32], width: usize, defective: &[bool], step:
 pub fn reduce_frame(
     masters: &Masters,
     light: &RawFrame,
-) -> (Vec<f32>, Option<(String, f64)>, usize) {
+) -> (Vec<f32>, Option<(String, f64)>, Cosmetic) {
     let t = light.exposure_s.unwrap_or(0.0);
     let dark = masters.dark_signal(t);
     let mut defective = masters.defective.clone();
@@ -760,10 +812,10 @@ pub fn reduce_to_files(
     let mut done = Vec::with_capacity(config.lights.len());
     for (light, output) in config.lights.iter().zip(outputs) {
         let mut frame = decode_file(light, &LevelOverrides::default())?;
-        let (pixels, dark, replaced) = reduce_frame(&masters, &frame);
+        let (pixels, dark, cosmetic) = reduce_frame(&masters, &frame);
         let written = if frame.fits.is_some() {
             let (cards, history) =
-                header_of(&masters, &frame, dark.as_ref(), replaced, &calib_name);
+                header_of(&masters, &frame, dark.as_ref(), cosmetic, &calib_name);
             pgrf_raw::encode_fits_light(&frame, &pixels, &cards, &history)
                 .and_then(|bytes| Ok(pgrf_core::write_atomic(&output, &bytes)?))
         } else {
@@ -789,7 +841,7 @@ pub fn reduce_to_files(
             output,
             exposure_s: frame.exposure_s,
             dark: dark.map(|(master, scale)| DarkUsed { master, scale }),
-            replaced,
+            cosmetic,
         });
         progress.advance(1);
     }
@@ -828,7 +880,7 @@ fn header_of(
     masters: &Masters,
     light: &RawFrame,
     dark: Option<&(String, f64)>,
-    replaced: usize,
+    cosmetic: Cosmetic,
     calib_name: &str,
 ) -> (Vec<FitsCard>, Vec<String>) {
     let ascii = pgrf_raw::fits::card_text;
@@ -869,13 +921,26 @@ fn header_of(
     ));
     cards.push(FitsCard::new(
         "NDEFECT",
-        FitsValue::Int(replaced as i64),
+        FitsValue::Int(cosmetic.replaced as i64),
         "pixels replaced (cosmetic)",
     ));
     history.push(format!(
-        "cosmetic: {replaced} defective pixels of {} replaced by the median of same-colour neighbours",
+        "cosmetic: {} defective pixels of {} replaced by the median of same-colour neighbours",
+        cosmetic.replaced,
         ascii(calib_name)
     ));
+    if cosmetic.along_row > 0 {
+        history.push(format!(
+            "{} of them, with no good neighbour, by the nearest good pixels along the row",
+            cosmetic.along_row
+        ));
+    }
+    if cosmetic.kept > 0 {
+        history.push(format!(
+            "{} defective pixels kept: no good pixel of their colour in their row",
+            cosmetic.kept
+        ));
+    }
     history.push("pixels in DN above black / 65535".into());
     (cards, history)
 }
@@ -977,7 +1042,7 @@ mod tests {
         // (4,0) 24, (4,2) 26, (4,4) 28; (2,4) is defective. Median of
         // seven: 12.
         let mut bayer = data.clone();
-        assert_eq!(replace_defects(&mut bayer, w, &bad, 2), 2);
+        assert_eq!(replace_defects(&mut bayer, w, &bad, 2).replaced, 2);
         assert_eq!(bayer[2 * w + 2], 12.0);
         // Step 1 around (2, 2): 7, 8, 9, 13, 15, 19, 20, 21: median 14.
         let mut mono = data.clone();
@@ -985,6 +1050,44 @@ mod tests {
         assert_eq!(mono[2 * w + 2], 14.0);
         // Untouched elsewhere.
         assert_eq!(mono[0], 0.0);
+    }
+
+    /// A monochrome sensor's columns 0, 1, W - 2 and W - 1 defective (no
+    /// good neighbour for columns 0 and W - 1 in their 3 x 3) are filled
+    /// from the nearest good pixels along their rows (columns 2 and W - 3),
+    /// and counted; a row with no good pixel keeps its values, counted too.
+    #[test]
+    fn edge_columns_without_good_neighbours_are_filled_along_the_row() {
+        let (w, h) = (8, 4);
+        let data: Vec<f32> = (0..w * h)
+            .map(|i| (i % w) as f32 * 10.0 + (i / w) as f32)
+            .collect();
+        let mut bad: Vec<bool> = (0..w * h).map(|i| matches!(i % w, 0 | 1 | 6 | 7)).collect();
+        let mut mono = data.clone();
+        let done = replace_defects(&mut mono, w, &bad, 1);
+        // Columns 1 and 6 have good neighbours in their ring (2 and 5):
+        // medians; columns 0 and 7 take columns 2 and 5 of their row.
+        assert_eq!(
+            done,
+            Cosmetic {
+                replaced: 16,
+                along_row: 8,
+                kept: 0
+            }
+        );
+        for y in 0..h {
+            assert_eq!(mono[y * w], data[y * w + 2], "row {y}");
+            assert_eq!(mono[y * w + 7], data[y * w + 5], "row {y}");
+        }
+        // With row 1 all defective, its pixels at columns 0 and 7 have no
+        // good pixel in their ring or their row: kept (a NaN becomes 0);
+        // the others take their ring's rows 0 and 2.
+        bad[w..2 * w].iter_mut().for_each(|b| *b = true);
+        let mut mono = data.clone();
+        mono[w] = f32::NAN;
+        let done = replace_defects(&mut mono, w, &bad, 1);
+        assert_eq!(done.kept, 2, "{done:?}");
+        assert_eq!((mono[w], mono[w + 7]), (0.0, data[w + 7]));
     }
 
     fn master(t: f64) -> MasterFrame {

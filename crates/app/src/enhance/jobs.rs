@@ -233,6 +233,11 @@ pub fn output_is_file(output: &Path) -> Result<bool, NnError> {
         return Ok(true);
     }
     let what = if output.exists() {
+        // A shard of the same batch may have made the folder since the
+        // first look (a folder appears whole): it is then a folder.
+        if output.is_dir() {
+            return Ok(false);
+        }
         "is an existing file, not a folder".to_string()
     } else {
         match output.extension() {

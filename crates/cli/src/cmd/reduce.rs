@@ -52,11 +52,17 @@ pub fn run(a: &ReduceArgs) -> Result<()> {
             Some(d) => format!(", {} x{:.4}", d.master, d.scale),
             None => String::new(),
         };
+        let c = &l.cosmetic;
+        let edge = match (c.along_row, c.kept) {
+            (0, 0) => String::new(),
+            (n, 0) => format!(", {n} of them from the nearest good pixels along the row"),
+            (n, k) => format!(", {n} of them along the row; {k} kept: no good pixel in their row"),
+        };
         eprintln!(
-            "{} -> {} ({} defects replaced{dark})",
+            "{} -> {} ({} defects replaced{edge}{dark})",
             l.input.display(),
             l.output.display(),
-            l.replaced
+            c.replaced
         );
     }
     eprintln!(
