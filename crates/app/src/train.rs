@@ -34,6 +34,7 @@ pub fn pairs_noise(c: &TrainConfig, iso_range: Option<(u32, u32)>) -> Result<Pai
         calibrated_dark_level: c.calibrated_dark_level,
         calibrated_share: c.calibrated_share,
         calibration: c.calib.as_deref(),
+        noise_bank: c.noise_bank,
         darktable: c.darktable_profiles.as_deref(),
     })
     .map_err(|e| match e {

@@ -490,7 +490,8 @@ pub fn calibrate(input: &CalibrateInput, progress: &dyn Progress) -> Result<Cali
     )?;
     let (defect_map, defect_columns) =
         defects(&bias, Some(&gain), dark.as_ref(), key.cfa.offsets());
-    let maps = maps_of(&bias, &gain, dark.as_ref(), defect_map);
+    let mut maps = maps_of(&bias, &gain, dark.as_ref(), defect_map);
+    maps.noise_bank = crate::bank::bank_of(&bias_stack.groups[0].files, &bias.mean)?;
     let meta = meta_of(&Measured {
         key: &key,
         bias: &bias,
@@ -572,6 +573,7 @@ fn maps_of(
         r2_sqrt: dark.map(|d| d.r2_sqrt.clone()),
         r2_linear: dark.map(|d| d.r2_linear.clone()),
         dark_offset: dark.and_then(|d| d.offset_dn.clone()),
+        noise_bank: Vec::new(),
     }
 }
 

@@ -326,7 +326,23 @@ pub struct CalibMaps {
     /// record's law has one: dark charge every exposed frame has and a
     /// zero-length bias frame lacks.
     pub dark_offset: Option<Array3<f32>>,
+    /// The bias frames' residual noise, DN, packed like the maps or a
+    /// centre crop of them ([`crate::bank`]); in the file `noise_bank_00`,
+    /// `noise_bank_01`, ...
+    pub noise_bank: Vec<Array3<f32>>,
 }
+
+/// The file names of the noise bank's frames, in order.
+const BANK_NAMES: [&str; pgrf_noise::bank::MAX_BANK_FRAMES] = [
+    "noise_bank_00",
+    "noise_bank_01",
+    "noise_bank_02",
+    "noise_bank_03",
+    "noise_bank_04",
+    "noise_bank_05",
+    "noise_bank_06",
+    "noise_bank_07",
+];
 
 impl CalibMaps {
     /// Every present map with its file name, in name order.
@@ -337,6 +353,7 @@ impl CalibMaps {
             ("fixed_pattern", &self.fixed_pattern),
             ("sigma_read", &self.sigma_read),
         ];
+        v.extend(BANK_NAMES.iter().copied().zip(&self.noise_bank));
         for (name, m) in [
             ("dark_offset", &self.dark_offset),
             ("gain", &self.gain),
@@ -371,6 +388,7 @@ impl CalibMaps {
             r2_sqrt: maps.remove("r2_sqrt"),
             r2_linear: maps.remove("r2_linear"),
             dark_offset: maps.remove("dark_offset"),
+            noise_bank: BANK_NAMES.iter().map_while(|n| maps.remove(*n)).collect(),
         };
         if let Some(n) = maps.keys().next() {
             return Err(CalibError::UnknownMap {
@@ -419,11 +437,12 @@ impl Calibration {
         let meta = serde_json::to_value(&self.meta).map_err(CalibError::EncodeRecord)?;
         let named = self.maps.named();
         let single: Vec<Array3<f32>> = if self.meta.cfa == "mono" {
-            let (h, w) = (self.meta.height, self.meta.width);
             named
                 .iter()
                 .map(|(_, m)| {
-                    Array3::from_shape_vec((1, h, w), sensor_layout(m, MONO_LATTICES))
+                    // The map's own size: a noise bank's frames may be crops.
+                    let (_, ph, pw) = m.dim();
+                    Array3::from_shape_vec((1, 2 * ph, 2 * pw), sensor_layout(m, MONO_LATTICES))
                         .expect("a packed map holds H x W values")
                 })
                 .collect()
@@ -475,9 +494,22 @@ impl Calibration {
         let single = [1, meta.height, meta.width];
         let mut maps = maps;
         for (name, a) in maps.iter_mut() {
-            if mono && a.shape() == single {
+            // A noise bank's frames may be a centre crop of the maps.
+            let crop = name.starts_with("noise_bank_");
+            let fits = |found: &[usize], full: [usize; 3]| match crop {
+                false => found == full,
+                true => {
+                    found.len() == 3
+                        && found[0] == full[0]
+                        && (1..=full[1]).contains(&found[1])
+                        && (1..=full[2]).contains(&found[2])
+                        && (full[0] == 4
+                            || (found[1].is_multiple_of(2) && found[2].is_multiple_of(2)))
+                }
+            };
+            if mono && fits(a.shape(), single) {
                 *a = packed(a, MONO_LATTICES);
-            } else if a.shape() != shape {
+            } else if !fits(a.shape(), shape) {
                 return Err(CalibError::MapShape {
                     path: path.to_path_buf(),
                     map: name.clone(),
@@ -488,6 +520,12 @@ impl Calibration {
         }
         let maps = CalibMaps::from_named(maps, path)?;
         let c = Calibration { meta, maps };
+        c.bank()
+            .transpose()
+            .map_err(|error| CalibError::MapValues {
+                path: path.to_path_buf(),
+                error,
+            })?;
         c.to_pixel_maps()?
             .check_values()
             .map_err(|error| CalibError::MapValues {
@@ -495,6 +533,15 @@ impl Calibration {
                 error,
             })?;
         Ok(c)
+    }
+
+    /// The noise bank of the calibration's bias frames, None when it has
+    /// none (fewer than two bias frames, or a file from before banks).
+    pub fn bank(
+        &self,
+    ) -> Option<std::result::Result<pgrf_noise::bank::NoiseBank, pgrf_noise::NoiseError>> {
+        let frames = &self.maps.noise_bank;
+        (!frames.is_empty()).then(|| pgrf_noise::bank::NoiseBank::new(frames.clone()))
     }
 
     /// Refuse to apply a calibration of another camera or ISO (unless forced).

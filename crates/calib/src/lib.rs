@@ -5,6 +5,7 @@
 
 #![warn(missing_docs)]
 
+mod bank;
 pub mod calibrate;
 mod calibration;
 mod columns;

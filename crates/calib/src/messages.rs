@@ -63,6 +63,17 @@ impl CalibrateOutcome {
             m.hot_pixels,
             m.dead_pixels
         ));
+        let bank = &self.run.calibration.maps.noise_bank;
+        if let Some(f) = bank.first() {
+            let (_, h, w) = f.dim();
+            lines.push(format!(
+                "noise bank: {} bias frames' residuals of {}x{} photosites ({:.1} MiB) for `pgrf synth --noise-bank`",
+                bank.len(),
+                2 * w,
+                2 * h,
+                (bank.len() * f.len() * 4) as f64 / (1u64 << 20) as f64
+            ));
+        }
         lines
     }
 }

@@ -32,6 +32,9 @@ pub struct MixSpec<'a> {
     pub calibrated_share: f64,
     /// A per-pixel calibration file for the (single) sensor.
     pub calibration: Option<&'a Path>,
+    /// Draw read, row and quantisation noise from the calibration's noise
+    /// bank ([`pgrf_noise::bank`]).
+    pub noise_bank: bool,
     /// darktable's noiseprofiles.json for `darktable:` profiles (None:
     /// darktable's install is searched).
     pub darktable: Option<&'a Path>,
@@ -83,6 +86,16 @@ pub enum MixError {
         /// The frame's width and height.
         frame: (usize, usize),
     },
+    /// A noise bank was asked for without a calibration, or the
+    /// calibration has none.
+    #[error("{}", match path {
+        None => "--noise-bank draws from a calibration's bias frames: give --calib FILE".to_string(),
+        Some(p) => format!("--noise-bank: {} holds no noise bank (calibrated from fewer than two bias frames, or by a pgrf before banks): calibrate again", p.display()),
+    })]
+    NoBank {
+        /// The calibration without one.
+        path: Option<PathBuf>,
+    },
     /// The calibration's maps could not be applied to the noise model.
     #[error("--calib {}: {cause}", path.display())]
     Apply {
@@ -117,7 +130,12 @@ pub fn build(spec: &MixSpec) -> Result<CalibratedMix, MixError> {
         };
         let cal = CalibrationFile::load(path, None, None)?;
         cal.apply_to(one)?;
+        if spec.noise_bank {
+            one.bank = Some(std::sync::Arc::new(cal.noise_bank()?));
+        }
         calibration = Some(cal.calibration.identity(path));
+    } else if spec.noise_bank {
+        return Err(MixError::NoBank { path: None });
     }
     Ok(CalibratedMix { mix, calibration })
 }
@@ -172,6 +190,17 @@ impl CalibrationFile {
             path: path.to_path_buf(),
             calibration: cal,
         })
+    }
+
+    /// Its noise bank, or why it has none.
+    pub fn noise_bank(&self) -> Result<pgrf_noise::bank::NoiseBank, MixError> {
+        match self.calibration.bank() {
+            Some(Ok(b)) => Ok(b),
+            Some(Err(e)) => Err(MixError::Profile(e)),
+            None => Err(MixError::NoBank {
+                path: Some(self.path.clone()),
+            }),
+        }
     }
 
     /// Apply its maps, gain and row noise to `spec`.

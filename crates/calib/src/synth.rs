@@ -57,6 +57,10 @@ pub struct SynthConfig {
     /// capture's offset and read and row noise, which `pgrf enhance` reads
     /// the black level from ([`pgrf_raw::masked`]).
     pub masked_columns: usize,
+    /// Draw the read, row and quantisation noise from the calibration's
+    /// noise bank (its bias frames' residuals, [`pgrf_noise::bank`])
+    /// instead of the parametric model (needs `calib`, PGRF model).
+    pub noise_bank: bool,
 }
 
 /// Most masked columns `--masked-columns` takes (Canon's readouts have
@@ -98,15 +102,19 @@ impl Synthesized {
             ),
             None => String::new(),
         };
+        let noise = match c.noise_bank {
+            true => {
+                "read, row and quantisation noise from the calibration's noise bank".to_string()
+            }
+            false => format!("read {:.3} DN, row {:.3} DN", i.read_dn, i.row_dn),
+        };
         format!(
-            "({}): model {:?}{components}, ratio {:.1}, exposure {:.4} s, {conditions}, K {:.4} DN/e-, read {:.3} DN, row {:.3} DN, seed {}{masked}",
+            "({}): model {:?}{components}, ratio {:.1}, exposure {:.4} s, {conditions}, K {:.4} DN/e-, {noise}, seed {}{masked}",
             if c.brightened { "brightened by the ratio" } else { "dark capture" },
             c.model,
             i.ratio,
             i.exposure_s,
             i.k,
-            i.read_dn,
-            i.row_dn,
             c.seed
         )
     }
@@ -190,6 +198,12 @@ pub fn check(c: &SynthConfig) -> Result<(), SynthError> {
                 "--masked-columns must be even (the CFA phase holds across the strip) and at most {MAX_MASKED_COLUMNS}, got {}",
                 c.masked_columns
             ),
+        ));
+    }
+    if c.noise_bank && c.model != ModelKind::Pgrf {
+        return Err(bad(
+            "--noise-bank",
+            "--noise-bank replaces the pgrf model's read, row and quantisation noise: use --model pgrf".into(),
         ));
     }
     if c.masked_columns > 0 && c.calib.is_some() {
@@ -345,6 +359,10 @@ pub fn synthesize_packed(
     };
     if let Some(cal) = calibration {
         cal.apply_to(&mut spec)?;
+    }
+    if c.noise_bank {
+        let cal = calibration.ok_or(MixError::NoBank { path: None })?;
+        spec.bank = Some(std::sync::Arc::new(cal.noise_bank()?));
     }
     let pair = spec
         .synthesize(clean, facts.plane_rows, c.seed)
@@ -503,6 +521,7 @@ mod tests {
             brightened: false,
             masked_columns: 0,
             darktable: None,
+            noise_bank: false,
         };
         let made = synthesize(&frame, Path::new("flat.dng"), &c).unwrap();
         let out = &made.frame;

@@ -226,6 +226,7 @@ fn calibration_recovers_the_virtual_sensor() {
         components: Components::parse("G,H,Q,F").unwrap(),
         dn_range: 16383.0 - 512.0,
         black: Some(512.0),
+        bank: None,
     };
     let truth_var = v.sigma_read.mapv(|s| s * s + v.spec.row_sigma.powi(2));
     let zeros = Array3::<f32>::zeros(v.bias.raw_dim());

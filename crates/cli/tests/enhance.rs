@@ -564,6 +564,7 @@ fn the_calibrated_fixed_pattern_is_subtracted() {
             },
             gain: None,
             response: None,
+            noise_bank: Vec::new(),
             r2_sqrt: None,
             r2_linear: None,
             dark_offset: None,

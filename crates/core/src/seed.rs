@@ -25,6 +25,8 @@ pub enum Domain {
     Params = 3,
     /// Per-pixel truth and benchmark maps.
     Maps = 4,
+    /// A noise bank's frame and shift per tile of a capture.
+    Bank = 5,
 }
 
 /// SplitMix64 (Steele et al.): one step of its sequence from state `z`, a

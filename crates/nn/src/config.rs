@@ -49,6 +49,10 @@ pub struct TrainConfig {
     /// Per-pixel calibration file (from `pgrf calibrate`) for the pgrf noise model.
     #[cfg_attr(feature = "clap", arg(long))]
     pub calib: Option<PathBuf>,
+    /// Draw the pairs' read, row and quantisation noise from --calib's noise bank (its bias frames' residuals) instead of the parametric model.
+    #[cfg_attr(feature = "clap", arg(long, action = clap::ArgAction::Set, num_args = 0..=1, default_missing_value = "true", default_value_t = false, hide_default_value = true))]
+    #[serde(default, skip_serializing_if = "is_false")]
+    pub noise_bank: bool,
     /// Noise model of the synthetic pairs: pg, eld or pgrf [default: pgrf] (`--noise`, its old name, still works).
     #[cfg_attr(feature = "clap", arg(long = "noise-model", alias = "noise", default_value_t = d().noise, hide_default_value = true))]
     pub noise: ModelKind,
@@ -371,6 +375,7 @@ impl Default for TrainConfig {
             no_augment: false,
             calibrated_dark_level: false,
             calibrated_share: 0.0,
+            noise_bank: false,
             keep_below_black: false,
             item_weight: ItemWeight::None,
             loss: Distance::L1,
@@ -661,6 +666,12 @@ impl TrainConfig {
                 "--calibrated-share goes without --calibrated-dark-level (which draws every capture calibrated)",
             ));
         }
+        if self.noise_bank && self.calib.is_none() {
+            return Err(bad(
+                "--noise-bank",
+                "--noise-bank draws from a calibration's bias frames: give --calib FILE",
+            ));
+        }
         self.iso_range()?;
         Ok(())
     }
@@ -783,6 +794,24 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("stepz"), "{e}");
+    }
+
+    /// `noise_bank` round-trips through TOML, is left out of a record
+    /// that does not use it, and is refused without a calibration.
+    #[test]
+    fn a_noise_bank_needs_a_calibration() {
+        let c = TrainConfig {
+            noise_bank: true,
+            ..TrainConfig::default()
+        };
+        let e = c.validate().unwrap_err().to_string();
+        assert!(e.contains("--noise-bank") && e.contains("--calib"), "{e}");
+        let with = TrainConfig {
+            calib: Some("cal.safetensors".into()),
+            ..c
+        };
+        assert_eq!(TrainConfig::from_toml(&with.to_toml()).unwrap(), with);
+        assert!(!TrainConfig::default().to_toml().contains("noise_bank"));
     }
 
     #[test]

@@ -146,6 +146,9 @@ pub enum NoiseError {
         /// Height in pixels.
         height: usize,
     },
+    /// A noise bank that cannot be drawn from.
+    #[error("invalid noise setting: {0}")]
+    Bank(String),
     /// A frame whose noise an estimate would misstate: a calibration frame,
     /// or one whose black level is unknown.
     #[error("{why}")]

@@ -9,6 +9,7 @@
 
 #![warn(missing_docs)]
 
+pub mod bank;
 pub mod capture;
 pub mod catalog;
 mod components;

@@ -135,6 +135,10 @@ pub struct NoiseModel {
     pub dn_range: f32,
     /// Black level in DN, when known: values are clipped at 0 DN.
     pub black: Option<f32>,
+    /// The sensor's own residual noise frames, drawn instead of the
+    /// parametric read, row and quantisation noise (components G, H and Q
+    /// together, when any of them is asked for).
+    pub bank: Option<std::sync::Arc<crate::bank::NoiseBank>>,
 }
 
 /// One capture's conditions.
@@ -226,6 +230,7 @@ impl NoiseModel {
             components: Components::PG,
             dn_range: profile.dn_range as f32,
             black: profile.black.map(|b| b as f32),
+            bank: None,
         }
     }
 
@@ -257,6 +262,7 @@ impl NoiseModel {
             components: Components::ELD,
             dn_range: profile.dn_range as f32,
             black: profile.black.map(|b| b as f32),
+            bank: None,
         }
     }
 
@@ -296,6 +302,7 @@ impl NoiseModel {
             components,
             dn_range: profile.dn_range as f32,
             black: profile.black.map(|b| b as f32),
+            bank: None,
         }
     }
 
@@ -374,8 +381,12 @@ impl NoiseModel {
             vec![0.0; 2 * ph]
         };
 
+        let bank = (self.bank.as_ref())
+            .filter(|_| c.read || c.row || c.quant)
+            .map(|b| (b.as_ref(), b.draw(capture.seed, ph, pw)));
         let draw = RowDraw {
             model: self,
+            bank: bank.as_ref().map(|(b, d)| (*b, d)),
             to_dn: self.dn_range / capture.ratio,
             from_dn: capture.ratio / self.dn_range,
             inv_k: 1.0 / self.k as f64,
@@ -408,6 +419,7 @@ impl NoiseModel {
 /// the capture's constants.
 struct RowDraw<'a> {
     model: &'a NoiseModel,
+    bank: Option<(&'a crate::bank::NoiseBank, &'a crate::bank::BankDraw)>,
     to_dn: f32,
     from_dn: f32,
     inv_k: f64,
@@ -438,6 +450,12 @@ impl RowDraw<'_> {
         let bias_row = m.bias.row(plane, i, pw);
         let dark_row = m.dark_rate.row(plane, i, pw);
         let fp_row = m.n_fp.row(plane, i, pw);
+        // The bank's residuals stand for N_r + N_H + N_q: written into dst
+        // first, added per pixel below.
+        if let Some((b, d)) = self.bank {
+            b.row_into(d, plane, i, dst);
+        }
+        let banked = self.bank.is_some();
         for j in 0..pw {
             let s = srow[j] * self.to_dn;
             row_ok &= s.is_finite();
@@ -459,15 +477,19 @@ impl RowDraw<'_> {
             if c.fixed_pattern {
                 v += bias_row.map_or_else(|| m.bias.at(plane, base + j), |r| r[j]);
             }
-            if c.read {
-                let sigma = sig_row.map_or_else(|| m.sigma_read.at(plane, base + j), |r| r[j]);
-                v += read_noise(rng, sigma, model.read);
-            }
-            if c.row {
-                v += row_off;
-            }
-            if c.quant {
-                v += quantisation(rng, q);
+            if banked {
+                v += dst[j];
+            } else {
+                if c.read {
+                    let sigma = sig_row.map_or_else(|| m.sigma_read.at(plane, base + j), |r| r[j]);
+                    v += read_noise(rng, sigma, model.read);
+                }
+                if c.row {
+                    v += row_off;
+                }
+                if c.quant {
+                    v += quantisation(rng, q);
+                }
             }
             row_ok &= v.is_finite();
             dst[j] = v.clamp(self.lo, hi) * self.from_dn;

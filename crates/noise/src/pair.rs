@@ -146,6 +146,10 @@ pub struct PairSpec {
     /// Per-pixel calibration maps for the PGRF model (None: the profile's
     /// global values); packed `(4, H/2, W/2)` like the clean images.
     pub maps: Option<PixelMaps>,
+    /// The sensor's residual noise frames, drawn by the PGRF model instead
+    /// of its parametric read, row and quantisation noise
+    /// ([`crate::bank`]; None: parametric).
+    pub bank: Option<std::sync::Arc<crate::bank::NoiseBank>>,
     /// Global numbers measured with `maps` (gain, row noise, DN scale): they
     /// replace the profile's, because per-pixel maps are only meaningful on
     /// the scale and at the gain they were measured with.
@@ -217,6 +221,7 @@ impl PairSpec {
             global: false,
             tukey: true,
             maps: None,
+            bank: None,
             measured: None,
             iso: None,
             iso_range: None,
@@ -260,13 +265,16 @@ impl PairSpec {
         let model = match self.kind {
             ModelKind::PoissonGaussian => NoiseModel::poisson_gaussian(profile, &params),
             ModelKind::Eld => NoiseModel::eld(profile, &params, self.tukey),
-            ModelKind::Pgrf => NoiseModel::pgrf(
-                profile,
-                &params,
-                self.maps.clone(),
-                self.components,
-                self.global,
-            ),
+            ModelKind::Pgrf => NoiseModel {
+                bank: self.bank.clone(),
+                ..NoiseModel::pgrf(
+                    profile,
+                    &params,
+                    self.maps.clone(),
+                    self.components,
+                    self.global,
+                )
+            },
         };
         Ok((model, params))
     }

@@ -84,6 +84,17 @@ pub struct SensorSpec {
     /// frame, DN: the offset drift of a sensor's readout (or its cooling)
     /// from frame to frame, which moves every row alike and is not row noise.
     pub frame_offset_sigma: f32,
+    /// Read noise with heavy tails: Tukey-lambda of this lambda (ELD's
+    /// read-noise law; negative is heavier than Gaussian) at each pixel's
+    /// sigma_r as its scale, instead of a Gaussian (None).
+    pub read_tukey_lambda: Option<f32>,
+    /// Share of random telegraph pixels: pixels whose level jumps between
+    /// two states from frame to frame (each frame draws the state), as
+    /// traps in a source follower make them.
+    pub rts_fraction: f32,
+    /// The jump between a random telegraph pixel's two states, DN (the
+    /// pixel reads +- half of it around its mean).
+    pub rts_amplitude: f32,
     /// Standard deviation of N_FP.
     pub(crate) n_fp: f32,
     /// Share of hot pixels and their dark rate multiplier.
@@ -130,6 +141,9 @@ impl SensorSpec {
             frame_offset_sigma: 0.0,
             vignetting: 0.0,
             temperature_c: None,
+            read_tukey_lambda: None,
+            rts_fraction: 0.0,
+            rts_amplitude: 0.0,
             n_fp: 0.05,
             hot_fraction: 1e-4,
             hot_factor: 50.0,
@@ -155,6 +169,8 @@ pub struct VirtualSensor {
     pub(crate) n_fp: Array3<f32>,
     /// 1 where the pixel is hot.
     pub hot: Array3<f32>,
+    /// The jump of each random telegraph pixel, DN (0 elsewhere).
+    pub rts: Array3<f32>,
 }
 
 impl VirtualSensor {
@@ -194,6 +210,9 @@ impl VirtualSensor {
             dark_rate,
             n_fp: seeded_map(s, 5, ph, pw, move |r| (nfp * gn(r)).max(-0.9)),
             hot,
+            rts: seeded_map(s, 7, ph, pw, move |r| {
+                (open01(r) < spec.rts_fraction as f64) as u8 as f32 * spec.rts_amplitude
+            }),
             spec,
         })
     }
@@ -221,6 +240,11 @@ impl VirtualSensor {
         let sig = self.sigma_read.as_slice().expect("standard");
         let dark = self.dark_rate.as_slice().expect("standard");
         let nfp = self.n_fp.as_slice().expect("standard");
+        let rts = self.rts.as_slice().expect("standard");
+        let read = match sp.read_tukey_lambda {
+            Some(lambda) => ReadDist::Tukey { lambda },
+            None => ReadDist::Gaussian,
+        };
         packed
             .as_slice_mut()
             .expect("standard")
@@ -248,7 +272,10 @@ impl VirtualSensor {
                     if de > 0.0 {
                         v += dark_shot(&mut rng, sp.k, de, Some(nfp[x]));
                     }
-                    v += read_noise(&mut rng, sig[x], ReadDist::Gaussian);
+                    v += read_noise(&mut rng, sig[x], read);
+                    if rts[x] > 0.0 {
+                        v += rts[x] * ((open01(&mut rng) < 0.5) as u8 as f32 - 0.5);
+                    }
                     *d = v.round().clamp(0.0, white) as u16;
                 }
             });

@@ -68,6 +68,12 @@ pub struct StacksConfig {
     pub mono: bool,
     /// Light lost at the corners of the flats (0.2 = 20 %).
     pub vignetting: f32,
+    /// Read noise with heavy tails: Tukey-lambda of this lambda (-0.5 <
+    /// lambda < 0.5; negative is heavier than Gaussian) instead of Gaussian.
+    pub read_tails: Option<f32>,
+    /// Random telegraph pixels: their share (0..0.1) and the jump between
+    /// their two states, DN.
+    pub rts: Option<(f32, f32)>,
     /// The file format of the frames.
     pub format: FrameFormat,
     /// Which stacks to write, by name ([`STACKS`]).
@@ -126,6 +132,14 @@ pub enum StacksError {
     Temperature {
         /// The temperature given.
         celsius: f32,
+    },
+    /// A read-noise tail or telegraph setting out of range.
+    #[error("{flag}: {message}")]
+    NoiseSetting {
+        /// The flag.
+        flag: &'static str,
+        /// What is wrong.
+        message: String,
     },
     /// Vignetting outside 0..0.9.
     #[error("--vignetting must be a fraction between 0 and 0.9, got {fraction}")]
@@ -225,6 +239,31 @@ impl StacksConfig {
                 return Err(StacksError::Temperature { celsius: t });
             }
         }
+        if let Some(l) = self
+            .read_tails
+            .filter(|l| !(l.is_finite() && l.abs() < 0.5))
+        {
+            return Err(StacksError::NoiseSetting {
+                flag: "--read-tails",
+                message: format!(
+                    "lambda must lie strictly between -0.5 and 0.5 (finite variance), got {l}"
+                ),
+            });
+        }
+        if let Some((f, a)) = self.rts {
+            if !(f.is_finite()
+                && (0.0..=0.1).contains(&f)
+                && a.is_finite()
+                && (0.0..=1000.0).contains(&a))
+            {
+                return Err(StacksError::NoiseSetting {
+                    flag: "--rts",
+                    message: format!(
+                        "the share must be in 0..0.1 and the jump in 0..1000 DN, got {f},{a}"
+                    ),
+                });
+            }
+        }
         if !(self.vignetting.is_finite() && (0.0..0.9).contains(&self.vignetting)) {
             return Err(StacksError::Vignetting {
                 fraction: self.vignetting,
@@ -288,6 +327,8 @@ impl StacksConfig {
         spec.vignetting = self.vignetting;
         spec.mono = self.mono;
         spec.temperature_c = self.temperature;
+        spec.read_tukey_lambda = self.read_tails;
+        (spec.rts_fraction, spec.rts_amplitude) = self.rts.unwrap_or((0.0, 0.0));
         Ok(VirtualSensor::new(spec)?)
     }
 
@@ -448,6 +489,8 @@ mod tests {
             temperature: None,
             mono: false,
             vignetting: 0.0,
+            read_tails: None,
+            rts: None,
             format: FrameFormat::Fits,
             stacks: vec!["bias".into(), "dark".into(), "flat".into()],
             seed: 3,

@@ -25,6 +25,7 @@ fn model(components: &str) -> NoiseModel {
         components: Components::parse(components).unwrap(),
         dn_range: RANGE,
         black: Some(512.0),
+        bank: None,
     }
 }
 
@@ -371,4 +372,58 @@ fn bad_inputs_are_errors() {
     let mut neg = model("G");
     neg.maps.sigma_read = Map::Scalar(-1.0);
     assert!(neg.sample(c.view(), &capture(100.0, 1)).is_err());
+}
+
+/// With a noise bank, read, row and quantisation noise are the bank's
+/// residuals: a dark capture (no signal) of the bank's size, components
+/// G, H, Q, is in DN one bank frame's values per plane, each exactly once
+/// (a shift of whole rows and columns), for every seed; another seed
+/// draws another frame or shift.
+#[test]
+fn a_bank_draw_is_a_shifted_bank_frame() {
+    use pgrf_noise::bank::NoiseBank;
+    let frame = |k: usize| {
+        Array3::from_shape_fn((4, 6, 10), |(p, i, j)| {
+            ((k * 7919 + p * 613 + i * 71 + j * 13) % 97) as f32 - 48.0
+        })
+    };
+    let bank = NoiseBank::new(vec![frame(1), frame(2), frame(3)]).unwrap();
+    let mut m = model("G,H,Q");
+    m.bank = Some(std::sync::Arc::new(bank.clone()));
+    let zeros = Array3::<f32>::zeros((4, 6, 10));
+    let mut seen = std::collections::HashSet::new();
+    for seed in 0..8u64 {
+        let c = Capture {
+            ratio: 1.0,
+            exposure_s: 0.01,
+            plane_rows: [0, 0, 1, 1],
+            seed,
+        };
+        let out = m.sample(zeros.view(), &c).unwrap();
+        let dn: Vec<Vec<i64>> = (0..4)
+            .map(|p| {
+                let mut v: Vec<i64> = out
+                    .index_axis(ndarray::Axis(0), p)
+                    .iter()
+                    .map(|&x| (x * RANGE).round() as i64)
+                    .collect();
+                v.sort_unstable();
+                v
+            })
+            .collect();
+        let which = bank.frames().iter().position(|f| {
+            (0..4).all(|p| {
+                let mut v: Vec<i64> = f
+                    .index_axis(ndarray::Axis(0), p)
+                    .iter()
+                    .map(|&x| x.round() as i64)
+                    .collect();
+                v.sort_unstable();
+                v == dn[p]
+            })
+        });
+        assert!(which.is_some(), "seed {seed}: not one bank frame's values");
+        seen.insert((which, out[[0, 0, 0]].to_bits()));
+    }
+    assert!(seen.len() > 1, "every seed drew the same frame and shift");
 }

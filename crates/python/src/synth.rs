@@ -32,6 +32,7 @@ struct Settings {
     exposure_s: Option<f32>,
     dark_rate: Option<f64>,
     dark_law: DarkLaw,
+    noise_bank: bool,
 }
 
 impl Settings {
@@ -53,6 +54,7 @@ impl Settings {
             brightened: false,
             masked_columns: 0,
             darktable: None,
+            noise_bank: self.noise_bank,
         }
     }
 }
@@ -133,7 +135,7 @@ fn setting<'py, T: pyo3::conversion::FromPyObjectOwned<'py>>(
 /// of range by the recipe, before it draws anything
 /// ([`synthesize_packed`]'s first checks).
 fn parse_settings(d: &Bound<'_, PyDict>) -> PyResult<Settings> {
-    const KEYS: [&str; 9] = [
+    const KEYS: [&str; 10] = [
         "ratio",
         "iso",
         "model",
@@ -143,6 +145,7 @@ fn parse_settings(d: &Bound<'_, PyDict>) -> PyResult<Settings> {
         "exposure_s",
         "dark_rate",
         "dark_law",
+        "noise_bank",
     ];
     for k in d.keys() {
         let k: String = k.extract()?;
@@ -172,6 +175,7 @@ fn parse_settings(d: &Bound<'_, PyDict>) -> PyResult<Settings> {
         exposure_s: setting(d, "exposure_s", None)?,
         dark_rate: setting(d, "dark_rate", None)?,
         dark_law,
+        noise_bank: setting(d, "noise_bank", false)?,
     })
 }
 

@@ -146,3 +146,28 @@ def test_the_gil_is_released_while_pgrf_works():
     t0, t1 = span
     mid = [s for s in stamps if t0 + 0.25 * (t1 - t0) < s < t0 + 0.75 * (t1 - t0)]
     assert t1 - t0 > 0.02 and len(mid) >= 3, (t1 - t0, len(mid))
+
+
+def test_noise_bank_draws_are_the_commands(run_pgrf, tmp_path):
+    """With a calibration's noise bank (its bias frames' residuals), `pgrf.synth(...,
+    noise_bank=True)` written with write_dng is `pgrf synth --calib C --noise-bank`, byte for
+    byte; without a calibration it is refused."""
+    vs = tmp_path / "vs"
+    run_pgrf("simulate-sensor", "--width", "64", "--height", "48", "--frames", "4",
+             "--stacks", "bias,flat", "--read-tails", "-0.2", "-o", vs)
+    cal = tmp_path / "cal.safetensors"
+    run_pgrf("calibrate", "--bias", vs / "bias", "--flat", vs / "flat", "-o", cal)
+    src = vs / "flat" / "flat_8000e_0000.dng"
+    cli = tmp_path / "cli.dng"
+    run_pgrf("synth", src, "--profile", "sony-a7s2", "--calib", cal, "--noise-bank",
+             "--ratio", "10", "--seed", "4", "-o", cli)
+    clean, meta = pgrf.read(src)
+    profile = pgrf.Profile.calibration(str(cal))
+    cap = pgrf.synth(clean, profile, ratio=10, seed=4, meta=meta, noise_bank=True)
+    mine = tmp_path / "py.dng"
+    pgrf.write_dng(mine, cap.dark, cap.meta)
+    assert cli.read_bytes() == mine.read_bytes()
+    plain = pgrf.synth(clean, profile, ratio=10, seed=4, meta=meta)
+    assert not np.array_equal(plain.dark, cap.dark)
+    with pytest.raises(ValueError, match="noise-bank"):
+        pgrf.synth(clean, A7S2, ratio=10, seed=4, meta=meta, noise_bank=True)

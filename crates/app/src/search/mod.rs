@@ -321,6 +321,7 @@ fn pairs_noise(req: &SearchRequest, meta: &WeightMeta) -> Result<PairsNoise> {
         calibrated_dark_level: noise.calibrated_dark_level,
         calibrated_share: trained.map_or(0.0, |c| c.calibrated_share),
         calibration: req.calib.as_deref(),
+        noise_bank: trained.is_some_and(|c| c.noise_bank) && req.calib.is_some(),
         darktable: req.darktable.as_deref(),
     })
     .map_err(|e| match e {

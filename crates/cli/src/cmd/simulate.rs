@@ -55,12 +55,27 @@ pub struct SimulateArgs {
     /// Flat shading: the light lost at the corners (0.2 = 20 %), as a lens's vignetting.
     #[arg(long, default_value_t = 0.0)]
     pub vignetting: f32,
+    /// Read noise with heavy tails: Tukey-lambda of this lambda (ELD's read-noise law; -0.2 is heavier than Gaussian; -0.5 < lambda < 0.5) at each pixel's sigma as its scale, instead of Gaussian.
+    #[arg(long, allow_hyphen_values = true)]
+    pub read_tails: Option<f32>,
+    /// Random telegraph pixels: SHARE,JUMP (e.g. 0.002,40): that share of the pixels jumps between two levels JUMP DN apart, drawn anew every frame.
+    #[arg(long, value_parser = parse_rts)]
+    pub rts: Option<(f32, f32)>,
     /// Which stacks to write (comma separated): bias, dark, flat.
     #[arg(long, value_delimiter = ',', default_value = "bias,dark,flat")]
     pub stacks: Vec<String>,
     /// Seed of the frames (the sensor's own maps have a fixed seed per preset).
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
+}
+
+/// `--rts SHARE,JUMP`.
+fn parse_rts(text: &str) -> std::result::Result<(f32, f32), String> {
+    let parse = |v: &str| v.trim().parse::<f32>().map_err(|e| format!("{v:?}: {e}"));
+    match text.split_once(',') {
+        Some((f, a)) => Ok((parse(f)?, parse(a)?)),
+        None => Err(format!("{text:?}: expected SHARE,JUMP (e.g. 0.002,40)")),
+    }
 }
 
 impl SimulateArgs {
@@ -81,6 +96,8 @@ impl SimulateArgs {
             temperature: self.temperature,
             mono: self.mono,
             vignetting: self.vignetting,
+            read_tails: self.read_tails,
+            rts: self.rts,
             format: if self.fits {
                 FrameFormat::Fits
             } else {

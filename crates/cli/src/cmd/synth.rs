@@ -91,6 +91,9 @@ pub struct SynthArgs {
     /// only; not with --calib).
     #[arg(long, default_value_t = 0)]
     pub masked_columns: usize,
+    /// Draw the read, row and quantisation noise from --calib's noise bank (the residuals of the bias frames it was made from: their tails, random telegraph pixels and row and column structure) instead of the parametric model.
+    #[arg(long)]
+    pub noise_bank: bool,
     #[command(flatten)]
     pub input: InputArgs,
 }
@@ -152,6 +155,7 @@ fn config(a: &SynthArgs, g: &crate::Globals) -> SynthConfig {
         seed: a.seed,
         brightened: a.brightened,
         masked_columns: a.masked_columns,
+        noise_bank: a.noise_bank,
         darktable: g.darktable.map(Into::into),
     }
 }

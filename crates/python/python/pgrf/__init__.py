@@ -193,7 +193,7 @@ class Capture:
 
 #: The keyword arguments of synth and synth_batch that set the capture.
 _SETTINGS = ("ratio", "iso", "model", "components", "global_maps", "gaussian_read",
-             "exposure_s", "dark_rate", "dark_law")
+             "exposure_s", "dark_rate", "dark_law", "noise_bank")
 
 
 def _settings(args: Dict[str, Any]) -> Dict[str, Any]:
@@ -217,6 +217,7 @@ def synth(
     gaussian_read: bool = False,
     dark_rate: Optional[float] = None,
     dark_law: str = "sqrt",
+    noise_bank: bool = False,
 ) -> Capture:
     """Simulate the low-light capture of a packed clean image.
 
@@ -234,7 +235,9 @@ def synth(
     exposure (None: ``meta``'s / ratio, else drawn). ``global_maps``: the
     paper's "noD" ablation. ``gaussian_read``: ELD with Gaussian read
     noise. ``dark_rate``/``dark_law``: dark current in electrons per
-    sqrt(s) ("sqrt") or per s ("linear").
+    sqrt(s) ("sqrt") or per s ("linear"). ``noise_bank``: draw the read,
+    row and quantisation noise from the calibration's bank of its bias
+    frames' residuals (``Profile.calibration``; ``pgrf synth --noise-bank``).
 
     The same arguments and seed give the same arrays, in any thread or
     process, and the numbers ``pgrf synth --seed`` writes for that file.
@@ -287,6 +290,7 @@ def synth_batch(
     gaussian_read: bool = False,
     dark_rate: Optional[float] = None,
     dark_law: str = "sqrt",
+    noise_bank: bool = False,
 ) -> BatchCapture:
     """:func:`synth` of each image of ``clean`` ``(N, 4, H/2, W/2)`` with its own seed.
 
