@@ -35,10 +35,11 @@ pub struct RawFrame {
     pub cfa: Cfa,
     /// A monochrome sensor (no colour filter: astronomy CCDs, Leica
     /// Monochrom). Per-pixel work (packing, calibration, synthesis,
-    /// restoration by the packed four-plane networks) treats its 2x2
-    /// sub-lattices as four planes of one colour; nothing colour applies (no
-    /// white balance, matrix or demosaic), and what needs colour data
-    /// (training sets, colour evaluation) refuses it ([`RawFrame::require_cfa`]).
+    /// restoration, training and scoring by the packed four-plane networks)
+    /// treats its 2x2 sub-lattices as four planes of one colour; nothing
+    /// colour applies (no white balance, matrix, demosaic or colour cast),
+    /// and what needs a camera's colour (unprocessing photos into it)
+    /// refuses it ([`RawFrame::require_cfa`]).
     pub mono: bool,
     /// Black level in DN of the planes R, G1, B, G2.
     pub black: [f32; 4],

@@ -177,19 +177,17 @@ pub(crate) fn load_pair(s: &Sample, levels: &LevelOverrides) -> Result<LoadedPai
     );
     let n = n.map_err(|e| DatasetError(e.to_string()))?;
     let r = r.map_err(|e| DatasetError(e.to_string()))?;
-    n.require_cfa("evaluation")
-        .map_err(|e| DatasetError(format!("{}: {e}", s.noisy.display())))?;
-    if (n.width, n.height, n.cfa) != (r.width, r.height, r.cfa) {
+    if (n.width, n.height, n.layout()) != (r.width, r.height, r.layout()) {
         return err(format!(
             "{} ({}x{} {}) and {} ({}x{} {}) differ in size or CFA phase",
             s.noisy.display(),
             n.width,
             n.height,
-            n.cfa,
+            n.layout(),
             s.reference.display(),
             r.width,
             r.height,
-            r.cfa
+            r.layout()
         ));
     }
     let ratio = match s.ratio {

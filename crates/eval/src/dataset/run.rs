@@ -277,9 +277,12 @@ fn measure_case(
         let p = if *name == NOISY { &plain } else { &protocol };
         let at = |e: MetricError| DatasetError(format!("{}: {e}", case.title));
         let sc = evaluate(out.view(), reference, p).map_err(at)?;
+        // A monochrome frame has no colour to cast.
         let cast = match &colour {
-            Some(c) => colour_cast(out.view(), reference, c).map_err(at)?,
-            None => None,
+            Some(c) if !case.pair.reference_frame.mono => {
+                colour_cast(out.view(), reference, c).map_err(at)?
+            }
+            _ => None,
         };
         let black = colour
             .is_some()

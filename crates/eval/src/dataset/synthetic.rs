@@ -177,11 +177,9 @@ impl Image {
     pub fn load(&self, levels: &LevelOverrides) -> Result<RawFrame> {
         let e = |e: pgrf_raw::RawError| DatasetError(e.to_string());
         if !self.photo {
-            let frame = decode_file(&self.path, levels).map_err(e)?;
-            frame
-                .require_cfa("evaluation")
-                .map_err(|x| DatasetError(format!("{}: {x}", self.path.display())))?;
-            return Ok(frame);
+            // A monochrome frame is scored on its four packed sub-lattices,
+            // as enhance restores it.
+            return decode_file(&self.path, levels).map_err(e);
         }
         let photo = pgrf_scenes::photo::read_photo(&self.path)
             .and_then(|p| p.downscale(2))

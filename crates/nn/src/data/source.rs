@@ -95,12 +95,12 @@ impl Folder {
     fn get(&self, i: usize) -> Result<Arc<Packed>> {
         let path = &self.files[i];
         let load = || {
-            let frame = decode_file(path, &self.levels)
-                .and_then(|f| f.require_cfa("training").map(|()| f))
-                .map_err(|e| NnError::BadData {
-                    path: path.clone(),
-                    reason: e.to_string(),
-                })?;
+            // A monochrome frame packs into its four sub-lattices as
+            // enhance packs it: four half-resolution images of one scene.
+            let frame = decode_file(path, &self.levels).map_err(|e| NnError::BadData {
+                path: path.clone(),
+                reason: e.to_string(),
+            })?;
             Packed::from_frame(&frame)
         };
         self.cache.get_or_load(i, load, |p| p.planes.len() * 2)
