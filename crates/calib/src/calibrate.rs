@@ -33,6 +33,11 @@ pub struct CalibrateInput {
     /// median of all frames' before the run is refused; `None` for
     /// [`TEMPERATURE_TOLERANCE_C`].
     pub temperature_tolerance: Option<f32>,
+    /// Dark frames taken at other sensor temperatures than the rest (two or
+    /// more exposures not needed): with the darks, they measure the
+    /// temperature rise that doubles the dark current
+    /// ([`crate::temperature`]).
+    pub temperature_darks: Vec<PathBuf>,
     /// Drop the frames that stand out from their stack
     /// ([`crate::stack::Stack::odd_frames`]) and read the stack again
     /// without them; without it they are kept and named in warnings.
@@ -478,7 +483,27 @@ pub fn calibrate(input: &CalibrateInput, progress: &dyn Progress) -> Result<Cali
         }
         let dark = estimate_dark(&dark_stack, &bias, gain.k)?;
         let frames = dark_stack.groups.iter().map(|g| g.files.len()).collect();
-        (Some(dark), frames, dark_stack.temperatures)
+        let rates = match input.temperature_darks.is_empty() {
+            true => Vec::new(),
+            false => rates_with_temperature(
+                input,
+                &dark_stack,
+                &bias,
+                dark.law,
+                &opts("dark", 1, false),
+            )?,
+        };
+        (Some((dark, rates)), frames, dark_stack.temperatures)
+    };
+    let (dark, rates) = match dark {
+        Some((d, r)) => (Some(d), r),
+        None if !input.temperature_darks.is_empty() => {
+            return Err(CalibError::BadOption {
+                flag: "--temperature-darks",
+                message: "--temperature-darks measure the dark current's growth against the darks at the calibration's temperature: give --dark too".into(),
+            })
+        }
+        None => (None, Vec::new()),
     };
     let temperature_c = check_temperatures(
         &[
@@ -505,6 +530,9 @@ pub fn calibrate(input: &CalibrateInput, progress: &dyn Progress) -> Result<Cali
         defects: &maps.defects,
         defect_columns,
     });
+    let mut meta = meta;
+    meta.dark_doubling_c = crate::temperature::doubling_temperature(&rates);
+    meta.dark_rates_by_temperature = rates;
     Ok(CalibrationRun {
         calibration: Calibration { meta, maps },
         bias,
@@ -513,6 +541,36 @@ pub fn calibrate(input: &CalibrateInput, progress: &dyn Progress) -> Result<Cali
         masters,
         key,
     })
+}
+
+/// The dark rate at the darks' median temperature and at each temperature
+/// of `input.temperature_darks` ([`crate::temperature`]).
+fn rates_with_temperature(
+    input: &CalibrateInput,
+    darks: &crate::stack::Stack,
+    bias: &BiasEstimate,
+    law: pgrf_noise::DarkLaw,
+    opt: &ReadOptions,
+) -> Result<Vec<(f32, f64)>> {
+    let mut temps: Vec<f64> = darks.temperatures.iter().map(|(_, t)| *t as f64).collect();
+    if temps.is_empty() {
+        return Err(CalibError::BadOption {
+            flag: "--temperature-darks",
+            message: "the darks record no temperature to compare with".into(),
+        });
+    }
+    let here = pgrf_core::stats::median(&mut temps) as f32;
+    let mut rates: Vec<(f32, f64)> = crate::temperature::median_rate(darks, bias, law)
+        .map(|r| (here, r))
+        .into_iter()
+        .collect();
+    rates.extend(crate::temperature::rates_by_temperature(
+        &input.temperature_darks,
+        opt,
+        bias,
+        law,
+    )?);
+    Ok(rates)
 }
 
 /// The temperature tolerance asked for (checked), else the default.
@@ -657,6 +715,8 @@ fn meta_of(r: &Measured) -> CalibMeta {
         dead_pixels: count(defect::DEAD),
         cold_pixels: count(defect::COLD),
         defect_columns: r.defect_columns,
+        dark_doubling_c: None,
+        dark_rates_by_temperature: Vec::new(),
         row_order: Some(key.row_order),
         units: format!("{}; fixed_pattern (bias mean - black), sigma_read, response: DN; gain: DN per electron (eq. 3.15 per pixel; 0 at dead pixels); dark_rate: electrons per sqrt(s) (sqrt law) or per s (linear law), N_FP absorbed; defects: 0 good, 1 hot, 2 dead, 3 cold, 4 defective column (defect_columns counts sensor columns); r2_*: R^2 of the per-pixel dark fits (with the offset term when dark_offset); dark_offset: the dark law's offset c, DN; K: DN/e-; row_sigma, read_sigma_median (median of the true per-pixel sigma, corrected for the frames' sampling error), dark_noise_sigma (EMVA 1288 sigma_y.dark from bias-frame pair differences), dsnu: DN", if key.mono { "maps in the file one plane (1, H, W) of the sensor's pixels (in memory packed as its four sub-lattices)" } else { "maps packed (4, H/2, W/2) in R,G1,B,G2 order" }),
     }

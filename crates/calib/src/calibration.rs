@@ -145,6 +145,15 @@ pub struct CalibMeta {
     /// `defects` map where not flagged otherwise.
     #[serde(default)]
     pub defect_columns: usize,
+    /// Temperature rise that doubles the dark current, degrees C, fitted to
+    /// darks at two or more temperatures ([`crate::temperature`]); None when
+    /// not measured.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub dark_doubling_c: Option<f64>,
+    /// The dark rates it was fitted to: (temperature in degrees C, DN per
+    /// unit of the law's g(t)).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub dark_rates_by_temperature: Vec<(f32, f64)>,
     pub(crate) units: String,
 }
 
@@ -238,6 +247,16 @@ impl CalibMeta {
         if let Some(r) = self.dark_rate_mean {
             if !(r.is_finite() && r.abs() <= 1e9) {
                 return Err(RecordFault::DarkRate(r));
+            }
+        }
+        // A light's dark is scaled by 2^(dT / doubling): a doubling of a
+        // fraction of a degree (or none) is no sensor's.
+        if let Some(d) = self.dark_doubling_c {
+            if !(d.is_finite() && (0.5..=100.0).contains(&d)) {
+                return Err(RecordFault::Figure {
+                    field: "dark_doubling_c",
+                    value: d,
+                });
             }
         }
         if let Some(c) = self.dark_offset_mean {

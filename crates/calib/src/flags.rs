@@ -17,6 +17,9 @@ pub struct CalibrateArgs {
     /// Folder of dark frames (lens capped, two or more exposure times, read from each file: a camera RAW's EXIF ExposureTime, a FITS file's EXPTIME or EXPOSURE; any number of frames at each, one is fine).
     #[arg(long)]
     pub dark: Option<PathBuf>,
+    /// Folder of dark frames taken at other sensor temperatures than the rest (CCD-TEMP in FITS; any exposures, grouped by temperature): with --dark, they measure the temperature rise that doubles the dark current, which `pgrf reduce` scales a light's dark by.
+    #[arg(long)]
+    pub temperature_darks: Option<PathBuf>,
     /// Folder of flat-field frames (uniform light; two or more levels, told apart by exposure time: EXIF ExposureTime, or FITS EXPTIME or EXPOSURE).
     #[arg(long)]
     pub flat: PathBuf,
@@ -80,6 +83,10 @@ impl CalibrateArgs {
             Some(d) => list_files(d)?,
             None => Vec::new(),
         };
+        let temperature_darks = match &self.temperature_darks {
+            Some(d) => list_files(d)?,
+            None => Vec::new(),
+        };
         if let Some(dir) = &self.report {
             check_folder("--report", dir, " for the report")?;
         }
@@ -110,6 +117,7 @@ impl CalibrateArgs {
                 reject: self.reject,
                 masters: self.masters.is_some(),
                 temperature_tolerance: self.temperature_tolerance,
+                temperature_darks,
             },
             output: self.output.clone(),
             masters: self.masters.clone(),

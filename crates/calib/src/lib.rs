@@ -24,6 +24,7 @@ mod sample_sd;
 pub mod stack;
 mod stats;
 pub mod synth;
+pub mod temperature;
 
 pub use calibrate::{calibrate, CalibrateInput, CalibrationRun};
 pub use calibration::{CalibMaps, CalibMeta, Calibration};

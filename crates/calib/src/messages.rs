@@ -63,6 +63,16 @@ impl CalibrateOutcome {
             m.hot_pixels,
             m.dead_pixels
         ));
+        if let Some(d) = m.dark_doubling_c {
+            let at: Vec<String> = (m.dark_rates_by_temperature.iter())
+                .map(|(t, r)| format!("{r:.3} at {t:.1} °C"))
+                .collect();
+            lines.push(format!(
+                "dark current doubles every {d:.2} °C (rates {} DN per unit of g(t)): `pgrf reduce` scales a light's dark to its temperature within {} °C",
+                at.join(", "),
+                crate::temperature::DARK_SCALE_RANGE_C
+            ));
+        }
         let bank = &self.run.calibration.maps.noise_bank;
         if let Some(f) = bank.first() {
             let (_, h, w) = f.dim();

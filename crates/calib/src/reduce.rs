@@ -156,6 +156,21 @@ pub enum ReduceError {
         /// The allowed distance, degrees C.
         tolerance: f32,
     },
+    /// A light farther from the calibration's temperature than its dark is
+    /// scaled over by the measured doubling temperature.
+    #[error("{}: taken at {light_c:.1} °C, the calibration at {calib_c:.1} °C: its dark (doubling every {doubling:.1} °C) is scaled over {reach} °C at most", file.display())]
+    TemperatureBeyondScale {
+        /// The light.
+        file: PathBuf,
+        /// Its temperature, degrees C.
+        light_c: f32,
+        /// The calibration's, degrees C.
+        calib_c: f32,
+        /// The largest distance scaled over, degrees C.
+        reach: f32,
+        /// The calibration's doubling temperature, degrees C.
+        doubling: f64,
+    },
     /// A master flat whose plane has no light once bias and dark are off.
     #[error("{}: plane {plane} averages {mean} DN above bias and dark: not a flat field", file.display())]
     DarkFlat {
@@ -241,6 +256,10 @@ pub struct Masters {
     pub cfa: pgrf_raw::Cfa,
     /// The master bias's XBINNING x YBINNING, when its header states one.
     pub binning: Option<(u32, u32)>,
+    /// The calibration's temperature and the doubling temperature of its
+    /// dark current, degrees C, when both were measured: a light's dark is
+    /// scaled to the light's temperature ([`Masters::temperature_scale`]).
+    pub dark_temperature: Option<(f32, f64)>,
 }
 
 /// The time factor of `law`: g(t) in dark(t) = a g(t) + c.
@@ -286,6 +305,14 @@ impl Masters {
                 c + (d.samples[i] - self.bias.samples[i] - c) * scale
             })
             .collect()
+    }
+
+    /// How many times the calibration's the dark current is at a light's
+    /// temperature `light_c`: 2^((light - calibration) / doubling); None
+    /// without a measured doubling temperature or the light's temperature.
+    pub fn temperature_scale(&self, light_c: Option<f32>) -> Option<f64> {
+        let (calib_c, doubling) = self.dark_temperature?;
+        Some(2f64.powf((light_c? - calib_c) as f64 / doubling))
     }
 
     /// The packed plane of stored pixel `i` for the flat's means: 0..4,
@@ -487,6 +514,7 @@ fn assemble(
         mono: bias_frame.mono,
         cfa,
         binning: bias_frame.fits.as_ref().and_then(|h| h.binning),
+        dark_temperature: calib.meta.temperature_c.zip(calib.meta.dark_doubling_c),
     }
 }
 
@@ -534,6 +562,10 @@ pub struct DarkUsed {
     /// Its scale factor g(t) / g(t_d) (the dark law at the light's and the
     /// master's exposures).
     pub scale: f64,
+    /// The further factor to the light's temperature, when the calibration
+    /// measured a doubling temperature ([`Masters::temperature_scale`]).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub temperature_scale: Option<f64>,
 }
 
 /// What became of one light.
@@ -587,13 +619,29 @@ fn check_light(
     let tolerance = config
         .temperature_tolerance
         .unwrap_or(crate::calibrate::TEMPERATURE_TOLERANCE_C);
+    // With a measured doubling temperature the dark is scaled to the
+    // light's temperature, over a stated range.
+    let scaled = masters.dark_temperature.map(|(_, d)| d);
+    let reach = match scaled {
+        Some(_) => tolerance.max(crate::temperature::DARK_SCALE_RANGE_C),
+        None => tolerance,
+    };
     if let (Some(light_c), Some(calib_c)) = (frame.temperature_c, calib.meta.temperature_c) {
-        if (light_c - calib_c).abs() > tolerance {
-            return Err(ReduceError::Temperature {
-                file: file.to_path_buf(),
-                light_c,
-                calib_c,
-                tolerance,
+        if (light_c - calib_c).abs() > reach {
+            return Err(match scaled {
+                Some(doubling) => ReduceError::TemperatureBeyondScale {
+                    file: file.to_path_buf(),
+                    light_c,
+                    calib_c,
+                    reach,
+                    doubling,
+                },
+                None => ReduceError::Temperature {
+                    file: file.to_path_buf(),
+                    light_c,
+                    calib_c,
+                    tolerance,
+                },
             });
         }
     }
@@ -721,7 +769,10 @@ pub fn reduce_frame(
     light: &RawFrame,
 ) -> (Vec<f32>, Option<(String, f64)>, Cosmetic) {
     let t = light.exposure_s.unwrap_or(0.0);
-    let dark = masters.dark_signal(t);
+    let mut dark = masters.dark_signal(t);
+    if let Some(f) = masters.temperature_scale(light.temperature_c) {
+        dark.iter_mut().for_each(|d| *d *= f as f32);
+    }
     let mut defective = masters.defective.clone();
     let mut out: Vec<f32> = (0..light.mosaic.len())
         .map(|i| {
@@ -840,7 +891,11 @@ pub fn reduce_to_files(
             input: light.clone(),
             output,
             exposure_s: frame.exposure_s,
-            dark: dark.map(|(master, scale)| DarkUsed { master, scale }),
+            dark: dark.map(|(master, scale)| DarkUsed {
+                master,
+                scale,
+                temperature_scale: masters.temperature_scale(frame.temperature_c),
+            }),
             cosmetic,
         });
         progress.advance(1);
@@ -898,6 +953,20 @@ fn header_of(
         let (dark_cards, step) = dark_step(masters, light, name, *scale);
         cards.extend(dark_cards);
         history.push(step);
+        if let (Some(f), Some((calib_c, doubling))) = (
+            masters.temperature_scale(light.temperature_c),
+            masters.dark_temperature,
+        ) {
+            cards.push(FitsCard::new(
+                "DARKTSCL",
+                FitsValue::Float(f),
+                "dark scale to the light's temperature",
+            ));
+            history.push(format!(
+                "dark scaled from {calib_c:.1} C to the light's {:.1} C: x{f:.6} (doubling every {doubling:.2} C)",
+                light.temperature_c.unwrap_or(calib_c)
+            ));
+        }
     }
     cards.push(FitsCard::new(
         "MFLAT",
@@ -1120,6 +1189,7 @@ mod tests {
             mono: true,
             cfa: pgrf_raw::Cfa::Rggb,
             binning: None,
+            dark_temperature: None,
         };
         let (d, s) = m.dark_for(20.0).unwrap();
         assert_eq!(d.exposure_s, 40.0);

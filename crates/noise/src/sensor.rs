@@ -28,6 +28,10 @@ use rayon::prelude::*;
 /// Time constant of the virtual sensor's dark offset, s.
 pub const DARK_OFFSET_TAU_S: f64 = 0.05;
 
+/// The temperature at which a virtual sensor with a doubling temperature
+/// has its `dark_rate`, degrees C.
+pub const DARK_REFERENCE_C: f32 = 0.0;
+
 /// Design of a virtual sensor. The gain, read and row noise of the presets are
 /// the published A7S2 numbers (PMN: K = 9.563e-4 x ISO; sigma_read, sigma_row
 /// at the ISO); the per-pixel spreads (DSNU, PRNU, read-noise spread, dark
@@ -84,6 +88,11 @@ pub struct SensorSpec {
     /// frame, DN: the offset drift of a sensor's readout (or its cooling)
     /// from frame to frame, which moves every row alike and is not row noise.
     pub frame_offset_sigma: f32,
+    /// Temperature rise that doubles the dark current, degrees C (0: the
+    /// dark current does not depend on temperature): `dark_rate` holds at
+    /// [`DARK_REFERENCE_C`], and a frame taken at `temperature_c` has
+    /// 2^((temperature - reference) / doubling) times it.
+    pub dark_doubling_c: f32,
     /// Read noise with heavy tails: Tukey-lambda of this lambda (ELD's
     /// read-noise law; negative is heavier than Gaussian) at each pixel's
     /// sigma_r as its scale, instead of a Gaussian (None).
@@ -141,6 +150,7 @@ impl SensorSpec {
             frame_offset_sigma: 0.0,
             vignetting: 0.0,
             temperature_c: None,
+            dark_doubling_c: 0.0,
             read_tukey_lambda: None,
             rts_fraction: 0.0,
             rts_amplitude: 0.0,
@@ -217,6 +227,16 @@ impl VirtualSensor {
         })
     }
 
+    /// How many times its `dark_rate` the sensor's dark current is at its
+    /// temperature: 2^((temperature - [`DARK_REFERENCE_C`]) / doubling), 1
+    /// without a doubling temperature or a temperature.
+    pub fn dark_temperature_factor(&self) -> f64 {
+        match (self.spec.temperature_c, self.spec.dark_doubling_c) {
+            (Some(t), d) if d > 0.0 => 2f64.powf(((t - DARK_REFERENCE_C) / d) as f64),
+            _ => 1.0,
+        }
+    }
+
     /// One frame: `electrons` of uniform light (0 for bias/dark) at exposure
     /// `t` seconds. Deterministic in `seed`.
     pub fn frame(&self, electrons: f32, t: f32, seed: u64) -> Result<RawFrame> {
@@ -229,7 +249,7 @@ impl VirtualSensor {
             let o = sp.frame_offset_sigma * r.sample::<f32, _>(StandardNormal);
             rows.iter_mut().for_each(|v| *v += o);
         }
-        let g = sp.dark_law.electrons(1.0, t as f64);
+        let g = sp.dark_law.electrons(1.0, t as f64) * self.dark_temperature_factor();
         let offset = sp.dark_offset as f64 * (1.0 - (-(t as f64) / DARK_OFFSET_TAU_S).exp());
         let white = sp.white as f32;
         let (cy, cx) = (sp.height as f64 / 2.0, sp.width as f64 / 2.0);

@@ -68,6 +68,9 @@ pub struct StacksConfig {
     pub mono: bool,
     /// Light lost at the corners of the flats (0.2 = 20 %).
     pub vignetting: f32,
+    /// Temperature rise that doubles the dark current, degrees C (0: none;
+    /// the preset's dark rate holds at 0 degrees C).
+    pub dark_doubling: f32,
     /// Read noise with heavy tails: Tukey-lambda of this lambda (-0.5 <
     /// lambda < 0.5; negative is heavier than Gaussian) instead of Gaussian.
     pub read_tails: Option<f32>,
@@ -328,6 +331,7 @@ impl StacksConfig {
         spec.mono = self.mono;
         spec.temperature_c = self.temperature;
         spec.read_tukey_lambda = self.read_tails;
+        spec.dark_doubling_c = self.dark_doubling;
         (spec.rts_fraction, spec.rts_amplitude) = self.rts.unwrap_or((0.0, 0.0));
         Ok(VirtualSensor::new(spec)?)
     }
@@ -489,6 +493,7 @@ mod tests {
             temperature: None,
             mono: false,
             vignetting: 0.0,
+            dark_doubling: 0.0,
             read_tails: None,
             rts: None,
             format: FrameFormat::Fits,

@@ -76,6 +76,7 @@ pub fn calibrate(
         masters: false,
         temperature_tolerance,
         reject,
+        temperature_darks: Vec::new(),
     };
     let run_ = run(py, || pgrf_calib::calibrate(&input, &pgrf_core::NoProgress))?;
     Ok(Calibration {

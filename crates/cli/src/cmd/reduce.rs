@@ -49,7 +49,13 @@ pub fn run(a: &ReduceArgs) -> Result<()> {
     let outcome = reduce_to_files(&config, &bar)?;
     for l in &outcome.lights {
         let dark = match &l.dark {
-            Some(d) => format!(", {} x{:.4}", d.master, d.scale),
+            Some(d) => match d.temperature_scale {
+                Some(f) => format!(
+                    ", {} x{:.4}, x{f:.4} to the light's temperature",
+                    d.master, d.scale
+                ),
+                None => format!(", {} x{:.4}", d.master, d.scale),
+            },
             None => String::new(),
         };
         let c = &l.cosmetic;
