@@ -468,43 +468,19 @@ pub fn calibrate(input: &CalibrateInput, progress: &dyn Progress) -> Result<Cali
         ]
         .concat();
     }
-    let (dark, dark_frames, dark_temps) = if input.dark.is_empty() {
-        (None, Vec::new(), Vec::new())
-    } else {
-        let dark_stack = read_checked(
-            &input.dark,
-            &opts("dark", 1, false),
-            input.reject,
-            &mut notes,
-            &mut rejected,
-        )?;
-        if input.masters {
-            masters.extend(masters_of(&dark_stack, "dark"));
-        }
-        let dark = estimate_dark(&dark_stack, &bias, gain.k)?;
-        let frames = dark_stack.groups.iter().map(|g| g.files.len()).collect();
-        let rates = match input.temperature_darks.is_empty() {
-            true => Vec::new(),
-            false => rates_with_temperature(
-                input,
-                &dark_stack,
-                &bias,
-                dark.law,
-                &opts("dark", 1, false),
-            )?,
-        };
-        (Some((dark, rates)), frames, dark_stack.temperatures)
-    };
-    let (dark, rates) = match dark {
-        Some((d, r)) => (Some(d), r),
-        None if !input.temperature_darks.is_empty() => {
-            return Err(CalibError::BadOption {
-                flag: "--temperature-darks",
-                message: "--temperature-darks measure the dark current's growth against the darks at the calibration's temperature: give --dark too".into(),
-            })
-        }
-        None => (None, Vec::new()),
-    };
+    let darks = read_darks(
+        input,
+        &opts,
+        (&bias, &gain),
+        (&mut notes, &mut rejected),
+        &mut masters,
+    )?;
+    let (dark, dark_frames, dark_temps, rates) = (
+        darks.estimate,
+        darks.frames,
+        darks.temperatures,
+        darks.rates,
+    );
     let temperature_c = check_temperatures(
         &[
             &bias_stack.temperatures,
@@ -517,7 +493,7 @@ pub fn calibrate(input: &CalibrateInput, progress: &dyn Progress) -> Result<Cali
         defects(&bias, Some(&gain), dark.as_ref(), key.cfa.offsets());
     let mut maps = maps_of(&bias, &gain, dark.as_ref(), defect_map);
     maps.noise_bank = crate::bank::bank_of(&bias_stack.groups[0].files, &bias.mean)?;
-    let meta = meta_of(&Measured {
+    let mut meta = meta_of(&Measured {
         key: &key,
         bias: &bias,
         bias_exposure_s: bias_stack.groups[0].exposure_s,
@@ -530,7 +506,6 @@ pub fn calibrate(input: &CalibrateInput, progress: &dyn Progress) -> Result<Cali
         defects: &maps.defects,
         defect_columns,
     });
-    let mut meta = meta;
     meta.dark_doubling_c = crate::temperature::doubling_temperature(&rates);
     meta.dark_rates_by_temperature = rates;
     Ok(CalibrationRun {
@@ -540,6 +515,62 @@ pub fn calibrate(input: &CalibrateInput, progress: &dyn Progress) -> Result<Cali
         dark,
         masters,
         key,
+    })
+}
+
+/// What the dark stacks gave: the estimate, the frames per exposure, the
+/// frames' temperatures and the rates at each temperature.
+struct Darks {
+    estimate: Option<DarkEstimate>,
+    frames: Vec<usize>,
+    temperatures: Vec<(PathBuf, f32)>,
+    rates: Vec<(f32, f64)>,
+}
+
+/// Read and estimate the dark stack (none without darks; temperature darks
+/// need darks), its masters added to `masters`, and the rates at the
+/// temperature darks' temperatures.
+fn read_darks<'o>(
+    input: &CalibrateInput,
+    opts: &dyn Fn(&'static str, usize, bool) -> ReadOptions<'o>,
+    (bias, gain): (&BiasEstimate, &GainEstimate),
+    (notes, rejected): (&mut Vec<String>, &mut Vec<String>),
+    masters: &mut Vec<Master>,
+) -> Result<Darks> {
+    if input.dark.is_empty() {
+        if !input.temperature_darks.is_empty() {
+            return Err(CalibError::BadOption {
+                flag: "--temperature-darks",
+                message: "--temperature-darks measure the dark current's growth against the darks at the calibration's temperature: give --dark too".into(),
+            });
+        }
+        return Ok(Darks {
+            estimate: None,
+            frames: Vec::new(),
+            temperatures: Vec::new(),
+            rates: Vec::new(),
+        });
+    }
+    let stack = read_checked(
+        &input.dark,
+        &opts("dark", 1, false),
+        input.reject,
+        notes,
+        rejected,
+    )?;
+    if input.masters {
+        masters.extend(masters_of(&stack, "dark"));
+    }
+    let dark = estimate_dark(&stack, bias, gain.k)?;
+    let rates = match input.temperature_darks.is_empty() {
+        true => Vec::new(),
+        false => rates_with_temperature(input, &stack, bias, dark.law, &opts("dark", 1, false))?,
+    };
+    Ok(Darks {
+        estimate: Some(dark),
+        frames: stack.groups.iter().map(|g| g.files.len()).collect(),
+        temperatures: stack.temperatures,
+        rates,
     })
 }
 

@@ -862,42 +862,7 @@ pub fn reduce_to_files(
         .unwrap_or_default();
     let mut done = Vec::with_capacity(config.lights.len());
     for (light, output) in config.lights.iter().zip(outputs) {
-        let mut frame = decode_file(light, &LevelOverrides::default())?;
-        let (pixels, dark, cosmetic) = reduce_frame(&masters, &frame);
-        let written = if frame.fits.is_some() {
-            let (cards, history) =
-                header_of(&masters, &frame, dark.as_ref(), cosmetic, &calib_name);
-            pgrf_raw::encode_fits_light(&frame, &pixels, &cards, &history)
-                .and_then(|bytes| Ok(pgrf_core::write_atomic(&output, &bytes)?))
-        } else {
-            // A DNG holds integers above its black level: the result is
-            // put back on the light's black, rounded and clipped to the
-            // light's range (a negative noise excursion clips at 0).
-            let w = frame.width;
-            frame.mosaic = (pixels.iter().enumerate())
-                .map(|(i, &v)| {
-                    (v + frame.black_at(i / w, i % w))
-                        .round()
-                        .clamp(0.0, frame.white as f32) as u16
-                })
-                .collect();
-            pgrf_raw::write_dng(&frame, &output, &Default::default())
-        };
-        written.map_err(|e| ReduceError::Write {
-            path: output.clone(),
-            reason: e.to_string(),
-        })?;
-        done.push(ReducedLight {
-            input: light.clone(),
-            output,
-            exposure_s: frame.exposure_s,
-            dark: dark.map(|(master, scale)| DarkUsed {
-                master,
-                scale,
-                temperature_scale: masters.temperature_scale(frame.temperature_c),
-            }),
-            cosmetic,
-        });
+        done.push(reduce_light(&masters, light, output, &calib_name)?);
         progress.advance(1);
     }
     progress.finish();
@@ -906,6 +871,52 @@ pub fn reduce_to_files(
         bias: masters.bias.name(),
         flat: masters.flat.name(),
         law: law_name(masters.law),
+    })
+}
+
+/// Reduce `light` with `masters` into `output` (FITS for a FITS light,
+/// else a DNG on the light's levels); `calib_name` names the calibration
+/// in the FITS header.
+fn reduce_light(
+    masters: &Masters,
+    light: &Path,
+    output: PathBuf,
+    calib_name: &str,
+) -> Result<ReducedLight, ReduceError> {
+    let mut frame = decode_file(light, &LevelOverrides::default())?;
+    let (pixels, dark, cosmetic) = reduce_frame(masters, &frame);
+    let written = if frame.fits.is_some() {
+        let (cards, history) = header_of(masters, &frame, dark.as_ref(), cosmetic, calib_name);
+        pgrf_raw::encode_fits_light(&frame, &pixels, &cards, &history)
+            .and_then(|bytes| Ok(pgrf_core::write_atomic(&output, &bytes)?))
+    } else {
+        // A DNG holds integers above its black level: the result is put
+        // back on the light's black, rounded and clipped to the light's
+        // range (a negative noise excursion clips at 0).
+        let w = frame.width;
+        frame.mosaic = (pixels.iter().enumerate())
+            .map(|(i, &v)| {
+                (v + frame.black_at(i / w, i % w))
+                    .round()
+                    .clamp(0.0, frame.white as f32) as u16
+            })
+            .collect();
+        pgrf_raw::write_dng(&frame, &output, &Default::default())
+    };
+    written.map_err(|e| ReduceError::Write {
+        path: output.clone(),
+        reason: e.to_string(),
+    })?;
+    Ok(ReducedLight {
+        input: light.to_path_buf(),
+        output,
+        exposure_s: frame.exposure_s,
+        dark: dark.map(|(master, scale)| DarkUsed {
+            master,
+            scale,
+            temperature_scale: masters.temperature_scale(frame.temperature_c),
+        }),
+        cosmetic,
     })
 }
 
@@ -953,19 +964,9 @@ fn header_of(
         let (dark_cards, step) = dark_step(masters, light, name, *scale);
         cards.extend(dark_cards);
         history.push(step);
-        if let (Some(f), Some((calib_c, doubling))) = (
-            masters.temperature_scale(light.temperature_c),
-            masters.dark_temperature,
-        ) {
-            cards.push(FitsCard::new(
-                "DARKTSCL",
-                FitsValue::Float(f),
-                "dark scale to the light's temperature",
-            ));
-            history.push(format!(
-                "dark scaled from {calib_c:.1} C to the light's {:.1} C: x{f:.6} (doubling every {doubling:.2} C)",
-                light.temperature_c.unwrap_or(calib_c)
-            ));
+        if let Some((card, step)) = temperature_step(masters, light) {
+            cards.push(card);
+            history.push(step);
         }
     }
     cards.push(FitsCard::new(
@@ -993,29 +994,52 @@ fn header_of(
         FitsValue::Int(cosmetic.replaced as i64),
         "pixels replaced (cosmetic)",
     ));
-    history.push(format!(
-        "cosmetic: {} defective pixels of {} replaced by the median of same-colour neighbours",
-        cosmetic.replaced,
-        ascii(calib_name)
-    ));
-    if cosmetic.along_row > 0 {
-        history.push(format!(
-            "{} of them, with no good neighbour, by the nearest good pixels along the row",
-            cosmetic.along_row
-        ));
-    }
-    if cosmetic.kept > 0 {
-        history.push(format!(
-            "{} defective pixels kept: no good pixel of their colour in their row",
-            cosmetic.kept
-        ));
-    }
+    history.extend(cosmetic_history(cosmetic, &ascii(calib_name)));
     history.push("pixels in DN above black / 65535".into());
     (cards, history)
 }
 
 /// The cards and the HISTORY line of the dark subtraction: master `name`
 /// scaled by `scale` to the light's exposure.
+/// The DARKTSCL card and HISTORY line of a dark scaled to `light`'s
+/// temperature, when it was ([`Masters::temperature_scale`]).
+fn temperature_step(masters: &Masters, light: &RawFrame) -> Option<(FitsCard, String)> {
+    let f = masters.temperature_scale(light.temperature_c)?;
+    let (calib_c, doubling) = masters.dark_temperature?;
+    let card = FitsCard::new(
+        "DARKTSCL",
+        FitsValue::Float(f),
+        "dark scale to the light's temperature",
+    );
+    let step = format!(
+        "dark scaled from {calib_c:.1} C to the light's {:.1} C: x{f:.6} (doubling every {doubling:.2} C)",
+        light.temperature_c.unwrap_or(calib_c)
+    );
+    Some((card, step))
+}
+
+/// The HISTORY lines of cosmetic correction with the defects of
+/// calibration `calib_name`.
+fn cosmetic_history(cosmetic: Cosmetic, calib_name: &str) -> Vec<String> {
+    let mut lines = vec![format!(
+        "cosmetic: {} defective pixels of {calib_name} replaced by the median of same-colour neighbours",
+        cosmetic.replaced
+    )];
+    if cosmetic.along_row > 0 {
+        lines.push(format!(
+            "{} of them, with no good neighbour, by the nearest good pixels along the row",
+            cosmetic.along_row
+        ));
+    }
+    if cosmetic.kept > 0 {
+        lines.push(format!(
+            "{} defective pixels kept: no good pixel of their colour in their row",
+            cosmetic.kept
+        ));
+    }
+    lines
+}
+
 fn dark_step(
     masters: &Masters,
     light: &RawFrame,

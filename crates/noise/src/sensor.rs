@@ -299,29 +299,35 @@ impl VirtualSensor {
                     *d = v.round().clamp(0.0, white) as u16;
                 }
             });
-        let template = RawFrame::from_mosaic(
-            sp.width,
-            sp.height,
-            vec![0; sp.width * sp.height],
-            sp.cfa,
-            [sp.black; 4],
-            sp.white,
-        )
-        .map_err(|error| NoiseError::Frame { error })?;
-        let template = if sp.mono {
-            RawFrame::from_mono(sp.width, sp.height, template.mosaic, sp.black, sp.white)
-                .map_err(|error| NoiseError::Frame { error })?
-        } else {
-            template
-        };
-        let mut f = pgrf_raw::unpack_u16(packed.view(), &template)
-            .map_err(|error| NoiseError::Frame { error })?;
+        let mut f = self.unpacked(&packed)?;
         f.iso = Some(sp.iso);
         f.exposure_s = Some(t as f64);
         f.temperature_c = sp.temperature_c;
         f.make = "pgrf".into();
         f.model = format!("virtual sensor {}", sp.name);
         Ok(f)
+    }
+
+    /// Packed DN `packed` as a frame of the sensor's size, layout and
+    /// levels.
+    fn unpacked(&self, packed: &Array3<u16>) -> Result<RawFrame> {
+        let sp = &self.spec;
+        let frame = |r: pgrf_raw::Result<RawFrame>| r.map_err(|error| NoiseError::Frame { error });
+        let mosaic = vec![0; sp.width * sp.height];
+        let template = match sp.mono {
+            true => frame(RawFrame::from_mono(
+                sp.width, sp.height, mosaic, sp.black, sp.white,
+            ))?,
+            false => frame(RawFrame::from_mosaic(
+                sp.width,
+                sp.height,
+                mosaic,
+                sp.cfa,
+                [sp.black; 4],
+                sp.white,
+            ))?,
+        };
+        frame(pgrf_raw::unpack_u16(packed.view(), &template))
     }
 
     /// Ground truth as named maps, for a maps file.

@@ -895,24 +895,7 @@ fn sigma_hist_section(dir: &Path, data: &ReportData, title: &str) -> Result<Sect
             .filter(|m| m.is_finite())
             .unwrap_or(p[1]),
     }];
-    let mut note = Vec::new();
-    // Said in summary.md, not under the plot (one line there).
-    let corrected = data.read_sigma_median.is_some_and(|m| m.is_finite()).then(|| {
-        format!(
-            " The line is the true per-pixel sigma's median, corrected for the frames' sampling error, as the summary table states it; the bars are the per-pixel sample sigmas (their median {} DN).",
-            fmt_sig(p[1], 4)
-        )
-    });
-    if above > 0 {
-        note.push(format!(
-            "{above} pixel(s) above the 99.95th percentile ({} DN) not shown",
-            fmt_sig(hi, 4)
-        ));
-    }
-    if non_finite > 0 {
-        note.push(format!("{non_finite} non-finite value(s) ignored"));
-    }
-    let note = (!note.is_empty()).then(|| note.join("; "));
+    let note = hist_note(above, hi, non_finite);
     let spec = HistSpec {
         caption: format!("Read noise: {title}"),
         x_desc: "temporal read noise sigma [DN]",
@@ -935,11 +918,34 @@ fn sigma_hist_section(dir: &Path, data: &ReportData, title: &str) -> Result<Sect
         },
         fmt_sig(spec.series[0].median, 4)
     );
-    text.push_str(&corrected.unwrap_or_default());
+    // Said in summary.md, not under the plot (one line there).
+    if data.read_sigma_median.is_some_and(|m| m.is_finite()) {
+        let _ = write!(
+            text,
+            " The line is the true per-pixel sigma's median, corrected for the frames' sampling error, as the summary table states it; the bars are the per-pixel sample sigmas (their median {} DN).",
+            fmt_sig(p[1], 4)
+        );
+    }
     if let Some(note) = note {
         let _ = write!(text, " Note: {note}.");
     }
     Ok(Section::written(HEADING, SIGMA_HIST_PNG, path, text))
+}
+
+/// The read-noise histogram's note: values above its axis, values not
+/// finite (None when neither).
+fn hist_note(above: usize, hi: f64, non_finite: usize) -> Option<String> {
+    let mut note = Vec::new();
+    if above > 0 {
+        note.push(format!(
+            "{above} pixel(s) above the 99.95th percentile ({} DN) not shown",
+            fmt_sig(hi, 4)
+        ));
+    }
+    if non_finite > 0 {
+        note.push(format!("{non_finite} non-finite value(s) ignored"));
+    }
+    (!note.is_empty()).then(|| note.join("; "))
 }
 
 /// Both laws on one set of bins: the question the plot answers is which
