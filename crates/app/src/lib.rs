@@ -1,7 +1,7 @@
 //! What pgrf does with its networks, one recipe per command, over the
 //! networks, training and tensor inference of `pgrf-nn`:
 //!
-//! - [`array`]: a packed array restored as `pgrf enhance` restores a
+//! - [`array`](mod@array): a packed array restored as `pgrf enhance` restores a
 //!   file's (the Python package's `Model.restore`);
 //! - [`builtin`]: the models built in (`builtin:spc`, `builtin:pgrf`) and
 //!   loading a model by name or file;

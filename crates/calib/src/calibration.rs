@@ -346,7 +346,7 @@ pub struct CalibMaps {
     /// zero-length bias frame lacks.
     pub dark_offset: Option<Array3<f32>>,
     /// The bias frames' residual noise, DN, packed like the maps or a
-    /// centre crop of them ([`crate::bank`]); in the file `noise_bank_00`,
+    /// centre crop of them (see the `bank` module); in the file `noise_bank_00`,
     /// `noise_bank_01`, ...
     pub noise_bank: Vec<Array3<f32>>,
 }

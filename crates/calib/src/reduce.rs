@@ -680,7 +680,7 @@ pub struct Cosmetic {
 /// neighbours of the same colour (the 3 x 3 ring at `step` pixels: 2 on a
 /// Bayer mosaic, 1 on a monochrome sensor); one without any takes the mean
 /// of the nearest good same-colour pixels to its left and right along its
-/// row ([`along_row`]); one whose row has none is kept, or 0 when it is not
+/// row; one whose row has none is kept, or 0 when it is not
 /// finite (a pixel the flat does not reach).
 pub fn replace_defects(
     data: &mut [f32],
