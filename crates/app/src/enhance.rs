@@ -163,6 +163,8 @@ pub struct FileReport {
     pub defects_corrected: usize,
     /// Seconds for the file, opening included.
     pub seconds: f64,
+    /// Where those seconds went.
+    pub stages: StageSeconds,
     /// The process's peak resident memory so far.
     pub peak_rss_mib: Option<f64>,
     /// The noise parameters a noise-aware model was told, and their
@@ -200,6 +202,29 @@ impl FileReport {
             self.output, self.width, self.height, self.ratio, self.tiles, self.tile, self.seconds,
         )
     }
+}
+
+/// Seconds each stage of enhancing one file took (`pgrf enhance --json`;
+/// BENCHMARKS.md's 24 MP table).
+#[derive(Clone, Copy, Debug, Default, Serialize)]
+pub struct StageSeconds {
+    /// Decoding the file and checking its size against memory.
+    pub decode: f64,
+    /// The calibration, the masked black, the ratio and the noise lookup.
+    pub prepare: f64,
+    /// The network over the tiles, packing and unpacking included.
+    pub network: f64,
+    /// Encoding and writing the DNG (or FITS file).
+    pub write: f64,
+    /// Rendering and writing the preview.
+    pub preview: f64,
+}
+
+/// Seconds since `t`, and `t` moved to now.
+fn lap(t: &mut Instant) -> f64 {
+    let s = t.elapsed().as_secs_f64();
+    *t = Instant::now();
+    s
 }
 
 /// The network and its sampler, in one phrase ("SID U-Net ... (one pass)").
@@ -262,6 +287,7 @@ pub fn enhance_file<P: Progress>(
     start: impl FnOnce() -> P,
 ) -> Result<FileReport, EnhanceError> {
     let t0 = Instant::now();
+    let (mut t, mut stages) = (t0, StageSeconds::default());
     let mut frame = open(&job.input).map_err(EnhanceError::Open)?;
     pgrf_nn::infer::memory::check_frame(
         restorer,
@@ -271,6 +297,7 @@ pub fn enhance_file<P: Progress>(
         cfg.tiling.device,
         job.png.is_some(),
     )?;
+    stages.decode = lap(&mut t);
     let (dark, defects_corrected) = calibrate(cfg, &mut frame)?;
     let black = (cfg.masked_black && cfg.calib.is_none())
         .then(|| masked_black(&mut frame))
@@ -283,6 +310,7 @@ pub fn enhance_file<P: Progress>(
     let level = noise
         .as_ref()
         .map(|n| crate::array::level_of(n, &frame, ratio));
+    stages.prepare = lap(&mut t);
     let progress = start();
     let mut restored = restore_frame(
         restorer,
@@ -297,10 +325,13 @@ pub fn enhance_file<P: Progress>(
     // The input's NoiseProfile describes the noisy input; what noise a
     // network leaves is not known, so the output states none.
     restored.frame.noise_profile = None;
+    stages.network = lap(&mut t);
     write_frame(&restored.frame, &job.output, &DngOptions::default())?;
+    stages.write = lap(&mut t);
     if let Some(png) = &job.png {
         render_preview(&restored.frame, &PreviewOptions::default())?.write_png(png, 8)?;
     }
+    stages.preview = lap(&mut t);
     Ok(FileReport {
         input: job.input.display().to_string(),
         output: job.output.display().to_string(),
@@ -315,6 +346,7 @@ pub fn enhance_file<P: Progress>(
         tiles,
         defects_corrected,
         seconds: t0.elapsed().as_secs_f64(),
+        stages,
         peak_rss_mib: pgrf_core::mem::peak_rss_mib(),
         noise: noise.map(|n| n.to_string()),
         black,

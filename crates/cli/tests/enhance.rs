@@ -92,6 +92,14 @@ fn the_dng_keeps_the_input_and_holds_the_model_output() {
         let report: Value = serde_json::from_slice(&r.stdout).unwrap();
         assert_eq!(report["tiles"], 6, "{report}");
         assert_eq!(report["nfe"], if flow { 2 } else { 1 });
+        // The stages' seconds are each the file's and add up to at most its
+        // total; the network and the preview took some.
+        let stage = |k: &str| report["stages"][k].as_f64().unwrap();
+        let parts = ["decode", "prepare", "network", "write", "preview"].map(stage);
+        let total = report["seconds"].as_f64().unwrap();
+        assert!(parts.iter().all(|&p| p >= 0.0), "{report}");
+        assert!(parts.iter().sum::<f64>() <= total + 1e-6, "{report}");
+        assert!(parts[2] > 0.0 && parts[4] > 0.0, "{report}");
 
         let got = decode_file(&out, &LevelOverrides::default()).unwrap();
         assert_eq!((got.width, got.height), (input.width, input.height));
