@@ -682,8 +682,9 @@ impl Calibration {
     /// dark frame removes, is not handed to the denoiser. In a Bayer mosaic
     /// the same colour sits two photosites away; a monochrome sensor has
     /// one colour, so its direct neighbours, half as far and sampling the
-    /// scene where the defect is, replace it. Defective columns are left:
-    /// their offset is in the fixed pattern. Returns how many pixels were
+    /// scene where the defect is, replace it. Defective columns (a
+    /// column's response to light, issue 54) are left to the network here;
+    /// `pgrf reduce` replaces them after the flat. Returns how many pixels were
     /// replaced; `frame` must be the calibration's size (checked by the
     /// caller with the rest of the calibration).
     pub fn correct_defects(&self, frame: &mut pgrf_raw::RawFrame) -> usize {
