@@ -539,12 +539,14 @@ impl Calibration {
         }
         let maps = CalibMaps::from_named(maps, path)?;
         let c = Calibration { meta, maps };
-        c.bank()
-            .transpose()
-            .map_err(|error| CalibError::MapValues {
-                path: path.to_path_buf(),
-                error,
+        if !c.maps.noise_bank.is_empty() {
+            pgrf_noise::bank::NoiseBank::check(&c.maps.noise_bank).map_err(|error| {
+                CalibError::MapValues {
+                    path: path.to_path_buf(),
+                    error,
+                }
             })?;
+        }
         c.to_pixel_maps()?
             .check_values()
             .map_err(|error| CalibError::MapValues {

@@ -196,7 +196,13 @@ impl CalibrationFile {
     pub fn noise_bank(&self) -> Result<pgrf_noise::bank::NoiseBank, MixError> {
         match self.calibration.bank() {
             Some(Ok(b)) => Ok(b),
-            Some(Err(e)) => Err(MixError::Profile(e)),
+            Some(Err(error)) => Err(MixError::Apply {
+                path: self.path.clone(),
+                cause: Box::new(CalibError::MapValues {
+                    path: self.path.clone(),
+                    error,
+                }),
+            }),
             None => Err(MixError::NoBank {
                 path: Some(self.path.clone()),
             }),

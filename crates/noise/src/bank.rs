@@ -41,9 +41,15 @@ struct TileDraw {
 }
 
 impl NoiseBank {
-    /// A bank of `frames`: one or more, all of one packed shape with four
-    /// planes and pixels, every value finite.
+    /// A bank of `frames` ([`NoiseBank::check`]).
     pub fn new(frames: Vec<Array3<f32>>) -> Result<NoiseBank> {
+        Self::check(&frames)?;
+        Ok(NoiseBank { frames })
+    }
+
+    /// Refuse `frames` no bank can be drawn from: none, not all of one
+    /// packed shape with four planes and pixels, or a value not finite.
+    pub fn check(frames: &[Array3<f32>]) -> Result<()> {
         let Some(first) = frames.first() else {
             return Err(NoiseError::Bank(
                 "a noise bank needs at least one frame".into(),
@@ -66,7 +72,7 @@ impl NoiseBank {
         if frames.iter().flatten().any(|v| !v.is_finite()) {
             return Err(NoiseError::Bank("a noise bank value is not finite".into()));
         }
-        Ok(NoiseBank { frames })
+        Ok(())
     }
 
     /// The frames.
