@@ -374,16 +374,16 @@ impl NoiseModel {
         let (ph, pw) = (clean.shape()[1], clean.shape()[2]);
         let c = self.components;
 
+        // A bank's residuals stand for read, row and quantisation noise.
+        let bank = (self.bank.as_ref())
+            .filter(|_| c.read || c.row || c.quant)
+            .map(|b| (b.as_ref(), b.draw(capture.seed, ph, pw)));
         // Row noise: one value per sensor row, shared by the planes on it.
-        let rows: Vec<f32> = if c.row && self.row_sigma > 0.0 {
+        let rows: Vec<f32> = if c.row && self.row_sigma > 0.0 && bank.is_none() {
             row_noise(capture.seed, 2 * ph, self.row_sigma, 0)
         } else {
             vec![0.0; 2 * ph]
         };
-
-        let bank = (self.bank.as_ref())
-            .filter(|_| c.read || c.row || c.quant)
-            .map(|b| (b.as_ref(), b.draw(capture.seed, ph, pw)));
         let draw = RowDraw {
             model: self,
             bank: bank.as_ref().map(|(b, d)| (*b, d)),
