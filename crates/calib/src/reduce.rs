@@ -764,13 +764,15 @@ fn along_row(data: &[f32], width: usize, defective: &[bool], i: usize, step: usi
 /// A light reduced: (light - bias - dark(t)) / flat, then cosmetic
 /// correction; the pixels in DN above black, and the light's report
 /// (its output path left for the caller).
-pub fn reduce_frame(
-    masters: &Masters,
-    light: &RawFrame,
-) -> (Vec<f32>, Option<(String, f64)>, Cosmetic) {
+pub fn reduce_frame(masters: &Masters, light: &RawFrame) -> (Vec<f32>, Option<DarkUsed>, Cosmetic) {
     let t = light.exposure_s.unwrap_or(0.0);
+    let used = masters.dark_for(t).map(|(d, scale)| DarkUsed {
+        master: d.name(),
+        scale,
+        temperature_scale: masters.temperature_scale(light.temperature_c),
+    });
     let mut dark = masters.dark_signal(t);
-    if let Some(f) = masters.temperature_scale(light.temperature_c) {
+    if let Some(f) = used.as_ref().and_then(|d| d.temperature_scale) {
         dark.iter_mut().for_each(|d| *d *= f as f32);
     }
     let mut defective = masters.defective.clone();
@@ -788,7 +790,6 @@ pub fn reduce_frame(
         .collect();
     let step = if masters.mono { 1 } else { 2 };
     let replaced = replace_defects(&mut out, light.width, &defective, step);
-    let used = masters.dark_for(t).map(|(d, s)| (d.name(), s));
     (out, used, replaced)
 }
 
@@ -911,11 +912,7 @@ fn reduce_light(
         input: light.to_path_buf(),
         output,
         exposure_s: frame.exposure_s,
-        dark: dark.map(|(master, scale)| DarkUsed {
-            master,
-            scale,
-            temperature_scale: masters.temperature_scale(frame.temperature_c),
-        }),
+        dark,
         cosmetic,
     })
 }
@@ -945,7 +942,7 @@ fn check_light_outputs(config: &ReduceConfig, outputs: &[PathBuf]) -> Result<(),
 fn header_of(
     masters: &Masters,
     light: &RawFrame,
-    dark: Option<&(String, f64)>,
+    dark: Option<&DarkUsed>,
     cosmetic: Cosmetic,
     calib_name: &str,
 ) -> (Vec<FitsCard>, Vec<String>) {
@@ -960,11 +957,11 @@ fn header_of(
         env!("CARGO_PKG_VERSION"),
         ascii(&masters.bias.name())
     )];
-    if let Some((name, scale)) = dark {
-        let (dark_cards, step) = dark_step(masters, light, name, *scale);
+    if let Some(d) = dark {
+        let (dark_cards, step) = dark_step(masters, light, &d.master, d.scale);
         cards.extend(dark_cards);
         history.push(step);
-        if let Some((card, step)) = temperature_step(masters, light) {
+        if let Some((card, step)) = temperature_step(masters, light, d) {
             cards.push(card);
             history.push(step);
         }
@@ -1001,10 +998,14 @@ fn header_of(
 
 /// The cards and the HISTORY line of the dark subtraction: master `name`
 /// scaled by `scale` to the light's exposure.
-/// The DARKTSCL card and HISTORY line of a dark scaled to `light`'s
+/// The DARKTSCL card and HISTORY line of `dark` scaled to `light`'s
 /// temperature, when it was ([`Masters::temperature_scale`]).
-fn temperature_step(masters: &Masters, light: &RawFrame) -> Option<(FitsCard, String)> {
-    let f = masters.temperature_scale(light.temperature_c)?;
+fn temperature_step(
+    masters: &Masters,
+    light: &RawFrame,
+    dark: &DarkUsed,
+) -> Option<(FitsCard, String)> {
+    let f = dark.temperature_scale?;
     let (calib_c, doubling) = masters.dark_temperature?;
     let card = FitsCard::new(
         "DARKTSCL",
