@@ -1099,7 +1099,8 @@ fn synth_then_enhance_round_trips_at_ratio_100() {
 /// calibration keeps a bank of its 6 bias frames' residuals (it says so);
 /// `synth --calib --noise-bank` draws from it: the same seed gives the same
 /// bytes, the parametric draw other ones. Asking for the bank without a
-/// calibration, or bad tails and telegraph settings, are one-line errors.
+/// calibration, or bad doubling, tails and telegraph settings, are
+/// one-line errors.
 #[test]
 fn synth_draws_noise_from_the_calibrations_bank() {
     let dir = scratch("bank");
@@ -1184,6 +1185,11 @@ fn synth_draws_noise_from_the_calibrations_bank() {
     let err = assert_one_line_failure(&out, "--noise-bank");
     assert!(err.contains("give --calib"), "{err}");
     for (flag, value, says) in [
+        (
+            "--dark-doubling",
+            "-3",
+            "doubling temperature must be in 0..50",
+        ),
         ("--read-tails", "-0.7", "between -0.5 and 0.5"),
         ("--rts", "0.5,80", "share must be in 0..0.1"),
         ("--rts", "0.01", "SHARE,JUMP"),

@@ -242,31 +242,7 @@ impl StacksConfig {
                 return Err(StacksError::Temperature { celsius: t });
             }
         }
-        if let Some(l) = self
-            .read_tails
-            .filter(|l| !(l.is_finite() && l.abs() < 0.5))
-        {
-            return Err(StacksError::NoiseSetting {
-                flag: "--read-tails",
-                message: format!(
-                    "lambda must lie strictly between -0.5 and 0.5 (finite variance), got {l}"
-                ),
-            });
-        }
-        if let Some((f, a)) = self.rts {
-            if !(f.is_finite()
-                && (0.0..=0.1).contains(&f)
-                && a.is_finite()
-                && (0.0..=1000.0).contains(&a))
-            {
-                return Err(StacksError::NoiseSetting {
-                    flag: "--rts",
-                    message: format!(
-                        "the share must be in 0..0.1 and the jump in 0..1000 DN, got {f},{a}"
-                    ),
-                });
-            }
-        }
+        self.check_noise_settings()?;
         if !(self.vignetting.is_finite() && (0.0..0.9).contains(&self.vignetting)) {
             return Err(StacksError::Vignetting {
                 fraction: self.vignetting,
@@ -287,6 +263,40 @@ impl StacksConfig {
             self.width as f64 * self.height as f64 * 128.0,
         )
         .map_err(StacksError::Memory)
+    }
+
+    /// The dark current's doubling temperature, the read noise's tails and
+    /// the random telegraph pixels, each within what a sensor has.
+    fn check_noise_settings(&self) -> Result<(), StacksError> {
+        let bad = |flag, message| Err(StacksError::NoiseSetting { flag, message });
+        if !(self.dark_doubling.is_finite() && (0.0..=50.0).contains(&self.dark_doubling)) {
+            return bad(
+                "--dark-doubling",
+                format!(
+                    "the doubling temperature must be in 0..50 degrees C (0: none), got {}",
+                    self.dark_doubling
+                ),
+            );
+        }
+        if let Some(l) = self
+            .read_tails
+            .filter(|l| !(l.is_finite() && l.abs() < 0.5))
+        {
+            return bad(
+                "--read-tails",
+                format!("lambda must lie strictly between -0.5 and 0.5 (finite variance), got {l}"),
+            );
+        }
+        if let Some((f, a)) = self.rts {
+            let fine = f.is_finite() && (0.0..=0.1).contains(&f);
+            if !(fine && a.is_finite() && (0.0..=1000.0).contains(&a)) {
+                return bad(
+                    "--rts",
+                    format!("the share must be in 0..0.1 and the jump in 0..1000 DN, got {f},{a}"),
+                );
+            }
+        }
+        Ok(())
     }
 
     /// Before any work: the output folder's parent exists, the output is

@@ -56,7 +56,7 @@ pub struct SimulateArgs {
     #[arg(long, default_value_t = 0.0)]
     pub vignetting: f32,
     /// Temperature rise that doubles the dark current, degrees C (0: none): the preset's dark rate holds at 0 degrees C, and frames at --temperature T have 2^(T / DOUBLING) times it.
-    #[arg(long, default_value_t = 0.0)]
+    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
     pub dark_doubling: f32,
     /// Read noise with heavy tails: Tukey-lambda of this lambda (ELD's read-noise law; -0.2 is heavier than Gaussian; -0.5 < lambda < 0.5) at each pixel's sigma as its scale, instead of Gaussian.
     #[arg(long, allow_hyphen_values = true)]
