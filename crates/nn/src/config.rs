@@ -672,6 +672,12 @@ impl TrainConfig {
                 "--noise-bank draws from a calibration's bias frames: give --calib FILE",
             ));
         }
+        if self.noise_bank && self.noise != ModelKind::Pgrf {
+            return Err(bad(
+                "--noise-bank",
+                "--noise-bank replaces the pgrf model's read, row and quantisation noise: use --noise pgrf",
+            ));
+        }
         self.iso_range()?;
         Ok(())
     }
@@ -811,6 +817,13 @@ mod tests {
             ..c
         };
         assert_eq!(TrainConfig::from_toml(&with.to_toml()).unwrap(), with);
+        // The bank stands for the pgrf model's terms only.
+        let eld = TrainConfig {
+            noise: ModelKind::Eld,
+            ..with.clone()
+        };
+        let e = eld.validate().unwrap_err().to_string();
+        assert!(e.contains("use --noise pgrf"), "{e}");
         assert!(!TrainConfig::default().to_toml().contains("noise_bank"));
     }
 
