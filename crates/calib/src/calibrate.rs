@@ -475,17 +475,12 @@ pub fn calibrate(input: &CalibrateInput, progress: &dyn Progress) -> Result<Cali
         (&mut notes, &mut rejected),
         &mut masters,
     )?;
-    let (dark, dark_frames, dark_temps, rates) = (
-        darks.estimate,
-        darks.frames,
-        darks.temperatures,
-        darks.rates,
-    );
+    let dark = darks.estimate;
     let temperature_c = check_temperatures(
         &[
             &bias_stack.temperatures,
             &flat_stack.temperatures,
-            &dark_temps,
+            &darks.temperatures,
         ],
         tolerance,
     )?;
@@ -499,15 +494,15 @@ pub fn calibrate(input: &CalibrateInput, progress: &dyn Progress) -> Result<Cali
         bias_exposure_s: bias_stack.groups[0].exposure_s,
         gain: &gain,
         dark: dark.as_ref(),
-        dark_frames,
+        dark_frames: darks.frames,
         temperature_c,
         notes,
         rejected,
         defects: &maps.defects,
         defect_columns,
     });
-    meta.dark_doubling_c = crate::temperature::doubling_temperature(&rates);
-    meta.dark_rates_by_temperature = rates;
+    meta.dark_doubling_c = crate::temperature::doubling_temperature(&darks.rates);
+    meta.dark_rates_by_temperature = darks.rates;
     Ok(CalibrationRun {
         calibration: Calibration { meta, maps },
         bias,

@@ -63,6 +63,17 @@ impl CalibrateOutcome {
             m.hot_pixels,
             m.dead_pixels
         ));
+        lines.extend(self.run.extra_lines());
+        lines
+    }
+}
+
+impl CalibrationRun {
+    /// What the run measured beyond the usual figures, a line each: the
+    /// dark current's doubling temperature and the noise bank kept.
+    fn extra_lines(&self) -> Vec<String> {
+        let m = &self.calibration.meta;
+        let mut lines = Vec::new();
         if let Some(d) = m.dark_doubling_c {
             let at: Vec<String> = (m.dark_rates_by_temperature.iter())
                 .map(|(t, r)| format!("{r:.3} at {t:.1} °C"))
@@ -73,7 +84,7 @@ impl CalibrateOutcome {
                 crate::temperature::DARK_SCALE_RANGE_C
             ));
         }
-        let bank = &self.run.calibration.maps.noise_bank;
+        let bank = &self.calibration.maps.noise_bank;
         if let Some(f) = bank.first() {
             let (_, h, w) = f.dim();
             lines.push(format!(
@@ -86,9 +97,7 @@ impl CalibrateOutcome {
         }
         lines
     }
-}
 
-impl CalibrationRun {
     /// The run's global results as one JSON record (`pgrf calibrate
     /// --json`), naming the calibration file `output`.
     pub fn json_record(&self, output: &Path) -> serde_json::Value {

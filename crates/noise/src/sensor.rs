@@ -13,7 +13,10 @@
 //! with o(frame) a whole-frame offset drift (`SensorSpec::frame_offset_sigma`)
 //! and c(t) the dark offset (`SensorSpec::dark_offset`, reached within a
 //! fraction of a second). Rounding to integers is the quantisation. Hot pixels have a dark rate far
-//! above the rest.
+//! above the rest. Optionally d(x) doubles every `SensorSpec::dark_doubling_c` degrees
+//! (from [`DARK_REFERENCE_C`]), the read noise is Tukey-lambda instead of N(0, sigma_r(x))
+//! (`SensorSpec::read_tukey_lambda`), and random telegraph pixels add +- half their
+//! jump, drawn per frame (`SensorSpec::rts_fraction`).
 
 use crate::error::{NoiseError, Result};
 use crate::model::{dark_shot, photon_shot, read_noise, row_noise, ReadDist};
