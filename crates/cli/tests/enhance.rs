@@ -456,7 +456,10 @@ fn search_writes_the_best_t2_and_agrees_with_the_sampler() {
     let psnr: Vec<f64> = serde_json::from_value(j["psnr"].clone()).unwrap();
     assert_eq!(t, [0.25, 0.5, 0.75, 1.0]);
     let best = j["best_t2"].as_f64().unwrap();
-    let k = (0..4).fold(0, |b, k| if psnr[k] > psnr[b] { k } else { b });
+    // The kept t: the smallest within the default 0.01 dB of the best.
+    assert_eq!(j["tolerance_db"].as_f64(), Some(0.01));
+    let max = psnr.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    let k = (0..4).find(|&k| psnr[k] >= max - 0.01).unwrap();
     assert_eq!(best, t[k]);
     // Averaging: K = 1 is the two-stage result at the best t; K = 2 differs.
     let avg: Vec<(usize, f64, f64)> = serde_json::from_value(j["averaged"].clone()).unwrap();
@@ -521,6 +524,21 @@ fn search_writes_the_best_t2_and_agrees_with_the_sampler() {
         s(&plot),
     ]);
     assert!(r.status.success());
+    assert_eq!(std::fs::read(&m).unwrap(), bytes);
+    for tol in ["-0.01", "0.5", "nan"] {
+        let err = one_line_error(&pgrf(&[
+            "search",
+            "--model",
+            s(&m),
+            "--procedural",
+            "1",
+            &format!("--tolerance={tol}"),
+        ]));
+        assert!(
+            err.contains("--tolerance must be from 0 to 0.1"),
+            "{tol}: {err}"
+        );
+    }
     assert_eq!(std::fs::read(&m).unwrap(), bytes);
     let spc = model(&d, false, None);
     let err = one_line_error(&pgrf(&["search", "--model", s(&spc), "--procedural", "1"]));

@@ -56,6 +56,11 @@ pub struct SearchArgs {
     /// One JSON line on stdout instead of the table.
     #[arg(long)]
     pub json: bool,
+    /// Keep the smallest t whose mean PSNR is within this many dB of the
+    /// best (0 to 0.1; 0: the argmax): where the curve is flat, a smaller
+    /// t2 re-noises less and shows fewer ring-shaped speckles.
+    #[arg(long, default_value_t = super::DEFAULT_TOLERANCE_DB)]
+    pub tolerance: f64,
 }
 
 impl SearchArgs {
@@ -86,6 +91,7 @@ impl SearchArgs {
                 device: self.device,
                 kernels,
                 protocol: Protocol::eld(false),
+                tolerance_db: self.tolerance,
             },
             // The caller's (the command line's global --darktable-profiles).
             darktable: None,

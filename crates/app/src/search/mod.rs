@@ -87,7 +87,24 @@ pub struct SearchOptions {
     pub kernels: pgrf_nn::ops::Kernels,
     /// How outputs are scored against the clean images.
     pub protocol: Protocol,
+    /// The kept t2 is the smallest t whose mean PSNR is within this many dB
+    /// of the curve's best ([`DEFAULT_TOLERANCE_DB`]; 0: the argmax).
+    pub tolerance_db: f64,
 }
+
+/// Default of [`SearchOptions::tolerance_db`]. The curve is flat to a few
+/// thousandths of a dB over most t (the built-in PGRF: 0.005 dB from 0.1
+/// to 0.7, MODELS.md), while a larger t2 re-noises the first stage's
+/// estimate more and the second stage then draws more of the field's
+/// ring-shaped speckles (on the 550D chart at A7S2 ISO 1600 x100, 2 pixels
+/// where the correction of the SPC's restoration passes 0.02 of white at
+/// t2 = 0.1, 115 at 0.5; `crates/app/tests/artefacts.rs`); so among times
+/// the validation cannot tell apart, the least re-noised wins.
+pub const DEFAULT_TOLERANCE_DB: f64 = 0.01;
+
+/// The largest tolerance `--tolerance` takes: beyond it the rule would
+/// trade measured PSNR for the artefact it avoids.
+pub const MAX_TOLERANCE_DB: f64 = 0.1;
 
 impl Default for SearchOptions {
     /// Step 0.1, no averaging, seed 0, CPU with pgrf's operations, ELD
@@ -100,6 +117,7 @@ impl Default for SearchOptions {
             device: DeviceKind::Cpu,
             kernels: pgrf_nn::ops::Kernels::Pgrf,
             protocol: Protocol::eld(false),
+            tolerance_db: DEFAULT_TOLERANCE_DB,
         }
     }
 }
@@ -109,6 +127,15 @@ impl SearchOptions {
     /// (callers may call it early to refuse bad options before costly work).
     pub fn times(&self) -> Result<Vec<f64>> {
         let times = grid(self.step)?;
+        if !(0.0..=MAX_TOLERANCE_DB).contains(&self.tolerance_db) {
+            return Err(NnError::BadSetting {
+                flag: "--tolerance",
+                message: format!(
+                    "--tolerance must be from 0 to {MAX_TOLERANCE_DB} dB, got {}",
+                    self.tolerance_db
+                ),
+            });
+        }
         if self.samples == 0 || self.samples > MAX_SAMPLES {
             return Err(NnError::BadSetting {
                 flag: "--samples",
@@ -127,7 +154,8 @@ impl SearchOptions {
 pub struct SearchOutcome {
     /// (t, PSNR dB, SSIM) of the two-stage sampler at each candidate t.
     pub curve: Vec<(f64, f64, f64)>,
-    /// Index into `curve` of the best mean PSNR (ties go to the smaller t).
+    /// Index into `curve` of the kept t: the smallest t within the options'
+    /// tolerance of the best mean PSNR.
     pub best: usize,
     /// The best t: the model's t2.
     pub best_t2: f64,
@@ -493,7 +521,7 @@ pub(crate) fn search_with<B: PgrfOps>(
             progress.advance(1);
         }
     }
-    let best = best_index(&psnr);
+    let best = best_index(&psnr, opts.tolerance_db);
     let best_t2 = times[best];
     let averaging = if opts.samples > 1 {
         average(net, device, pairs, opts, best_t2, progress)?
@@ -511,9 +539,11 @@ pub(crate) fn search_with<B: PgrfOps>(
     })
 }
 
-/// The index of the largest value; ties go to the first (the smaller t).
-fn best_index(psnr: &[f64]) -> usize {
-    (0..psnr.len()).fold(0, |b, k| if psnr[k] > psnr[b] { k } else { b })
+/// The first index (the smallest t) whose value is within `tolerance` of
+/// the largest; with 0 the argmax, ties to the first.
+fn best_index(psnr: &[f64], tolerance: f64) -> usize {
+    let max = psnr.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    psnr.iter().position(|&v| v >= max - tolerance).unwrap_or(0)
 }
 
 /// Writes `t2` into the weight file `model` (its JSON record only, an
@@ -634,8 +664,12 @@ mod tests {
 
     #[test]
     fn ties_go_to_the_smaller_t() {
-        assert_eq!(best_index(&[1.0, 3.0, 3.0, 2.0]), 1);
-        assert_eq!(best_index(&[5.0]), 0);
+        assert_eq!(best_index(&[1.0, 3.0, 3.0, 2.0], 0.0), 1);
+        assert_eq!(best_index(&[5.0], 0.0), 0);
+        // Within the tolerance of the best, the smaller t wins; beyond it not.
+        assert_eq!(best_index(&[2.995, 3.0, 2.0], 0.01), 0);
+        assert_eq!(best_index(&[2.98, 2.995, 3.0], 0.01), 1);
+        assert_eq!(best_index(&[2.98, 2.995, 3.0], 0.0), 2);
     }
 
     /// A small SR3 field with seeded (random, not trained) weights and two
@@ -732,7 +766,7 @@ mod tests {
         // The curve is not flat (t matters), and the best is its argmax.
         let psnr: Vec<f64> = got.curve.iter().map(|c| c.1).collect();
         assert!(psnr.iter().any(|&p| p != psnr[0]), "{psnr:?}");
-        assert_eq!(got.best, best_index(&psnr));
+        assert_eq!(got.best, best_index(&psnr, DEFAULT_TOLERANCE_DB));
         assert_eq!(got.best_t2, got.curve[got.best].0);
         assert_eq!(
             got.averaging,
@@ -785,6 +819,18 @@ mod tests {
             },
             SearchOptions {
                 samples: MAX_SAMPLES + 1,
+                ..Default::default()
+            },
+            SearchOptions {
+                tolerance_db: -0.01,
+                ..Default::default()
+            },
+            SearchOptions {
+                tolerance_db: MAX_TOLERANCE_DB * 1.5,
+                ..Default::default()
+            },
+            SearchOptions {
+                tolerance_db: f64::NAN,
                 ..Default::default()
             },
         ] {

@@ -21,6 +21,8 @@ struct Summary {
     one_step: [f64; 2],
     input: [f64; 2],
     best_t2: f64,
+    /// The kept t2 is the smallest t within this many dB of the best PSNR.
+    tolerance_db: f64,
     /// (K, PSNR, SSIM) of the mean of K samples at the best t.
     averaged: Vec<(usize, f64, f64)>,
     written: bool,
@@ -72,6 +74,7 @@ impl Searched {
             one_step: [out.one_step.0, out.one_step.1],
             input: [out.input.0, out.input.1],
             best_t2: out.best_t2,
+            tolerance_db: req.options.tolerance_db,
             averaged: out.averaging.clone(),
             written: self.written,
             plot: req.plot.display().to_string(),
@@ -119,7 +122,7 @@ impl Searched {
         row(&mut s, "noisy input", out.input);
         row(&mut s, "one step", out.one_step);
         for (k, (t, p, q)) in out.curve.iter().enumerate() {
-            let mark = if k == best { "  <- best" } else { "" };
+            let mark = if k == best { "  <- kept" } else { "" };
             let _ = writeln!(s, "{t:>14.3}  {p:>9.3}  {q:>7.4}{mark}");
         }
         if req.options.samples > 1 {
@@ -128,6 +131,11 @@ impl Searched {
                 row(&mut s, &format!("K = {k}"), (*p, *q));
             }
         }
+        let _ = writeln!(
+            s,
+            "kept: the smallest t within {} dB of the best PSNR",
+            req.options.tolerance_db
+        );
         let _ = writeln!(
             s,
             "t2 = {best_t:.3}{} ; plot {}",
