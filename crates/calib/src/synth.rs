@@ -302,7 +302,18 @@ impl PackedCapture {
 
     /// Multiplied back by the ratio and clipped to [0, 1], as a network is fed it.
     pub fn brightened(&self) -> ndarray::Array3<f32> {
-        self.noisy.mapv(|v| v.clamp(0.0, 1.0))
+        ndarray::Zip::from(&self.noisy).par_map_collect(|&v| v.clamp(0.0, 1.0))
+    }
+
+    /// Both recorded forms, ([`PackedCapture::dark`],
+    /// [`PackedCapture::brightened`]), the brightened one made in place of
+    /// `noisy`, which is left empty: for callers done with the capture's
+    /// pixels (one frame-sized copy fewer; `pgrf.synth`).
+    pub fn take_forms(&mut self) -> (ndarray::Array3<f32>, ndarray::Array3<f32>) {
+        let dark = self.dark();
+        let mut bright = std::mem::take(&mut self.noisy);
+        bright.par_mapv_inplace(|v| v.clamp(0.0, 1.0));
+        (dark, bright)
     }
 
     /// Set the capture's ISO, exposure and NoiseProfile (the last only for
@@ -365,7 +376,7 @@ pub fn synthesize_packed(
         spec.bank = Some(std::sync::Arc::new(cal.noise_bank()?));
     }
     let pair = spec
-        .synthesize(clean, facts.plane_rows, c.seed)
+        .synthesize_noisy(clean, facts.plane_rows, c.seed)
         .map_err(|cause| SynthError::Synthesis {
             path: label.to_path_buf(),
             cause,

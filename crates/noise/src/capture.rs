@@ -20,7 +20,7 @@ use pgrf_raw::{pack_normalized, unpack_normalized, RawFrame};
 /// kept (values below black stay, down to 0 DN on unpacking), as a real
 /// dark frame has them.
 pub fn recorded(noisy_amplified: &ndarray::Array3<f32>, ratio: f32) -> ndarray::Array3<f32> {
-    noisy_amplified.mapv(|v| (v / ratio).min(1.0))
+    ndarray::Zip::from(noisy_amplified).par_map_collect(|&v| (v / ratio).min(1.0))
 }
 
 /// How the dark frame is taken.

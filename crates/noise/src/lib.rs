@@ -17,6 +17,7 @@ pub mod darktable;
 pub mod describe;
 mod error;
 pub mod estimate;
+mod fast;
 pub mod lookup;
 pub mod mapfile;
 mod maps;

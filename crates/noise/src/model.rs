@@ -14,7 +14,7 @@
 //! | K (I + N_s) | photon shot: K times Poisson(I electrons) | P | [`photon_shot`] |
 //! | N_RS (1 + N_FP) | dark-current shot K Poisson(d(t)), times the pixel's fixed-pattern factor | A, F | [`dark_shot`] |
 //! | b(x, y) | fixed-pattern offset (calibrated bias mean) / ELD's colour bias | F | added in [`NoiseModel::sample`] |
-//! | N_r | source-follower (read) noise sigma_r(x, y) N(0, 1) or Tukey | G | [`read_noise`] |
+//! | N_r | source-follower (read) noise sigma_r(x, y) N(0, 1) or Tukey | G | [`read_noise`] (a row's Tukey quantiles at once in [`NoiseModel::sample`]: [`tukey::quantiles_in_place`]) |
 //! | N_H | row noise, one N(0, sigma_H) per sensor row | H | [`row_noise`] |
 //! | N_q | quantisation, U(-q/2, q/2) | Q | [`quantisation`] |
 //!
@@ -368,6 +368,21 @@ impl NoiseModel {
     /// clipped to [-black, white - black], in this order of draws.
     /// Deterministic in `capture.seed`, whatever the number of threads.
     pub fn sample(&self, clean: ArrayView3<f32>, capture: &Capture) -> Result<Array3<f32>> {
+        self.sample_with(clean, capture, false)
+    }
+
+    /// [`NoiseModel::sample`] of `clean` clipped to [0, 1] (as a pair's
+    /// target is), each value as it is read: no clipped copy of the frame.
+    pub fn sample_clipped(&self, clean: ArrayView3<f32>, capture: &Capture) -> Result<Array3<f32>> {
+        self.sample_with(clean, capture, true)
+    }
+
+    fn sample_with(
+        &self,
+        clean: ArrayView3<f32>,
+        capture: &Capture,
+        clip: bool,
+    ) -> Result<Array3<f32>> {
         self.validate(&clean, capture)?;
         let clean = clean.as_standard_layout();
         let src = clean.as_slice().expect("standard layout");
@@ -393,6 +408,7 @@ impl NoiseModel {
             dark_time: self.maps.dark_law.electrons(1.0, capture.exposure_s as f64) as f32,
             lo: self.black.map(|b| -b).unwrap_or(f32::NEG_INFINITY),
             pw,
+            clip,
         };
         // Non-finite inputs (clean pixels, per-pixel map values) are caught
         // in the loop instead of by extra passes over ~290 MB (a separate scan
@@ -426,6 +442,8 @@ struct RowDraw<'a> {
     dark_time: f32,
     lo: f32,
     pw: usize,
+    /// Clip each clean value to [0, 1] as it is read.
+    clip: bool,
 }
 
 impl RowDraw<'_> {
@@ -456,8 +474,22 @@ impl RowDraw<'_> {
             b.row_into(d, plane, i, dst);
         }
         let banked = self.bank.is_some();
+        // Tukey read noise: each pixel's uniform is drawn in the loop, in
+        // the model's order, and the row's quantiles are taken after it in
+        // one vector loop ([`RowDraw::add_tukey`]); the loop leaves the
+        // rest of the value in DN in `dst`.
+        let tukey = match model.read {
+            ReadDist::Tukey { lambda } if c.read && !banked => Some(lambda as f64),
+            _ => None,
+        };
+        let mut us = vec![0.0f64; if tukey.is_some() { pw } else { 0 }];
         for j in 0..pw {
-            let s = srow[j] * self.to_dn;
+            let x = if self.clip {
+                srow[j].clamp(0.0, 1.0)
+            } else {
+                srow[j]
+            };
+            let s = x * self.to_dn;
             row_ok &= s.is_finite();
             let mut v = if c.photon {
                 photon_shot(rng, k, s as f64 * self.inv_k)
@@ -480,7 +512,9 @@ impl RowDraw<'_> {
             if banked {
                 v += dst[j];
             } else {
-                if c.read {
+                if tukey.is_some() {
+                    us[j] = open01(rng);
+                } else if c.read {
                     let sigma = sig_row.map_or_else(|| m.sigma_read.at(plane, base + j), |r| r[j]);
                     v += read_noise(rng, sigma, model.read);
                 }
@@ -491,9 +525,40 @@ impl RowDraw<'_> {
                     v += quantisation(rng, q);
                 }
             }
-            row_ok &= v.is_finite();
-            dst[j] = v.clamp(self.lo, hi) * self.from_dn;
+            if tukey.is_some() {
+                dst[j] = v;
+            } else {
+                row_ok &= v.is_finite();
+                dst[j] = v.clamp(self.lo, hi) * self.from_dn;
+            }
+        }
+        if let Some(lambda) = tukey {
+            row_ok &= self.add_tukey(&mut us, lambda, (plane, i), dst);
         }
         row_ok
+    }
+
+    /// The Tukey-lambda read noise of row `i` of `plane` added to `dst`
+    /// (the rest of each value, in DN): the quantiles of the row's uniforms
+    /// `us` times each pixel's sigma_r, then the clamp and the scaling the
+    /// loop leaves for this pass; false when a value came out non-finite.
+    fn add_tukey(
+        &self,
+        us: &mut [f64],
+        lambda: f64,
+        (plane, i): (usize, usize),
+        dst: &mut [f32],
+    ) -> bool {
+        tukey::quantiles_in_place(us, lambda);
+        let (m, pw) = (&self.model.maps, self.pw);
+        let sig_row = m.sigma_read.row(plane, i, pw);
+        let mut ok = true;
+        for (j, (d, &q)) in dst.iter_mut().zip(us.iter()).enumerate() {
+            let sigma = sig_row.map_or_else(|| m.sigma_read.at(plane, i * pw + j), |r| r[j]);
+            let v = *d + sigma * q as f32;
+            ok &= v.is_finite();
+            *d = v.clamp(self.lo, self.model.dn_range) * self.from_dn;
+        }
+        ok
     }
 }

@@ -208,6 +208,19 @@ pub struct Pair {
     pub params: CaptureParams,
 }
 
+/// A noisy capture without its clean target ([`PairSpec::synthesize_noisy`]).
+#[derive(Clone, Debug)]
+pub struct NoisyDraw {
+    /// Noisy capture multiplied back by the ratio, normalised units.
+    pub noisy: Array3<f32>,
+    /// The exposure ratio it was synthesised at.
+    pub ratio: f32,
+    /// Exposure time of the noisy capture, seconds.
+    pub exposure_s: f32,
+    /// The noise parameters it was drawn with.
+    pub params: CaptureParams,
+}
+
 impl PairSpec {
     /// `kind` on `profile` with ELD's choices: all components, per-pixel
     /// effects from the profile (no maps), Tukey-lambda read noise for ELD,
@@ -348,11 +361,29 @@ impl PairSpec {
         plane_rows: [usize; 4],
         seed: u64,
     ) -> Result<Pair> {
+        let d = self.synthesize_noisy(clean, plane_rows, seed)?;
+        Ok(Pair {
+            noisy: d.noisy,
+            clean: clean.mapv(|v| v.clamp(0.0, 1.0)),
+            ratio: d.ratio,
+            exposure_s: d.exposure_s,
+            params: d.params,
+        })
+    }
+
+    /// [`PairSpec::synthesize`] without the clean target's clipped copy:
+    /// the same noisy capture, for callers that keep only it (`pgrf synth`,
+    /// `pgrf.synth`), which saves a frame-sized copy.
+    pub fn synthesize_noisy(
+        &self,
+        clean: ArrayView3<f32>,
+        plane_rows: [usize; 4],
+        seed: u64,
+    ) -> Result<NoisyDraw> {
         let (ratio, exposure_s) = self.conditions(seed)?;
         let (model, params) = self.model(seed)?;
-        let clean = clean.mapv(|v| v.clamp(0.0, 1.0));
-        let noisy = model.sample(
-            clean.view(),
+        let noisy = model.sample_clipped(
+            clean,
             &Capture {
                 ratio,
                 exposure_s,
@@ -360,9 +391,8 @@ impl PairSpec {
                 seed,
             },
         )?;
-        Ok(Pair {
+        Ok(NoisyDraw {
             noisy,
-            clean,
             ratio,
             exposure_s,
             params,
@@ -596,5 +626,58 @@ mod tests {
         spec.ratio = RatioSpec::Fixed(100.0);
         spec.exposure = ExposureSpec::LogUniform { lo: 0.0, hi: 1.0 };
         assert!(spec.conditions(0).is_err());
+    }
+}
+
+#[cfg(test)]
+mod noisy_only_tests {
+    use super::*;
+    use crate::CameraProfile;
+
+    /// Clipping each clean value as it is read draws, bit for bit, what
+    /// the model draws from a clipped copy of the frame, for every model
+    /// (ELD's Tukey read noise included) and a frame with values outside
+    /// [0, 1]; and the pair's noisy capture is the one without its copy.
+    #[test]
+    fn synthesize_noisy_draws_what_synthesize_draws() {
+        let clean = ndarray::Array3::from_shape_fn((4, 24, 40), |(p, y, x)| {
+            -0.2 + 1.5 * ((p * 31 + y * 7 + x * 3) % 97) as f32 / 96.0
+        });
+        for kind in [ModelKind::PoissonGaussian, ModelKind::Eld, ModelKind::Pgrf] {
+            let mut spec = PairSpec::new(CameraProfile::built_in("sony-a7s2").unwrap(), kind);
+            spec.iso = Some(1600);
+            spec.ratio = RatioSpec::Fixed(100.0);
+            let (model, _) = spec.model(5).unwrap();
+            let (ratio, exposure_s) = spec.conditions(5).unwrap();
+            let c = Capture {
+                ratio,
+                exposure_s,
+                plane_rows: [0, 0, 1, 1],
+                seed: 5,
+            };
+            let copy = clean.mapv(|v| v.clamp(0.0, 1.0));
+            let from_copy = model.sample(copy.view(), &c).unwrap();
+            assert_eq!(
+                from_copy,
+                model.sample_clipped(clean.view(), &c).unwrap(),
+                "{kind:?}"
+            );
+            assert_ne!(
+                from_copy,
+                model.sample(clean.view(), &c).unwrap(),
+                "{kind:?}"
+            );
+            let pair = spec.synthesize(clean.view(), [0, 0, 1, 1], 5).unwrap();
+            assert_eq!(pair.noisy, from_copy, "{kind:?}");
+            let noisy = spec
+                .synthesize_noisy(clean.view(), [0, 0, 1, 1], 5)
+                .unwrap();
+            assert_eq!(pair.noisy, noisy.noisy, "{kind:?}");
+            assert_eq!(
+                (pair.ratio, pair.exposure_s),
+                (noisy.ratio, noisy.exposure_s)
+            );
+            assert!(pair.clean.iter().all(|v| (0.0..=1.0).contains(v)));
+        }
     }
 }

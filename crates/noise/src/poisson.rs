@@ -26,20 +26,36 @@ pub(crate) fn poisson<R: Rng + ?Sized>(rng: &mut R, mean: f64) -> f64 {
     }
 }
 
+/// The search's cap: the tail beyond k = 200 has probability < 1e-150 for
+/// mean < 10; the cap only guards against rounding leaving cdf a hair
+/// below u.
+const INVERSION_CAP: usize = 200;
+
+/// 1 / k for k = 1..=[`INVERSION_CAP`] (entry 0 unused): the search
+/// multiplies by these instead of dividing (a division's latency sat on
+/// the chain of p at every step).
+const RECIPROCALS: [f64; INVERSION_CAP + 1] = {
+    let mut t = [0.0; INVERSION_CAP + 1];
+    let mut k = 1;
+    while k <= INVERSION_CAP {
+        t[k] = 1.0 / k as f64;
+        k += 1;
+    }
+    t
+};
+
 #[inline]
 fn inversion<R: Rng + ?Sized>(rng: &mut R, mean: f64) -> f64 {
     let u = open01(rng);
     let mut p = (-mean).exp();
     let mut cdf = p;
-    let mut k = 0.0;
-    // The tail beyond k = 200 has probability < 1e-150 for mean < 10; the cap
-    // only guards against rounding leaving cdf a hair below u.
-    while u > cdf && k < 200.0 {
-        k += 1.0;
-        p *= mean / k;
+    let mut k = 0;
+    while u > cdf && k < INVERSION_CAP {
+        k += 1;
+        p *= mean * RECIPROCALS[k];
         cdf += p;
     }
-    k
+    k as f64
 }
 
 /// PTRS (W. Hörmann, "The transformed rejection method for generating Poisson
@@ -87,9 +103,11 @@ fn floor(x: f64) -> f64 {
 }
 
 /// ln(k!) exactly for small k (table), by Stirling's series beyond (relative
-/// error below 1e-15 for k >= 32).
+/// error below 1e-15 for k >= 32). The table reaches k = 255 so that PTRS's
+/// slow path at the means low-light scenes have (10 to ~150 electrons)
+/// takes no second logarithm.
 pub(crate) fn ln_factorial(k: f64) -> f64 {
-    const N: usize = 32;
+    const N: usize = 256;
     static TABLE: std::sync::OnceLock<[f64; N]> = std::sync::OnceLock::new();
     let t = TABLE.get_or_init(|| {
         let mut t = [0.0; N];

@@ -232,8 +232,8 @@ pub fn synth<'py>(
         check_packed(t, view.shape(), "synth clean")?;
     }
     let (made, dark, bright) = run(py, || {
-        let made = capture(view, &facts, profile, &s, seed)?;
-        let (dark, bright) = rayon::join(|| made.dark(), || made.brightened());
+        let mut made = capture(view, &facts, profile, &s, seed)?;
+        let (dark, bright) = made.take_forms();
         Ok::<_, pgrf_calib::synth::SynthError>((made, dark, bright))
     })?;
     let metas = match template {
