@@ -105,7 +105,9 @@ def test_the_model_says_what_it_is(spc):
     pg = pgrf.Model.load("builtin:pgrf")
     assert "SID U-Net" in spc.description and "one pass" in spc.description
     assert pg.method == "pgrf" and pg.nfe == 2
-    assert re.search(r"t2 = 0\.5", pg.description), pg.description
+    # The built-in file's searched t2 (0.1 since the search keeps the smallest within 0.01 dB).
+    assert re.search(r"t2 = 0\.1\b", pg.description), pg.description
+    assert re.search(r"t2 = 0\.5\b", pgrf.Model.load("builtin:pgrf", t2=0.5).description)
     assert spc.record["arch"] == "sid-unet" and pg.record["arch"] == "sr3-prior"
     assert pgrf.Model.load("builtin:pgrf", sampler="one-step").nfe == 1
 
