@@ -102,6 +102,23 @@ fn identical_files_score_infinite_psnr_and_unit_ssim() {
         (Some(0.0), Some(0.0)),
         "{v}"
     );
+    // The grid's offset is below its period, and only with a period.
+    for (args, needle) in [
+        (
+            vec!["--seam-period", "8", "--seam-offset", "8"],
+            "offset must be below the period",
+        ),
+        (vec!["--seam-offset", "3"], "--seam-period"),
+    ] {
+        let mut all = vec!["metrics", s(&r), s(&r)];
+        all.extend(args);
+        let out = pgrf(&all);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(
+            !out.status.success() && err.starts_with("pgrf: error:") && err.contains(needle),
+            "{err}"
+        );
+    }
     let out = pgrf(&["metrics", s(&r), s(&r)]);
     assert!(out.status.success());
     let text = String::from_utf8_lossy(&out.stdout);

@@ -49,20 +49,20 @@ pub struct FileScores {
     pub protocol: String,
     /// Speckles in the reference's flat regions ([`crate::artefacts`]).
     pub speckles: Speckles,
-    /// The worst seam at the borders every `seam_period` packed pixels,
-    /// when a period was given.
+    /// The worst seam at the borders of the seam grid, when one was given.
     pub seams: Option<Seams>,
 }
 
 /// Measure file `output` against file `reference` (same size and CFA
 /// phase), each normalised by its own levels, under ELD's protocol with or
 /// without its illuminance correction; speckles always, and seams at the
-/// borders every `seam_period` packed pixels when given.
+/// borders of `seam_grid` when given: (period, offset), the borders every
+/// period packed pixels from `offset` before the frame ([`seams`]).
 pub fn compare_files(
     output: &Path,
     reference: &Path,
     illuminance_correct: bool,
-    seam_period: Option<usize>,
+    seam_grid: Option<(usize, usize)>,
 ) -> Result<FileScores, CompareError> {
     let o = LevelOverrides::default();
     let (out, refr) = rayon::join(|| decode_file(output, &o), || decode_file(reference, &o));
@@ -80,8 +80,8 @@ pub fn compare_files(
     let protocol = Protocol::eld(illuminance_correct);
     let scores = evaluate(po.view(), pr.view(), &protocol)?;
     let speckles = speckles(po.view(), pr.view())?;
-    let seams = seam_period
-        .map(|p| seams(po.view(), pr.view(), p))
+    let seams = seam_grid
+        .map(|(period, offset)| seams(po.view(), pr.view(), period, offset))
         .transpose()?;
     Ok(FileScores {
         scores,
@@ -114,7 +114,7 @@ mod tests {
         let (a, b) = (d.join("a.dng"), d.join("b.dng"));
         pgrf_raw::write_dng(&chart(128, 96), &a, &Default::default()).unwrap();
         pgrf_raw::write_dng(&chart(64, 64), &b, &Default::default()).unwrap();
-        let same = compare_files(&a, &a, false, Some(32)).unwrap();
+        let same = compare_files(&a, &a, false, Some((32, 0))).unwrap();
         assert!(same.scores.psnr.is_infinite() && same.scores.ssim == 1.0);
         assert_eq!(same.speckles.count, 0);
         assert_eq!(same.seams.unwrap().worst, 0.0);

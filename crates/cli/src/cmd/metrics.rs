@@ -28,6 +28,12 @@ pub struct MetricsArgs {
     /// between neighbouring columns (rows); near 1 where there is no seam.
     #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(2..))]
     pub seam_period: Option<u32>,
+    /// With --seam-period: where the grid starts, this many packed pixels
+    /// before the frame. `pgrf enhance` mirrors the frame by 4 pixels on every
+    /// side before tiling it, so its tile and window borders sit at k N - 4;
+    /// 0 for a grid that starts at the frame's corner.
+    #[arg(long, value_name = "PIXELS", default_value_t = pgrf_nn::infer::image::EDGE_MARGIN as u32, requires = "seam_period")]
+    pub seam_offset: u32,
     /// Print one JSON line: {"psnr": .., "ssim": .., "gain": .., "speckles": {"count", "flat_pixels",
     /// "sigma"}, "seam": {"worst", "axis", "at", "median_step"} or null, "protocol": ..}.
     #[arg(long)]
@@ -48,8 +54,8 @@ struct Report {
 }
 
 pub fn run(a: &MetricsArgs) -> Result<()> {
-    let period = a.seam_period.map(|p| p as usize);
-    let m = pgrf_eval::compare_files(&a.output, &a.reference, a.illuminance_correct, period)?;
+    let grid = a.seam_period.map(|p| (p as usize, a.seam_offset as usize));
+    let m = pgrf_eval::compare_files(&a.output, &a.reference, a.illuminance_correct, grid)?;
     let report = Report {
         psnr: m.scores.psnr.is_finite().then_some(m.scores.psnr),
         ssim: m.scores.ssim,

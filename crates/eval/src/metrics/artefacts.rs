@@ -195,13 +195,20 @@ fn steps(e: &ndarray::Array3<f64>, axis: usize) -> Vec<f64> {
 
 /// The worst seam of `output` against `reference` at the borders every
 /// `period` packed pixels (the tile or window grid: 128 for the shipped
-/// PGRF's windows), rows and columns.
-pub fn seams(output: ArrayView3<f32>, reference: ArrayView3<f32>, period: usize) -> Result<Seams> {
+/// PGRF's windows), rows and columns, the grid starting `offset` pixels
+/// before the frame (borders at k period - offset; `pgrf enhance`'s grid
+/// starts its mirrored margin before the frame, `pgrf_nn`'s `EDGE_MARGIN`).
+pub fn seams(
+    output: ArrayView3<f32>,
+    reference: ArrayView3<f32>,
+    period: usize,
+    offset: usize,
+) -> Result<Seams> {
     check(output, reference)?;
     let (_, h, w) = output.dim();
-    if period < 2 || (period >= w && period >= h) {
+    if period < 2 || offset >= period || (period - offset >= w && period - offset >= h) {
         return Err(MetricError::InvalidOption(format!(
-            "a border period of {period} has no border inside a {w}x{h} frame"
+            "a border period of {period} starting {offset} before the frame has no border inside a {w}x{h} frame (the offset must be below the period)"
         )));
     }
     let e = error(output, reference);
@@ -214,7 +221,7 @@ pub fn seams(output: ArrayView3<f32>, reference: ArrayView3<f32>, period: usize)
     for (axis, name) in [(2usize, "column"), (1, "row")] {
         let s = steps(&e, axis);
         let med = median(&mut s.clone());
-        let mut k = period;
+        let mut k = period - offset;
         while k < s.len() + 1 {
             let ratio = if med > 0.0 { s[k - 1] / med } else { 0.0 };
             if ratio > worst.worst {
@@ -261,7 +268,7 @@ mod tests {
         // e - median of 8 others: sd about 1.1 of the error's own (the
         // median of 8 has variance ~0.18 sigma^2).
         assert!(s.sigma > 0.0041 && s.sigma < 0.0049, "{}", s.sigma);
-        let m = seams(o.view(), r.view(), 32).unwrap();
+        let m = seams(o.view(), r.view(), 32, 0).unwrap();
         // Steps of white noise: the median |d| of 4 x 96 (columns) or 4 x
         // 160 (rows) samples, sd ~ 6 % of it, so the largest of 7 borders
         // stays below 1.15.
@@ -299,10 +306,22 @@ mod tests {
                 *v += 0.008;
             }
         }
-        let m = seams(o.view(), r.view(), 32).unwrap();
+        let m = seams(o.view(), r.view(), 32, 0).unwrap();
         assert!(m.worst > 1.7, "{m:?}");
         assert_eq!(m.at % 32, 0);
-        assert!(seams(o.view(), r.view(), 1).is_err());
-        assert!(seams(o.view(), r.view(), 500).is_err());
+        assert!(seams(o.view(), r.view(), 1, 0).is_err());
+        assert!(seams(o.view(), r.view(), 500, 0).is_err());
+        assert!(seams(o.view(), r.view(), 32, 32).is_err());
+        // The same windows starting 4 pixels before the frame: found with
+        // that offset, missed without it.
+        let (mut o, r) = pair(53);
+        for ((_, y, x), v) in o.indexed_iter_mut() {
+            if (((x + 4) / 32) + ((y + 4) / 32)) % 2 == 1 {
+                *v += 0.008;
+            }
+        }
+        let shifted = seams(o.view(), r.view(), 32, 4).unwrap();
+        assert!(shifted.worst > 1.7 && shifted.at % 32 == 28, "{shifted:?}");
+        assert!(seams(o.view(), r.view(), 32, 0).unwrap().worst < 1.3);
     }
 }
