@@ -90,7 +90,9 @@ fn the_dng_keeps_the_input_and_holds_the_model_output() {
         ]);
         assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
         let report: Value = serde_json::from_slice(&r.stdout).unwrap();
-        assert_eq!(report["tiles"], 6, "{report}");
+        // 224 x 304 packed, mirrored by 4 on every side: 232 x 312 in tiles
+        // of 144 (128 as run) overlapping by 64, 3 x 4 of them.
+        assert_eq!(report["tiles"], 12, "{report}");
         assert_eq!(report["nfe"], if flow { 2 } else { 1 });
         // The stages' seconds are each the file's and add up to at most its
         // total; the network and the preview took some.

@@ -5,7 +5,7 @@
 
 use ndarray::{s, Array3, ArrayView3};
 use pgrf_nn::backend::Cpu;
-use pgrf_nn::infer::image::plan_for;
+use pgrf_nn::infer::image::{frame_plan, reflect_margin, EDGE_MARGIN};
 use pgrf_nn::infer::start::start_noise;
 use pgrf_nn::infer::{restore_image, ImageOptions, Restore, Restorer, SamplerChoice};
 use pgrf_nn::weights::{NoiseSource, WeightMeta};
@@ -66,7 +66,8 @@ fn column_kinks(e: &Array3<f32>) -> Vec<f64> {
 }
 
 fn check(r: &dyn Restore, name: &str) {
-    let (h, w) = (64, 176);
+    // 56 rows: one row of tiles of 64 once mirrored by the edge margin.
+    let (h, w) = (56, 176);
     let x = scene(h, w);
     let whole_opts = ImageOptions {
         tile: 1024,
@@ -75,14 +76,19 @@ fn check(r: &dyn Restore, name: &str) {
         noise: None,
     };
     let whole = restore_image(r, x.view(), &whole_opts, &pgrf_core::NoProgress).unwrap();
-    // One tile is the untiled network output itself (to 1e-5).
+    // One tile is the untiled network output itself (to 1e-5), on the frame
+    // mirrored by the edge margin (the start fields likewise) and cut back.
+    let m = EDGE_MARGIN;
+    let xp = reflect_margin(x.view(), m);
     let x0s: Vec<Array3<f32>> = (0..r.samples() as u64)
-        .map(|k| start_noise(3, k, 4, h, w))
+        .map(|k| reflect_margin(start_noise(3, k, 4, h, w).view(), m))
         .collect();
     let views: Vec<ArrayView3<f32>> = x0s.iter().map(|a| a.view()).collect();
+    let crop = s![.., m..m + h, m..m + w];
     let direct = r
-        .restore(x.view(), &views, None)
+        .restore(xp.view(), &views, None)
         .unwrap()
+        .slice(crop)
         .mapv(|v| v.clamp(0.0, 1.0));
     let d = (&whole - &direct)
         .iter()
@@ -96,18 +102,20 @@ fn check(r: &dyn Restore, name: &str) {
         seed: 3,
         noise: None,
     };
-    let plan = plan_for(h, w, &opts, r.side_multiple()).unwrap();
+    // The tiles of the mirrored frame, as restore_image cuts them.
+    let plan = frame_plan(r, h, w, &opts).unwrap();
     assert!(plan.cols.count() >= 3, "{name}");
     let tiled = restore_image(r, x.view(), &opts, &pgrf_core::NoProgress).unwrap();
     // The same tiles averaged with equal weights where they overlap: the
     // common naive blend, which steps wherever a tile begins or ends.
-    let mut sum = Array3::<f32>::zeros((4, h, w));
-    let mut count = ndarray::Array2::<f32>::zeros((h, w));
+    let (hp, wp) = (h + 2 * m, w + 2 * m);
+    let mut sum = Array3::<f32>::zeros((4, hp, wp));
+    let mut count = ndarray::Array2::<f32>::zeros((hp, wp));
     for t in plan.tiles() {
         let sl = s![.., t.y..t.y + t.h, t.x..t.x + t.w];
         let xv: Vec<ArrayView3<f32>> = x0s.iter().map(|a| a.slice(sl)).collect();
         let out = r
-            .restore(x.slice(sl), &xv, None)
+            .restore(xp.slice(sl), &xv, None)
             .unwrap()
             .mapv(|v| v.clamp(0.0, 1.0));
         let mut dst = sum.slice_mut(sl);
@@ -115,15 +123,19 @@ fn check(r: &dyn Restore, name: &str) {
         let mut c = count.slice_mut(s![t.y..t.y + t.h, t.x..t.x + t.w]);
         c += 1.0;
     }
-    let naive = &sum / &count.insert_axis(ndarray::Axis(0));
+    let naive = (&sum / &count.insert_axis(ndarray::Axis(0)))
+        .slice(crop)
+        .to_owned();
     let e_soft = &tiled - &whole;
     let e_naive = &naive - &whole;
     let soft = column_kinks(&e_soft);
     let avg = column_kinks(&e_naive);
-    // Columns where a tile begins or ends (and their neighbours), and the rest.
+    // Columns where a tile begins or ends (and their neighbours), and the
+    // rest; the plan's columns are the mirrored frame's, m before the frame.
     let mut edge = vec![false; w];
     for k in 1..plan.cols.count() {
         for c in [plan.cols.starts[k], plan.cols.starts[k - 1] + plan.cols.len] {
+            let c = c.saturating_sub(m);
             let from = c.saturating_sub(1);
             for flag in edge.iter_mut().take(c + 1).skip(from) {
                 *flag = true;

@@ -171,8 +171,9 @@ fn edge_margin(h: usize, w: usize) -> usize {
 }
 
 /// `a` `(c, h, w)` mirrored by `m` pixels on every side (the edge not
-/// repeated); `m` below the shorter side.
-fn reflect_margin(a: ArrayView3<f32>, m: usize) -> Array3<f32> {
+/// repeated); `m` below the shorter side. What [`restore_image`] restores
+/// (with [`EDGE_MARGIN`]) before it cuts the margin off again.
+pub fn reflect_margin(a: ArrayView3<f32>, m: usize) -> Array3<f32> {
     let (c, h, w) = a.dim();
     let fold = |i: usize, n: usize| -> usize {
         let i = i as isize - m as isize;
