@@ -478,18 +478,10 @@ impl RowDraw<'_> {
         // the model's order, and the row's quantiles are taken after it in
         // one vector loop ([`RowDraw::add_tukey`]); the loop leaves the
         // rest of the value in DN in `dst`.
-        let tukey = match model.read {
-            ReadDist::Tukey { lambda } if c.read && !banked => Some(lambda as f64),
-            _ => None,
-        };
+        let tukey = self.tukey_lambda();
         let mut us = vec![0.0f64; if tukey.is_some() { pw } else { 0 }];
         for j in 0..pw {
-            let x = if self.clip {
-                srow[j].clamp(0.0, 1.0)
-            } else {
-                srow[j]
-            };
-            let s = x * self.to_dn;
+            let s = self.signal(srow[j]);
             row_ok &= s.is_finite();
             let mut v = if c.photon {
                 photon_shot(rng, k, s as f64 * self.inv_k)
@@ -497,14 +489,12 @@ impl RowDraw<'_> {
                 s
             };
             if c.dark {
-                let rate = dark_row.map_or_else(|| m.dark_rate.at(plane, base + j), |r| r[j]);
-                let e = rate * self.dark_time;
-                if e > 0.0 {
-                    let fp = c
-                        .fixed_pattern
-                        .then(|| fp_row.map_or_else(|| m.n_fp.at(plane, base + j), |r| r[j]));
-                    v += dark_shot(rng, k, e as f64, fp);
-                }
+                v += self.dark(
+                    rng,
+                    (plane, base + j),
+                    dark_row.map(|r| r[j]),
+                    fp_row.map(|r| r[j]),
+                );
             }
             if c.fixed_pattern {
                 v += bias_row.map_or_else(|| m.bias.at(plane, base + j), |r| r[j]);
@@ -536,6 +526,49 @@ impl RowDraw<'_> {
             row_ok &= self.add_tukey(&mut us, lambda, (plane, i), dst);
         }
         row_ok
+    }
+
+    /// ELD's Tukey-lambda shape when the row draws that read noise itself
+    /// (not from a bank).
+    fn tukey_lambda(&self) -> Option<f64> {
+        match self.model.read {
+            ReadDist::Tukey { lambda } if self.model.components.read && self.bank.is_none() => {
+                Some(lambda as f64)
+            }
+            _ => None,
+        }
+    }
+
+    /// A clean value in DN of the capture (clipped to [0, 1] first when
+    /// the draw clips).
+    #[inline(always)]
+    fn signal(&self, x: f32) -> f32 {
+        let x = if self.clip { x.clamp(0.0, 1.0) } else { x };
+        x * self.to_dn
+    }
+
+    /// The dark-current shot noise of pixel `at` of `plane` (component A,
+    /// times 1 + N_FP with F): its rate and fixed-pattern deviation from the
+    /// row's maps when given (`rate`, `fp`), else looked up; none where the
+    /// pixel's dark signal is none.
+    #[inline(always)]
+    fn dark<R: Rng>(
+        &self,
+        rng: &mut R,
+        (plane, at): (usize, usize),
+        rate: Option<f32>,
+        fp: Option<f32>,
+    ) -> f32 {
+        let (c, m) = (self.model.components, &self.model.maps);
+        let e = rate.unwrap_or_else(|| m.dark_rate.at(plane, at)) * self.dark_time;
+        if e > 0.0 {
+            let fp = c
+                .fixed_pattern
+                .then(|| fp.unwrap_or_else(|| m.n_fp.at(plane, at)));
+            dark_shot(rng, self.model.k, e as f64, fp)
+        } else {
+            0.0
+        }
     }
 
     /// The Tukey-lambda read noise of row `i` of `plane` added to `dst`
