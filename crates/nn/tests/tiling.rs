@@ -5,7 +5,7 @@
 
 use ndarray::{s, Array3, ArrayView3};
 use pgrf_nn::backend::Cpu;
-use pgrf_nn::infer::image::{frame_plan, reflect_margin, EDGE_MARGIN};
+use pgrf_nn::infer::image::{frame_plan, reflect_pad, EDGE_MARGIN};
 use pgrf_nn::infer::start::start_noise;
 use pgrf_nn::infer::{restore_image, ImageOptions, Restore, Restorer, SamplerChoice};
 use pgrf_nn::weights::{NoiseSource, WeightMeta};
@@ -79,9 +79,9 @@ fn check(r: &dyn Restore, name: &str) {
     // One tile is the untiled network output itself (to 1e-5), on the frame
     // mirrored by the edge margin (the start fields likewise) and cut back.
     let m = EDGE_MARGIN;
-    let xp = reflect_margin(x.view(), m);
+    let xp = reflect_pad(x.view(), m, 0, 0);
     let x0s: Vec<Array3<f32>> = (0..r.samples() as u64)
-        .map(|k| reflect_margin(start_noise(3, k, 4, h, w).view(), m))
+        .map(|k| reflect_pad(start_noise(3, k, 4, h, w).view(), m, 0, 0))
         .collect();
     let views: Vec<ArrayView3<f32>> = x0s.iter().map(|a| a.view()).collect();
     let crop = s![.., m..m + h, m..m + w];

@@ -97,15 +97,9 @@ pub fn restore_image(
     if let Some(pos) = input.iter().position(|v| !v.is_finite()) {
         return Err(NnError::NonFiniteInput { index: pos });
     }
-    // The frame mirrored by EDGE_MARGIN on every side ([`EDGE_MARGIN`]),
-    // then, for a windowed flow network, padded to whole windows, so that
-    // its tiles (multiples of the window, overlapping by multiples of it,
-    // the last flush with the padded end) all sit on the frame's window grid.
-    let m = edge_margin(h, w);
-    let (h2, w2) = (h + 2 * m, w + 2 * m);
-    let (ph, pw) = window_padding(h2, w2, r.window());
+    let (m, ph, pw) = frame_padding(h, w, r.window());
     let plan = frame_plan(r, h, w, opts)?;
-    let pad = |a: ArrayView3<f32>| reflect_pad(reflect_margin(a, m).view(), ph, pw);
+    let pad = |a: ArrayView3<f32>| reflect_pad(a, m, ph, pw);
     let padded = pad(input);
     let x0s: Vec<Array3<f32>> = (0..r.samples() as u64)
         .map(|k| pad(start_noise(opts.seed, k, c, h, w).view()))
@@ -130,10 +124,9 @@ pub fn restore_image(
 /// windows where `r` has them ([`Restore::window`]).
 pub fn frame_plan(r: &dyn Restore, h: usize, w: usize, opts: &ImageOptions) -> Result<TilePlan> {
     let window = r.window();
-    let m = edge_margin(h, w);
-    let (h2, w2) = (h + 2 * m, w + 2 * m);
-    let (ph, pw) = window_padding(h2, w2, window);
-    let padded = (h2 + ph).max(w2 + pw);
+    let (m, ph, pw) = frame_padding(h, w, window);
+    let (h2, w2) = (h + 2 * m + ph, w + 2 * m + pw);
+    let padded = h2.max(w2);
     let opts = ImageOptions {
         // A tile that holds the whole frame holds it padded too.
         tile: if opts.tile >= h.max(w) {
@@ -150,7 +143,20 @@ pub fn frame_plan(r: &dyn Restore, h: usize, w: usize, opts: &ImageOptions) -> R
         },
         ..*opts
     };
-    plan_for(h2 + ph, w2 + pw, &opts, r.side_multiple())
+    plan_for(h2, w2, &opts, r.side_multiple())
+}
+
+/// How an `h` x `w` packed frame is padded before it is tiled: mirrored by
+/// its edge margin `m` on every side ([`EDGE_MARGIN`]), then, for a flow
+/// network with windows of side `window`, by `ph` more rows below and `pw`
+/// more columns on the right to whole windows, so that its tiles
+/// (multiples of the window, overlapping by multiples of it, the last
+/// flush with the padded end) all sit on the padded frame's window grid.
+/// Returns (m, ph, pw).
+fn frame_padding(h: usize, w: usize, window: usize) -> (usize, usize, usize) {
+    let m = edge_margin(h, w);
+    let (ph, pw) = window_padding(h + 2 * m, w + 2 * m, window);
+    (m, ph, pw)
 }
 
 /// Packed pixels of the frame mirrored on every side before it is
@@ -170,47 +176,32 @@ fn edge_margin(h: usize, w: usize) -> usize {
     EDGE_MARGIN.min(h.min(w).saturating_sub(1))
 }
 
-/// `a` `(c, h, w)` mirrored by `m` pixels on every side (the edge not
-/// repeated); `m` below the shorter side. What [`restore_image`] restores
-/// (with [`EDGE_MARGIN`]) before it cuts the margin off again.
-pub fn reflect_margin(a: ArrayView3<f32>, m: usize) -> Array3<f32> {
+/// `a` `(c, h, w)` mirrored by `m` pixels on every side, then extended by
+/// `ph` rows below and `pw` columns on the right mirrored about the
+/// extended frame's last row and column (the edge never repeated, as the
+/// network's own reflection padding does; a mirror folds back for pads
+/// longer than what it mirrors): one copy. What [`restore_image`]
+/// restores (with [`EDGE_MARGIN`] and its windows' padding) before it cuts
+/// the padding off again.
+pub fn reflect_pad(a: ArrayView3<f32>, m: usize, ph: usize, pw: usize) -> Array3<f32> {
     let (c, h, w) = a.dim();
-    let fold = |i: usize, n: usize| -> usize {
-        let i = i as isize - m as isize;
-        let n = n as isize;
-        (if i < 0 {
-            -i
-        } else if i >= n {
-            2 * (n - 1) - i
-        } else {
-            i
-        }) as usize
-    };
-    Array3::from_shape_fn((c, h + 2 * m, w + 2 * m), |(k, i, j)| {
-        a[[k, fold(i, h), fold(j, w)]]
-    })
-}
-
-/// `a` `(c, h, w)` extended by `ph` rows below and `pw` columns to the
-/// right, mirrored about its last row and column (the edge not repeated, as
-/// the network's own reflection padding does), the mirror folding back for
-/// pads longer than the image.
-pub(crate) fn reflect_pad(a: ArrayView3<f32>, ph: usize, pw: usize) -> Array3<f32> {
-    let (c, h, w) = a.dim();
-    let fold = |i: usize, n: usize| -> usize {
+    // Index i, `before` pixels before a run of n, mirrored into 0..n.
+    let fold = |i: isize, n: usize| -> usize {
         if n == 1 {
             return 0;
         }
         let p = 2 * (n - 1);
-        let k = i % p;
+        let k = i.rem_euclid(p as isize) as usize;
         if k < n {
             k
         } else {
             p - k
         }
     };
-    Array3::from_shape_fn((c, h + ph, w + pw), |(k, i, j)| {
-        a[[k, fold(i, h), fold(j, w)]]
+    // Into the frame mirrored by m, then into the frame itself.
+    let at = |i: usize, n: usize| fold(fold(i as isize, n + 2 * m) as isize - m as isize, n);
+    Array3::from_shape_fn((c, h + 2 * m + ph, w + 2 * m + pw), |(k, i, j)| {
+        a[[k, at(i, h), at(j, w)]]
     })
 }
 
@@ -282,13 +273,21 @@ mod tests {
     #[test]
     fn the_edge_margin_mirrors_every_side() {
         let a = Array3::from_shape_fn((1, 3, 5), |(_, y, x)| (10 * y + x) as f32);
-        let p = reflect_margin(a.view(), 2);
+        let p = reflect_pad(a.view(), 2, 0, 0);
         assert_eq!(p.dim(), (1, 7, 9));
         assert_eq!(p.slice(s![.., 2..5, 2..7]), a);
         let row = |i: usize| p.slice(s![0, i, ..]).to_vec();
         assert_eq!(row(2), [2., 1., 0., 1., 2., 3., 4., 3., 2.]);
         assert_eq!(row(0), [22., 21., 20., 21., 22., 23., 24., 23., 22.]);
         assert_eq!(row(6), [2., 1., 0., 1., 2., 3., 4., 3., 2.]);
+        // The windows' padding mirrors the margin-extended frame and folds
+        // back when longer: [0 1 2] by 1 is [1 0 1 2 1], then 6 more.
+        let r = Array3::from_shape_fn((1, 1, 3), |(_, _, x)| x as f32);
+        let p = reflect_pad(r.view(), 1, 0, 6);
+        assert_eq!(
+            p.slice(s![0, 1, ..]).to_vec(),
+            [1., 0., 1., 2., 1., 2., 1., 0., 1., 0., 1.]
+        );
         assert_eq!(
             (
                 edge_margin(3, 5),
