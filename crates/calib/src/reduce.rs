@@ -292,17 +292,19 @@ impl Masters {
     }
 
     /// The dark signal at exposure `t`, DN per pixel (zeros without darks):
-    /// c + (dark - bias - c) * scale.
-    fn dark_signal(&self, t: f64) -> Vec<f32> {
+    /// c + (dark - bias - c) * scale, times `temperature` (the dark's factor
+    /// to a light's temperature, [`Masters::temperature_scale`]; 1 for
+    /// none).
+    fn dark_signal(&self, t: f64, temperature: f64) -> Vec<f32> {
         let n = self.bias.samples.len();
         let Some((d, scale)) = self.dark_for(t) else {
             return vec![0.0; n];
         };
-        let scale = scale as f32;
+        let (scale, temperature) = (scale as f32, temperature as f32);
         (0..n)
             .map(|i| {
                 let c = self.offset.as_ref().map_or(0.0, |o| o[i]);
-                c + (d.samples[i] - self.bias.samples[i] - c) * scale
+                (c + (d.samples[i] - self.bias.samples[i] - c) * scale) * temperature
             })
             .collect()
     }
@@ -520,7 +522,7 @@ fn assemble(
 
 /// The flat with bias and dark off, divided by its mean per plane.
 fn normalise_flat(m: &mut Masters) -> Result<(), ReduceError> {
-    let dark = m.dark_signal(m.flat.exposure_s);
+    let dark = m.dark_signal(m.flat.exposure_s, 1.0);
     let flat: Vec<f32> = (m.flat.samples.iter().zip(&m.bias.samples).zip(&dark))
         .map(|((&f, &b), &d)| f - b - d)
         .collect();
@@ -771,10 +773,8 @@ pub fn reduce_frame(masters: &Masters, light: &RawFrame) -> (Vec<f32>, Option<Da
         scale,
         temperature_scale: masters.temperature_scale(light.temperature_c),
     });
-    let mut dark = masters.dark_signal(t);
-    if let Some(f) = used.as_ref().and_then(|d| d.temperature_scale) {
-        dark.iter_mut().for_each(|d| *d *= f as f32);
-    }
+    let temperature = used.as_ref().and_then(|d| d.temperature_scale);
+    let dark = masters.dark_signal(t, temperature.unwrap_or(1.0));
     let mut defective = masters.defective.clone();
     let mut out: Vec<f32> = (0..light.mosaic.len())
         .map(|i| {
@@ -789,8 +789,8 @@ pub fn reduce_frame(masters: &Masters, light: &RawFrame) -> (Vec<f32>, Option<Da
         })
         .collect();
     let step = if masters.mono { 1 } else { 2 };
-    let replaced = replace_defects(&mut out, light.width, &defective, step);
-    (out, used, replaced)
+    let cosmetic = replace_defects(&mut out, light.width, &defective, step);
+    (out, used, cosmetic)
 }
 
 /// The output file of `light` in `dir`: its file name with only the final
@@ -996,8 +996,6 @@ fn header_of(
     (cards, history)
 }
 
-/// The cards and the HISTORY line of the dark subtraction: master `name`
-/// scaled by `scale` to the light's exposure.
 /// The DARKTSCL card and HISTORY line of `dark` scaled to `light`'s
 /// temperature, when it was ([`Masters::temperature_scale`]).
 fn temperature_step(
@@ -1041,6 +1039,8 @@ fn cosmetic_history(cosmetic: Cosmetic, calib_name: &str) -> Vec<String> {
     lines
 }
 
+/// The cards and the HISTORY line of the dark subtraction: master `name`
+/// scaled by `scale` to the light's exposure.
 fn dark_step(
     masters: &Masters,
     light: &RawFrame,
@@ -1224,8 +1224,14 @@ mod tests {
         assert_eq!(d.exposure_s, 10.0);
         assert!((s - 1.2).abs() < 1e-12, "{s}");
         // (100 - 90) * 1.2 per pixel; with an offset c = 4: 4 + 6 * 1.2.
-        assert!(m.dark_signal(12.0).iter().all(|&v| (v - 12.0).abs() < 1e-5));
+        assert!(m
+            .dark_signal(12.0, 1.0)
+            .iter()
+            .all(|&v| (v - 12.0).abs() < 1e-5));
         m.offset = Some(vec![4.0; 4]);
-        assert!(m.dark_signal(12.0).iter().all(|&v| (v - 11.2).abs() < 1e-5));
+        assert!(m
+            .dark_signal(12.0, 1.0)
+            .iter()
+            .all(|&v| (v - 11.2).abs() < 1e-5));
     }
 }
