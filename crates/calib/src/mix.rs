@@ -129,15 +129,33 @@ pub fn build(spec: &MixSpec) -> Result<CalibratedMix, MixError> {
             });
         };
         let cal = CalibrationFile::load(path, None, None)?;
-        cal.apply_to(one)?;
-        if spec.noise_bank {
-            one.bank = Some(std::sync::Arc::new(cal.noise_bank()?));
-        }
+        apply_calibration(Some(&cal), spec.noise_bank, one)?;
         calibration = Some(cal.calibration.identity(path));
     } else if spec.noise_bank {
         return Err(MixError::NoBank { path: None });
     }
     Ok(CalibratedMix { mix, calibration })
+}
+
+/// Apply calibration `cal` (its maps, gain and row noise) to `spec` and,
+/// with `noise_bank`, its noise bank; a noise bank without a calibration
+/// is refused.
+pub fn apply_calibration(
+    cal: Option<&CalibrationFile>,
+    noise_bank: bool,
+    spec: &mut PairSpec,
+) -> Result<(), MixError> {
+    let Some(cal) = cal else {
+        return match noise_bank {
+            true => Err(MixError::NoBank { path: None }),
+            false => Ok(()),
+        };
+    };
+    cal.apply_to(spec)?;
+    if noise_bank {
+        spec.bank = Some(std::sync::Arc::new(cal.noise_bank()?));
+    }
+    Ok(())
 }
 
 /// The frame a calibration must fit (`pgrf synth`: the clean frame whose

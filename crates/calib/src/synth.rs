@@ -368,13 +368,7 @@ pub fn synthesize_packed(
         (None, Some(t)) => ExposureSpec::Fixed((t / ratio as f64) as f32),
         (None, None) => ExposureSpec::default(),
     };
-    if let Some(cal) = calibration {
-        cal.apply_to(&mut spec)?;
-    }
-    if c.noise_bank {
-        let cal = calibration.ok_or(MixError::NoBank { path: None })?;
-        spec.bank = Some(std::sync::Arc::new(cal.noise_bank()?));
-    }
+    crate::mix::apply_calibration(calibration, c.noise_bank, &mut spec)?;
     let pair = spec
         .synthesize_noisy(clean, facts.plane_rows, c.seed)
         .map_err(|cause| SynthError::Synthesis {
