@@ -86,24 +86,6 @@ impl NoiseBank {
         (h, w)
     }
 
-    /// The draws of a `(4, ph, pw)` capture of `seed`: one per bank-sized
-    /// tile, row-major.
-    fn tiles(&self, seed: u64, ph: usize, pw: usize) -> (Vec<TileDraw>, usize) {
-        let (bh, bw) = self.dims();
-        let (rows, cols) = (ph.div_ceil(bh), pw.div_ceil(bw));
-        let draws = (0..rows * cols)
-            .map(|t| {
-                let mut rng = stream(seed, Domain::Bank, t as u64, 0);
-                TileDraw {
-                    frame: rng.random_range(0..self.frames.len()),
-                    dy: rng.random_range(0..bh),
-                    dx: rng.random_range(0..bw),
-                }
-            })
-            .collect();
-        (draws, cols)
-    }
-
     /// The bank's noise for packed row `i` of `plane` of a `(4, ph, pw)`
     /// capture of `seed`, written into `out` (`pw` values).
     pub(crate) fn row_into(&self, draw: &BankDraw, plane: usize, i: usize, out: &mut [f32]) {
@@ -115,9 +97,21 @@ impl NoiseBank {
         }
     }
 
-    /// What a capture of `seed` and packed size `(ph, pw)` draws.
+    /// What a capture of `seed` and packed size `(ph, pw)` draws: a frame
+    /// and a shift per bank-sized tile, row-major.
     pub(crate) fn draw(&self, seed: u64, ph: usize, pw: usize) -> BankDraw {
-        let (tiles, cols) = self.tiles(seed, ph, pw);
+        let (bh, bw) = self.dims();
+        let (rows, cols) = (ph.div_ceil(bh), pw.div_ceil(bw));
+        let tiles = (0..rows * cols)
+            .map(|t| {
+                let mut rng = stream(seed, Domain::Bank, t as u64, 0);
+                TileDraw {
+                    frame: rng.random_range(0..self.frames.len()),
+                    dy: rng.random_range(0..bh),
+                    dx: rng.random_range(0..bw),
+                }
+            })
+            .collect();
         BankDraw { tiles, cols }
     }
 }

@@ -461,7 +461,7 @@ impl RowDraw<'_> {
     ) -> bool {
         let (model, pw) = (self.model, self.pw);
         let (c, m, k) = (model.components, &model.maps, model.k);
-        let (hi, q) = (model.dn_range, model.quant_step);
+        let q = model.quant_step;
         let mut row_ok = true;
         let base = i * pw;
         let sig_row = m.sigma_read.row(plane, i, pw);
@@ -519,11 +519,11 @@ impl RowDraw<'_> {
                 dst[j] = v;
             } else {
                 row_ok &= v.is_finite();
-                dst[j] = v.clamp(self.lo, hi) * self.from_dn;
+                dst[j] = self.recorded(v);
             }
         }
         if let Some(lambda) = tukey {
-            row_ok &= self.add_tukey(&mut us, lambda, (plane, i), dst);
+            row_ok &= self.add_tukey(&mut us, lambda, (plane, base), sig_row, dst);
         }
         row_ok
     }
@@ -571,26 +571,36 @@ impl RowDraw<'_> {
         }
     }
 
-    /// The Tukey-lambda read noise of row `i` of `plane` added to `dst`
-    /// (the rest of each value, in DN): the quantiles of the row's uniforms
-    /// `us` times each pixel's sigma_r, then the clamp and the scaling the
-    /// loop leaves for this pass; false when a value came out non-finite.
+    /// A value in DN as the capture records it: clipped to the ADC's range
+    /// [-black, white - black], on the normalised scale amplified by the
+    /// ratio.
+    #[inline(always)]
+    fn recorded(&self, v: f32) -> f32 {
+        v.clamp(self.lo, self.model.dn_range) * self.from_dn
+    }
+
+    /// The Tukey-lambda read noise of the row starting at pixel `base` of
+    /// `plane` (its sigma_r row `sig_row` when the map has rows) added to
+    /// `dst` (the rest of each value, in DN): the quantiles of the row's
+    /// uniforms `us` times each pixel's sigma_r, then what the loop leaves
+    /// for this pass ([`RowDraw::recorded`]); false when a value came out
+    /// non-finite.
     fn add_tukey(
         &self,
         us: &mut [f64],
         lambda: f64,
-        (plane, i): (usize, usize),
+        (plane, base): (usize, usize),
+        sig_row: Option<&[f32]>,
         dst: &mut [f32],
     ) -> bool {
         tukey::quantiles_in_place(us, lambda);
-        let (m, pw) = (&self.model.maps, self.pw);
-        let sig_row = m.sigma_read.row(plane, i, pw);
+        let m = &self.model.maps;
         let mut ok = true;
         for (j, (d, &q)) in dst.iter_mut().zip(us.iter()).enumerate() {
-            let sigma = sig_row.map_or_else(|| m.sigma_read.at(plane, i * pw + j), |r| r[j]);
+            let sigma = sig_row.map_or_else(|| m.sigma_read.at(plane, base + j), |r| r[j]);
             let v = *d + sigma * q as f32;
             ok &= v.is_finite();
-            *d = v.clamp(self.lo, self.model.dn_range) * self.from_dn;
+            *d = self.recorded(v);
         }
         ok
     }
