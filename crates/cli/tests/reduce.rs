@@ -6,7 +6,7 @@
 //! nothing written.
 
 mod common;
-use common::{one_line_error, pgrf, reduce, s, scratch, sensor};
+use common::{one_line_error, pgrf, pgrf_ok, reduce, s, scratch, sensor};
 use std::path::Path;
 
 /// A FITS file's bytes with one more header card (`KEY = value`) where
@@ -33,13 +33,22 @@ fn with_card(fits: &[u8], key: &str, value: &str) -> Vec<u8> {
 fn read_reduced(path: &Path) -> (Vec<f32>, Vec<(String, String)>) {
     let bytes = std::fs::read(path).unwrap();
     let (_, samples) = pgrf_raw::fits::read_fits_samples(path, &bytes).unwrap();
-    let cards = bytes
+    (samples, cards_of(&bytes))
+}
+
+/// A FITS file's header cards up to END, as (keyword, the rest) trimmed.
+fn cards_of(bytes: &[u8]) -> Vec<(String, String)> {
+    bytes
         .chunks(80)
         .map(|c| String::from_utf8_lossy(c).to_string())
         .take_while(|c| !c.starts_with("END "))
         .map(|c| (c[..8].trim().to_string(), c[8..].trim().to_string()))
-        .collect();
-    (samples, cards)
+        .collect()
+}
+
+/// The number a card's rest holds ("= value / comment").
+fn card_number(rest: &str) -> f64 {
+    rest[1..].split('/').next().unwrap().trim().parse().unwrap()
 }
 
 /// ccdproc's numbers (reduce_ccdproc.py's output, 2026-11-27): per light,
@@ -115,21 +124,9 @@ fn reduced_lights_match_ccdproc() {
             assert!(card("CALIB").contains("'calib.safetensors'"));
             assert!(card("IMAGETYP").contains("'Light Frame'"));
             assert!(card("ROWORDER").contains("'TOP-DOWN'"));
-            let scale: f64 = card("DARKSCL")[1..]
-                .split('/')
-                .next()
-                .unwrap()
-                .trim()
-                .parse()
-                .unwrap();
+            let scale = card_number(&card("DARKSCL"));
             assert!((scale - (0.04f64 / 0.05).sqrt()).abs() < 1e-6, "{scale}");
-            let t: f64 = card("EXPTIME")[1..]
-                .split('/')
-                .next()
-                .unwrap()
-                .trim()
-                .parse()
-                .unwrap();
+            let t = card_number(&card("EXPTIME"));
             assert!((t - 0.04).abs() < 1e-6, "{t}");
             let history = cards.iter().filter(|(k, _)| k == "HISTORY").count();
             assert!(history >= 5, "{cards:?}");
@@ -470,12 +467,7 @@ fn darks_are_scaled_to_the_lights_temperature() {
             "-o",
             s(out),
         ];
-        let run = pgrf(&a);
-        assert!(
-            run.status.success(),
-            "{}",
-            String::from_utf8_lossy(&run.stderr)
-        );
+        pgrf_ok(&a);
     };
     let vs = dir.join("vs");
     sim(&vs, "-10", "bias,dark,flat", "10,60", "1");
@@ -546,24 +538,16 @@ fn darks_are_scaled_to_the_lights_temperature() {
         .chunks(4)
         .map(|c| f32::from_be_bytes([c[0], c[1], c[2], c[3]]) as f64 * 65535.0)
         .collect();
-    let cards: Vec<(String, String)> = bytes[..end * 80]
-        .chunks(80)
-        .map(|c| String::from_utf8_lossy(c).to_string())
-        .map(|c| (c[..8].trim().to_string(), c[8..].trim().to_string()))
-        .collect();
+    let cards = cards_of(&bytes);
     let mean = px.iter().sum::<f64>() / px.len() as f64;
     assert!(mean.abs() < 0.6, "mean {mean} DN");
-    let tscl: f64 = cards
-        .iter()
-        .find(|(k, _)| k == "DARKTSCL")
-        .expect("DARKTSCL")
-        .1[1..]
-        .split('/')
-        .next()
-        .unwrap()
-        .trim()
-        .parse()
-        .unwrap();
+    let tscl = card_number(
+        &cards
+            .iter()
+            .find(|(k, _)| k == "DARKTSCL")
+            .expect("DARKTSCL")
+            .1,
+    );
     assert!((tscl - 2f64.powf(4.0 / doubling)).abs() < 2e-3, "{tscl}");
     let far = lights.join("5/dark/dark_60s_0000.fits");
     let err = one_line_error(&reduce(&vs, std::slice::from_ref(&far), &dir.join("out2")));

@@ -763,7 +763,8 @@ mod tests {
         }
         let (p, s) = mean_scores(&val, |c, x0| one_step(&net, c, x0));
         assert!((p - got.one_step.0).abs() < 1e-6 && (s - got.one_step.1).abs() < 1e-6);
-        // The curve is not flat (t matters), and the best is its argmax.
+        // The curve is not flat (t matters), and the kept t is the smallest
+        // within the default tolerance of its best.
         let psnr: Vec<f64> = got.curve.iter().map(|c| c.1).collect();
         assert!(psnr.iter().any(|&p| p != psnr[0]), "{psnr:?}");
         assert_eq!(got.best, best_index(&psnr, DEFAULT_TOLERANCE_DB));

@@ -14,6 +14,17 @@ pub fn pgrf(args: &[&str]) -> Output {
         .expect("run pgrf")
 }
 
+/// `pgrf args`, which must succeed (else the test fails with its stderr).
+pub fn pgrf_ok(args: &[&str]) -> Output {
+    let out = pgrf(args);
+    assert!(
+        out.status.success(),
+        "{args:?}: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    out
+}
+
 /// An empty folder for one test of `suite`, unique to this process.
 pub fn scratch(suite: &str, name: &str) -> PathBuf {
     let d = std::env::temp_dir().join(format!("pgrf-{suite}-test-{}-{name}", std::process::id()));
@@ -139,12 +150,7 @@ pub fn sensor(dir: &Path, size: (u32, u32), mono: bool, fits: bool) -> (PathBuf,
         common.push("--mono");
     }
     let run = |args: &[&str]| {
-        let out = pgrf(args);
-        assert!(
-            out.status.success(),
-            "{args:?}: {}",
-            String::from_utf8_lossy(&out.stderr)
-        );
+        pgrf_ok(args);
     };
     let mut a = vec!["simulate-sensor"];
     a.extend(&common);
