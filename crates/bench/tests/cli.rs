@@ -39,7 +39,7 @@ fn every_benchmark_has_help() {
 
 #[test]
 fn failures_are_one_error_line() {
-    let dir = std::env::temp_dir().join(format!("pgrf-bench-cli-{}", std::process::id()));
+    let dir = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("pgrf-bench-cli");
     std::fs::create_dir_all(&dir).unwrap();
     let missing = dir.join("missing.dng");
     for args in [

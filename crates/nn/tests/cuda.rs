@@ -58,7 +58,7 @@ fn max_diff(a: &[f32], b: &[f32]) -> (f32, f32) {
 /// A seeded network of `arch` saved to a weight file, so that both backends
 /// load the same bytes (the path the weight files take in every command).
 fn weights(arch: Architecture, seed: u64, name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("pgrf-cuda-test-{}", std::process::id()));
+    let dir = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("pgrf-cuda-test");
     std::fs::create_dir_all(&dir).unwrap();
     let path = dir.join(name);
     let net = arch.init_seeded::<Cpu>(&Default::default(), seed).unwrap();

@@ -52,7 +52,7 @@ fn max_diff_from_pytorch(bytes: &[u8], scratch: &Path) -> f32 {
 #[test]
 fn every_checkpoint_shape_imports_and_matches_pytorch() {
     let scratch =
-        std::env::temp_dir().join(format!("pgrf-interop-{}.safetensors", std::process::id()));
+        std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("pgrf-interop.safetensors");
     let mut first = None;
     for (file, nesting) in [
         ("plain.pth", ""),
@@ -185,7 +185,7 @@ fn a_trained_spc_exports_to_what_pytorch_computes() {
     eprintln!("blind SPC: max |pgrf - PyTorch| = {d:.2e}");
 
     let pth = interop::export(&meta, &tensors, true).unwrap();
-    let dir = std::env::temp_dir().join(format!("pgrf-export-{}", std::process::id()));
+    let dir = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("pgrf-export");
     std::fs::create_dir_all(&dir).unwrap();
     let file = dir.join("spc.pth");
     std::fs::write(&file, &pth.bytes).unwrap();

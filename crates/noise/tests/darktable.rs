@@ -63,7 +63,7 @@ const FIXTURE: &str = r#"{
 fn fixture() -> &'static Path {
     static PATH: OnceLock<PathBuf> = OnceLock::new();
     let p = PATH.get_or_init(|| {
-        let dir = std::env::temp_dir().join(format!("pgrf-darktable-{}", std::process::id()));
+        let dir = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("pgrf-darktable");
         std::fs::create_dir_all(&dir).unwrap();
         let p = dir.join("noiseprofiles.json");
         std::fs::write(&p, FIXTURE).unwrap();

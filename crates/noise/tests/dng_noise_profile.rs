@@ -12,7 +12,7 @@ const S: f64 = 2e-4;
 const O: f64 = 5e-6;
 
 fn dng_with(name: &str, profile: Option<Vec<[f64; 2]>>) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("pgrf-dngnp-{}", std::process::id()));
+    let dir = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("pgrf-dngnp");
     std::fs::create_dir_all(&dir).unwrap();
     let mut f =
         RawFrame::from_mosaic(64, 48, vec![600; 64 * 48], Cfa::Rggb, [512.0; 4], 16383).unwrap();

@@ -274,7 +274,7 @@ fn every_dng_states_its_pixels_digest() {
         hex(pgrf_raw::raw_image_digest(&[1, 2])),
         "99ffb3d9eeadc24aa4f9b13530176bf8"
     );
-    let dir = std::env::temp_dir().join(format!("pgrf-digest-{}", std::process::id()));
+    let dir = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("pgrf-digest");
     std::fs::create_dir_all(&dir).unwrap();
     for compression in [Compression::Lossless, Compression::Uncompressed] {
         let path = dir.join("d.dng");

@@ -25,9 +25,11 @@ pub fn pgrf_ok(args: &[&str]) -> Output {
     out
 }
 
-/// An empty folder for one test of `suite`, unique to this process.
+/// An empty folder for one test of `suite`, under cargo's target/tmp: a
+/// rerun empties the same folder, so runs do not pile up in the system's
+/// temporary folder (they once filled the disk).
 pub fn scratch(suite: &str, name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("pgrf-{suite}-test-{}-{name}", std::process::id()));
+    let d = Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!("pgrf-{suite}-test-{name}"));
     let _ = std::fs::remove_dir_all(&d);
     std::fs::create_dir_all(&d).unwrap();
     d
