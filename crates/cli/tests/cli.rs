@@ -5,14 +5,10 @@ use rand::{RngCore, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde_json::{json, Value};
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::process::Output;
 
-fn pgrf(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_pgrf"))
-        .args(args)
-        .output()
-        .expect("run pgrf")
-}
+mod common;
+use common::{pgrf, s};
 
 /// `../shared/data`; tests that call this are ignored without it.
 fn data_dir() -> PathBuf {
@@ -20,14 +16,7 @@ fn data_dir() -> PathBuf {
 }
 
 fn scratch(name: &str) -> PathBuf {
-    let d = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!("pgrf-cli-test-{name}"));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
+    common::scratch("cli", name)
 }
 
 /// Exit code 1, nothing on stdout, exactly one line on stderr that names the file.

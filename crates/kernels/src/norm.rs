@@ -1,6 +1,7 @@
 //! GroupNorm with its affine, forward and backward, each a few passes over
 //! one contiguous `(channels / groups) * pixels` block per (image, group),
-//! in parallel over blocks.
+//! in parallel over blocks; optionally with its statistics taken per window
+//! of the image instead of over the whole of it.
 //!
 //! burn 0.21 builds GroupNorm (and pgrf's folded form, `pgrf_nn::norm`) from
 //! a dozen tensor operations whose backward repeats them; here the forward
@@ -8,26 +9,54 @@
 //! the backward reads input and output gradient twice and writes once.
 //! Sums run in eight f32 lanes over spans of 1024 values and in f64 across
 //! spans; biased variance, epsilon inside the root, as burn.
+//!
+//! Windows: the flow network normalises each window of its training crop's
+//! side on its own (`pgrf_nn::norm::windowed`). Cutting the windows out as
+//! batch items and putting them back costs two strided copies per GroupNorm
+//! (36 % of a 6 MP restoration's time in burn's strided iterator, issue
+//! 55); here the statistics are gathered from each window's row segments in
+//! place.
 
 use rayon::prelude::*;
 
-/// Layout of a GroupNorm input: `n` images of `c` channels of `pixels`
-/// values, `groups` groups of `c / groups` consecutive channels.
+/// Layout of a GroupNorm input: `n` images of `c` channels of `height` x
+/// `width` values, `groups` groups of `c / groups` consecutive channels,
+/// statistics per `window` (rows, columns) tile of each image (the whole
+/// image: `(height, width)`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct GroupShape {
     /// Images.
     pub n: usize,
     /// Channels (a multiple of `groups`).
     pub c: usize,
-    /// Pixels per channel.
-    pub pixels: usize,
+    /// Rows per channel.
+    pub height: usize,
+    /// Columns per channel.
+    pub width: usize,
     /// Groups.
     pub groups: usize,
+    /// Rows and columns of the windows the statistics are taken over; each
+    /// divides its side.
+    pub window: (usize, usize),
+    /// SiLU applied to the forward's output in the same pass (a flow
+    /// network's every GroupNorm is followed by one): one read and one
+    /// write of the activation fewer. Forward only: the backward of the
+    /// pair is SiLU's then GroupNorm's, taken apart by the caller.
+    pub silu: bool,
 }
 
 impl GroupShape {
+    fn pixels(&self) -> usize {
+        self.height * self.width
+    }
+
     fn block(&self) -> usize {
-        self.c / self.groups * self.pixels
+        self.c / self.groups * self.pixels()
+    }
+
+    /// Windows per column and per row.
+    fn grid(&self) -> (usize, usize) {
+        (self.height / self.window.0, self.width / self.window.1)
     }
 
     fn check(&self, len: usize) {
@@ -35,7 +64,23 @@ impl GroupShape {
             self.groups > 0 && self.c.is_multiple_of(self.groups),
             "groups must divide channels"
         );
-        assert_eq!(len, self.n * self.c * self.pixels, "tensor size");
+        let (wy, wx) = self.window;
+        assert!(
+            wy > 0 && wx > 0 && self.height.is_multiple_of(wy) && self.width.is_multiple_of(wx),
+            "windows must tile the image"
+        );
+        assert_eq!(len, self.n * self.c * self.pixels(), "tensor size");
+    }
+
+    /// The row segments of window `(wy, wx)` in one channel of `pixels`
+    /// values: `(start, len)` pairs.
+    fn segments(&self, wy: usize, wx: usize) -> impl Iterator<Item = std::ops::Range<usize>> {
+        let (sy, sx) = self.window;
+        let width = self.width;
+        (wy * sy..(wy + 1) * sy).map(move |y| {
+            let start = y * width + wx * sx;
+            start..start + sx
+        })
     }
 }
 
@@ -88,17 +133,31 @@ fn sums_dy(x: &[f32], dy: &[f32], mean: f32, rstd: f32) -> (f64, f64) {
     (total_a, total_b)
 }
 
-/// Mean and 1 / sqrt(variance + eps) of one block (two passes: the mean,
-/// then squared deviations from it).
-fn stats(block: &[f32], eps: f64) -> (f32, f32) {
-    let len = block.len().max(1) as f64;
-    let mean = (sum_by(block, |v| v) / len) as f32;
-    let var = sum_by(block, |v| (v - mean) * (v - mean)) / len;
+/// `sum f(v)` over window `(wy, wx)` of every channel of one block.
+#[inline(always)]
+fn window_sum(
+    block: &[f32],
+    s: &GroupShape,
+    (wy, wx): (usize, usize),
+    f: impl Fn(f32) -> f32 + Copy,
+) -> f64 {
+    block
+        .chunks(s.pixels())
+        .map(|ch| s.segments(wy, wx).map(|r| sum_by(&ch[r], f)).sum::<f64>())
+        .sum()
+}
+
+/// Mean and 1 / sqrt(variance + eps) of window `(wy, wx)` of one block
+/// (two passes: the mean, then squared deviations from it).
+fn window_stats(block: &[f32], s: &GroupShape, wy: usize, wx: usize, eps: f64) -> (f32, f32) {
+    let len = (s.c / s.groups * s.window.0 * s.window.1).max(1) as f64;
+    let mean = (window_sum(block, s, (wy, wx), |v| v) / len) as f32;
+    let var = window_sum(block, s, (wy, wx), |v| (v - mean) * (v - mean)) / len;
     (mean, (1.0 / (var + eps).sqrt()) as f32)
 }
 
 /// `out = (x - mean) / sqrt(var + eps) * gamma[c] + beta[c]`, statistics per
-/// (image, group).
+/// (image, group, window).
 pub fn group_norm(
     x: &[f32],
     s: &GroupShape,
@@ -110,19 +169,35 @@ pub fn group_norm(
     s.check(x.len());
     assert_eq!(out.len(), x.len(), "output size");
     assert!(gamma.len() == s.c && beta.len() == s.c, "affine sizes");
-    let (block, cg) = (s.block(), s.c / s.groups);
+    let (block, cg, pixels) = (s.block(), s.c / s.groups, s.pixels());
+    let (gy, gx) = s.grid();
     out.par_chunks_mut(block.max(1))
         .zip(x.par_chunks(block.max(1)))
         .enumerate()
         .for_each(|(b, (o, x))| {
-            let (mean, rstd) = stats(x, eps);
             let g = b % s.groups;
-            for (k, (o, x)) in o.chunks_mut(s.pixels).zip(x.chunks(s.pixels)).enumerate() {
-                let ch = g * cg + k;
-                let scale = rstd * gamma[ch];
-                let shift = beta[ch] - mean * scale;
-                for (o, &v) in o.iter_mut().zip(x) {
-                    *o = v * scale + shift;
+            for wy in 0..gy {
+                for wx in 0..gx {
+                    let (mean, rstd) = window_stats(x, s, wy, wx, eps);
+                    for k in 0..cg {
+                        let ch = g * cg + k;
+                        let scale = rstd * gamma[ch];
+                        let shift = beta[ch] - mean * scale;
+                        let (o, x) = (&mut o[k * pixels..], &x[k * pixels..]);
+                        for r in s.segments(wy, wx) {
+                            let (o, x) = (&mut o[r.clone()], &x[r]);
+                            if s.silu {
+                                for (o, &v) in o.iter_mut().zip(x) {
+                                    let y = v * scale + shift;
+                                    *o = y * crate::act::sigmoid(y);
+                                }
+                            } else {
+                                for (o, &v) in o.iter_mut().zip(x) {
+                                    *o = v * scale + shift;
+                                }
+                            }
+                        }
+                    }
                 }
             }
         });
@@ -130,8 +205,8 @@ pub fn group_norm(
 
 /// Gradients of [`group_norm`] from its input `x` and output gradient `dy`:
 /// writes `dx` and returns `(dgamma, dbeta)`, each `c` long. With `xh` the
-/// normalised input and `dxh = dy * gamma[c]`, per block: `dx = rstd * (dxh
-/// - mean(dxh) - xh * mean(dxh * xh))`.
+/// normalised input and `dxh = dy * gamma[c]`, per window of a block: `dx =
+/// rstd * (dxh - mean(dxh) - xh * mean(dxh * xh))`.
 pub fn group_norm_backward(
     x: &[f32],
     dy: &[f32],
@@ -141,42 +216,28 @@ pub fn group_norm_backward(
     dx: &mut [f32],
 ) -> (Vec<f32>, Vec<f32>) {
     s.check(x.len());
+    assert!(
+        !s.silu,
+        "the backward of GroupNorm then SiLU is taken apart"
+    );
     assert!(dy.len() == x.len() && dx.len() == x.len(), "gradient sizes");
     assert_eq!(gamma.len(), s.c, "affine size");
     let (block, cg) = (s.block(), s.c / s.groups);
+    let (gy, gx) = s.grid();
     // Per (image, channel) sums of dy and dy * xh, for the affine's gradients.
     let partial: Vec<(Vec<f64>, Vec<f64>)> = dx
         .par_chunks_mut(block.max(1))
         .zip(x.par_chunks(block.max(1)).zip(dy.par_chunks(block.max(1))))
         .enumerate()
         .map(|(b, (dx, (x, dy)))| {
-            let (mean, rstd) = stats(x, eps);
             let g = b % s.groups;
-            let (mut sum_dy, mut sum_dy_xh) = (vec![0.0f64; cg], vec![0.0f64; cg]);
-            let (mut sum_dxh, mut sum_dxh_xh) = (0.0f64, 0.0f64);
-            for (k, (x, dy)) in x.chunks(s.pixels).zip(dy.chunks(s.pixels)).enumerate() {
-                let gm = f64::from(gamma[g * cg + k]);
-                let (a, b2) = sums_dy(x, dy, mean, rstd);
-                sum_dy[k] = a;
-                sum_dy_xh[k] = b2;
-                sum_dxh += a * gm;
-                sum_dxh_xh += b2 * gm;
-            }
-            let len = block.max(1) as f64;
-            let (m1, m2) = ((sum_dxh / len) as f32, (sum_dxh_xh / len) as f32);
-            for (k, ((dx, x), dy)) in dx
-                .chunks_mut(s.pixels)
-                .zip(x.chunks(s.pixels))
-                .zip(dy.chunks(s.pixels))
-                .enumerate()
-            {
-                let gm = gamma[g * cg + k];
-                for ((o, &v), &d) in dx.iter_mut().zip(x).zip(dy) {
-                    let xh = (v - mean) * rstd;
-                    *o = rstd * (d * gm - m1 - xh * m2);
+            let mut sums = (vec![0.0f64; cg], vec![0.0f64; cg]);
+            for wy in 0..gy {
+                for wx in 0..gx {
+                    window_backward(x, dy, dx, s, (wy, wx), eps, &gamma[g * cg..], &mut sums);
                 }
             }
-            (sum_dy, sum_dy_xh)
+            sums
         })
         .collect();
     let (mut dgamma, mut dbeta) = (vec![0.0f64; s.c], vec![0.0f64; s.c]);
@@ -189,6 +250,48 @@ pub fn group_norm_backward(
     }
     let to32 = |v: Vec<f64>| v.into_iter().map(|v| v as f32).collect();
     (to32(dgamma), to32(dbeta))
+}
+
+/// [`group_norm_backward`] on one window of one block: writes the window's
+/// `dx` and adds its per-channel sums of `dy` and `dy * xh` to `sums`.
+/// `gamma` starts at the block's first channel.
+#[allow(clippy::too_many_arguments)]
+fn window_backward(
+    x: &[f32],
+    dy: &[f32],
+    dx: &mut [f32],
+    s: &GroupShape,
+    (wy, wx): (usize, usize),
+    eps: f64,
+    gamma: &[f32],
+    (sum_dy, sum_dy_xh): &mut (Vec<f64>, Vec<f64>),
+) {
+    let (cg, pixels) = (s.c / s.groups, s.pixels());
+    let (mean, rstd) = window_stats(x, s, wy, wx, eps);
+    let (mut sum_dxh, mut sum_dxh_xh) = (0.0f64, 0.0f64);
+    for k in 0..cg {
+        let gm = f64::from(gamma[k]);
+        let (xc, dc) = (&x[k * pixels..], &dy[k * pixels..]);
+        for r in s.segments(wy, wx) {
+            let (a, b2) = sums_dy(&xc[r.clone()], &dc[r], mean, rstd);
+            sum_dy[k] += a;
+            sum_dy_xh[k] += b2;
+            sum_dxh += a * gm;
+            sum_dxh_xh += b2 * gm;
+        }
+    }
+    let len = (cg * s.window.0 * s.window.1).max(1) as f64;
+    let (m1, m2) = ((sum_dxh / len) as f32, (sum_dxh_xh / len) as f32);
+    for k in 0..cg {
+        let gm = gamma[k];
+        let (xc, dc, oc) = (&x[k * pixels..], &dy[k * pixels..], &mut dx[k * pixels..]);
+        for r in s.segments(wy, wx) {
+            for ((o, &v), &d) in oc[r.clone()].iter_mut().zip(&xc[r.clone()]).zip(&dc[r]) {
+                let xh = (v - mean) * rstd;
+                *o = rstd * (d * gm - m1 - xh * m2);
+            }
+        }
+    }
 }
 
 #[cfg(test)]
@@ -217,8 +320,11 @@ mod tests {
         let s = GroupShape {
             n: 2,
             c: 6,
-            pixels: 10,
+            height: 2,
+            width: 5,
             groups: 3,
+            window: (2, 5),
+            silu: false,
         };
         let x = values(120, 1);
         let (gamma, beta) = (vec![1.0; 6], vec![0.0; 6]);
@@ -237,22 +343,16 @@ mod tests {
     }
 
     /// Gradients against central differences of the f64-summed loss.
-    #[test]
-    fn backward_matches_finite_differences() {
-        let s = GroupShape {
-            n: 2,
-            c: 4,
-            pixels: 6,
-            groups: 2,
-        };
-        let x = values(48, 2);
-        let r = values(48, 3);
-        let gamma: Vec<f32> = (0..4).map(|i| 0.5 + 0.3 * i as f32).collect();
-        let beta: Vec<f32> = (0..4).map(|i| 0.1 * i as f32 - 0.2).collect();
-        let mut dx = vec![0.0; 48];
+    fn check_backward(s: GroupShape) {
+        let len = s.n * s.c * s.pixels();
+        let x = values(len, 2);
+        let r = values(len, 3);
+        let gamma: Vec<f32> = (0..s.c).map(|i| 0.5 + 0.3 * i as f32).collect();
+        let beta: Vec<f32> = (0..s.c).map(|i| 0.1 * i as f32 - 0.2).collect();
+        let mut dx = vec![0.0; len];
         let (dgamma, dbeta) = group_norm_backward(&x, &r, &s, 1e-5, &gamma, &mut dx);
         let h = 1e-2f32;
-        for i in [0, 7, 23, 31, 47] {
+        for i in [0, 7, 23, 31, len - 1] {
             let (mut a, mut b) = (x.clone(), x.clone());
             a[i] += h;
             b[i] -= h;
@@ -264,7 +364,7 @@ mod tests {
                 dx[i]
             );
         }
-        for c in 0..4 {
+        for c in 0..s.c {
             let (mut a, mut b) = (gamma.clone(), gamma.clone());
             a[c] += h;
             b[c] -= h;
@@ -277,6 +377,105 @@ mod tests {
             let num = (loss(&x, &s, &gamma, &a, &r) - loss(&x, &s, &gamma, &b, &r))
                 / (2.0 * f64::from(h));
             assert!((f64::from(dbeta[c]) - num).abs() < 2e-3, "dbeta[{c}]");
+        }
+    }
+    #[test]
+    fn backward_matches_finite_differences() {
+        check_backward(GroupShape {
+            n: 2,
+            c: 4,
+            height: 2,
+            width: 3,
+            groups: 2,
+            window: (2, 3),
+            silu: false,
+        });
+    }
+
+    #[test]
+    fn windowed_backward_matches_finite_differences() {
+        check_backward(GroupShape {
+            n: 2,
+            c: 4,
+            height: 4,
+            width: 6,
+            groups: 2,
+            window: (2, 3),
+            silu: false,
+        });
+    }
+
+    /// Statistics per window: equal to each window cut out and normalised
+    /// as an image of its own.
+    #[test]
+    fn windows_are_normalised_on_their_own() {
+        let s = GroupShape {
+            n: 2,
+            c: 6,
+            height: 8,
+            width: 12,
+            groups: 3,
+            window: (4, 3),
+            silu: false,
+        };
+        let x = values(s.n * s.c * s.pixels(), 5);
+        let gamma: Vec<f32> = (0..6).map(|i| 0.7 + 0.2 * i as f32).collect();
+        let beta: Vec<f32> = (0..6).map(|i| 0.3 - 0.1 * i as f32).collect();
+        let mut y = vec![0.0; x.len()];
+        group_norm(&x, &s, 1e-5, &gamma, &beta, &mut y);
+        let one = GroupShape {
+            height: 4,
+            width: 3,
+            window: (4, 3),
+            ..s
+        };
+        let at = |img: usize, ch: usize, r: usize, col: usize| ((img * 6 + ch) * 8 + r) * 12 + col;
+        for (wy, wx) in [(0, 0), (1, 3), (0, 2), (1, 1)] {
+            let cut = |v: &[f32]| -> Vec<f32> {
+                let mut out = Vec::new();
+                for img in 0..2 {
+                    for ch in 0..6 {
+                        for r in 0..4 {
+                            for col in 0..3 {
+                                out.push(v[at(img, ch, wy * 4 + r, wx * 3 + col)]);
+                            }
+                        }
+                    }
+                }
+                out
+            };
+            let part = cut(&x);
+            let mut want = vec![0.0; part.len()];
+            group_norm(&part, &one, 1e-5, &gamma, &beta, &mut want);
+            let have = cut(&y);
+            for (a, b) in want.iter().zip(&have) {
+                assert!((a - b).abs() < 1e-5, "window ({wy}, {wx}): {a} vs {b}");
+            }
+        }
+    }
+
+    /// The fused SiLU is SiLU of the plain output.
+    #[test]
+    fn silu_in_the_same_pass_is_silu_of_the_output() {
+        let s = GroupShape {
+            n: 1,
+            c: 4,
+            height: 4,
+            width: 8,
+            groups: 2,
+            window: (4, 4),
+            silu: false,
+        };
+        let x = values(128, 9);
+        let gamma: Vec<f32> = (0..4).map(|i| 0.8 + 0.4 * i as f32).collect();
+        let beta: Vec<f32> = (0..4).map(|i| 0.2 * i as f32 - 0.3).collect();
+        let (mut plain, mut fused) = (vec![0.0; 128], vec![0.0; 128]);
+        group_norm(&x, &s, 1e-5, &gamma, &beta, &mut plain);
+        let fs = GroupShape { silu: true, ..s };
+        group_norm(&x, &fs, 1e-5, &gamma, &beta, &mut fused);
+        for (p, f) in plain.iter().zip(&fused) {
+            let want = f64::from(*p) / (1.0 + (-f64::from(*p)).exp());
+            assert!((f64::from(*f) - want).abs() < 1e-5, "{f} vs {want}");
         }
     }
 }

@@ -83,20 +83,52 @@ pub fn windowed<B: Backend>(
     side: usize,
     f: impl FnOnce(Tensor<B, 4>) -> Tensor<B, 4>,
 ) -> Tensor<B, 4> {
-    let [n, c, h, w] = x.dims();
-    if side == 0 || (h <= side && w <= side) || h % side != 0 || w % side != 0 {
-        return f(x);
-    }
-    let (gy, gx) = (h / side, w / side);
-    let windows = x
-        .reshape([n, c, gy, side, gx, side])
-        .permute([0, 2, 4, 1, 3, 5])
-        .reshape([n * gy * gx, c, side, side]);
-    let y = f(windows);
+    let [n, _, h, w] = x.dims();
+    let y = f(to_windows(x, side));
     let co = y.dims()[1];
-    y.reshape([n, gy, gx, co, side, side])
+    from_windows(y, [n, co, h, w], side)
+}
+
+/// The (rows, columns) of the windows [`windowed`] cuts an `h` x `w` input
+/// into for `side`: the whole input when `side` is 0, the input is one
+/// window or less, or it is not a whole number of windows.
+pub(crate) fn window_of(h: usize, w: usize, side: usize) -> (usize, usize) {
+    if side == 0 || (h <= side && w <= side) || !h.is_multiple_of(side) || !w.is_multiple_of(side) {
+        return (h, w);
+    }
+    (side, side)
+}
+
+/// `x` `(n, c, h, w)` as its windows of [`window_of`], each a batch item:
+/// `(n * windows, c, side, side)` (the input itself when it is one window).
+pub(crate) fn to_windows<B: Backend>(x: Tensor<B, 4>, side: usize) -> Tensor<B, 4> {
+    let [n, c, h, w] = x.dims();
+    let (sy, sx) = window_of(h, w, side);
+    if (sy, sx) == (h, w) {
+        return x;
+    }
+    let (gy, gx) = (h / sy, w / sx);
+    x.reshape([n, c, gy, sy, gx, sx])
+        .permute([0, 2, 4, 1, 3, 5])
+        .reshape([n * gy * gx, c, sy, sx])
+}
+
+/// The inverse of [`to_windows`]: `y`, windows as batch items, put back in
+/// place as `dims` `(n, c, h, w)` (`c` may differ from the input's).
+pub(crate) fn from_windows<B: Backend>(
+    y: Tensor<B, 4>,
+    dims: [usize; 4],
+    side: usize,
+) -> Tensor<B, 4> {
+    let [n, c, h, w] = dims;
+    let (sy, sx) = window_of(h, w, side);
+    if (sy, sx) == (h, w) {
+        return y;
+    }
+    let (gy, gx) = (h / sy, w / sx);
+    y.reshape([n, gy, gx, c, sy, sx])
         .permute([0, 3, 1, 4, 2, 5])
-        .reshape([n, co, h, w])
+        .reshape([n, c, h, w])
 }
 
 #[cfg(test)]

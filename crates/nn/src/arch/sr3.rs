@@ -17,7 +17,7 @@ use crate::error::{ArchFault, Result as NnResult};
 use crate::layers::Layer;
 use crate::named::NamedTensor;
 use crate::norm::{window_padding, windowed};
-use crate::ops::{self, group_norm, silu, PgrfOps};
+use crate::ops::{self, group_norm, group_norm_windowed, silu, PgrfOps};
 use burn::config::Config;
 use burn::module::Module;
 use burn::nn::conv::{Conv2d, Conv2dConfig};
@@ -473,14 +473,12 @@ impl<B: PgrfOps> ResBlock<B> {
     /// taken over `window` x `window` windows (0: the whole input).
     fn forward(&self, x: Tensor<B, 4>, emb: &Tensor<B, 2>, window: usize) -> Tensor<B, 4> {
         let [n, _, _, _] = x.dims();
-        let norm = |g: &GroupNorm<B>, x: Tensor<B, 4>| windowed(x, window, |x| group_norm(g, x));
-        let h = ops::conv2d(&self.conv1, silu(norm(&self.norm1, x.clone())));
+        // Every GroupNorm of the block is followed by SiLU: one pass.
+        let norm = |g: &GroupNorm<B>, x: Tensor<B, 4>| group_norm_windowed(g, x, window, true);
+        let h = ops::conv2d(&self.conv1, norm(&self.norm1, x.clone()));
         let c = h.dims()[1];
         let h = h + self.emb.forward(emb.clone()).reshape([n, c, 1, 1]);
-        let h = ops::conv2d(
-            &self.conv2,
-            self.dropout.forward(silu(norm(&self.norm2, h))),
-        );
+        let h = ops::conv2d(&self.conv2, self.dropout.forward(norm(&self.norm2, h)));
         let res = match &self.skip {
             Some(s) => ops::conv2d(s, x),
             None => x,
@@ -656,8 +654,8 @@ impl<B: PgrfOps> Sr3Unet<B> {
                 x = ops::conv2d(upsamples.next().expect("upsample"), x);
             }
         }
-        let x = windowed(x, self.window, |x| group_norm(&self.final_norm, x));
-        let out = ops::conv2d(&self.final_conv, silu(x));
+        let x = group_norm_windowed(&self.final_norm, x, self.window, true);
+        let out = ops::conv2d(&self.final_conv, x);
         let c = out.dims()[1];
         let out = out.slice([0..n, 0..c, 0..h, 0..w]);
         match skip {

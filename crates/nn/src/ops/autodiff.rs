@@ -6,7 +6,7 @@
 //! convolution and activation nodes (burn-autodiff 0.21, `ops/module.rs`,
 //! `ops/activation.rs`).
 
-use super::{Needed, PgrfOps};
+use super::{Needed, NormSpec, PgrfOps};
 use burn::backend::autodiff::checkpoint::base::Checkpointer;
 use burn::backend::autodiff::checkpoint::strategy::CheckpointStrategy;
 use burn::backend::autodiff::grads::Gradients;
@@ -224,14 +224,21 @@ impl<B: PgrfOps, C: CheckpointStrategy> PgrfOps for Autodiff<B, C> {
         x: FloatTensor<Self>,
         gamma: FloatTensor<Self>,
         beta: FloatTensor<Self>,
-        groups: usize,
-        epsilon: f64,
+        spec: NormSpec,
     ) -> FloatTensor<Self> {
+        if spec.silu {
+            // Recorded as two operations, each with its own backward.
+            let plain = NormSpec {
+                silu: false,
+                ..spec
+            };
+            return Self::pgrf_silu(Self::pgrf_group_norm(x, gamma, beta, plain));
+        }
         #[derive(Debug)]
         struct GroupNorm;
 
         impl<B: PgrfOps> Backward<B, 3> for GroupNorm {
-            type State = (NodeId, NodeId, usize, f64);
+            type State = (NodeId, NodeId, NormSpec);
 
             fn backward(
                 self,
@@ -240,10 +247,10 @@ impl<B: PgrfOps, C: CheckpointStrategy> PgrfOps for Autodiff<B, C> {
                 checkpointer: &mut Checkpointer,
             ) {
                 let dy = grads.consume::<B>(&ops.node);
-                let (xs, gs, groups, epsilon) = ops.state;
+                let (xs, gs, spec) = ops.state;
                 let x = checkpointer.retrieve_node_output::<FloatTensor<B>>(xs);
                 let gamma = checkpointer.retrieve_node_output::<FloatTensor<B>>(gs);
-                let g = B::pgrf_group_norm_backward(x, gamma, dy, groups, epsilon);
+                let g = B::pgrf_group_norm_backward(x, gamma, dy, spec);
                 for (parent, grad) in ops.parents.into_iter().zip(g) {
                     if let Some(node) = parent {
                         grads.register::<B>(node.id, grad);
@@ -258,27 +265,15 @@ impl<B: PgrfOps, C: CheckpointStrategy> PgrfOps for Autodiff<B, C> {
             .stateful()
         {
             OpsKind::Tracked(mut prep) => {
-                let state = (
-                    prep.checkpoint(&x),
-                    prep.checkpoint(&gamma),
-                    groups,
-                    epsilon,
-                );
-                let out = B::pgrf_group_norm(
-                    x.primitive,
-                    gamma.primitive,
-                    beta.primitive,
-                    groups,
-                    epsilon,
-                );
+                let state = (prep.checkpoint(&x), prep.checkpoint(&gamma), spec);
+                let out = B::pgrf_group_norm(x.primitive, gamma.primitive, beta.primitive, spec);
                 prep.finish(state, out)
             }
             OpsKind::UnTracked(prep) => prep.finish(B::pgrf_group_norm(
                 x.primitive,
                 gamma.primitive,
                 beta.primitive,
-                groups,
-                epsilon,
+                spec,
             )),
         }
     }

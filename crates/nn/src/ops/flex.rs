@@ -7,7 +7,7 @@
 use super::{
     burn_adam, burn_conv2d_backward, burn_conv_transpose2d_backward, burn_group_norm,
     burn_group_norm_backward, burn_leaky_relu_backward, burn_silu, burn_silu_backward, ConvGrads,
-    Needed,
+    Needed, NormSpec,
 };
 use burn::backend::Flex;
 use burn::tensor::ops::{
@@ -386,17 +386,16 @@ pub(super) fn silu_backward(x: FlexTensor, dy: FlexTensor) -> FlexTensor {
     map2(x, dy, act::silu_backward)
 }
 
-/// GroupNorm with its affine through `pgrf_kernels::norm`; burn's
-/// operations for other dtypes or shapes.
+/// GroupNorm with its affine through `pgrf_kernels::norm`, windows in
+/// place; burn's operations for other dtypes or shapes.
 pub(super) fn group_norm(
     x: FlexTensor,
     gamma: FlexTensor,
     beta: FlexTensor,
-    groups: usize,
-    epsilon: f64,
+    spec: NormSpec,
 ) -> FlexTensor {
-    let Some(shape) = group_shape(&[&x, &gamma, &beta], groups) else {
-        return burn_group_norm::<Flex>(x, gamma, beta, groups, epsilon);
+    let Some(shape) = group_shape(&[&x, &gamma, &beta], spec) else {
+        return burn_group_norm::<Flex>(x, gamma, beta, spec);
     };
     let (gamma, beta) = (contiguous(gamma), contiguous(beta));
     let xd = dims(&x);
@@ -405,7 +404,7 @@ pub(super) fn group_norm(
     norm::group_norm(
         values(&x),
         &shape,
-        epsilon,
+        spec.epsilon,
         values(&gamma),
         values(&beta),
         &mut out,
@@ -414,9 +413,11 @@ pub(super) fn group_norm(
 }
 
 /// The GroupNorm layout of `ts[0]` (`(n, c, h, w)`, f32, with `c`-long f32
-/// affine tensors after it), `None` where the kernels do not apply.
-fn group_shape(ts: &[&FlexTensor], groups: usize) -> Option<GroupShape> {
+/// affine tensors after it) and its windows, `None` where the kernels do
+/// not apply.
+fn group_shape(ts: &[&FlexTensor], spec: NormSpec) -> Option<GroupShape> {
     let xd = dims(ts[0]);
+    let groups = spec.groups;
     let ok = is_f32(ts)
         && xd.len() == 4
         && groups > 0
@@ -425,8 +426,11 @@ fn group_shape(ts: &[&FlexTensor], groups: usize) -> Option<GroupShape> {
     ok.then(|| GroupShape {
         n: xd[0],
         c: xd[1],
-        pixels: xd[2] * xd[3],
+        height: xd[2],
+        width: xd[3],
         groups,
+        window: crate::norm::window_of(xd[2], xd[3], spec.window),
+        silu: spec.silu,
     })
 }
 
@@ -435,13 +439,12 @@ pub(super) fn group_norm_backward(
     x: FlexTensor,
     gamma: FlexTensor,
     dy: FlexTensor,
-    groups: usize,
-    epsilon: f64,
+    spec: NormSpec,
 ) -> [FlexTensor; 3] {
-    let shape =
-        group_shape(&[&x, &gamma], groups).filter(|_| dims(&dy) == dims(&x) && is_f32(&[&dy]));
+    let shape = group_shape(&[&x, &gamma], spec)
+        .filter(|s| !s.silu && dims(&dy) == dims(&x) && is_f32(&[&dy]));
     let Some(shape) = shape else {
-        return burn_group_norm_backward::<Flex>(x, gamma, dy, groups, epsilon);
+        return burn_group_norm_backward::<Flex>(x, gamma, dy, spec);
     };
     let xd = dims(&x);
     let (x, dy, gamma) = (contiguous(x), contiguous(dy), contiguous(gamma));
@@ -450,7 +453,7 @@ pub(super) fn group_norm_backward(
         values(&x),
         values(&dy),
         &shape,
-        epsilon,
+        spec.epsilon,
         values(&gamma),
         &mut dx,
     );

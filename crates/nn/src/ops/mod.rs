@@ -225,16 +225,14 @@ pub trait PgrfOps: Backend {
         burn_silu_backward::<Self>(x, dy)
     }
 
-    /// GroupNorm of `x` in `groups` groups with its affine `gamma`, `beta`
-    /// (biased variance, `epsilon` inside the root).
+    /// GroupNorm of `x` as `spec` says, with its affine `gamma`, `beta`.
     fn pgrf_group_norm(
         x: FloatTensor<Self>,
         gamma: FloatTensor<Self>,
         beta: FloatTensor<Self>,
-        groups: usize,
-        epsilon: f64,
+        spec: NormSpec,
     ) -> FloatTensor<Self> {
-        burn_group_norm::<Self>(x, gamma, beta, groups, epsilon)
+        burn_group_norm::<Self>(x, gamma, beta, spec)
     }
 
     /// Gradients of [`PgrfOps::pgrf_group_norm`]: `[dx, dgamma, dbeta]`.
@@ -242,10 +240,9 @@ pub trait PgrfOps: Backend {
         x: FloatTensor<Self>,
         gamma: FloatTensor<Self>,
         dy: FloatTensor<Self>,
-        groups: usize,
-        epsilon: f64,
+        spec: NormSpec,
     ) -> [FloatTensor<Self>; 3] {
-        burn_group_norm_backward::<Self>(x, gamma, dy, groups, epsilon)
+        burn_group_norm_backward::<Self>(x, gamma, dy, spec)
     }
 
     /// One Adam step on one parameter tensor: returns the parameter and the
@@ -291,21 +288,28 @@ pub(crate) fn burn_silu_backward<B: Backend>(
 }
 
 /// GroupNorm in burn's tensor operations (pgrf's folded form,
-/// [`crate::norm`]).
+/// [`crate::norm`]), each window cut out as a batch item
+/// ([`crate::norm::windowed`]).
 pub(crate) fn burn_group_norm<B: Backend>(
     x: FloatTensor<B>,
     gamma: FloatTensor<B>,
     beta: FloatTensor<B>,
-    groups: usize,
-    epsilon: f64,
+    spec: NormSpec,
 ) -> FloatTensor<B> {
-    primitive(crate::norm::folded(
-        tensor::<B, 4>(x),
-        Some(tensor(gamma)),
-        Some(tensor(beta)),
-        groups,
-        epsilon,
-    ))
+    let y = primitive(crate::norm::windowed(tensor::<B, 4>(x), spec.window, |x| {
+        crate::norm::folded(
+            x,
+            Some(tensor(gamma)),
+            Some(tensor(beta)),
+            spec.groups,
+            spec.epsilon,
+        )
+    }));
+    if spec.silu {
+        burn_silu::<B>(y)
+    } else {
+        y
+    }
 }
 
 /// GroupNorm's gradients in burn's tensor operations: with `xh` the
@@ -316,10 +320,32 @@ pub(crate) fn burn_group_norm_backward<B: Backend>(
     x: FloatTensor<B>,
     gamma: FloatTensor<B>,
     dy: FloatTensor<B>,
+    spec: NormSpec,
+) -> [FloatTensor<B>; 3] {
+    assert!(
+        !spec.silu,
+        "the backward of GroupNorm then SiLU is taken apart"
+    );
+    let (x, dy) = (tensor::<B, 4>(x), tensor::<B, 4>(dy));
+    let dims = x.dims();
+    let side = spec.window;
+    let (x, dy) = (
+        crate::norm::to_windows(x, side),
+        crate::norm::to_windows(dy, side),
+    );
+    let [dx, dgamma, dbeta] = unwindowed_backward::<B>(x, gamma, dy, spec.groups, spec.epsilon);
+    let dx = crate::norm::from_windows::<B>(tensor(dx), dims, side);
+    [primitive(dx), dgamma, dbeta]
+}
+
+/// [`burn_group_norm_backward`] with statistics per (image, group).
+fn unwindowed_backward<B: Backend>(
+    x: Tensor<B, 4>,
+    gamma: FloatTensor<B>,
+    dy: Tensor<B, 4>,
     groups: usize,
     epsilon: f64,
 ) -> [FloatTensor<B>; 3] {
-    let x: Tensor<B, 4> = tensor(x);
     let [n, c, h, w] = x.dims();
     let block = c / groups * h * w;
     let grouped = x.reshape([n, groups, block]);
@@ -332,7 +358,7 @@ pub(crate) fn burn_group_norm_backward<B: Backend>(
         .sqrt()
         .recip();
     let xh = (centred * rstd.clone()).reshape([n, c, h * w]);
-    let dy = tensor::<B, 4>(dy).reshape([n, c, h * w]);
+    let dy = dy.reshape([n, c, h * w]);
     let dbeta = dy.clone().sum_dim(2).sum_dim(0).reshape([c]);
     let dgamma = (dy.clone() * xh.clone()).sum_dim(2).sum_dim(0).reshape([c]);
     let dxh = (dy * tensor::<B, 1>(gamma).reshape([1, c, 1])).reshape([n, groups, block]);
@@ -494,20 +520,18 @@ impl PgrfOps for burn::backend::Flex {
         x: FloatTensor<Self>,
         gamma: FloatTensor<Self>,
         beta: FloatTensor<Self>,
-        groups: usize,
-        epsilon: f64,
+        spec: NormSpec,
     ) -> FloatTensor<Self> {
-        flex::group_norm(x, gamma, beta, groups, epsilon)
+        flex::group_norm(x, gamma, beta, spec)
     }
 
     fn pgrf_group_norm_backward(
         x: FloatTensor<Self>,
         gamma: FloatTensor<Self>,
         dy: FloatTensor<Self>,
-        groups: usize,
-        epsilon: f64,
+        spec: NormSpec,
     ) -> [FloatTensor<Self>; 3] {
-        flex::group_norm_backward(x, gamma, dy, groups, epsilon)
+        flex::group_norm_backward(x, gamma, dy, spec)
     }
 
     fn pgrf_adam(
@@ -628,16 +652,58 @@ pub fn leaky_relu<B: PgrfOps, const D: usize>(x: Tensor<B, D>, slope: f32) -> Te
 /// forward and backward where the backend has pgrf's kernels; pgrf's folded
 /// form in burn's operations ([`crate::norm::group_norm`]) otherwise.
 pub fn group_norm<B: PgrfOps>(norm: &GroupNorm<B>, x: Tensor<B, 4>) -> Tensor<B, 4> {
+    group_norm_windowed(norm, x, 0, false)
+}
+
+/// [`group_norm`] with its statistics taken per `window` x `window` window
+/// of `x` as [`crate::norm::windowed`] cuts them (0: whole inputs), in
+/// place where the backend has pgrf's kernels (no copies of the windows),
+/// followed by SiLU when `then_silu`.
+pub fn group_norm_windowed<B: PgrfOps>(
+    norm: &GroupNorm<B>,
+    x: Tensor<B, 4>,
+    window: usize,
+    then_silu: bool,
+) -> Tensor<B, 4> {
     match (&norm.gamma, &norm.beta) {
         (Some(gamma), Some(beta)) if B::pgrf_kernels() => tensor(B::pgrf_group_norm(
             primitive(x),
             primitive(gamma.val()),
             primitive(beta.val()),
-            norm.num_groups,
-            norm.epsilon,
+            NormSpec {
+                groups: norm.num_groups,
+                epsilon: norm.epsilon,
+                window,
+                silu: then_silu,
+            },
         )),
-        _ => crate::norm::group_norm(norm, x),
+        _ => {
+            let y = crate::norm::windowed(x, window, |x| crate::norm::group_norm(norm, x));
+            if then_silu {
+                silu(y)
+            } else {
+                y
+            }
+        }
     }
+}
+
+/// What a GroupNorm operation needs besides its tensors: `groups` groups of
+/// consecutive channels, `epsilon` inside the root (biased variance), and
+/// the side of the windows its statistics are taken over (0: whole inputs;
+/// [`crate::norm::windowed`]'s rule).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct NormSpec {
+    /// Groups of channels.
+    pub groups: usize,
+    /// Added to the variance inside the root.
+    pub epsilon: f64,
+    /// Window side in pixels (0: none).
+    pub window: usize,
+    /// SiLU applied to the output (the flow network's every GroupNorm is
+    /// followed by one): one pass where the backend has pgrf's kernels;
+    /// the autodiff backend records the two operations apart.
+    pub silu: bool,
 }
 
 /// SiLU, one pass forward and backward where the backend has pgrf's

@@ -410,27 +410,32 @@ fn training_curves_match_burns() {
     }
 }
 
-#[test]
-fn group_norm_matches_burns() {
-    use burn::nn::GroupNormConfig;
+/// A GroupNorm of `groups` x `channels` with its scale and shift moved
+/// away from burn's (1, 0) initialisation by `step` per value from `from`.
+fn shifted_group_norm(groups: usize, channels: usize, step: f32, from: f32) -> GroupNorm<B> {
     let device = Default::default();
-    // Scale and shift away from burn's (1, 0) initialisation.
-    let gn = GroupNormConfig::new(4, 12).init::<B>(&device);
+    let gn = burn::nn::GroupNormConfig::new(groups, channels).init::<B>(&device);
     let mut named = crate::named::collect::<B, _>(&gn);
     for t in named.values_mut() {
         for (i, v) in t.values.iter_mut().enumerate() {
-            *v += 0.1 * i as f32 - 0.4;
+            *v += step * i as f32 + from;
         }
     }
-    let gn = crate::named::assign(gn, &named, &device).unwrap();
-    let x = random([3, 12, 5, 7], 70) * 3.0 + 1.0;
-    let run = |pgrf: bool| {
+    crate::named::assign(gn, &named, &device).unwrap()
+}
+
+/// `norm` on `x` against `reference` on it: the outputs, the input's and
+/// the affine's gradients (loss `sum(y * pattern)`), each within 1e-4.
+fn norms_agree(
+    what: &str,
+    gn: &GroupNorm<B>,
+    x: &Tensor<B, 4>,
+    norm: impl Fn(Tensor<B, 4>) -> Tensor<B, 4>,
+    reference: impl Fn(Tensor<B, 4>) -> Tensor<B, 4>,
+) {
+    let run = |f: &dyn Fn(Tensor<B, 4>) -> Tensor<B, 4>| {
         let x = x.clone().require_grad();
-        let y = if pgrf {
-            group_norm(&gn, x.clone())
-        } else {
-            gn.forward(x.clone())
-        };
+        let y = f(x.clone());
         let grads = (y.clone() * pattern(y.dims(), 71)).sum().backward();
         let gamma = gn.gamma.as_ref().unwrap().val().grad(&grads).map(values);
         let beta = gn.beta.as_ref().unwrap().val().grad(&grads).map(values);
@@ -441,11 +446,55 @@ fn group_norm_matches_burns() {
             beta.unwrap(),
         ]
     };
-    let (ours, burns) = (run(true), run(false));
+    let (ours, burns) = (run(&norm), run(&reference));
     for (part, (a, b)) in ["forward", "dx", "dgamma", "dbeta"]
         .iter()
         .zip(ours.iter().zip(&burns))
     {
-        close(&format!("group norm {part}"), a, b, 1e-4);
+        close(&format!("{what}: {part}"), a, b, 1e-4);
+    }
+}
+
+#[test]
+fn group_norm_matches_burns() {
+    let gn = shifted_group_norm(4, 12, 0.1, -0.4);
+    let x = random([3, 12, 5, 7], 70) * 3.0 + 1.0;
+    norms_agree(
+        "group norm",
+        &gn,
+        &x,
+        |x| group_norm(&gn, x),
+        |x| gn.forward(x),
+    );
+}
+
+/// The kernels' windows taken in place equal burn's GroupNorm run on the
+/// windows cut out as batch items ([`crate::norm::windowed`]), forward and
+/// every gradient, with and without the SiLU after it; an input that is not
+/// a whole number of windows is normalised whole by both.
+#[test]
+fn windowed_group_norm_matches_burns_on_cut_windows() {
+    let gn = shifted_group_norm(4, 8, 0.15, -0.5);
+    for (dims, window, then_silu) in [
+        ([2, 8, 8, 12], 4, false),
+        ([1, 8, 16, 8], 8, true),
+        ([2, 8, 9, 12], 4, true),
+    ] {
+        let x = random(dims, 72) * 2.0 - 0.5;
+        let reference = |x: Tensor<B, 4>| {
+            let y = crate::norm::windowed(x, window, |t| gn.forward(t));
+            if then_silu {
+                burn::tensor::activation::silu(y)
+            } else {
+                y
+            }
+        };
+        norms_agree(
+            &format!("{dims:?} window {window}, SiLU {then_silu}"),
+            &gn,
+            &x,
+            |x| group_norm_windowed(&gn, x, window, then_silu),
+            reference,
+        );
     }
 }
