@@ -89,7 +89,7 @@ pub enum MixError {
     /// A noise bank was asked for without a calibration, or the
     /// calibration has none.
     #[error("{}", match path {
-        None => "--noise-bank draws from a calibration's bias frames: give --calib FILE".to_string(),
+        None => pgrf_noise::bank::NEEDS_CALIBRATION.to_string(),
         Some(p) => format!("--noise-bank: {} holds no noise bank (calibrated from fewer than two bias frames, or by a pgrf before banks): calibrate again", p.display()),
     })]
     NoBank {

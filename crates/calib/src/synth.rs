@@ -203,7 +203,7 @@ pub fn check(c: &SynthConfig) -> Result<(), SynthError> {
     if c.noise_bank && c.model != ModelKind::Pgrf {
         return Err(bad(
             "--noise-bank",
-            "--noise-bank replaces the pgrf model's read, row and quantisation noise: use --model pgrf".into(),
+            pgrf_noise::bank::needs_pgrf_model("--model"),
         ));
     }
     if c.masked_columns > 0 && c.calib.is_some() {

@@ -667,15 +667,12 @@ impl TrainConfig {
             ));
         }
         if self.noise_bank && self.calib.is_none() {
-            return Err(bad(
-                "--noise-bank",
-                "--noise-bank draws from a calibration's bias frames: give --calib FILE",
-            ));
+            return Err(bad("--noise-bank", pgrf_noise::bank::NEEDS_CALIBRATION));
         }
         if self.noise_bank && self.noise != ModelKind::Pgrf {
             return Err(bad(
                 "--noise-bank",
-                "--noise-bank replaces the pgrf model's read, row and quantisation noise: use --noise pgrf",
+                pgrf_noise::bank::needs_pgrf_model("--noise"),
             ));
         }
         self.iso_range()?;

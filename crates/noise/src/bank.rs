@@ -17,6 +17,19 @@ use ndarray::Array3;
 use pgrf_core::seed::{stream, Domain};
 use rand::Rng;
 
+/// Why `--noise-bank` is refused without a calibration: the one wording
+/// `pgrf train` and `pgrf synth` give.
+pub const NEEDS_CALIBRATION: &str =
+    "--noise-bank draws from a calibration's bias frames: give --calib FILE";
+
+/// Why `--noise-bank` is refused with another noise model than pgrf's;
+/// `flag` is the command's flag that chooses the model.
+pub fn needs_pgrf_model(flag: &str) -> String {
+    format!(
+        "--noise-bank replaces the pgrf model's read, row and quantisation noise: use {flag} pgrf"
+    )
+}
+
 /// Most frames a calibration's bank holds: more adds little to a draw's
 /// variety (each capture shifts its frame anew) and only grows the file.
 pub const MAX_BANK_FRAMES: usize = 8;
