@@ -298,6 +298,20 @@ fn window_backward(
 mod tests {
     use super::*;
 
+    /// `[n, c, height, width]`, `groups`, `window`, `silu`.
+    fn shape(dims: [usize; 4], groups: usize, window: (usize, usize), silu: bool) -> GroupShape {
+        let [n, c, height, width] = dims;
+        GroupShape {
+            n,
+            c,
+            height,
+            width,
+            groups,
+            window,
+            silu,
+        }
+    }
+
     fn values(len: usize, seed: u32) -> Vec<f32> {
         (0..len)
             .map(|i| {
@@ -317,15 +331,7 @@ mod tests {
 
     #[test]
     fn forward_normalises_each_group() {
-        let s = GroupShape {
-            n: 2,
-            c: 6,
-            height: 2,
-            width: 5,
-            groups: 3,
-            window: (2, 5),
-            silu: false,
-        };
+        let s = shape([2, 6, 2, 5], 3, (2, 5), false);
         let x = values(120, 1);
         let (gamma, beta) = (vec![1.0; 6], vec![0.0; 6]);
         let mut y = vec![0.0; 120];
@@ -381,43 +387,19 @@ mod tests {
     }
     #[test]
     fn backward_matches_finite_differences() {
-        check_backward(GroupShape {
-            n: 2,
-            c: 4,
-            height: 2,
-            width: 3,
-            groups: 2,
-            window: (2, 3),
-            silu: false,
-        });
+        check_backward(shape([2, 4, 2, 3], 2, (2, 3), false));
     }
 
     #[test]
     fn windowed_backward_matches_finite_differences() {
-        check_backward(GroupShape {
-            n: 2,
-            c: 4,
-            height: 4,
-            width: 6,
-            groups: 2,
-            window: (2, 3),
-            silu: false,
-        });
+        check_backward(shape([2, 4, 4, 6], 2, (2, 3), false));
     }
 
     /// Statistics per window: equal to each window cut out and normalised
     /// as an image of its own.
     #[test]
     fn windows_are_normalised_on_their_own() {
-        let s = GroupShape {
-            n: 2,
-            c: 6,
-            height: 8,
-            width: 12,
-            groups: 3,
-            window: (4, 3),
-            silu: false,
-        };
+        let s = shape([2, 6, 8, 12], 3, (4, 3), false);
         let x = values(s.n * s.c * s.pixels(), 5);
         let gamma: Vec<f32> = (0..6).map(|i| 0.7 + 0.2 * i as f32).collect();
         let beta: Vec<f32> = (0..6).map(|i| 0.3 - 0.1 * i as f32).collect();
@@ -457,15 +439,7 @@ mod tests {
     /// The fused SiLU is SiLU of the plain output.
     #[test]
     fn silu_in_the_same_pass_is_silu_of_the_output() {
-        let s = GroupShape {
-            n: 1,
-            c: 4,
-            height: 4,
-            width: 8,
-            groups: 2,
-            window: (4, 4),
-            silu: false,
-        };
+        let s = shape([1, 4, 4, 8], 2, (4, 4), false);
         let x = values(128, 9);
         let gamma: Vec<f32> = (0..4).map(|i| 0.8 + 0.4 * i as f32).collect();
         let beta: Vec<f32> = (0..4).map(|i| 0.2 * i as f32 - 0.3).collect();
