@@ -487,7 +487,11 @@ pub fn calibrate(input: &CalibrateInput, progress: &dyn Progress) -> Result<Cali
     let (defect_map, defect_columns) =
         defects(&bias, Some(&gain), dark.as_ref(), key.cfa.offsets());
     let mut maps = maps_of(&bias, &gain, dark.as_ref(), defect_map);
-    maps.noise_bank = crate::bank::bank_of(&bias_stack.groups[0].files, &bias.mean)?;
+    maps.noise_bank = crate::bank::bank_of(
+        &bias_stack.bank_crops,
+        bias_stack.groups[0].files.len(),
+        &bias.mean,
+    );
     let mut meta = meta_of(&Measured {
         key: &key,
         bias: &bias,
@@ -618,7 +622,7 @@ fn read_bias(
 ) -> Result<(Stack, FrameKey)> {
     let bias_stack = read_checked(
         &input.bias,
-        &ReadOptions::bias(input.tap_pixels, true, progress),
+        &ReadOptions::bias(input.tap_pixels, true, progress).with_bank(),
         input.reject,
         notes,
         rejected,

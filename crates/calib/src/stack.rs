@@ -233,6 +233,9 @@ pub struct Stack {
     pub(crate) tap: Vec<Vec<f32>>,
     /// The capture temperature of every frame that records one, degrees C.
     pub temperatures: Vec<(PathBuf, f32)>,
+    /// The first frames' centre crops for the noise bank
+    /// (`bank::bank_crop`), read with [`ReadOptions::with_bank`].
+    pub(crate) bank_crops: Vec<ndarray::Array3<u16>>,
 }
 
 /// Options for reading one stack.
@@ -256,6 +259,8 @@ pub struct ReadOptions<'a> {
     pub pairs: bool,
     /// Called once per frame accumulated.
     pub progress: &'a dyn pgrf_core::Progress,
+    /// Keep the first frames' centre crops for the noise bank.
+    pub bank: bool,
 }
 
 impl<'a> ReadOptions<'a> {
@@ -271,7 +276,14 @@ impl<'a> ReadOptions<'a> {
             tap_pixels,
             pairs,
             progress,
+            bank: false,
         }
+    }
+
+    /// These options, also keeping the crops the noise bank is made of
+    /// (the calibration's `noise_bank`) as the frames are decoded.
+    pub fn with_bank(self) -> Self {
+        ReadOptions { bank: true, ..self }
     }
 
     /// A flat or dark stack read after the bias: several exposures, each
@@ -292,6 +304,7 @@ impl<'a> ReadOptions<'a> {
             tap_pixels: 0,
             pairs,
             progress,
+            bank: false,
         }
     }
 }
@@ -377,6 +390,7 @@ struct Accumulator<'o, 'a> {
     tap_index: Vec<usize>,
     tap: Vec<Vec<f32>>,
     temperatures: Vec<(PathBuf, f32)>,
+    bank_crops: Vec<ndarray::Array3<u16>>,
 }
 
 impl<'o, 'a> Accumulator<'o, 'a> {
@@ -388,6 +402,7 @@ impl<'o, 'a> Accumulator<'o, 'a> {
             tap_index: Vec::new(),
             tap: Vec::new(),
             temperatures: Vec::new(),
+            bank_crops: Vec::new(),
         }
     }
 
@@ -425,6 +440,9 @@ impl<'o, 'a> Accumulator<'o, 'a> {
         let slot = self.slot(file, t, || {
             PixelStats::new(ph, pw, frame.cfa.offsets().map(|(r, _)| r))
         })?;
+        if opt.bank && slot == 0 && self.bank_crops.len() < pgrf_noise::bank::MAX_BANK_FRAMES {
+            self.bank_crops.push(crate::bank::bank_crop(packed.view()));
+        }
         let data = packed.as_slice().expect("standard layout");
         self.tap_pixels(slot, data);
         let g = &mut self.groups[slot];
@@ -514,6 +532,7 @@ impl<'o, 'a> Accumulator<'o, 'a> {
             groups: self.groups,
             tap: self.tap,
             temperatures: self.temperatures,
+            bank_crops: self.bank_crops,
         })
     }
 }
