@@ -3,6 +3,7 @@
 //! so that `pgrf synth --calib FILE --noise-bank` draws a capture's read,
 //! row and quantisation noise from the sensor's own frames.
 
+use crate::stack::Stack;
 use ndarray::{s, Array3, ArrayView3};
 use pgrf_noise::bank::{MAX_BANK_BYTES, MAX_BANK_FRAMES};
 
@@ -27,14 +28,16 @@ pub(crate) fn bank_crop(packed: ArrayView3<u16>) -> Array3<u16> {
     packed.slice(s![.., y0..y0 + h, x0..x0 + w]).to_owned()
 }
 
-/// The noise bank of a bias stack of `n` frames whose per-pixel mean (DN,
-/// packed) is `mean`, from its first frames' [`bank_crop`]s `crops` (in
-/// the order read): as many as [`MAX_BANK_FRAMES`] and [`MAX_BANK_BYTES`]
+/// The noise bank of the bias stack `bias` (read with its crops,
+/// `ReadOptions::with_bank`; n frames of one exposure) whose per-pixel mean
+/// (DN, packed) is `mean`, from its first frames' [`bank_crop`]s (in the
+/// order read): as many as [`MAX_BANK_FRAMES`] and [`MAX_BANK_BYTES`]
 /// allow, each taken minus the mean, times sqrt(n / (n - 1)) (a frame is in
 /// the mean of n it is taken from, which would leave its residual that much
 /// too quiet). None with fewer than two frames (one frame's residual is
 /// zero).
-pub(crate) fn bank_of(crops: &[Array3<u16>], n: usize, mean: &Array3<f64>) -> Vec<Array3<f32>> {
+pub(crate) fn bank_of(bias: &Stack, mean: &Array3<f64>) -> Vec<Array3<f32>> {
+    let (crops, n) = (&bias.bank_crops, bias.groups[0].files.len());
     if n < 2 {
         return Vec::new();
     }

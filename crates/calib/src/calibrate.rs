@@ -487,11 +487,7 @@ pub fn calibrate(input: &CalibrateInput, progress: &dyn Progress) -> Result<Cali
     let (defect_map, defect_columns) =
         defects(&bias, Some(&gain), dark.as_ref(), key.cfa.offsets());
     let mut maps = maps_of(&bias, &gain, dark.as_ref(), defect_map);
-    maps.noise_bank = crate::bank::bank_of(
-        &bias_stack.bank_crops,
-        bias_stack.groups[0].files.len(),
-        &bias.mean,
-    );
+    maps.noise_bank = crate::bank::bank_of(&bias_stack, &bias.mean);
     let mut meta = meta_of(&Measured {
         key: &key,
         bias: &bias,

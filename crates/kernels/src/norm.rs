@@ -54,6 +54,11 @@ impl GroupShape {
         self.c / self.groups * self.pixels()
     }
 
+    /// Values in one window of one (image, group) block.
+    fn window_values(&self) -> usize {
+        self.c / self.groups * self.window.0 * self.window.1
+    }
+
     /// Windows per column and per row.
     fn grid(&self) -> (usize, usize) {
         (self.height / self.window.0, self.width / self.window.1)
@@ -73,7 +78,7 @@ impl GroupShape {
     }
 
     /// The row segments of window `(wy, wx)` in one channel of `pixels`
-    /// values: `(start, len)` pairs.
+    /// values, as index ranges.
     fn segments(&self, wy: usize, wx: usize) -> impl Iterator<Item = std::ops::Range<usize>> {
         let (sy, sx) = self.window;
         let width = self.width;
@@ -150,7 +155,7 @@ fn window_sum(
 /// Mean and 1 / sqrt(variance + eps) of window `(wy, wx)` of one block
 /// (two passes: the mean, then squared deviations from it).
 fn window_stats(block: &[f32], s: &GroupShape, wy: usize, wx: usize, eps: f64) -> (f32, f32) {
-    let len = (s.c / s.groups * s.window.0 * s.window.1).max(1) as f64;
+    let len = s.window_values().max(1) as f64;
     let mean = (window_sum(block, s, (wy, wx), |v| v) / len) as f32;
     let var = window_sum(block, s, (wy, wx), |v| (v - mean) * (v - mean)) / len;
     (mean, (1.0 / (var + eps).sqrt()) as f32)
@@ -280,7 +285,7 @@ fn window_backward(
             sum_dxh_xh += b2 * gm;
         }
     }
-    let len = (cg * s.window.0 * s.window.1).max(1) as f64;
+    let len = s.window_values().max(1) as f64;
     let (m1, m2) = ((sum_dxh / len) as f32, (sum_dxh_xh / len) as f32);
     for k in 0..cg {
         let gm = gamma[k];

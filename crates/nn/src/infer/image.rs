@@ -185,7 +185,7 @@ fn edge_margin(h: usize, w: usize) -> usize {
 /// the padding off again.
 pub fn reflect_pad(a: ArrayView3<f32>, m: usize, ph: usize, pw: usize) -> Array3<f32> {
     let (c, h, w) = a.dim();
-    // Index i, `before` pixels before a run of n, mirrored into 0..n.
+    // Index i of a run of n (negative: before it), mirrored into 0..n.
     let fold = |i: isize, n: usize| -> usize {
         if n == 1 {
             return 0;
