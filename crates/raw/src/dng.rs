@@ -334,18 +334,19 @@ fn put_ljpeg<W: Write + Seek>(dng: &mut DngWriter<W>, frame: &RawFrame) -> Resul
 }
 
 /// The pixels as 16-bit little-endian strips: one strip up to 100 rows,
-/// strips of 256 rows above.
+/// strips of 256 rows above. RowsPerStrip is one number (TIFF 6.0: the last
+/// strip holds what is left); a count per strip is read as one strip by
+/// tifffile and others.
 fn put_uncompressed<W: Write + Seek>(dng: &mut DngWriter<W>, frame: &RawFrame) -> Result<()> {
     let rows = if frame.height > 100 {
         256
     } else {
         frame.height.max(1)
     };
-    let (mut offsets, mut sizes, mut counts) = (Vec::new(), Vec::new(), Vec::new());
+    let (mut offsets, mut sizes) = (Vec::new(), Vec::new());
     for strip in frame.mosaic.chunks(rows * frame.width.max(1)) {
         offsets.push(dng.dng.write_data_u16_le(strip).map_err(dng_fault)?);
         sizes.push(std::mem::size_of_val(strip) as u32);
-        counts.push((strip.len() / frame.width.max(1)) as u32);
     }
     let ifd = dng.root_ifd_mut();
     ifd.add_tag(TiffCommonTag::Compression, CompressionMethod::None);
@@ -353,7 +354,7 @@ fn put_uncompressed<W: Write + Seek>(dng: &mut DngWriter<W>, frame: &RawFrame) -
     ifd.add_tag(TiffCommonTag::BitsPerSample, &vec![16_u16]);
     ifd.add_tag(TiffCommonTag::StripOffsets, &offsets);
     ifd.add_tag(TiffCommonTag::StripByteCounts, &sizes);
-    ifd.add_tag(TiffCommonTag::RowsPerStrip, &counts);
+    ifd.add_tag(TiffCommonTag::RowsPerStrip, rows as u32);
     Ok(())
 }
 
@@ -491,6 +492,31 @@ mod tests {
             .unwrap();
         assert!(back.mosaic == mosaic);
         assert_eq!(back.bits, 16);
+    }
+
+    /// Uncompressed strips carry one RowsPerStrip value (TIFF 6.0's count 1;
+    /// the last strip is shorter), and the frame reads back exactly.
+    #[test]
+    fn uncompressed_strips_have_one_rows_per_strip() {
+        use rawler::formats::tiff::reader::{GenericTiffReader, TiffReader};
+        let (w, h) = (40, 600);
+        let mosaic: Vec<u16> = (0..w * h).map(|i| (i * 7 % 4000) as u16).collect();
+        let f = RawFrame::from_mosaic(w, h, mosaic.clone(), crate::Cfa::Rggb, [512.0; 4], 16383)
+            .unwrap();
+        let options = DngOptions {
+            compression: Compression::Uncompressed,
+            ..Default::default()
+        };
+        let bytes = encode_dng(&f, &options).unwrap();
+        let tiff = GenericTiffReader::new_with_buffer(&bytes, 0, 0, None).unwrap();
+        let ifd = tiff.root_ifd();
+        let rows = ifd.get_entry(TiffCommonTag::RowsPerStrip).unwrap();
+        assert_eq!(rows.count(), 1);
+        assert_eq!(rows.force_u32(0), 256);
+        assert_eq!(ifd.get_entry(TiffCommonTag::StripOffsets).unwrap().count(), 3);
+        let back = crate::decode_bytes(std::path::Path::new("t.dng"), &bytes, &Default::default())
+            .unwrap();
+        assert!(back.mosaic == mosaic);
     }
 
     #[test]
