@@ -6,11 +6,7 @@
 //! image): the weight gradient is `dY · colᵀ`, the input gradient's columns
 //! are `Wᵀ · dY`, scattered back by [`col2im`]. Rows of that layout are
 //! contiguous copies of input rows (for stride 1), so building it costs one
-//! pass, in parallel over rows, with no NHWC transposition. A transposed
-//! convolution whose kernel equals its stride (the U-Net's 2x2 upsampling)
-//! touches every output pixel once: it is one product followed by
-//! [`depth_to_space`], and its gradients one [`space_to_depth`] followed by
-//! products.
+//! pass, in parallel over rows, with no NHWC transposition.
 
 use rayon::prelude::*;
 use std::ops::Range;
@@ -238,19 +234,6 @@ pub fn to_channel_major(src: &[f32], n: usize, c: usize, per: usize, dst: &mut [
         });
 }
 
-/// The inverse of [`to_channel_major`]: `[c, n * per]` to `(n, c, per)`.
-/// Parallel over (image, channel) planes.
-pub fn to_batch_major(src: &[f32], n: usize, c: usize, per: usize, dst: &mut [f32]) {
-    assert_eq!(src.len(), n * c * per, "source size");
-    assert_eq!(dst.len(), n * c * per, "destination size");
-    dst.par_chunks_mut(per.max(1))
-        .enumerate()
-        .for_each(|(p, out)| {
-            let (j, ch) = (p / c, p % c);
-            out.copy_from_slice(&src[ch * n * per + j * per..][..per]);
-        });
-}
-
 /// Per-channel sums of `(n, c, per)` (a bias gradient), accumulated in f64.
 pub fn channel_sums(src: &[f32], n: usize, c: usize, per: usize) -> Vec<f32> {
     assert_eq!(src.len(), n * c * per, "source size");
@@ -267,76 +250,6 @@ pub fn channel_sums(src: &[f32], n: usize, c: usize, per: usize) -> Vec<f32> {
                 .sum::<f64>() as f32
         })
         .collect()
-}
-
-/// Output of a transposed convolution whose kernel equals its stride `k`
-/// (no overlap, no padding): from the product `z = Wᵀ · x`, `[co * k * k,
-/// n * h * w]` (row `(c, dy, dx)`), to `out`, `(n, co, h * k, w * k)`, with
-/// `bias[c]` added when given. Parallel over output planes.
-#[allow(clippy::too_many_arguments)]
-pub fn depth_to_space(
-    z: &[f32],
-    n: usize,
-    co: usize,
-    h: usize,
-    w: usize,
-    k: usize,
-    bias: Option<&[f32]>,
-    out: &mut [f32],
-) {
-    let (hw, len, ow) = (h * w, n * h * w, w * k);
-    assert_eq!(z.len(), co * k * k * len, "product size");
-    assert_eq!(out.len(), n * co * hw * k * k, "output size");
-    if let Some(b) = bias {
-        assert_eq!(b.len(), co, "bias size");
-    }
-    out.par_chunks_mut((hw * k * k).max(1))
-        .enumerate()
-        .for_each(|(p, plane)| {
-            let (j, c) = (p / co, p % co);
-            let b = bias.map_or(0.0, |b| b[c]);
-            for dy in 0..k {
-                for dx in 0..k {
-                    let row = &z[((c * k + dy) * k + dx) * len + j * hw..][..hw];
-                    for y in 0..h {
-                        let line = &mut plane[(y * k + dy) * ow..][..ow];
-                        for (x, v) in row[y * w..][..w].iter().enumerate() {
-                            line[x * k + dx] = v + b;
-                        }
-                    }
-                }
-            }
-        });
-}
-
-/// The adjoint of [`depth_to_space`] without the bias: `dy`, `(n, co, h *
-/// k, w * k)`, to `s`, `[co * k * k, n * h * w]`. Parallel over rows.
-pub fn space_to_depth(
-    dy: &[f32],
-    n: usize,
-    co: usize,
-    h: usize,
-    w: usize,
-    k: usize,
-    s: &mut [f32],
-) {
-    let (hw, len, ow) = (h * w, n * h * w, w * k);
-    assert_eq!(dy.len(), n * co * hw * k * k, "gradient size");
-    assert_eq!(s.len(), co * k * k * len, "shuffled size");
-    s.par_chunks_mut(len.max(1))
-        .enumerate()
-        .for_each(|(r, row)| {
-            let (c, ddy, ddx) = (r / (k * k), (r / k) % k, r % k);
-            for j in 0..n {
-                let plane = &dy[(j * co + c) * hw * k * k..][..hw * k * k];
-                for y in 0..h {
-                    let line = &plane[(y * k + ddy) * ow..][..ow];
-                    for (x, o) in row[j * hw + y * w..][..w].iter_mut().enumerate() {
-                        *o = line[x * k + ddx];
-                    }
-                }
-            }
-        });
 }
 
 #[cfg(test)]
@@ -499,40 +412,21 @@ pub(crate) mod tests {
     }
 
     #[test]
-    fn layouts_round_trip_and_sum() {
+    fn channel_major_layout_and_sums() {
         let (n, c, per) = (3, 5, 7);
         let src = values(n * c * per, 4);
         let mut cm = vec![0.0; src.len()];
         to_channel_major(&src, n, c, per, &mut cm);
-        assert_eq!(cm[2 * n * per + per + 3], src[(c + 2) * per + 3]);
-        let mut back = vec![0.0; src.len()];
-        to_batch_major(&cm, n, c, per, &mut back);
-        assert_eq!(back, src);
+        for (j, ch, i) in
+            (0..n).flat_map(|j| (0..c).flat_map(move |ch| (0..per).map(move |i| (j, ch, i))))
+        {
+            assert_eq!(cm[ch * n * per + j * per + i], src[(j * c + ch) * per + i]);
+        }
         let sums = channel_sums(&src, n, c, per);
         for (ch, s) in sums.iter().enumerate() {
             let want: f32 = cm[ch * n * per..][..n * per].iter().sum();
             assert!((s - want).abs() < 1e-5, "{s} vs {want}");
         }
-    }
-
-    #[test]
-    fn space_to_depth_is_the_adjoint_of_depth_to_space() {
-        let (n, co, h, w, k) = (2, 3, 3, 4, 2);
-        let z = values(co * k * k * n * h * w, 5);
-        let mut out = vec![f32::NAN; n * co * h * w * k * k];
-        depth_to_space(&z, n, co, h, w, k, None, &mut out);
-        assert!(
-            out.iter().all(|v| v.is_finite()),
-            "every output pixel written once"
-        );
-        let mut s = vec![f32::NAN; z.len()];
-        space_to_depth(&out, n, co, h, w, k, &mut s);
-        assert_eq!(s, z, "a permutation: its adjoint is its inverse");
-        let bias = [1.0, -2.0, 0.5];
-        let mut with_bias = vec![0.0; out.len()];
-        depth_to_space(&z, n, co, h, w, k, Some(&bias), &mut with_bias);
-        let plane = h * w * k * k;
-        assert_eq!(with_bias[plane + 5], out[plane + 5] - 2.0);
     }
 
     #[test]

@@ -41,7 +41,7 @@ pub(crate) fn rows_per_tile(g: &ConvGeom, ow: usize) -> usize {
 /// A raw output pointer handed to the tasks, each of which writes only its
 /// own (image, rows) block.
 #[derive(Clone, Copy)]
-pub(crate) struct Out(*mut f32);
+pub(crate) struct Out(pub(crate) *mut f32);
 // SAFETY: the tasks write disjoint elements (distinct images or distinct
 // output rows of one image), and the buffer outlives the parallel loop.
 unsafe impl Send for Out {}

@@ -14,9 +14,8 @@
 //! in parallel.
 //!
 //! - [`conv`]: convolution geometry, im2col and its adjoint col2im, the
-//!   `[channels, n * pixels]` layouts the products run on, the
-//!   space-to-depth shuffles of a non-overlapping transposed convolution and
-//!   per-channel sums (bias gradients).
+//!   `[channels, n * pixels]` layout the products run on and per-channel
+//!   sums (bias gradients).
 //! - [`conv_forward`]: the forward convolution over cache-sized tiles of
 //!   output rows, one `gemm` product each, bias written first.
 //! - [`conv_backward`]: the weight gradient summed over the same tiles in a
@@ -25,6 +24,8 @@
 //!   branch-free exp the compiler vectorises.
 //! - [`norm`]: GroupNorm with its affine, forward and backward, per
 //!   (image, group) block.
+//! - [`upconv`]: the non-overlapping transposed convolution (the U-Net's
+//!   2x2 upsampling), forward and gradients, on tiles of input rows.
 //! - [`adam`]: one pass per parameter tensor for Adam's update.
 
 pub mod act;
@@ -33,6 +34,7 @@ pub mod conv;
 pub mod conv_backward;
 pub mod conv_forward;
 pub mod norm;
+pub mod upconv;
 
 /// Elements per rayon task in the element-wise kernels: large enough that
 /// task overhead is negligible, small enough that two threads share a

@@ -513,7 +513,10 @@ mod tests {
         let rows = ifd.get_entry(TiffCommonTag::RowsPerStrip).unwrap();
         assert_eq!(rows.count(), 1);
         assert_eq!(rows.force_u32(0), 256);
-        assert_eq!(ifd.get_entry(TiffCommonTag::StripOffsets).unwrap().count(), 3);
+        assert_eq!(
+            ifd.get_entry(TiffCommonTag::StripOffsets).unwrap().count(),
+            3
+        );
         let back = crate::decode_bytes(std::path::Path::new("t.dng"), &bytes, &Default::default())
             .unwrap();
         assert!(back.mosaic == mosaic);

@@ -20,6 +20,7 @@ use pgrf_kernels::adam::{self, AdamStep};
 use pgrf_kernels::conv::{self, ConvGeom};
 use pgrf_kernels::conv_backward;
 use pgrf_kernels::norm::{self, GroupShape};
+use pgrf_kernels::upconv;
 
 /// Bytes one chunk's im2col buffer may take; larger batches are processed
 /// in chunks of images whose partial products are summed.
@@ -236,9 +237,9 @@ fn non_overlapping(weight: &FlexTensor, options: &ConvTransposeOptions<2>) -> Op
         .then_some(k)
 }
 
-/// Transposed convolution: for a non-overlapping kernel `z = Wᵀ · x` over
-/// `[ci, n * h * w]` and [`conv::depth_to_space`] with the bias; Flex's
-/// own operation otherwise.
+/// Transposed convolution: for a non-overlapping kernel pgrf's
+/// [`upconv::upconv_forward`] (one product per tile of input rows, shuffled
+/// into the output while in cache); Flex's own operation otherwise.
 pub(super) fn conv_transpose2d(
     x: FlexTensor,
     weight: FlexTensor,
@@ -253,32 +254,36 @@ pub(super) fn conv_transpose2d(
     let Some(k) = k.filter(|_| ok) else {
         return <Flex as ModuleOps<Flex>>::conv_transpose2d(x, weight, bias, options);
     };
-    let (xd, wd) = (dims(&x), dims(&weight));
-    let (n, ci, h, w, co) = (xd[0], xd[1], xd[2], xd[3], wd[1]);
-    let len = n * h * w;
-    let x = contiguous(x);
-    let mut xc = pgrf_kernels::zeroed(ci * len);
-    conv::to_channel_major(values(&x), n, ci, h * w, &mut xc);
-    let w_rows = contiguous(weight).reshape(Shape::from(vec![ci, co * k * k]));
-    let z = contiguous(matmul(w_rows.transpose(0, 1), new(xc, &[ci, len])));
+    let g = up_geom(&dims(&x), &dims(&weight), k);
+    let (x, weight) = (contiguous(x), contiguous(weight));
     let bias = bias.map(contiguous);
-    let mut out = pgrf_kernels::zeroed(n * co * h * w * k * k);
-    conv::depth_to_space(
-        values(&z),
-        n,
-        co,
-        h,
-        w,
-        k,
+    let mut out = pgrf_kernels::zeroed(g.n * g.co * g.h * g.w * k * k);
+    upconv::upconv_forward(
+        values(&x),
+        &g,
+        values(&weight),
         bias.as_ref().map(values),
         &mut out,
     );
-    new(out, &[n, co, h * k, w * k])
+    new(out, &[g.n, g.co, g.h * k, g.w * k])
 }
 
-/// Gradients of [`conv_transpose2d`]: with `S` = [`conv::space_to_depth`]
-/// of `dy`, the input's is `W · S`, the weight's `x · Sᵀ`, the bias's the
-/// per-channel sums of `dy`.
+/// The geometry of a non-overlapping transposed convolution of an input of
+/// dims `xd` by a kernel of dims `wd` (`(ci, co, k, k)`).
+fn up_geom(xd: &[usize], wd: &[usize], k: usize) -> upconv::UpGeom {
+    upconv::UpGeom {
+        n: xd[0],
+        ci: xd[1],
+        co: wd[1],
+        h: xd[2],
+        w: xd[3],
+        k,
+    }
+}
+
+/// Gradients of [`conv_transpose2d`] by [`upconv::upconv_backward`] (input
+/// and weight in one pass over the tiles); the bias's is the per-channel
+/// sums of `dy`.
 pub(super) fn conv_transpose2d_backward(
     x: FlexTensor,
     weight: FlexTensor,
@@ -294,34 +299,35 @@ pub(super) fn conv_transpose2d_backward(
     let Some(k) = k else {
         return burn_conv_transpose2d_backward::<Flex>(x, weight, bias, dy, options, needed);
     };
-    let (n, ci, h, w, co) = (xd[0], xd[1], xd[2], xd[3], wd[1]);
-    let (len, rows) = (n * h * w, co * k * k);
-    let dy = contiguous(dy);
+    let g = up_geom(&xd, &wd, k);
+    let (x, weight, dy) = (contiguous(x), contiguous(weight), contiguous(dy));
     let dyv = values(&dy);
-    let bias_grad = (needed.bias && bias.is_some())
-        .then(|| new(conv::channel_sums(dyv, n, co, h * w * k * k), &[co]));
-    let mut s = pgrf_kernels::zeroed(rows * len);
-    conv::space_to_depth(dyv, n, co, h, w, k, &mut s);
-    let s = new(s, &[rows, len]);
-    let weight_grad = needed.weight.then(|| {
-        let x = contiguous(x);
-        let mut xc = pgrf_kernels::zeroed(ci * len);
-        conv::to_channel_major(values(&x), n, ci, h * w, &mut xc);
-        let g = matmul(new(xc, &[ci, len]), s.clone().transpose(0, 1));
-        contiguous(g).reshape(Shape::from(wd.clone()))
+    let bias_grad = (needed.bias && bias.is_some()).then(|| {
+        new(
+            conv::channel_sums(dyv, g.n, g.co, g.h * g.w * k * k),
+            &[g.co],
+        )
     });
-    let x_grad = needed.x.then(|| {
-        let w_rows = contiguous(weight).reshape(Shape::from(vec![ci, rows]));
-        let dxc = contiguous(matmul(w_rows, s));
-        let mut dx = pgrf_kernels::zeroed(n * ci * h * w);
-        conv::to_batch_major(values(&dxc), n, ci, h * w, &mut dx);
-        new(dx, &xd)
-    });
+    let mut dx = needed.x.then(|| pgrf_kernels::zeroed(elements(&xd)));
+    let mut dw = needed.weight.then(|| pgrf_kernels::zeroed(elements(&wd)));
+    upconv::upconv_backward(
+        values(&x),
+        &g,
+        values(&weight),
+        dyv,
+        dx.as_deref_mut(),
+        dw.as_deref_mut(),
+    );
     ConvGrads {
-        x: x_grad,
-        weight: weight_grad,
+        x: dx.map(|d| new(d, &xd)),
+        weight: dw.map(|d| new(d, &wd)),
         bias: bias_grad,
     }
+}
+
+/// Elements of a tensor of dims `d`.
+fn elements(d: &[usize]) -> usize {
+    d.iter().product()
 }
 
 /// `f` of `x`'s values into a new tensor of its shape, or `in_place` on

@@ -165,10 +165,12 @@ fn large_batches_add_up() {
 fn transposed_convolutions_match_burns() {
     let device = Default::default();
     // (cin, cout, kernel, stride, h, w, batch): the U-Net's 2x2 stride 2
-    // (pgrf's product and shuffle), then an overlapping kernel (burn's).
+    // (pgrf's tiles of products and shuffles; the third wide enough for two
+    // tiles per image), then an overlapping kernel (burn's).
     let cases = [
         (6, 3, 2, 2, 5, 4, 2),
         (4, 4, 2, 2, 1, 3, 1),
+        (16, 32, 2, 2, 6, 150, 2),
         (3, 2, 3, 1, 4, 5, 2),
     ];
     for (i, &(cin, cout, k, s, h, w, n)) in cases.iter().enumerate() {
