@@ -26,7 +26,7 @@
 #![allow(unsafe_code)]
 
 use crate::conv::{tile_matrix, ConvGeom};
-use crate::conv_forward::{conv2d_forward, rows_per_tile};
+use crate::conv_forward::{conv2d_forward, inner_parallelism, rows_per_tile};
 use rayon::prelude::*;
 
 /// Groups the weight gradient's tiles are split into: enough that 16
@@ -51,65 +51,98 @@ pub fn conv2d_weight_grad(x: &[f32], g: &ConvGeom, dy: &[f32], co: usize, dw: &m
     let tiles_per_image = oh.div_ceil(rows);
     let tasks = g.n * tiles_per_image;
     let groups = tasks.min(GROUPS);
-    let threads = rayon::current_num_threads();
-    let inner = if groups >= threads {
-        gemm::Parallelism::None
-    } else {
-        gemm::Parallelism::Rayon(threads)
-    };
+    let inner = inner_parallelism(groups);
     let partials: Vec<Vec<f32>> = (0..groups)
         .into_par_iter()
         .map(|grp| {
-            let mut part = vec![0.0f32; co * k];
-            let mut col = Vec::new();
-            for t in grp * tasks / groups..(grp + 1) * tasks / groups {
-                let (img, r0) = (t / tiles_per_image, (t % tiles_per_image) * rows);
-                let r1 = (r0 + rows).min(oh);
-                let len = (r1 - r0) * ow;
-                let (m, m_rs) = tile_matrix(x, g, img, r0..r1, &mut col);
-                let base = img * co * per + r0 * ow;
-                // `dY_tile` element (o, l) is `dy[base + o * per + l]`, the
-                // last at `base + (co - 1) * per + len - 1 < (img + 1) * co *
-                // per <= dy.len()`; the tile matrix's transpose has element
-                // (l, r) at `m[r * m_rs + l]`, inside `m` (k rows of len,
-                // stride m_rs); `part` is co x k.
-                assert!(base + (co - 1) * per + len <= dy.len());
-                assert!(m.len() >= (k - 1) * m_rs + len, "tile matrix extent");
-                // SAFETY: the three matrices lie inside `dy`, `m` and `part`
-                // as checked above; `part` is this task's own buffer and
-                // gemm only reads `dy` and `m`.
-                unsafe {
-                    gemm::gemm(
-                        co,
-                        k,
-                        len,
-                        part.as_mut_ptr(),
-                        1,
-                        k as isize,
-                        true,
-                        dy.as_ptr().add(base),
-                        1,
-                        per as isize,
-                        m.as_ptr(),
-                        m_rs as isize,
-                        1,
-                        1.0,
-                        1.0,
-                        false,
-                        false,
-                        false,
-                        inner,
-                    );
-                }
-            }
-            part
+            let tiles = grp * tasks / groups..(grp + 1) * tasks / groups;
+            let rows = TileRows {
+                rows,
+                per_image: tiles_per_image,
+                oh,
+                ow,
+            };
+            group_weight_grad(x, g, dy, co, tiles, rows, inner)
         })
         .collect();
+    add_partials(&partials, dw);
+}
+
+/// How [`conv2d_weight_grad`] cuts the output into tiles: `rows` output
+/// rows per tile, `per_image` tiles per image, output `oh` x `ow`.
+#[derive(Clone, Copy)]
+struct TileRows {
+    rows: usize,
+    per_image: usize,
+    oh: usize,
+    ow: usize,
+}
+
+/// One group's partial weight gradient: `Σ dY_tile · col_tileᵀ` over the
+/// tiles `tiles` (numbered image by image), `co x ci·kh·kw`.
+fn group_weight_grad(
+    x: &[f32],
+    g: &ConvGeom,
+    dy: &[f32],
+    co: usize,
+    tiles: std::ops::Range<usize>,
+    t: TileRows,
+    inner: gemm::Parallelism,
+) -> Vec<f32> {
+    let (k, per, ow, rows) = (g.rows(), t.oh * t.ow, t.ow, t.rows);
+    let mut part = vec![0.0f32; co * k];
+    let mut col = Vec::new();
+    for i in tiles {
+        let (img, r0) = (i / t.per_image, (i % t.per_image) * rows);
+        let r1 = (r0 + rows).min(t.oh);
+        let len = (r1 - r0) * ow;
+        let (m, m_rs) = tile_matrix(x, g, img, r0..r1, &mut col);
+        let base = img * co * per + r0 * ow;
+        // `dY_tile` element (o, l) is `dy[base + o * per + l]`, the
+        // last at `base + (co - 1) * per + len - 1 < (img + 1) * co *
+        // per <= dy.len()`; the tile matrix's transpose has element
+        // (l, r) at `m[r * m_rs + l]`, inside `m` (k rows of len,
+        // stride m_rs); `part` is co x k.
+        assert!(base + (co - 1) * per + len <= dy.len());
+        assert!(m.len() >= (k - 1) * m_rs + len, "tile matrix extent");
+        // SAFETY: the three matrices lie inside `dy`, `m` and `part`
+        // as checked above; `part` is this task's own buffer and
+        // gemm only reads `dy` and `m`.
+        unsafe {
+            gemm::gemm(
+                co,
+                k,
+                len,
+                part.as_mut_ptr(),
+                1,
+                k as isize,
+                true,
+                dy.as_ptr().add(base),
+                1,
+                per as isize,
+                m.as_ptr(),
+                m_rs as isize,
+                1,
+                1.0,
+                1.0,
+                false,
+                false,
+                false,
+                inner,
+            );
+        }
+    }
+    part
+}
+
+/// `dw += Σ partials`, the partials added in their order (so the sum has
+/// the same bits at any thread count), in parallel over chunks of `dw`.
+pub(crate) fn add_partials(partials: &[Vec<f32>], dw: &mut [f32]) {
     dw.par_chunks_mut(crate::CHUNK)
         .enumerate()
         .for_each(|(i, out)| {
             let at = i * crate::CHUNK;
-            for part in &partials {
+            for part in partials {
                 for (o, p) in out.iter_mut().zip(&part[at..]) {
                     *o += p;
                 }

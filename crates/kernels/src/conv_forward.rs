@@ -38,6 +38,18 @@ pub(crate) fn rows_per_tile(g: &ConvGeom, ow: usize) -> usize {
     by_cache.max(by_width).max(1)
 }
 
+/// gemm's parallelism inside one product of a loop of `tasks` products run
+/// in parallel: the pool when the tasks are fewer than the threads (small
+/// late layers), none otherwise.
+pub(crate) fn inner_parallelism(tasks: usize) -> gemm::Parallelism {
+    let threads = rayon::current_num_threads();
+    if tasks >= threads {
+        gemm::Parallelism::None
+    } else {
+        gemm::Parallelism::Rayon(threads)
+    }
+}
+
 /// A raw output pointer handed to the tasks, each of which writes only its
 /// own (image, rows) block.
 #[derive(Clone, Copy)]
@@ -162,12 +174,7 @@ pub fn conv2d_forward(
     let rows = rows_per_tile(g, ow).min(oh);
     let tiles_per_image = oh.div_ceil(rows);
     let tasks = g.n * tiles_per_image;
-    let threads = rayon::current_num_threads();
-    let inner = if tasks >= threads {
-        gemm::Parallelism::None
-    } else {
-        gemm::Parallelism::Rayon(threads)
-    };
+    let inner = inner_parallelism(tasks);
     let dst = Out(out.as_mut_ptr());
     (0..tasks)
         .into_par_iter()

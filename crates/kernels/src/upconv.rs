@@ -23,7 +23,8 @@
 // before the unsafe blocks.
 #![allow(unsafe_code)]
 
-use crate::conv_forward::Out;
+use crate::conv_backward::add_partials;
+use crate::conv_forward::{inner_parallelism, Out};
 use rayon::prelude::*;
 
 /// Bytes of a tile's shuffled block (`Z` or `S`): about half a core's L2.
@@ -87,17 +88,6 @@ impl UpGeom {
     }
 }
 
-/// gemm's parallelism inside one product: the pool when the tiles are
-/// fewer than the threads (small late layers), none otherwise.
-fn inner(tasks: usize) -> gemm::Parallelism {
-    let threads = rayon::current_num_threads();
-    if tasks >= threads {
-        gemm::Parallelism::None
-    } else {
-        gemm::Parallelism::Rayon(threads)
-    }
-}
-
 /// `out = conv_transpose(x, weight) + bias`: `x` is `(n, ci, h, w)`,
 /// `weight` `(ci, co, k, k)`, `bias` `co` values, `out` `(n, co, h·k, w·k)`,
 /// every element written. Parallel over tiles of input rows.
@@ -117,7 +107,7 @@ pub fn upconv_forward(
     }
     let (rows, hw) = (g.rows(), g.h * g.w);
     let tiles = g.tiles();
-    let par = inner(tiles.len());
+    let par = inner_parallelism(tiles.len());
     let dst = Out(out.as_mut_ptr());
     tiles
         .par_iter()
@@ -233,7 +223,7 @@ pub fn upconv_backward(
     let rows = g.rows();
     let tiles = g.tiles();
     let groups = tiles.len().min(GROUPS);
-    let par = inner(groups);
+    let par = inner_parallelism(groups);
     let dx = dx.map(|d| {
         assert_eq!(d.len(), x.len(), "input gradient size");
         Out(d.as_mut_ptr())
@@ -264,11 +254,7 @@ pub fn upconv_backward(
     if let Some(dw) = dw {
         assert_eq!(dw.len(), g.ci * rows, "weight gradient size");
         dw.fill(0.0);
-        for part in &partials {
-            for (o, p) in dw.iter_mut().zip(part) {
-                *o += p;
-            }
-        }
+        add_partials(&partials, dw);
     }
 }
 

@@ -376,15 +376,28 @@ pub(super) fn check_decoder_ifds(
                 .map_err(|e| e.within(format!("in Panasonic's CameraIFD at byte {}", cam.at)))?;
         }
     }
-    let Some(private) = first(TAG_DNG_PRIVATE_AREA, values)? else {
-        return Ok(());
-    };
-    let Some(off) = private.data(&file).and_then(|d| Order(true).u32(d, 0)) else {
+    match first(TAG_DNG_PRIVATE_AREA, values)? {
+        Some(private) => check_sony_sr2(&file, &private, values),
+        None => Ok(()),
+    }
+}
+
+/// Sony's SR2 block as rawler reads it (decoders/arw.rs, lines 596-614):
+/// the little-endian IFD that DNGPrivateArea (`private`) points at, and
+/// the encrypted IFD its SonyOffset, SonyLength and SonyKey locate,
+/// decrypted and read with its offsets moved by -SonyOffset.
+fn check_sony_sr2(
+    file: &Blob,
+    private: &RawlerEntry,
+    values: &mut Values,
+) -> Result<(), ContainerError> {
+    let bytes = file.bytes;
+    let Some(off) = private.data(file).and_then(|d| Order(true).u32(d, 0)) else {
         return Ok(());
     };
     let little = Blob {
         order: Order(true),
-        ..file
+        ..*file
     };
     let Some(sr2) = check_ifd(&little, off, &[], values)? else {
         return Ok(());
