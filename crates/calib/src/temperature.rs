@@ -5,7 +5,7 @@
 //! ln 2 / slope of ln rate against temperature (least squares), as
 //! astrophotography tools scale a dark library to a light's temperature.
 
-use crate::error::Result;
+use crate::error::{CalibError, Result};
 use crate::estimate::BiasEstimate;
 use crate::stack::{read_stack, ReadOptions, Stack};
 use pgrf_core::stats::median;
@@ -45,16 +45,26 @@ pub(crate) fn rates_by_temperature(
     bias: &BiasEstimate,
     law: DarkLaw,
 ) -> Result<Vec<(f32, f64)>> {
-    let all = read_stack(files, opt)?;
     let mut groups: Vec<(i32, Vec<PathBuf>, Vec<f64>)> = Vec::new();
-    for (f, t) in &all.temperatures {
+    for f in files {
+        // The temperatures from the files' metadata; each group's frames are
+        // then decoded once, by its own stack.
+        let Some(t) = pgrf_raw::read_temperature(f)? else {
+            return Err(CalibError::BadOption {
+                flag: "--temperature-darks",
+                message: format!(
+                    "{} records no sensor temperature (EXIF AmbientTemperature, FITS CCD-TEMP)",
+                    f.display()
+                ),
+            });
+        };
         let key = (t * 2.0).round() as i32;
         match groups.iter_mut().find(|g| g.0 == key) {
             Some(g) => {
                 g.1.push(f.clone());
-                g.2.push(*t as f64);
+                g.2.push(t as f64);
             }
-            None => groups.push((key, vec![f.clone()], vec![*t as f64])),
+            None => groups.push((key, vec![f.clone()], vec![t as f64])),
         }
     }
     let mut out = Vec::new();

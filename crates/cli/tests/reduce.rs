@@ -512,6 +512,34 @@ fn darks_are_scaled_to_the_lights_temperature() {
         .parse()
         .unwrap();
     assert!((doubling - 6.0).abs() < 0.9, "{line}");
+    // A temperature dark that records no temperature (its CCD-TEMP card
+    // made a comment) is refused by name, before any frame is decoded.
+    let bare = dir.join("bare");
+    std::fs::create_dir_all(&bare).unwrap();
+    let mut fits = std::fs::read(warm.join("2_dark_60s_0000.fits")).unwrap();
+    let at = (0..fits.len() / 80)
+        .map(|i| i * 80)
+        .find(|&o| fits[o..].starts_with(b"CCD-TEMP"))
+        .expect("a CCD-TEMP card");
+    fits[at..at + 80].copy_from_slice(format!("{:<80}", "COMMENT no temperature").as_bytes());
+    std::fs::write(bare.join("dark.fits"), &fits).unwrap();
+    let err = one_line_error(&pgrf(&[
+        "calibrate",
+        "--bias",
+        s(&vs.join("bias")),
+        "--dark",
+        s(&vs.join("dark")),
+        "--flat",
+        s(&vs.join("flat")),
+        "--temperature-darks",
+        s(&bare),
+        "-o",
+        s(&dir.join("bare.safetensors")),
+    ]));
+    assert!(
+        err.contains("dark.fits") && err.contains("records no sensor temperature"),
+        "{err}"
+    );
     let lights = dir.join("lights");
     std::fs::create_dir_all(&lights).unwrap();
     for (t, seed) in [("-6", "9"), ("5", "10")] {

@@ -38,6 +38,26 @@ pub fn decode_file(path: &Path, overrides: &LevelOverrides) -> Result<RawFrame> 
     decode_source(path, || RawSource::new(path), overrides)
 }
 
+/// The sensor temperature a RAW or FITS file records (EXIF
+/// AmbientTemperature of a TIFF-based RAW, CCD-TEMP of a FITS header), read
+/// from its metadata without decoding a pixel: what [`decode_file`] puts in
+/// [`RawFrame::temperature_c`]. The file is checked as `decode_file` checks
+/// it before anything is read from it.
+pub fn read_temperature(path: &Path) -> Result<Option<f32>> {
+    let bytes = std::fs::read(path).map_err(|e| RawError::io(path, e))?;
+    if bytes.is_empty() {
+        return Err(RawError::decode(path, "file is empty"));
+    }
+    if crate::fits::is_fits(&bytes) {
+        return crate::fits::fits_temperature(path, &bytes);
+    }
+    crate::container::check(&bytes).map_err(|source| RawError::Container {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    Ok(crate::container::exif_temperature(&bytes))
+}
+
 /// [`decode_file`] for a file already in memory (e.g. one built into the
 /// binary); `name` stands for it in messages.
 pub fn decode_bytes(name: &Path, bytes: &[u8], overrides: &LevelOverrides) -> Result<RawFrame> {

@@ -335,6 +335,30 @@ mod tests {
         f
     }
 
+    /// `read_temperature` takes a FITS file's and a DNG's sensor temperature
+    /// from the metadata alone: a FITS file cut short of its pixels, which
+    /// does not decode, still gives it; a DNG without one gives none.
+    #[test]
+    fn temperatures_are_read_without_the_pixels() {
+        let dir = std::env::temp_dir().join(format!("pgrf-raw-temperature-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let f = frame(Some(Cfa::Rggb), 3);
+        let bytes = encode_fits_frame(&f).unwrap();
+        let cut = dir.join("cut.fits");
+        std::fs::write(&cut, &bytes[..2880]).unwrap();
+        assert!(crate::decode_file(&cut, &LevelOverrides::default()).is_err());
+        assert_eq!(crate::read_temperature(&cut).unwrap(), Some(-10.5));
+        let dng = dir.join("t.dng");
+        let mut d = frame(Some(Cfa::Rggb), 4);
+        d.temperature_c = Some(31.25);
+        crate::write_dng(&d, &dng, &crate::DngOptions::default()).unwrap();
+        assert_eq!(crate::read_temperature(&dng).unwrap(), Some(31.25));
+        d.temperature_c = None;
+        crate::write_dng(&d, &dng, &crate::DngOptions::default()).unwrap();
+        assert_eq!(crate::read_temperature(&dng).unwrap(), None);
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
     /// Written and read back: same samples, layout and metadata, for a
     /// monochrome frame and every Bayer phase.
     #[test]

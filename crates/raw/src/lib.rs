@@ -35,7 +35,7 @@ pub mod stats;
 pub use ndarray;
 
 pub use cfa::Cfa;
-pub use decode::{decode_bytes, decode_file};
+pub use decode::{decode_bytes, decode_file, read_temperature};
 pub use demosaic::Demosaic;
 pub use dng::{
     encode_dng, pixels_intact, raw_image_digest, tile_width, write_dng, Compression, DngOptions,

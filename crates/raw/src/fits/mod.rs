@@ -66,7 +66,7 @@ mod write;
 
 pub use keyword::KeywordError;
 pub(crate) use read::stored_phase;
-pub use read::{is_fits, read_fits, read_fits_samples};
+pub use read::{fits_temperature, is_fits, read_fits, read_fits_samples};
 pub use write::{card_text, encode_fits_f32, encode_fits_f32_history, encode_fits_u16};
 
 use crate::cfa::Cfa;

@@ -241,6 +241,49 @@ impl Scaling {
     }
 }
 
+/// The sensor temperature a header records (CCD-TEMP, else CCD_TEMP), with
+/// its keyword; refused outside -273.15..200 degrees C.
+fn temperature(name: &Path, header: &ValueMap) -> Result<Option<(&'static str, f64)>> {
+    for key in ["CCD-TEMP", "CCD_TEMP"] {
+        let Some(t) = number(header, key).map_err(|e| RawError::fits_keyword(name, e))? else {
+            continue;
+        };
+        if !(-273.15..=200.0).contains(&t) {
+            return Err(RawError::decode(
+                name,
+                format!("{key} = {t} is not a sensor temperature in degrees Celsius"),
+            ));
+        }
+        return Ok(Some((key, t)));
+    }
+    Ok(None)
+}
+
+/// The sensor temperature of a FITS file held in memory, from its primary
+/// header alone (no pixel is converted): what calibration groups
+/// temperature darks by before reading each group once.
+pub fn fits_temperature(name: &Path, bytes: &[u8]) -> Result<Option<f32>> {
+    if !is_fits(bytes) {
+        return Err(RawError::decode(
+            name,
+            "not a FITS file: the first card is not SIMPLE = T",
+        ));
+    }
+    if let Some(why) = oversized_axis(bytes) {
+        return Err(RawError::decode(name, why));
+    }
+    panic_guard::quietly(|| {
+        let mut fits = Fits::from_reader(Cursor::new(bytes));
+        match fits.next() {
+            Some(Ok(HDU::Primary(hdu))) => temperature(name, hdu.get_header()),
+            Some(Ok(_)) | None => Err(RawError::decode(name, "no primary HDU")),
+            Some(Err(e)) => Err(RawError::decode(name, header_error(bytes, &e))),
+        }
+    })
+    .map_err(|panic| RawError::decode(name, panic.to_string()))?
+    .map(|t| t.map(|(_, t)| t as f32))
+}
+
 /// The header values pgrf keeps, checked before the pixels are converted;
 /// exposure and temperature with the keyword they came from.
 struct Metadata {
@@ -284,14 +327,7 @@ impl Metadata {
             }
         }
         let gain_setting = number(header, "GAIN").map_err(keyword)?;
-        let temperature = first(["CCD-TEMP", "CCD_TEMP"])?;
-        if let Some((key, t)) = temperature {
-            if !(-273.15..=200.0).contains(&t) {
-                return Err(decode(format!(
-                    "{key} = {t} is not a sensor temperature in degrees Celsius"
-                )));
-            }
-        }
+        let temperature = temperature(name, header)?;
         let iso = match integer(header, "ISOSPEED").map_err(keyword)? {
             None => None,
             Some(v) if (1..=i64::from(u32::MAX)).contains(&v) => Some(v as u32),
