@@ -27,6 +27,7 @@
 
 use crate::conv::{tile_matrix, ConvGeom};
 use crate::conv_forward::{conv2d_forward, inner_parallelism, rows_per_tile};
+use crate::product::{product, row_major, transposed};
 use rayon::prelude::*;
 
 /// Groups the weight gradient's tiles are split into: enough that 16
@@ -109,25 +110,12 @@ fn group_weight_grad(
         // as checked above; `part` is this task's own buffer and
         // gemm only reads `dy` and `m`.
         unsafe {
-            gemm::gemm(
-                co,
-                k,
-                len,
-                part.as_mut_ptr(),
-                1,
-                k as isize,
+            product(
+                (co, k, len),
+                row_major(part.as_mut_ptr(), k),
                 true,
-                dy.as_ptr().add(base),
-                1,
-                per as isize,
-                m.as_ptr(),
-                m_rs as isize,
-                1,
-                1.0,
-                1.0,
-                false,
-                false,
-                false,
+                row_major(dy.as_ptr().add(base), per),
+                transposed(m.as_ptr(), m_rs),
                 inner,
             );
         }

@@ -18,6 +18,7 @@
 #![allow(unsafe_code)]
 
 use crate::conv::{tile_matrix, ConvGeom};
+use crate::product::{product, row_major};
 use rayon::prelude::*;
 
 /// Bytes of one tile's im2col block: about half a core's L2 cache on the
@@ -108,25 +109,12 @@ unsafe fn tile_product(
                 std::slice::from_raw_parts_mut(d.add(ch * per), len).fill(v);
             }
         }
-        gemm::gemm(
-            co,
-            len,
-            k,
-            d,
-            1,
-            per as isize,
+        product(
+            (co, len, k),
+            row_major(d, per),
             bias.is_some(),
-            weight.as_ptr(),
-            1,
-            k as isize,
-            t.m.as_ptr(),
-            1,
-            t.m_rs as isize,
-            1.0,
-            1.0,
-            false,
-            false,
-            false,
+            row_major(weight.as_ptr(), k),
+            row_major(t.m.as_ptr(), t.m_rs),
             inner,
         );
         if let Some(slope) = leaky {

@@ -34,6 +34,7 @@ pub mod conv;
 pub mod conv_backward;
 pub mod conv_forward;
 pub mod norm;
+mod product;
 pub mod upconv;
 
 /// Elements per rayon task in the element-wise kernels: large enough that

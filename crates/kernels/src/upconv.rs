@@ -25,6 +25,7 @@
 
 use crate::conv_backward::add_partials;
 use crate::conv_forward::{inner_parallelism, Out};
+use crate::product::{product, row_major, transposed};
 use rayon::prelude::*;
 
 /// Bytes of a tile's shuffled block (`Z` or `S`): about half a core's L2.
@@ -121,25 +122,12 @@ pub fn upconv_forward(
             // SAFETY: the three matrices lie inside `z` (rows x len), `weight`
             // and `x` as checked above; `z` is this task's own buffer.
             unsafe {
-                gemm::gemm(
-                    rows,
-                    len,
-                    g.ci,
-                    z.as_mut_ptr(),
-                    1,
-                    len as isize,
+                product(
+                    (rows, len, g.ci),
+                    row_major(z.as_mut_ptr(), len),
                     false,
-                    weight.as_ptr(),
-                    rows as isize,
-                    1,
-                    x.as_ptr().add(src),
-                    1,
-                    hw as isize,
-                    1.0,
-                    1.0,
-                    false,
-                    false,
-                    false,
+                    transposed(weight.as_ptr(), rows),
+                    row_major(x.as_ptr().add(src), hw),
                     par,
                 );
             }
@@ -277,25 +265,12 @@ unsafe fn tile_input_grad(
     // SAFETY: the caller's contract for `d`; `W` (ci x rows) and `S` (rows
     // x len) lie inside `weight` and `s` as checked above.
     unsafe {
-        gemm::gemm(
-            g.ci,
-            len,
-            rows,
-            d,
-            1,
-            (g.h * g.w) as isize,
+        product(
+            (g.ci, len, rows),
+            row_major(d, g.h * g.w),
             false,
-            weight.as_ptr(),
-            1,
-            rows as isize,
-            s.as_ptr(),
-            1,
-            len as isize,
-            1.0,
-            1.0,
-            false,
-            false,
-            false,
+            row_major(weight.as_ptr(), rows),
+            row_major(s.as_ptr(), len),
             par,
         );
     }
@@ -318,25 +293,12 @@ fn tile_weight_grad(
     // (l, r) at s[r * len + l]) and `part` (ci x rows) lie inside the slices
     // as checked above; `part` is the caller's own buffer.
     unsafe {
-        gemm::gemm(
-            g.ci,
-            rows,
-            len,
-            part.as_mut_ptr(),
-            1,
-            rows as isize,
+        product(
+            (g.ci, rows, len),
+            row_major(part.as_mut_ptr(), rows),
             true,
-            x.as_ptr(),
-            1,
-            hw as isize,
-            s.as_ptr(),
-            len as isize,
-            1,
-            1.0,
-            1.0,
-            false,
-            false,
-            false,
+            row_major(x.as_ptr(), hw),
+            transposed(s.as_ptr(), len),
             par,
         );
     }
