@@ -483,22 +483,23 @@ fn darks_are_scaled_to_the_lights_temperature() {
         }
     }
     let (masters, cal) = (vs.join("masters"), vs.join("calib.safetensors"));
-    let run = pgrf(&[
-        "calibrate",
-        "--bias",
-        s(&vs.join("bias")),
-        "--dark",
-        s(&vs.join("dark")),
-        "--flat",
-        s(&vs.join("flat")),
-        "--temperature-darks",
-        s(&warm),
-        "--masters",
-        s(&masters),
-        "--json",
-        "-o",
-        s(&cal),
-    ]);
+    // `pgrf calibrate` of the virtual sensor's stacks with `darks` as the
+    // temperature darks, written to `out`, with `more` arguments.
+    let calibrate = |darks: &Path, out: &Path, more: &[&str]| {
+        let (bias, dark, flat) = (vs.join("bias"), vs.join("dark"), vs.join("flat"));
+        let mut a = vec!["calibrate", "--bias", s(&bias), "--dark", s(&dark)];
+        a.extend([
+            "--flat",
+            s(&flat),
+            "--temperature-darks",
+            s(darks),
+            "-o",
+            s(out),
+        ]);
+        a.extend(more);
+        pgrf(&a)
+    };
+    let run = calibrate(&warm, &cal, &["--masters", s(&masters), "--json"]);
     let said = String::from_utf8_lossy(&run.stderr).into_owned();
     assert!(run.status.success(), "{said}");
     let line = said
@@ -513,7 +514,7 @@ fn darks_are_scaled_to_the_lights_temperature() {
         .unwrap();
     assert!((doubling - 6.0).abs() < 0.9, "{line}");
     // A temperature dark that records no temperature (its CCD-TEMP card
-    // made a comment) is refused by name, before any frame is decoded.
+    // made a comment) is refused by name.
     let bare = dir.join("bare");
     std::fs::create_dir_all(&bare).unwrap();
     let mut fits = std::fs::read(warm.join("2_dark_60s_0000.fits")).unwrap();
@@ -523,19 +524,7 @@ fn darks_are_scaled_to_the_lights_temperature() {
         .expect("a CCD-TEMP card");
     fits[at..at + 80].copy_from_slice(format!("{:<80}", "COMMENT no temperature").as_bytes());
     std::fs::write(bare.join("dark.fits"), &fits).unwrap();
-    let err = one_line_error(&pgrf(&[
-        "calibrate",
-        "--bias",
-        s(&vs.join("bias")),
-        "--dark",
-        s(&vs.join("dark")),
-        "--flat",
-        s(&vs.join("flat")),
-        "--temperature-darks",
-        s(&bare),
-        "-o",
-        s(&dir.join("bare.safetensors")),
-    ]));
+    let err = one_line_error(&calibrate(&bare, &dir.join("bare.safetensors"), &[]));
     assert!(
         err.contains("dark.fits") && err.contains("records no sensor temperature"),
         "{err}"

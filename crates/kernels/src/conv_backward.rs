@@ -33,8 +33,9 @@ use rayon::prelude::*;
 /// Groups the weight gradient's tiles are split into: enough that 16
 /// threads stay busy on the large early layers, few enough that adding the
 /// partials (one `co x ci·kh·kw` buffer each) is cheap. A constant, not
-/// the thread count, so that the sum's order does not depend on it.
-const GROUPS: usize = 16;
+/// the thread count, so that the sum's order does not depend on it. The
+/// upsampling's weight gradient ([`crate::upconv`]) is summed the same way.
+pub(crate) const GROUPS: usize = 16;
 
 /// `dw = ∂L/∂W` of `out = conv(x, W)`: `x` is `(n, ci, h, w)`, `dy` is
 /// `(n, co, oh, ow)`, `dw` is `(co, ci, kh, kw)` and is overwritten.

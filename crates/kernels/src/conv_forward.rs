@@ -21,22 +21,30 @@ use crate::conv::{tile_matrix, ConvGeom};
 use crate::product::{product, row_major};
 use rayon::prelude::*;
 
-/// Bytes of one tile's im2col block: about half a core's L2 cache on the
-/// machines pgrf runs on (512 KiB to 2 MiB per core), so the block and the
-/// weights' panel stay cached while the product reads them.
+/// Bytes of one tile's block (a convolution's im2col, an upsampling's
+/// shuffled product): about half a core's L2 cache on the machines pgrf
+/// runs on (512 KiB to 2 MiB per core), so the block and the weights' panel
+/// stay cached while the product reads them.
 const TILE_BYTES: usize = 256 << 10;
 
-/// Output pixels a tile has at least, whatever its im2col block's size: the
-/// product's columns, below which gemm's packing costs more than it saves.
+/// Pixels a tile has at least, whatever its block's size: the product's
+/// columns, below which gemm's packing costs more than it saves.
 const MIN_TILE_PIXELS: usize = 256;
+
+/// Rows per tile (at least one) for a block of `block_rows` rows of `width`
+/// pixels per image row: as many as [`TILE_BYTES`] holds, and at least
+/// [`MIN_TILE_PIXELS`].
+pub(crate) fn tile_rows(block_rows: usize, width: usize) -> usize {
+    let per_row = block_rows * width * std::mem::size_of::<f32>();
+    let by_cache = TILE_BYTES / per_row.max(1);
+    let by_width = MIN_TILE_PIXELS.div_ceil(width.max(1));
+    by_cache.max(by_width).max(1)
+}
 
 /// Output rows per tile for `g` (at least one); shared with the weight
 /// gradient's tiles.
 pub(crate) fn rows_per_tile(g: &ConvGeom, ow: usize) -> usize {
-    let per_row = g.rows() * ow * std::mem::size_of::<f32>();
-    let by_cache = TILE_BYTES / per_row.max(1);
-    let by_width = MIN_TILE_PIXELS.div_ceil(ow.max(1));
-    by_cache.max(by_width).max(1)
+    tile_rows(g.rows(), ow)
 }
 
 /// gemm's parallelism inside one product of a loop of `tasks` products run

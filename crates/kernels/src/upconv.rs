@@ -23,20 +23,10 @@
 // before the unsafe blocks.
 #![allow(unsafe_code)]
 
-use crate::conv_backward::add_partials;
-use crate::conv_forward::{inner_parallelism, Out};
+use crate::conv_backward::{add_partials, GROUPS};
+use crate::conv_forward::{inner_parallelism, tile_rows, Out};
 use crate::product::{product, row_major, transposed};
 use rayon::prelude::*;
-
-/// Bytes of a tile's shuffled block (`Z` or `S`): about half a core's L2.
-const TILE_BYTES: usize = 256 << 10;
-
-/// Input pixels a tile has at least (the products' columns).
-const MIN_TILE_PIXELS: usize = 256;
-
-/// Groups the weight gradient's tiles are summed in: a constant, so that
-/// the sum's order (and its bits) does not depend on the thread count.
-const GROUPS: usize = 16;
 
 /// Shape of a non-overlapping transposed convolution: `n` images of `ci`
 /// planes of `h` x `w` to `co` planes of `h·k` x `w·k`, weight `(ci, co, k,
@@ -63,12 +53,10 @@ impl UpGeom {
         self.co * self.k * self.k
     }
 
-    /// Input rows per tile (at least one, at most `h`).
+    /// Input rows per tile (at least one, at most `h`): cache-sized blocks
+    /// of `Z` or `S`, as the convolutions' tiles.
     fn tile_rows(&self) -> usize {
-        let per_row = self.rows() * self.w * std::mem::size_of::<f32>();
-        let by_cache = TILE_BYTES / per_row.max(1);
-        let by_width = MIN_TILE_PIXELS.div_ceil(self.w.max(1));
-        by_cache.max(by_width).clamp(1, self.h.max(1))
+        tile_rows(self.rows(), self.w).min(self.h.max(1))
     }
 
     /// The tiles: `(image, first input row, rows)`, image by image.
@@ -208,6 +196,9 @@ pub fn upconv_backward(
     dw: Option<&mut [f32]>,
 ) {
     g.check(x.len(), weight.len(), dy.len());
+    if dx.is_none() && dw.is_none() {
+        return;
+    }
     let rows = g.rows();
     let tiles = g.tiles();
     let groups = tiles.len().min(GROUPS);

@@ -308,8 +308,12 @@ pub(super) fn conv_transpose2d_backward(
             &[g.co],
         )
     });
-    let mut dx = needed.x.then(|| pgrf_kernels::zeroed(elements(&xd)));
-    let mut dw = needed.weight.then(|| pgrf_kernels::zeroed(elements(&wd)));
+    let mut dx = needed
+        .x
+        .then(|| pgrf_kernels::zeroed(x.layout().num_elements()));
+    let mut dw = needed
+        .weight
+        .then(|| pgrf_kernels::zeroed(weight.layout().num_elements()));
     upconv::upconv_backward(
         values(&x),
         &g,
@@ -323,11 +327,6 @@ pub(super) fn conv_transpose2d_backward(
         weight: dw.map(|d| new(d, &wd)),
         bias: bias_grad,
     }
-}
-
-/// Elements of a tensor of dims `d`.
-fn elements(d: &[usize]) -> usize {
-    d.iter().product()
 }
 
 /// `f` of `x`'s values into a new tensor of its shape, or `in_place` on

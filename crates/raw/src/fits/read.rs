@@ -32,6 +32,25 @@ pub fn is_fits(bytes: &[u8]) -> bool {
 /// buffer is sized from it; every refusal is one line naming the keyword or
 /// value at fault. See the module documentation for the Bayer convention.
 pub fn read_fits(name: &Path, bytes: &[u8]) -> Result<FitsImage> {
+    with_primary(name, bytes, |fits, hdu| {
+        read_primary(name, bytes, fits, hdu)
+    })
+}
+
+/// A reader of a FITS file held in memory, and its primary HDU.
+type Reader<'b> = Fits<Cursor<&'b [u8]>>;
+type Primary = fitsrs::fits::HDU<fitsrs::hdu::header::extension::image::Image>;
+
+/// `f` of the primary HDU of a FITS file held in memory (and its reader,
+/// for the data), after the checks every reader of it makes: not empty,
+/// `SIMPLE = T`, no axis pgrf cannot use (fitsrs multiplies the axis
+/// lengths while it parses, and would overflow on hostile ones). fitsrs
+/// asserts on some malformed input; a panic there becomes an error.
+fn with_primary<T>(
+    name: &Path,
+    bytes: &[u8],
+    f: impl FnOnce(&mut Reader<'_>, Primary) -> Result<T>,
+) -> Result<T> {
     if bytes.is_empty() {
         return Err(RawError::decode(name, "file is empty"));
     }
@@ -41,9 +60,18 @@ pub fn read_fits(name: &Path, bytes: &[u8]) -> Result<FitsImage> {
             "not a FITS file: the first card is not SIMPLE = T",
         ));
     }
-    // fitsrs asserts on some malformed input; a panic there becomes an error.
-    panic_guard::quietly(|| read_primary(name, bytes))
-        .map_err(|panic| RawError::decode(name, panic.to_string()))?
+    if let Some(why) = oversized_axis(bytes) {
+        return Err(RawError::decode(name, why));
+    }
+    panic_guard::quietly(|| {
+        let mut fits = Fits::from_reader(Cursor::new(bytes));
+        match fits.next() {
+            Some(Ok(HDU::Primary(hdu))) => f(&mut fits, hdu),
+            Some(Ok(_)) | None => Err(RawError::decode(name, "no primary HDU")),
+            Some(Err(e)) => Err(RawError::decode(name, header_error(bytes, &e))),
+        }
+    })
+    .map_err(|panic| RawError::decode(name, panic.to_string()))?
 }
 
 /// The samples of a FITS file in DN as floats, unrounded, beside what
@@ -87,21 +115,14 @@ pub fn read_fits_samples(name: &Path, bytes: &[u8]) -> Result<(FitsImage, Vec<f3
     Ok((image, samples))
 }
 
-fn read_primary(name: &Path, bytes: &[u8]) -> Result<FitsImage> {
+fn read_primary(
+    name: &Path,
+    bytes: &[u8],
+    fits: &mut Reader<'_>,
+    hdu: Primary,
+) -> Result<FitsImage> {
     let decode = |m: String| RawError::decode(name, m);
     let unsupported = |m: String| RawError::unsupported(name, m);
-
-    // fitsrs multiplies the axis lengths (and would overflow on hostile
-    // ones) while it parses; the ones pgrf cannot use are named first.
-    if let Some(why) = oversized_axis(bytes) {
-        return Err(decode(why));
-    }
-    let mut fits = Fits::from_reader(Cursor::new(bytes));
-    let hdu = match fits.next() {
-        Some(Ok(HDU::Primary(hdu))) => hdu,
-        Some(Ok(_)) | None => return Err(decode("no primary HDU".into())),
-        Some(Err(e)) => return Err(decode(header_error(bytes, &e))),
-    };
     let header = hdu.get_header();
     let image = header.get_xtension();
     let naxis: Vec<u64> = image.get_naxis().to_vec();
@@ -263,25 +284,8 @@ fn temperature(name: &Path, header: &ValueMap) -> Result<Option<(&'static str, f
 /// header alone (no pixel is converted): what calibration groups
 /// temperature darks by before reading each group once.
 pub fn fits_temperature(name: &Path, bytes: &[u8]) -> Result<Option<f32>> {
-    if !is_fits(bytes) {
-        return Err(RawError::decode(
-            name,
-            "not a FITS file: the first card is not SIMPLE = T",
-        ));
-    }
-    if let Some(why) = oversized_axis(bytes) {
-        return Err(RawError::decode(name, why));
-    }
-    panic_guard::quietly(|| {
-        let mut fits = Fits::from_reader(Cursor::new(bytes));
-        match fits.next() {
-            Some(Ok(HDU::Primary(hdu))) => temperature(name, hdu.get_header()),
-            Some(Ok(_)) | None => Err(RawError::decode(name, "no primary HDU")),
-            Some(Err(e)) => Err(RawError::decode(name, header_error(bytes, &e))),
-        }
-    })
-    .map_err(|panic| RawError::decode(name, panic.to_string()))?
-    .map(|t| t.map(|(_, t)| t as f32))
+    with_primary(name, bytes, |_, hdu| temperature(name, hdu.get_header()))
+        .map(|t| t.map(|(_, t)| t as f32))
 }
 
 /// The header values pgrf keeps, checked before the pixels are converted;
