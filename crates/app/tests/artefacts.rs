@@ -10,16 +10,17 @@
 //! Poisson-Gaussian noise of the Sony A7S2 at ISO 1600 (K 1.53 DN/e-, read
 //! 6.3 DN on a 15,871 DN range) made 100x too dark, seeded.
 
-use ndarray::Array3;
+use ndarray::{s, Array3};
 use pgrf_app::array::restore_array;
 use pgrf_app::builtin::load_model;
 use pgrf_nn::backend::DeviceKind;
 use pgrf_nn::condition::NoiseLevel;
 use pgrf_nn::infer::image::EDGE_MARGIN;
 use pgrf_nn::infer::{SamplerChoice, Tiling};
+use pgrf_nn::weights::read_meta;
 use rand::SeedableRng;
 use rand_distr::{Distribution, Normal, Poisson};
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 const H: usize = 384;
 const W: usize = 512;
@@ -75,6 +76,15 @@ fn restore(name: &str, choice: SamplerChoice, dark: &Array3<f32>) -> Array3<f32>
     .unwrap()
 }
 
+/// The built-in PGRF's prior, the SPC its configuration names (the file its
+/// field was trained to correct, which need not be today's built-in SPC).
+fn flow_prior() -> PathBuf {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+    let meta = read_meta(&root.join("models/pgrf.safetensors")).unwrap();
+    let cfg = meta.training.and_then(|t| t.config).expect("a record");
+    root.join(cfg.prior.expect("a prior"))
+}
+
 /// Pixels where the flow's correction of its prior's restoration, summed
 /// over the four planes, exceeds [`RING_DN`] of white: the ring-shaped
 /// speckles the field draws (a ring is a few packed pixels across, a dark
@@ -95,6 +105,12 @@ fn built_in_models_show_no_grid_and_no_ring_speckles_on_a_smooth_frame() {
     let clean = clean();
     let dark = capture(&clean, 51);
     let spc = restore("builtin:spc", SamplerChoice::default(), &dark);
+    let prior_file = flow_prior();
+    let prior = restore(
+        prior_file.to_str().unwrap(),
+        SamplerChoice::default(),
+        &dark,
+    );
     let pgrf = restore("builtin:pgrf", SamplerChoice::default(), &dark);
     let t05 = SamplerChoice {
         t2: Some(0.5),
@@ -109,21 +125,33 @@ fn built_in_models_show_no_grid_and_no_ring_speckles_on_a_smooth_frame() {
     ] {
         // The windows sit on the grid of the frame mirrored by EDGE_MARGIN.
         let seams = pgrf_eval::seams(out.view(), clean.view(), 128, EDGE_MARGIN).unwrap();
-        let rings = ring_pixels(out, &spc);
+        // (For the SPC: the pixels where it differs from the flow's prior
+        // by as much.)
+        let rings = ring_pixels(out, &prior);
         eprintln!(
             "{name}: seams {seams}; ring pixels {rings}; {:.4}",
             seams.worst
         );
         worst.push((seams.worst, rings));
     }
+    // The SPC has no windows: restored as one tile, the only borders it has
+    // are the frame's, whose band the edge test below bounds. On the grid
+    // that stops short of that band (the last border, 4 pixels from the
+    // frame's edge, left out) its steps must be the frame's own.
+    let inside = s![.., ..H - 2 * EDGE_MARGIN, ..W - 2 * EDGE_MARGIN];
+    let spc_inside =
+        pgrf_eval::seams(spc.slice(inside), clean.slice(inside), 128, EDGE_MARGIN).unwrap();
+    eprintln!("SPC inside the edge band: seams {spc_inside}");
+    assert!(spc_inside.worst <= 1.1, "{spc_inside}");
     // The bar is 1.1x the median step at every border of the
     // 128-pixel windows. Measured on their grid (EDGE_MARGIN before the
-    // frame): SPC 1.10 (at column 508, 4 pixels from the frame's edge, where
-    // the error is larger anyway: it has no window), PGRF 1.14 at column
-    // 380, its windows' statistics (1.095 before the frame was mirrored,
-    // when the grid fell on 128, 256, 384). The PGRF does not meet the bar;
-    // these bounds keep what was measured from getting worse.
-    assert!(worst[0].0 <= 1.15 && worst[1].0 <= 1.2, "{worst:?}");
+    // frame): PGRF 1.14 at column 380, its windows' statistics (1.095
+    // before the frame was mirrored, when the grid fell on 128, 256, 384).
+    // The PGRF does not meet the bar; this bound keeps what was measured
+    // from getting worse. (The SPC built in since 2026-11-29 measures 1.24
+    // on the whole grid, at row 380, 4 pixels from the frame's edge; D2
+    // before it 1.10 at column 508, as near the edge.)
+    assert!(worst[1].0 <= 1.2, "{worst:?}");
     // The built-in PGRF (t2 0.1, chosen for this) draws no rings: none
     // here against 35 at t2 0.5, which shows the count sees them.
     assert!(worst[1].1 <= 2, "{worst:?}");
