@@ -144,16 +144,17 @@ fn built_in_models_show_no_grid_and_no_ring_speckles_on_a_smooth_frame() {
     eprintln!("SPC inside the edge band: seams {spc_inside}");
     assert!(spc_inside.worst <= 1.1, "{spc_inside}");
     // The bar is 1.1x the median step at every border of the
-    // 128-pixel windows. Measured on their grid (EDGE_MARGIN before the
-    // frame): PGRF 1.14 at column 380, its windows' statistics (1.095
-    // before the frame was mirrored, when the grid fell on 128, 256, 384).
-    // The PGRF does not meet the bar; this bound keeps what was measured
-    // from getting worse. (The SPC built in since 2026-11-29 measures 1.24
-    // on the whole grid, at row 380, 4 pixels from the frame's edge; D2
-    // before it 1.10 at column 508, as near the edge.)
-    assert!(worst[1].0 <= 1.2, "{worst:?}");
-    // The built-in PGRF (t2 0.1, chosen for this) draws no rings: none
-    // here against 35 at t2 0.5, which shows the count sees them.
+    // 128-pixel windows, measured on their grid (EDGE_MARGIN before the
+    // frame). The PGRF measured 1.14 at column 380 while each window's
+    // GroupNorm statistics stepped at its border; with them interpolated
+    // between the windows' centres (`NormSpec::blend`) 1.08, at t2 0.5 1.07.
+    // (The SPC built in since 2026-11-29 measures 1.24 on the whole grid, at
+    // row 380, 4 pixels from the frame's edge: the edge band; D2 before it
+    // 1.10 at column 508, as near the edge.)
+    assert!(worst[1].0 <= 1.1 && worst[2].0 <= 1.1, "{worst:?}");
+    // The built-in PGRF (t2 0.1, chosen for this) draws almost no rings: 1
+    // here against 383 at t2 0.5 (0 and 35 before the windows were
+    // blended), which shows the count sees them.
     assert!(worst[1].1 <= 2, "{worst:?}");
     assert!(worst[2].1 >= 20, "{worst:?}");
 }

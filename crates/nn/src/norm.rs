@@ -52,6 +52,64 @@ pub(crate) fn folded<B: Backend>(
     (rows * scale + shift).reshape([n, c, h, w])
 }
 
+/// GroupNorm (as [`folded`]) with statistics per `side` x `side` window of
+/// `x` ([`window_of`]), blended: each pixel normalised by the mean and
+/// 1 / std interpolated bilinearly between the centres of the windows
+/// around it, so that nothing steps at a window's border (the weights of
+/// `pgrf_kernels::norm::blend_weights`, as the kernel's forward; a window's
+/// centre keeps its own statistics, an input of one window is plain
+/// GroupNorm). Differentiable burn operations: the path of backends without
+/// pgrf's kernels (CUDA).
+pub(crate) fn blended<B: Backend>(
+    x: Tensor<B, 4>,
+    gamma: Option<Tensor<B, 1>>,
+    beta: Option<Tensor<B, 1>>,
+    (groups, epsilon): (usize, f64),
+    side: usize,
+) -> Tensor<B, 4> {
+    let [n, c, h, w] = x.dims();
+    let (sy, sx) = window_of(h, w, side);
+    if (sy, sx) == (h, w) {
+        return folded(x, gamma, beta, groups, epsilon);
+    }
+    let (g, cg, gy, gx) = (groups, c / groups, h / sy, w / sx);
+    let windows = x
+        .clone()
+        .reshape([n, g, cg, gy, sy, gx, sx])
+        .permute([0, 1, 3, 5, 2, 4, 6])
+        .reshape([n * g, gy, gx, cg * sy * sx]);
+    let mean = windows.clone().mean_dim(3);
+    let var = (windows - mean.clone()).square().mean_dim(3);
+    let rstd = var.add_scalar(epsilon).sqrt().recip();
+    // (h, gy) and (gx, w) interpolation matrices: stats -> rows @ stats @ cols.
+    let device = x.device();
+    let matrix = |len: usize, side: usize, count: usize, by_row: bool| {
+        let mut m = vec![0.0f32; len * count];
+        for (i, (j, k, t)) in pgrf_kernels::norm::blend_weights(len, side, count)
+            .into_iter()
+            .enumerate()
+        {
+            let at = |q: usize| if by_row { i * count + q } else { q * len + i };
+            m[at(j)] += 1.0 - t;
+            m[at(k)] += t;
+        }
+        let shape = if by_row { [len, count] } else { [count, len] };
+        Tensor::<B, 2>::from_data(burn::tensor::TensorData::new(m, shape), &device)
+    };
+    let (rows, cols) = (matrix(h, sy, gy, true), matrix(w, sx, gx, false));
+    let spread = |s: Tensor<B, 4>| {
+        let s = s.reshape([n * g, gy, gx]);
+        let r = rows.clone().unsqueeze::<3>().expand([n * g, h, gy]);
+        let k = cols.clone().unsqueeze::<3>().expand([n * g, gx, w]);
+        r.matmul(s).matmul(k).reshape([n, g, 1, h, w])
+    };
+    let xh = ((x.reshape([n, g, cg, h, w]) - spread(mean)) * spread(rstd)).reshape([n, c, h, w]);
+    match (gamma, beta) {
+        (Some(gamma), Some(beta)) => xh * gamma.reshape([1, c, 1, 1]) + beta.reshape([1, c, 1, 1]),
+        _ => xh,
+    }
+}
+
 /// Padding (rows, columns) that brings an `h` x `w` input to whole windows
 /// of side `side`: none when the input fits in one window (it is then its
 /// own window, as a training crop is), else up to the next multiple on each

@@ -265,6 +265,11 @@ impl<B: PgrfOps, C: CheckpointStrategy> PgrfOps for Autodiff<B, C> {
             .stateful()
         {
             OpsKind::Tracked(mut prep) => {
+                // Recorded: each window on its own (`NormSpec::blend`).
+                let spec = NormSpec {
+                    blend: false,
+                    ..spec
+                };
                 let state = (prep.checkpoint(&x), prep.checkpoint(&gamma), spec);
                 let out = B::pgrf_group_norm(x.primitive, gamma.primitive, beta.primitive, spec);
                 prep.finish(state, out)

@@ -435,6 +435,7 @@ fn group_shape(ts: &[&FlexTensor], spec: NormSpec) -> Option<GroupShape> {
         width: xd[3],
         groups,
         window: crate::norm::window_of(xd[2], xd[3], spec.window),
+        blend: spec.blend,
         silu: spec.silu,
     })
 }

@@ -296,15 +296,15 @@ pub(crate) fn burn_group_norm<B: Backend>(
     beta: FloatTensor<B>,
     spec: NormSpec,
 ) -> FloatTensor<B> {
-    let y = primitive(crate::norm::windowed(tensor::<B, 4>(x), spec.window, |x| {
-        crate::norm::folded(
-            x,
-            Some(tensor(gamma)),
-            Some(tensor(beta)),
-            spec.groups,
-            spec.epsilon,
-        )
-    }));
+    let (x, gamma, beta) = (tensor::<B, 4>(x), Some(tensor(gamma)), Some(tensor(beta)));
+    let parts = (spec.groups, spec.epsilon);
+    let y = primitive(if spec.blend {
+        crate::norm::blended(x, gamma, beta, parts, spec.window)
+    } else {
+        crate::norm::windowed(x, spec.window, |x| {
+            crate::norm::folded(x, gamma, beta, parts.0, parts.1)
+        })
+    });
     if spec.silu {
         burn_silu::<B>(y)
     } else {
@@ -674,11 +674,18 @@ pub fn group_norm_windowed<B: PgrfOps>(
                 groups: norm.num_groups,
                 epsilon: norm.epsilon,
                 window,
+                blend: true,
                 silu: then_silu,
             },
         )),
         _ => {
-            let y = crate::norm::windowed(x, window, |x| crate::norm::group_norm(norm, x));
+            let y = crate::norm::blended(
+                x,
+                norm.gamma.as_ref().map(|g| g.val()),
+                norm.beta.as_ref().map(|b| b.val()),
+                (norm.num_groups, norm.epsilon),
+                window,
+            );
             if then_silu {
                 silu(y)
             } else {
@@ -700,6 +707,12 @@ pub struct NormSpec {
     pub epsilon: f64,
     /// Window side in pixels (0: none).
     pub window: usize,
+    /// The windows' statistics interpolated between their centres
+    /// ([`crate::norm::blended`]) instead of stepping at their borders:
+    /// forward only, what inference asks for (SR3's windows); a recorded
+    /// (autodiff) pass normalises each window on its own, as a training crop
+    /// of one window is, where the two agree.
+    pub blend: bool,
     /// SiLU applied to the output (the flow network's every GroupNorm is
     /// followed by one): one pass where the backend has pgrf's kernels;
     /// the autodiff backend records the two operations apart.

@@ -500,3 +500,43 @@ fn windowed_group_norm_matches_burns_on_cut_windows() {
         );
     }
 }
+
+/// Inference's blended windows (`NormSpec::blend`): the kernels' forward on
+/// Flex equals [`crate::norm::blended`] in burn's operations (the path of
+/// backends without pgrf's kernels), with and without the SiLU after it;
+/// both move the pixels away from the windows normalised on their own, and
+/// an input of one window is plain GroupNorm.
+#[test]
+fn blended_windows_agree_between_the_kernels_and_burns_operations() {
+    type I = <B as burn::tensor::backend::AutodiffBackend>::InnerBackend;
+    let gn = burn::module::AutodiffModule::valid(&shifted_group_norm(4, 8, 0.15, -0.5));
+    for (dims, window, then_silu) in [([2, 8, 8, 12], 4, false), ([1, 8, 24, 16], 8, true)] {
+        let x = (random(dims, 73) * 2.0 - 0.5).inner();
+        let ours = values(group_norm_windowed::<I>(&gn, x.clone(), window, then_silu));
+        let affine = (
+            gn.gamma.as_ref().map(|g| g.val()),
+            gn.beta.as_ref().map(|b| b.val()),
+        );
+        let parts = (gn.num_groups, gn.epsilon);
+        let burns = crate::norm::blended(x.clone(), affine.0, affine.1, parts, window);
+        let burns = values(if then_silu {
+            burn::tensor::activation::silu(burns)
+        } else {
+            burns
+        });
+        close(&format!("{dims:?} window {window}"), &ours, &burns, 1e-4);
+        let apart = crate::norm::windowed(x, window, |t| gn.forward(t));
+        let apart = values(if then_silu {
+            burn::tensor::activation::silu(apart)
+        } else {
+            apart
+        });
+        assert!(
+            rel(&ours, &apart) > 1e-2,
+            "{dims:?}: blending changed nothing"
+        );
+    }
+    let x = random([1, 8, 8, 8], 74).inner();
+    let one = values(group_norm_windowed::<I>(&gn, x.clone(), 8, false));
+    close("one window", &one, &values(gn.forward(x)), 1e-5);
+}
