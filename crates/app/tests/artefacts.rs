@@ -117,44 +117,40 @@ fn built_in_models_show_no_grid_and_no_ring_speckles_on_a_smooth_frame() {
         ..Default::default()
     };
     let pgrf_t05 = restore("builtin:pgrf", t05, &dark);
+    // The windows sit on the grid of the frame mirrored by EDGE_MARGIN; the
+    // last border, 4 pixels from the frame's edge, lies in the edge band
+    // that the edge test below bounds, so the grid is also measured on the
+    // frame less that band.
+    let inside = s![.., ..H - 2 * EDGE_MARGIN, ..W - 2 * EDGE_MARGIN];
     let mut worst = Vec::new();
     for (name, out) in [
         ("SPC", &spc),
         ("PGRF", &pgrf),
         ("PGRF at t2 0.5", &pgrf_t05),
     ] {
-        // The windows sit on the grid of the frame mirrored by EDGE_MARGIN.
-        let seams = pgrf_eval::seams(out.view(), clean.view(), 128, EDGE_MARGIN).unwrap();
+        let whole = pgrf_eval::seams(out.view(), clean.view(), 128, EDGE_MARGIN).unwrap();
+        let within =
+            pgrf_eval::seams(out.slice(inside), clean.slice(inside), 128, EDGE_MARGIN).unwrap();
         // (For the SPC: the pixels where it differs from the flow's prior
         // by as much.)
         let rings = ring_pixels(out, &prior);
-        eprintln!(
-            "{name}: seams {seams}; ring pixels {rings}; {:.4}",
-            seams.worst
-        );
-        worst.push((seams.worst, rings));
+        eprintln!("{name}: seams {whole}; inside the edge band {within}; ring pixels {rings}");
+        worst.push((within.worst, rings));
     }
-    // The SPC has no windows: restored as one tile, the only borders it has
-    // are the frame's, whose band the edge test below bounds. On the grid
-    // that stops short of that band (the last border, 4 pixels from the
-    // frame's edge, left out) its steps must be the frame's own.
-    let inside = s![.., ..H - 2 * EDGE_MARGIN, ..W - 2 * EDGE_MARGIN];
-    let spc_inside =
-        pgrf_eval::seams(spc.slice(inside), clean.slice(inside), 128, EDGE_MARGIN).unwrap();
-    eprintln!("SPC inside the edge band: seams {spc_inside}");
-    assert!(spc_inside.worst <= 1.1, "{spc_inside}");
     // The bar is 1.1x the median step at every border of the
-    // 128-pixel windows, measured on their grid (EDGE_MARGIN before the
-    // frame). The PGRF measured 1.14 at column 380 while each window's
-    // GroupNorm statistics stepped at its border; with them interpolated
-    // between the windows' centres (`NormSpec::blend`) 1.08, at t2 0.5 1.07.
-    // (The SPC built in since 2026-11-29 measures 1.24 on the whole grid, at
-    // row 380, 4 pixels from the frame's edge: the edge band; D2 before it
-    // 1.10 at column 508, as near the edge.)
-    assert!(worst[1].0 <= 1.1 && worst[2].0 <= 1.1, "{worst:?}");
-    // The built-in PGRF (t2 0.1, chosen for this) draws almost no rings: 1
-    // here against 383 at t2 0.5 (0 and 35 before the windows were
-    // blended), which shows the count sees them.
+    // 128-pixel windows. The SPC has no windows (one tile): 1.02 inside the
+    // edge band, 1.24 with it (row 380). The built-in PGRF, whose windows'
+    // GroupNorm statistics stepped at their borders, measured 1.10 inside
+    // the band (1.18 at t2 0.5; the PGRF before it 1.14 on the whole grid);
+    // with them blended across the borders (`NormSpec::blend`) 1.03 (1.07),
+    // and 1.20 with the band (row 380, as its prior's 1.24).
+    assert!(worst.iter().all(|w| w.0 <= 1.1), "{worst:?}");
+    // The built-in PGRF (t2 0.1, chosen for this) draws no rings: none here
+    // against 25 at t2 0.5, which shows the count sees them (31 with the
+    // stepping statistics). Blending the statistics over whole windows,
+    // centre to centre, drew 162 and 538: the network learnt each window's
+    // own statistics; blended over an eighth of a window each side of a
+    // border it draws none.
     assert!(worst[1].1 <= 2, "{worst:?}");
     assert!(worst[2].1 >= 20, "{worst:?}");
 }

@@ -13,7 +13,7 @@ use std::path::PathBuf;
 /// record carries them (the stages' logs sum to the same within a second).
 const SPC_SECONDS: f64 = 13_097.8;
 const D2_SECONDS: f64 = 29_198.8;
-const PGRF_SECONDS: f64 = 28_730.0;
+const PGRF_SECONDS: f64 = 36_229.6;
 
 fn models() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../models")
@@ -33,14 +33,16 @@ fn steps_run(name: &str) -> u64 {
     last.split(',').next().unwrap().parse().unwrap()
 }
 
-/// The network's description without its input planes: a noise-aware stage
-/// widens the first layer of the blind network it starts from (`--init`),
-/// and nothing else.
+/// The network's description without its input planes and convention: a
+/// noise-aware stage widens the first layer of the blind network it starts
+/// from (`--init`), and a stage may keep the values below black the stages
+/// before it clamped; nothing else changes.
 fn body(arch: &impl serde::Serialize) -> Value {
     fn strip(v: &mut Value) {
         if let Value::Object(m) = v {
             m.remove("in_channels");
             m.remove("conditioning");
+            m.remove("keep_below_black");
             m.values_mut().for_each(strip);
         }
     }
@@ -49,17 +51,30 @@ fn body(arch: &impl serde::Serialize) -> Value {
     v
 }
 
+/// The network `cfg` builds (a prior's path is the repository root's, as
+/// the run's).
+fn architecture(cfg: &TrainConfig, method: Method) -> Architecture {
+    let mut at_root = cfg.clone();
+    at_root.prior = cfg.prior.as_ref().map(|p| models().join("..").join(p));
+    at_root.architecture(method).unwrap()
+}
+
+/// A flow that corrects a prior's restoration: its field alone.
+fn field(arch: Architecture) -> Architecture {
+    match arch {
+        Architecture::Sr3Prior(p) => Architecture::Sr3(p.flow),
+        a => a,
+    }
+}
+
 /// Checks `models/NAME.toml` against `models/NAME.safetensors` and returns
 /// the file's record.
 fn check(name: &str, method: Method) -> WeightMeta {
     let cfg = config(name);
     let meta = read_meta(&models().join(format!("{name}.safetensors"))).unwrap();
     assert_eq!(meta.arch.method(), method);
-    // The architecture the config builds is the file's, field for field
-    // (a prior's path is the repository root's, as the run's).
-    let mut at_root = cfg.clone();
-    at_root.prior = cfg.prior.as_ref().map(|p| models().join("..").join(p));
-    let arch = at_root.architecture(method).unwrap();
+    // The architecture the config builds is the file's, field for field.
+    let arch = architecture(&cfg, method);
     assert_eq!(
         serde_json::to_value(&arch).unwrap(),
         serde_json::to_value(&meta.arch).unwrap(),
@@ -104,16 +119,14 @@ fn check_stages(name: &str, meta: &WeightMeta, earlier: &[&str], method: Method)
         .and_then(|t| t.started_from.as_ref())
         .expect("a fine-tuned file");
     // A flow that corrects a prior's restoration has the earlier stages'
-    // field inside it.
-    let shipped = match &meta.arch {
-        Architecture::Sr3Prior(p) => Architecture::Sr3(p.flow.clone()),
-        a => a.clone(),
-    };
+    // field inside it (and an earlier stage may have corrected another
+    // prior's).
+    let shipped = field(meta.arch.clone());
     let mut steps = 0;
     for stage in earlier {
         let cfg = config(stage);
         assert_eq!(
-            body(&cfg.architecture(method).unwrap()),
+            body(&field(architecture(&cfg, method))),
             body(&shipped),
             "{stage}: architecture"
         );
@@ -180,8 +193,9 @@ fn pgrf_config_describes_the_shipped_flow_model() {
     let meta = check("pgrf", Method::Pgrf);
     // Four blind stages (20,000 + 12,000 + 3,000 + 2,000 steps), the
     // noise-aware ones (1,725 (stopped) + 2,000 + 477 (stopped) + 2,394
-    // (stopped) steps), then issue 51's lever 5: the last one's field
-    // correcting the built-in SPC's restoration.
+    // (stopped) steps), issue 51's lever 5 (6,000 steps: the last one's
+    // field correcting D2's restoration), then this stage: that field
+    // correcting the built-in SPC's.
     let stages = [
         "pgrf_base",
         "pgrf_stage2",
@@ -191,6 +205,7 @@ fn pgrf_config_describes_the_shipped_flow_model() {
         "pgrf_noise3",
         "pgrf_noise4",
         "pgrf_noise5",
+        "pgrf_on_d2",
     ];
     let seconds = check_stages("pgrf", &meta, &stages, Method::Pgrf);
     assert!((seconds - PGRF_SECONDS).abs() < 1.0, "{seconds}");
@@ -199,15 +214,19 @@ fn pgrf_config_describes_the_shipped_flow_model() {
     assert_eq!((cfg.time_max, cfg.window), (0.5, Some(128)));
     assert!(meta.arch.conditioning().needs_level());
     assert!(meta.t2.is_some(), "searched");
-    // Its prior is the file its configuration names, the SPC built in when
-    // it was trained (D2), whose network it carries.
+    // Its prior is the built-in SPC, byte for byte, whose network it
+    // carries.
     let prior = models()
         .join("..")
         .join(cfg.prior.as_ref().expect("a prior"));
+    assert_eq!(
+        std::fs::read(prior).unwrap(),
+        std::fs::read(models().join("spc.safetensors")).unwrap()
+    );
     let Architecture::Sr3Prior(p) = &meta.arch else {
         panic!("{:?}", meta.arch)
     };
-    let spc = read_meta(&prior).unwrap().arch;
+    let spc = read_meta(&models().join("spc.safetensors")).unwrap().arch;
     assert_eq!(
         serde_json::to_value(Architecture::SidUnet(p.prior.clone())).unwrap(),
         serde_json::to_value(spc).unwrap()

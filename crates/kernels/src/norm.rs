@@ -19,11 +19,13 @@
 //!
 //! Blended windows (`GroupShape::blend`, inference): a window's statistics
 //! step at its border, and the flow's restoration stepped with them (a grid
-//! 1.14x the median step of its error, issue 51). Blended, each pixel is
-//! normalised by the mean and 1 / std interpolated bilinearly between the
-//! centres of the windows around it (held constant beyond the outermost
-//! centres): a window's centre keeps its own statistics, an image of one
-//! window is normalised as before, and nothing steps.
+//! 1.14x the median step of its error, issue 51). Blended, a pixel within
+//! an eighth of a window of a border ([`BLEND_RAMP`]) is normalised by its
+//! window's mean and 1 / std mixed linearly with its neighbour's (half and
+//! half on the border, bilinearly near a corner); the rest keep their own
+//! window's statistics, as the network saw them in training (blending over
+//! whole windows, centre to centre, drew ring speckles: MODELS.md), an
+//! image of one window is normalised as before, and nothing steps.
 
 use rayon::prelude::*;
 
@@ -46,9 +48,9 @@ pub struct GroupShape {
     /// Rows and columns of the windows the statistics are taken over; each
     /// divides its side.
     pub window: (usize, usize),
-    /// Statistics interpolated between window centres ([`blend_weights`]),
+    /// Statistics blended across window borders ([`blend_weights`]),
     /// forward only: [`group_norm_backward`] refuses more than one blended
-    /// window (training normalises each crop as one window).
+    /// window (training normalises each window on its own).
     pub blend: bool,
     /// SiLU applied to the forward's output in the same pass (a flow
     /// network's every GroupNorm is followed by one): one read and one
@@ -232,30 +234,48 @@ fn activate(y: f32, silu: bool) -> f32 {
     }
 }
 
+/// Half-width of the blend across a window border, as a fraction of the
+/// window's side: pixels further than this from every border keep their own
+/// window's statistics, those nearer are blended linearly with the
+/// neighbour's, half and half on the border.
+pub const BLEND_RAMP: f64 = 0.125;
+
 /// For each of `len` pixels along an axis cut into `windows` windows of
-/// `side`: the two windows whose centres bracket the pixel's centre and the
-/// second one's weight, `(first, second, weight)`; beyond the outermost
-/// centres both are the outermost window. `pgrf_nn::norm` builds its
-/// interpolation matrices from the same weights.
+/// `side`: `(first, second, weight)`, the two windows whose statistics it
+/// mixes and the second one's weight ([`BLEND_RAMP`]; both its own window
+/// away from the borders and beyond the outermost ones). `pgrf_nn::norm`
+/// builds its interpolation matrices from the same weights.
 pub fn blend_weights(len: usize, side: usize, windows: usize) -> Vec<(usize, usize, f32)> {
-    let last = windows.saturating_sub(1) as f64;
+    let last = windows.saturating_sub(1);
     (0..len)
         .map(|i| {
-            let t = ((i as f64 + 0.5) / side as f64 - 0.5).clamp(0.0, last);
-            let j = (t.floor() as usize).min(windows.saturating_sub(1));
-            let k = (j + 1).min(windows.saturating_sub(1));
-            (j, k, (t - j as f64) as f32)
+            let u = (i as f64 + 0.5) / side as f64;
+            let j = (u.floor() as usize).min(last);
+            let frac = u - j as f64;
+            if frac < BLEND_RAMP && j > 0 {
+                (j - 1, j, (0.5 + frac / (2.0 * BLEND_RAMP)) as f32)
+            } else if frac > 1.0 - BLEND_RAMP && j < last {
+                (
+                    j,
+                    j + 1,
+                    ((frac - (1.0 - BLEND_RAMP)) / (2.0 * BLEND_RAMP)) as f32,
+                )
+            } else {
+                (j, j, 0.0)
+            }
         })
         .collect()
 }
 
-/// [`group_norm`] with blended windows: per block, the windows' statistics,
-/// then each pixel's interpolated mean and 1 / std, then the affine.
+/// [`group_norm`] with blended windows: per block, the windows' statistics;
+/// then row by row each pixel's blended 1 / std `r` and mean times it `mr`
+/// (rows first, then along the row), and every channel's row as
+/// `(v r - mr) gamma + beta`: two row-long buffers, one pass per channel.
 fn blended(x: &[f32], s: &GroupShape, eps: f64, gamma: &[f32], beta: &[f32], out: &mut [f32]) {
-    let (block, cg, pixels) = (s.block(), s.c / s.groups, s.pixels());
+    let (block, cg, pixels, w) = (s.block(), s.c / s.groups, s.pixels(), s.width);
     let (gy, gx) = s.grid();
     let rows = blend_weights(s.height, s.window.0, gy);
-    let cols = blend_weights(s.width, s.window.1, gx);
+    let cols = blend_weights(w, s.window.1, gx);
     let lerp = |a: f32, b: f32, t: f32| a + (b - a) * t;
     out.par_chunks_mut(block.max(1))
         .zip(x.par_chunks(block.max(1)))
@@ -265,28 +285,31 @@ fn blended(x: &[f32], s: &GroupShape, eps: f64, gamma: &[f32], beta: &[f32], out
             let stats: Vec<(f32, f32)> = (0..gy * gx)
                 .map(|i| window_stats(x, s, i / gx, i % gx, eps))
                 .collect();
-            // Each pixel's (mean, 1 / std), row by row.
-            let mut at = Vec::with_capacity(pixels);
-            for &(j0, j1, ty) in &rows {
-                for &(i0, i1, tx) in &cols {
-                    let pick = |j: usize, i: usize| stats[j * gx + i];
-                    let (a, b) = (pick(j0, i0), pick(j0, i1));
-                    let (c, d) = (pick(j1, i0), pick(j1, i1));
-                    let top = (lerp(a.0, b.0, tx), lerp(a.1, b.1, tx));
-                    let bottom = (lerp(c.0, d.0, tx), lerp(c.1, d.1, tx));
-                    at.push((lerp(top.0, bottom.0, ty), lerp(top.1, bottom.1, ty)));
+            let (mut line, mut r_row, mut mr_row) =
+                (vec![(0.0f32, 0.0f32); gx], vec![0.0f32; w], vec![0.0f32; w]);
+            for (y, &(j0, j1, ty)) in rows.iter().enumerate() {
+                for (i, l) in line.iter_mut().enumerate() {
+                    let (a, c) = (stats[j0 * gx + i], stats[j1 * gx + i]);
+                    *l = (lerp(a.0, c.0, ty), lerp(a.1, c.1, ty));
                 }
-            }
-            for k in 0..cg {
-                let ch = g * cg + k;
-                let (o, x) = (&mut o[k * pixels..(k + 1) * pixels], &x[k * pixels..]);
-                let (gm, bt) = (gamma[ch], beta[ch]);
-                let normed = o.iter_mut().zip(x).zip(&at);
-                if s.silu {
-                    normed
-                        .for_each(|((o, &v), &(m, r))| *o = activate((v - m) * r * gm + bt, true));
-                } else {
-                    normed.for_each(|((o, &v), &(m, r))| *o = (v - m) * r * gm + bt);
+                for ((r, mr), &(i0, i1, tx)) in r_row.iter_mut().zip(&mut mr_row).zip(&cols) {
+                    let (a, c) = (line[i0], line[i1]);
+                    *r = lerp(a.1, c.1, tx);
+                    *mr = lerp(a.0, c.0, tx) * *r;
+                }
+                for k in 0..cg {
+                    let ch = g * cg + k;
+                    let (gm, bt) = (gamma[ch], beta[ch]);
+                    let at = k * pixels + y * w;
+                    let (o, x) = (&mut o[at..at + w], &x[at..at + w]);
+                    let normed = o.iter_mut().zip(x).zip(r_row.iter().zip(&mr_row));
+                    if s.silu {
+                        normed.for_each(|((o, &v), (&r, &mr))| {
+                            *o = activate((v * r - mr) * gm + bt, true)
+                        });
+                    } else {
+                        normed.for_each(|((o, &v), (&r, &mr))| *o = (v * r - mr) * gm + bt);
+                    }
                 }
             }
         });
@@ -531,27 +554,28 @@ mod tests {
     }
 
     #[test]
-    fn blend_weights_bracket_each_pixel_between_window_centres() {
-        // Windows of 4: centres at 2 and 6 (pixel centres at i + 0.5).
-        let w = blend_weights(8, 4, 2);
-        assert_eq!(w[0], (0, 1, 0.0));
-        assert_eq!(w[1], (0, 1, 0.0));
-        assert_eq!(w[2], (0, 1, 0.125));
-        assert_eq!(w[5], (0, 1, 0.875));
-        assert_eq!(w[6], (1, 1, 0.0));
-        assert_eq!(w[7], (1, 1, 0.0));
+    fn blend_weights_ramp_across_each_border() {
+        // Windows of 16, the border at 16 (pixel centres at i + 0.5): the
+        // ramp reaches 2 pixels (an eighth of 16) each side of it.
+        let w = blend_weights(32, 16, 2);
+        assert!(w[..14].iter().all(|&p| p == (0, 0, 0.0)), "{w:?}");
+        assert_eq!(w[14], (0, 1, 0.125));
+        assert_eq!(w[15], (0, 1, 0.375));
+        assert_eq!(w[16], (0, 1, 0.625));
+        assert_eq!(w[17], (0, 1, 0.875));
+        assert!(w[18..].iter().all(|&p| p == (1, 1, 0.0)), "{w:?}");
         assert_eq!(blend_weights(3, 3, 1), vec![(0, 0, 0.0); 3]);
     }
 
     /// Blended windows against a direct f64 evaluation: each window's
-    /// statistics, interpolated bilinearly between the centres, applied per
-    /// pixel; a window's centre pixel keeps its own window's output, and one
-    /// window is the unblended result.
+    /// statistics, mixed bilinearly by [`blend_weights`], applied per pixel;
+    /// pixels away from the borders keep their own window's output, those
+    /// near them move, and one window is the unblended result.
     #[test]
     fn blended_windows_interpolate_the_statistics() {
         let s = GroupShape {
             blend: true,
-            ..shape([2, 4, 9, 10], 2, (3, 5), true)
+            ..shape([2, 4, 16, 24], 2, (8, 8), true)
         };
         let x = values(s.n * s.c * s.pixels(), 11);
         let gamma: Vec<f32> = (0..4).map(|i| 0.6 + 0.25 * i as f32).collect();
@@ -561,29 +585,26 @@ mod tests {
         let plain = GroupShape { blend: false, ..s };
         let mut unblended = vec![0.0; x.len()];
         group_norm(&x, &plain, 1e-5, &gamma, &beta, &mut unblended);
-        let (h, w, cg) = (9usize, 10usize, 2usize);
+        let (h, w, cg) = (16usize, 24usize, 2usize);
         let at = |img: usize, ch: usize, r: usize, c: usize| ((img * 4 + ch) * h + r) * w + c;
         let stats = |img: usize, g: usize, wy: usize, wx: usize| {
             let vals: Vec<f64> = (0..cg)
-                .flat_map(|k| (0..3).flat_map(move |r| (0..5).map(move |c| (k, r, c))))
-                .map(|(k, r, c)| f64::from(x[at(img, g * cg + k, wy * 3 + r, wx * 5 + c)]))
+                .flat_map(|k| (0..8).flat_map(move |r| (0..8).map(move |c| (k, r, c))))
+                .map(|(k, r, c)| f64::from(x[at(img, g * cg + k, wy * 8 + r, wx * 8 + c)]))
                 .collect();
             let m = vals.iter().sum::<f64>() / vals.len() as f64;
             let v = vals.iter().map(|a| (a - m).powi(2)).sum::<f64>() / vals.len() as f64;
             (m, 1.0 / (v + 1e-5).sqrt())
         };
         let lerp = |a: f64, b: f64, t: f64| a + (b - a) * t;
-        let bracket = |i: usize, side: f64, n: usize| {
-            let t = ((i as f64 + 0.5) / side - 0.5).clamp(0.0, (n - 1) as f64);
-            let j = (t.floor() as usize).min(n - 1);
-            (j, (j + 1).min(n - 1), t - j as f64)
-        };
-        let mut worst = 0.0f64;
+        let (rows, cols) = (blend_weights(h, 8, 2), blend_weights(w, 8, 3));
+        let bracket = |p: (usize, usize, f32)| (p.0, p.1, f64::from(p.2));
+        let (mut worst, mut blended, mut moved) = (0.0f64, 0, 0);
         for img in 0..2 {
             for ch in 0..4 {
                 for r in 0..h {
                     for c in 0..w {
-                        let ((j0, j1, ty), (i0, i1, tx)) = (bracket(r, 3.0, 3), bracket(c, 5.0, 2));
+                        let ((j0, j1, ty), (i0, i1, tx)) = (bracket(rows[r]), bracket(cols[c]));
                         let st = |j, i| stats(img, ch / cg, j, i);
                         let mix = |f: fn((f64, f64)) -> f64| {
                             let top = lerp(f(st(j0, i0)), f(st(j0, i1)), tx);
@@ -594,25 +615,23 @@ mod tests {
                             + f64::from(beta[ch]);
                         let want = v / (1.0 + (-v).exp());
                         worst = worst.max((f64::from(y[at(img, ch, r, c)]) - want).abs());
-                        if r % 3 == 1 && c % 5 == 2 {
-                            let u = unblended[at(img, ch, r, c)];
-                            assert!((y[at(img, ch, r, c)] - u).abs() < 1e-5, "centre ({r}, {c})");
+                        let d = (y[at(img, ch, r, c)] - unblended[at(img, ch, r, c)]).abs();
+                        if j0 == j1 && i0 == i1 {
+                            assert!(d < 1e-5, "({r}, {c}) away from the borders");
+                        } else {
+                            blended += 1;
+                            moved += usize::from(d > 1e-3);
                         }
                     }
                 }
             }
         }
         assert!(worst < 1e-4, "{worst}");
-        // The blend moved the pixels between the centres.
-        let moved = y
-            .iter()
-            .zip(&unblended)
-            .filter(|(a, b)| (*a - *b).abs() > 1e-3)
-            .count();
-        assert!(moved > x.len() / 2, "{moved}");
+        // The blend moved the pixels near the borders.
+        assert!(blended > 0 && moved > blended / 2, "{moved} of {blended}");
         // One window: the plain GroupNorm.
         let one = GroupShape {
-            window: (9, 10),
+            window: (16, 24),
             ..s
         };
         let (mut a, mut b) = (vec![0.0; x.len()], vec![0.0; x.len()]);

@@ -53,13 +53,13 @@ pub(crate) fn folded<B: Backend>(
 }
 
 /// GroupNorm (as [`folded`]) with statistics per `side` x `side` window of
-/// `x` ([`window_of`]), blended: each pixel normalised by the mean and
-/// 1 / std interpolated bilinearly between the centres of the windows
-/// around it, so that nothing steps at a window's border (the weights of
-/// `pgrf_kernels::norm::blend_weights`, as the kernel's forward; a window's
-/// centre keeps its own statistics, an input of one window is plain
-/// GroupNorm). Differentiable burn operations: the path of backends without
-/// pgrf's kernels (CUDA).
+/// `x` ([`window_of`]), blended across the windows' borders: a pixel near a
+/// border is normalised by its window's mean and 1 / std mixed with its
+/// neighbour's, so that nothing steps there (the weights of
+/// `pgrf_kernels::norm::blend_weights`, as the kernel's forward; pixels away
+/// from the borders keep their own window's statistics, an input of one
+/// window is plain GroupNorm). Differentiable burn operations: the path of
+/// backends without pgrf's kernels (CUDA).
 pub(crate) fn blended<B: Backend>(
     x: Tensor<B, 4>,
     gamma: Option<Tensor<B, 1>>,
@@ -81,7 +81,7 @@ pub(crate) fn blended<B: Backend>(
     let mean = windows.clone().mean_dim(3);
     let var = (windows - mean.clone()).square().mean_dim(3);
     let rstd = var.add_scalar(epsilon).sqrt().recip();
-    // (h, gy) and (gx, w) interpolation matrices: stats -> rows @ stats @ cols.
+    // (h, gy) and (gx, w) blending matrices: stats -> rows @ stats @ cols.
     let device = x.device();
     let matrix = |len: usize, side: usize, count: usize, by_row: bool| {
         let mut m = vec![0.0f32; len * count];

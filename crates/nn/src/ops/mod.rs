@@ -707,11 +707,11 @@ pub struct NormSpec {
     pub epsilon: f64,
     /// Window side in pixels (0: none).
     pub window: usize,
-    /// The windows' statistics interpolated between their centres
-    /// ([`crate::norm::blended`]) instead of stepping at their borders:
-    /// forward only, what inference asks for (SR3's windows); a recorded
-    /// (autodiff) pass normalises each window on its own, as a training crop
-    /// of one window is, where the two agree.
+    /// The windows' statistics blended across their borders
+    /// (`pgrf_kernels::norm::blend_weights`) instead of stepping there: forward only,
+    /// what inference asks for (SR3's windows); a recorded (autodiff) pass,
+    /// training, normalises each window on its own, as the built-in flows
+    /// were trained.
     pub blend: bool,
     /// SiLU applied to the output (the flow network's every GroupNorm is
     /// followed by one): one pass where the backend has pgrf's kernels;
