@@ -160,10 +160,11 @@ fn spc_config_describes_the_shipped_denoiser() {
     assert_eq!(t.config.as_ref().unwrap().calibrated_share, 0.3);
 }
 
-/// D2, the SPC built in before it and the built-in PGRF's prior: its
-/// record and its stages are still described by `models/spc_d2.toml`.
+/// D2, the SPC built in before it (`models/next/spc_d2.safetensors`, the
+/// prior of the flow stage `pgrf_on_d2`): its record and its stages are
+/// still described by `models/spc_d2.toml`.
 #[test]
-fn d2_config_describes_the_built_in_flows_prior() {
+fn d2_config_describes_the_spc_built_in_before() {
     let name = "spc_d2";
     let cfg = config(name);
     let meta = read_meta(&models().join("next/spc_d2.safetensors")).unwrap();
