@@ -296,19 +296,35 @@ pub(crate) fn burn_group_norm<B: Backend>(
     beta: FloatTensor<B>,
     spec: NormSpec,
 ) -> FloatTensor<B> {
-    let (x, gamma, beta) = (tensor::<B, 4>(x), Some(tensor(gamma)), Some(tensor(beta)));
+    let y = primitive(burn_windows(
+        tensor::<B, 4>(x),
+        Some(tensor(gamma)),
+        Some(tensor(beta)),
+        spec,
+    ));
+    if spec.silu {
+        burn_silu::<B>(y)
+    } else {
+        y
+    }
+}
+
+/// GroupNorm over `spec`'s windows in burn's tensor operations (its SiLU
+/// left to the caller): blended across their borders when `spec.blend`
+/// ([`crate::norm::blended`]), else each window on its own.
+fn burn_windows<B: Backend>(
+    x: Tensor<B, 4>,
+    gamma: Option<Tensor<B, 1>>,
+    beta: Option<Tensor<B, 1>>,
+    spec: NormSpec,
+) -> Tensor<B, 4> {
     let parts = (spec.groups, spec.epsilon);
-    let y = primitive(if spec.blend {
+    if spec.blend {
         crate::norm::blended(x, gamma, beta, parts, spec.window)
     } else {
         crate::norm::windowed(x, spec.window, |x| {
             crate::norm::folded(x, gamma, beta, parts.0, parts.1)
         })
-    });
-    if spec.silu {
-        burn_silu::<B>(y)
-    } else {
-        y
     }
 }
 
@@ -658,7 +674,9 @@ pub fn group_norm<B: PgrfOps>(norm: &GroupNorm<B>, x: Tensor<B, 4>) -> Tensor<B,
 /// [`group_norm`] with its statistics taken per `window` x `window` window
 /// of `x` as [`crate::norm::windowed`] cuts them (0: whole inputs), in
 /// place where the backend has pgrf's kernels (no copies of the windows),
-/// followed by SiLU when `then_silu`.
+/// followed by SiLU when `then_silu`. Blended across the windows' borders
+/// ([`NormSpec::blend`]) unless the pass is recorded for a backward
+/// (training), on either path.
 pub fn group_norm_windowed<B: PgrfOps>(
     norm: &GroupNorm<B>,
     x: Tensor<B, 4>,
@@ -679,13 +697,22 @@ pub fn group_norm_windowed<B: PgrfOps>(
             },
         )),
         _ => {
-            let y = crate::norm::blended(
-                x,
+            let (gamma, beta) = (
                 norm.gamma.as_ref().map(|g| g.val()),
                 norm.beta.as_ref().map(|b| b.val()),
-                (norm.num_groups, norm.epsilon),
-                window,
             );
+            // Recorded as the kernels' autodiff records it: windows apart.
+            let recorded = x.is_require_grad()
+                || gamma.as_ref().is_some_and(|g| g.is_require_grad())
+                || beta.as_ref().is_some_and(|b| b.is_require_grad());
+            let spec = NormSpec {
+                groups: norm.num_groups,
+                epsilon: norm.epsilon,
+                window,
+                blend: !recorded,
+                silu: then_silu,
+            };
+            let y = burn_windows(x, gamma, beta, spec);
             if then_silu {
                 silu(y)
             } else {

@@ -503,9 +503,11 @@ fn windowed_group_norm_matches_burns_on_cut_windows() {
 
 /// Inference's blended windows (`NormSpec::blend`): the kernels' forward on
 /// Flex equals [`crate::norm::blended`] in burn's operations (the path of
-/// backends without pgrf's kernels), with and without the SiLU after it;
-/// both move the pixels away from the windows normalised on their own, and
-/// an input of one window is plain GroupNorm.
+/// backends without pgrf's kernels), and `group_norm_windowed` takes either
+/// path to the same result, with and without the SiLU after it; both move
+/// the pixels away from the windows normalised on their own, which a
+/// recorded (training) pass keeps on either path; an input of one window is
+/// plain GroupNorm.
 #[test]
 fn blended_windows_agree_between_the_kernels_and_burns_operations() {
     type I = <B as burn::tensor::backend::AutodiffBackend>::InnerBackend;
@@ -525,7 +527,18 @@ fn blended_windows_agree_between_the_kernels_and_burns_operations() {
             burns
         });
         close(&format!("{dims:?} window {window}"), &ours, &burns, 1e-4);
-        let apart = crate::norm::windowed(x, window, |t| gn.forward(t));
+        let by_burn = with_kernels(Kernels::Burn, || {
+            values(group_norm_windowed::<I>(&gn, x.clone(), window, then_silu))
+        });
+        close(&format!("{dims:?}: burn's path"), &by_burn, &burns, 1e-5);
+        let recorded = |k| {
+            let tracked = shifted_group_norm(4, 8, 0.15, -0.5);
+            let x = Tensor::<B, 4>::from_inner(x.clone()).require_grad();
+            with_kernels(k, || {
+                values(group_norm_windowed(&tracked, x, window, then_silu))
+            })
+        };
+        let apart = crate::norm::windowed(x.clone(), window, |t| gn.forward(t));
         let apart = values(if then_silu {
             burn::tensor::activation::silu(apart)
         } else {
@@ -535,6 +548,14 @@ fn blended_windows_agree_between_the_kernels_and_burns_operations() {
             rel(&ours, &apart) > 1e-2,
             "{dims:?}: blending changed nothing"
         );
+        for k in [Kernels::Pgrf, Kernels::Burn] {
+            close(
+                &format!("{dims:?}: recorded, {k:?}"),
+                &recorded(k),
+                &apart,
+                1e-4,
+            );
+        }
     }
     let x = random([1, 8, 16, 16], 74).inner();
     let one = values(group_norm_windowed::<I>(&gn, x.clone(), 16, false));
