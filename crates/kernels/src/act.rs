@@ -47,6 +47,13 @@ pub fn sigmoid(x: f32) -> f32 {
     1.0 / (1.0 + exp(-x))
 }
 
+/// SiLU of one value, `x * sigmoid(x)`: the element-wise [`silu`] and the
+/// GroupNorm's fused SiLU (`crate::norm`).
+#[inline(always)]
+pub fn silu_of(x: f32) -> f32 {
+    x * sigmoid(x)
+}
+
 /// Apply `f` to every element of `x`, writing `out`, in parallel chunks.
 fn map1(x: &[f32], out: &mut [f32], f: impl Fn(f32) -> f32 + Sync) {
     assert_eq!(x.len(), out.len(), "input and output sizes");
@@ -100,12 +107,12 @@ pub fn leaky_relu_backward(x: &[f32], dy: &[f32], slope: f32, out: &mut [f32]) {
 
 /// SiLU, `x * sigmoid(x)`.
 pub fn silu(x: &[f32], out: &mut [f32]) {
-    map1(x, out, |v| v * sigmoid(v));
+    map1(x, out, silu_of);
 }
 
 /// [`silu`] overwriting its input.
 pub fn silu_in_place(x: &mut [f32]) {
-    map_in_place(x, |v| v * sigmoid(v));
+    map_in_place(x, silu_of);
 }
 
 /// SiLU's input gradient: `dy * s * (1 + x * (1 - s))` with `s =

@@ -27,6 +27,7 @@
 //! whole windows, centre to centre, drew ring speckles: MODELS.md), an
 //! image of one window is normalised as before, and nothing steps.
 
+use crate::act::silu_of;
 use rayon::prelude::*;
 
 /// Layout of a GroupNorm input: `n` images of `c` channels of `height` x
@@ -210,7 +211,7 @@ pub fn group_norm(
                             let (o, x) = (&mut o[r.clone()], &x[r]);
                             if s.silu {
                                 for (o, &v) in o.iter_mut().zip(x) {
-                                    *o = activate(v * scale + shift, true);
+                                    *o = silu_of(v * scale + shift);
                                 }
                             } else {
                                 for (o, &v) in o.iter_mut().zip(x) {
@@ -222,16 +223,6 @@ pub fn group_norm(
                 }
             }
         });
-}
-
-/// `y`, or SiLU of it.
-#[inline(always)]
-fn activate(y: f32, silu: bool) -> f32 {
-    if silu {
-        y * crate::act::sigmoid(y)
-    } else {
-        y
-    }
 }
 
 /// Half-width of the blend across a window border, as a fraction of the
@@ -304,9 +295,8 @@ fn blended(x: &[f32], s: &GroupShape, eps: f64, gamma: &[f32], beta: &[f32], out
                     let (o, x) = (&mut o[at..at + w], &x[at..at + w]);
                     let normed = o.iter_mut().zip(x).zip(r_row.iter().zip(&mr_row));
                     if s.silu {
-                        normed.for_each(|((o, &v), (&r, &mr))| {
-                            *o = activate((v * r - mr) * gm + bt, true)
-                        });
+                        normed
+                            .for_each(|((o, &v), (&r, &mr))| *o = silu_of((v * r - mr) * gm + bt));
                     } else {
                         normed.for_each(|((o, &v), (&r, &mr))| *o = (v * r - mr) * gm + bt);
                     }

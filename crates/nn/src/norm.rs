@@ -83,20 +83,18 @@ pub(crate) fn blended<B: Backend>(
     let rstd = var.add_scalar(epsilon).sqrt().recip();
     // (h, gy) and (gx, w) blending matrices: stats -> rows @ stats @ cols.
     let device = x.device();
-    let matrix = |len: usize, side: usize, count: usize, by_row: bool| {
+    let matrix = |len: usize, side: usize, count: usize| {
         let mut m = vec![0.0f32; len * count];
         for (i, (j, k, t)) in pgrf_kernels::norm::blend_weights(len, side, count)
             .into_iter()
             .enumerate()
         {
-            let at = |q: usize| if by_row { i * count + q } else { q * len + i };
-            m[at(j)] += 1.0 - t;
-            m[at(k)] += t;
+            m[i * count + j] += 1.0 - t;
+            m[i * count + k] += t;
         }
-        let shape = if by_row { [len, count] } else { [count, len] };
-        Tensor::<B, 2>::from_data(burn::tensor::TensorData::new(m, shape), &device)
+        Tensor::<B, 2>::from_data(burn::tensor::TensorData::new(m, [len, count]), &device)
     };
-    let (rows, cols) = (matrix(h, sy, gy, true), matrix(w, sx, gx, false));
+    let (rows, cols) = (matrix(h, sy, gy), matrix(w, sx, gx).transpose());
     let spread = |s: Tensor<B, 4>| {
         let s = s.reshape([n * g, gy, gx]);
         let r = rows.clone().unsqueeze::<3>().expand([n * g, h, gy]);
