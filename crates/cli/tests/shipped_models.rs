@@ -247,3 +247,59 @@ fn a_different_config_is_caught() {
     // Nor is a stage list that leaves one out.
     assert_ne!(steps_run("spc_clamp_log"), 0);
 }
+
+/// The `models/...` files a text names (`.toml` and `.safetensors`), in
+/// order of appearance.
+fn model_paths(text: &str) -> Vec<&str> {
+    let allowed = |c: char| c.is_ascii_alphanumeric() || "_/.-".contains(c);
+    let mut found = Vec::new();
+    for (at, _) in text.match_indices("models/") {
+        // A path starts here, not inside a longer one (`runs/models/...`).
+        if text[..at].chars().next_back().is_some_and(allowed) {
+            continue;
+        }
+        let len = text[at..]
+            .find(|c: char| !allowed(c))
+            .unwrap_or(text.len() - at);
+        let path = text[at..at + len].trim_end_matches('.');
+        if path.ends_with(".toml") || path.ends_with(".safetensors") {
+            found.push(path);
+        }
+    }
+    found
+}
+
+/// The scripts that run the shipped models or their recipes on another
+/// machine (bench/gpu.sh on a lent GPU, the measures) name files that
+/// exist: a renamed recipe otherwise surfaces only there, minutes of a
+/// lent device later (bench/gpu.sh named a moved recipe until the 21st
+/// session).
+#[test]
+fn bench_scripts_name_existing_model_files() {
+    let root = models().join("..");
+    let mut checked = 0;
+    for entry in std::fs::read_dir(root.join("bench")).unwrap() {
+        let path = entry.unwrap().path();
+        let Some(ext) = path.extension().and_then(|e| e.to_str()) else {
+            continue;
+        };
+        if ext != "sh" && ext != "py" {
+            continue;
+        }
+        let text = std::fs::read_to_string(&path).unwrap();
+        for name in model_paths(&text) {
+            assert!(
+                root.join(name).is_file(),
+                "{} names {name}, which does not exist",
+                path.display()
+            );
+            checked += 1;
+        }
+    }
+    // bench/gpu.sh alone names the SPC's recipe and weights.
+    assert!(checked >= 3, "only {checked} model paths found in bench/");
+    assert_eq!(
+        model_paths("a models/spc.toml, runs/models/x.toml `models/next/a.safetensors`."),
+        ["models/spc.toml", "models/next/a.safetensors"]
+    );
+}
