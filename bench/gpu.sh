@@ -11,6 +11,7 @@
 # Env: DEADLINE (seconds after which no new phase starts, default 360),
 #      ROUNDS (training-step comparisons, pgrf and PyTorch alternating; default 2).
 # Needs nvidia-smi and python3 with PyTorch (CUDA); nothing is fetched.
+# Rehearse it here first: bench/gpu_rehearse.sh OUT (the CPU in the card's place).
 # Peak GPU memory is nvidia-smi's memory.used sampled every 100 ms during
 # each command (the whole process: burn's memory pool, PyTorch's caching
 # allocator and the CUDA context), written to OUT/results.txt.
