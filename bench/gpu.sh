@@ -159,12 +159,12 @@ fi
 #    the log's rows say what the minutes gained over it.
 left=$((deadline + 60 - $(elapsed)))
 if [ "$left" -gt 40 ]; then
-  "$bin/pgrf" train spc --config models/spc.toml --data procedural --init models/spc.safetensors \
-    --steps 0 --device cpu --output "$work/spc_base.safetensors" --log "$work/spc_base.log.csv" \
+  spc=(train spc --config models/spc.toml --data procedural --init models/spc.safetensors)
+  "$bin/pgrf" "${spc[@]}" --steps 0 --device cpu \
+    --output "$work/spc_base.safetensors" --log "$work/spc_base.log.csv" \
     2>&1 | tr '\r' '\n' | grep 'validation PSNR' | tee -a "$results"
   left=$((deadline + 60 - $(elapsed)))
-  measure train-spc-cuda "$left" "$bin/pgrf" train spc --config models/spc.toml \
-    --data procedural --init models/spc.safetensors --lr 1e-4 --device cuda --workers 12 \
+  measure train-spc-cuda "$left" "$bin/pgrf" "${spc[@]}" --lr 1e-4 --device cuda --workers 12 \
     --steps 20000 --val-every 500 --checkpoint-every 500 --checkpoint "$work/spc_gpu.ckpt" \
     --output "$out/spc_gpu.safetensors" --log "$out/spc_gpu.log.csv"
   [ -f "$work/spc_gpu.ckpt" ] && split -b 15M "$work/spc_gpu.ckpt" "$out/spc_gpu.ckpt.part-"

@@ -15,9 +15,10 @@
 //!
 //! `splitmix64` is one step of SplitMix64, `pgrf_core::seed::mix64`.
 //!
-//! A noise-conditioned weight file (both built-ins) is told the frame's own
-//! noise level, [`FRAME_NOISE`]: the value does not change the arithmetic,
-//! but without one the restorer refuses to run, as `pgrf enhance` does.
+//! Every network is told the frame's own noise level, [`FRAME_NOISE`]: a
+//! noise-conditioned one (both built-ins) refuses to run without one, as in
+//! `pgrf enhance`, and an unconditioned one ignores it; the value does not
+//! change the amount of arithmetic.
 //!
 //! The default frame is a Sony A7S2 raw (4256 x 2848 mosaic, 12.1 MP) packed:
 //! 4 x 1424 x 2128. The default tile is the one `pgrf enhance` would choose
@@ -49,7 +50,7 @@ use std::time::Instant;
 /// Seed of the benchmark frame's noise (see the module docs).
 pub const SEED: u64 = 11;
 
-/// The benchmark frame's noise level for a conditioned network, as a
+/// The benchmark frame's noise level, given to every network, as a
 /// capture's: Var = 0.01 x + 0.0035, which is 0.0075 (the variance of the
 /// frame's uniform noise, 0.3^2 / 12) at its mean signal, 0.8 x 0.48 ~ 0.4,
 /// with a shot-noise part as every capture has (the restorer needs one).
@@ -373,12 +374,7 @@ impl Plan {
             tile,
             overlap: a.overlap,
             seed: 0,
-            noise: r
-                .meta()
-                .arch
-                .conditioning()
-                .needs_level()
-                .then_some(FRAME_NOISE),
+            noise: Some(FRAME_NOISE),
         };
         let plan = frame_plan(r, ph, pw, &opts)?;
         let (th, tw) = (plan.rows.len, plan.cols.len);

@@ -515,17 +515,20 @@ fn blended_windows_agree_between_the_kernels_and_burns_operations() {
     for (dims, window, then_silu) in [([2, 8, 32, 48], 16, false), ([1, 8, 48, 32], 16, true)] {
         let x = (random(dims, 73) * 2.0 - 0.5).inner();
         let ours = values(group_norm_windowed::<I>(&gn, x.clone(), window, then_silu));
+        let act = |t: Tensor<I, 4>| {
+            if then_silu {
+                burn::tensor::activation::silu(t)
+            } else {
+                t
+            }
+        };
         let affine = (
             gn.gamma.as_ref().map(|g| g.val()),
             gn.beta.as_ref().map(|b| b.val()),
         );
         let parts = (gn.num_groups, gn.epsilon);
         let burns = crate::norm::blended(x.clone(), affine.0, affine.1, parts, window);
-        let burns = values(if then_silu {
-            burn::tensor::activation::silu(burns)
-        } else {
-            burns
-        });
+        let burns = values(act(burns));
         close(&format!("{dims:?} window {window}"), &ours, &burns, 1e-4);
         let by_burn = with_kernels(Kernels::Burn, || {
             values(group_norm_windowed::<I>(&gn, x.clone(), window, then_silu))
@@ -538,12 +541,9 @@ fn blended_windows_agree_between_the_kernels_and_burns_operations() {
                 values(group_norm_windowed(&tracked, x, window, then_silu))
             })
         };
-        let apart = crate::norm::windowed(x.clone(), window, |t| gn.forward(t));
-        let apart = values(if then_silu {
-            burn::tensor::activation::silu(apart)
-        } else {
-            apart
-        });
+        let apart = values(act(crate::norm::windowed(x.clone(), window, |t| {
+            gn.forward(t)
+        })));
         assert!(
             rel(&ours, &apart) > 1e-2,
             "{dims:?}: blending changed nothing"
